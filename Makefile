@@ -1,0 +1,34 @@
+# Two entry points for a fresh machine: `make serve` and `make test`.
+PYTHON ?= python3.11
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: install serve test lint data bench clean
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	# torch first and pinned: an unpinned resolve pulls gigabytes of CUDA wheels
+	$(BIN)/pip install -q torch==2.13.0
+	$(BIN)/pip install -q -e '.[dev]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+data: $(STAMP)
+	$(BIN)/tomstudy simulate highway --n 2000 --seed 0 --if-missing
+	$(BIN)/tomstudy simulate obstacle --n 2000 --seed 0 --if-missing
+
+serve: $(STAMP)
+	$(BIN)/tomstudy serve
+
+test: $(STAMP)
+	$(BIN)/ruff check app analysis tests benchmarks
+	$(BIN)/pytest -q
+
+bench: $(STAMP)
+	for f in benchmarks/*.py; do $(BIN)/python $$f || exit 1; done
+
+clean:
+	rm -rf var .pytest_cache .ruff_cache

@@ -1,0 +1,46 @@
+"""Typed YAML configs: a misspelt key or a bad value is an error that names the field."""
+
+from pathlib import Path
+from typing import TypeVar
+
+import yaml
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+M = TypeVar("M", bound=BaseModel)
+
+
+class ConfigError(ValueError):
+    """A config file is missing, unreadable or invalid; the message names file and field."""
+
+
+class StrictModel(BaseModel):
+    """Base for every config: unknown keys are errors, instances are immutable."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def describe_validation_error(err: ValidationError, source: str) -> str:
+    """One line per problem: `source: field.path: message`."""
+    lines = []
+    for problem in err.errors():
+        field = ".".join(str(part) for part in problem["loc"]) or "(root)"
+        lines.append(f"{source}: {field}: {problem['msg']}")
+    return "\n".join(lines)
+
+
+def load_yaml_model(path: Path, model: type[M], overrides: dict | None = None) -> M:
+    """Read a YAML file into `model`; `overrides` are applied on top of the file's keys."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: config file not found")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{path}: not valid YAML: {err}") from err
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: top level must be a mapping of keys")
+    data.update(overrides or {})
+    try:
+        return model.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(describe_validation_error(err, str(path))) from err

@@ -1,0 +1,121 @@
+"""Two-agent trajectory containers and their reproducible .npz storage.
+
+Shape legend: N trajectories, T = max steps, A = 2 agents (0 = robot, 1 = human), D = 2 (x, y).
+- positions [N, T+1, A, D] m, in the world's frame (see Scene.frame)
+- actions   [N, T, A, D]   m/s, always (positions[t+1] - positions[t]) / dt
+- headings  [N, T+1, A]    rad, for drawing; speeds [N, T+1, A] m/s, world-frame speed
+- lengths   [N]            number of valid actions; later steps repeat the last state
+- labels    name -> [N] int, with class names in label_names
+"""
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from app.fileio import write_npz
+from app.worlds.scene import Scene
+
+ROBOT, HUMAN = 0, 1
+
+
+@dataclass
+class Episode:
+    """One rollout before padding: positions [L+1, A, D], headings/speeds [L+1, A], labels."""
+
+    positions: np.ndarray
+    headings: np.ndarray
+    speeds: np.ndarray
+    labels: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def length(self) -> int:
+        """Number of actions (steps) in the episode."""
+        return len(self.positions) - 1
+
+
+class Rejected(Exception):
+    """A rollout that must not enter the dataset; the message is the reason (e.g. 'collision')."""
+
+
+@dataclass
+class TrajectorySet:
+    """A padded batch of episodes of one world, with labels and scene."""
+
+    world: str
+    dt_s: float
+    positions: np.ndarray
+    headings: np.ndarray
+    speeds: np.ndarray
+    lengths: np.ndarray
+    labels: dict[str, np.ndarray]
+    label_names: dict[str, list[str]]
+    scene: Scene
+
+    @property
+    def actions(self) -> np.ndarray:
+        """Velocities [N, T, A, D] = position differences / dt (zero after the end)."""
+        return (np.diff(self.positions, axis=1) / self.dt_s).astype(np.float32)
+
+    def __len__(self) -> int:
+        return len(self.lengths)
+
+    @classmethod
+    def from_episodes(cls, world: str, dt_s: float, episodes: list[Episode],
+                      label_names: dict[str, list[str]], scene: Scene) -> "TrajectorySet":
+        """Pad episodes to the longest one by repeating each final state."""
+        horizon = max(ep.length for ep in episodes)
+
+        def pad(arr: np.ndarray) -> np.ndarray:
+            reps = horizon + 1 - len(arr)
+            return np.concatenate([arr, np.repeat(arr[-1:], reps, axis=0)], axis=0)
+
+        return cls(
+            world=world,
+            dt_s=dt_s,
+            positions=np.stack([pad(ep.positions) for ep in episodes]).astype(np.float32),
+            headings=np.stack([pad(ep.headings) for ep in episodes]).astype(np.float32),
+            speeds=np.stack([pad(ep.speeds) for ep in episodes]).astype(np.float32),
+            lengths=np.array([ep.length for ep in episodes], dtype=np.int32),
+            labels={name: np.array([ep.labels[name] for ep in episodes], dtype=np.int32)
+                    for name in sorted(episodes[0].labels)},
+            label_names=label_names,
+            scene=scene,
+        )
+
+    def subset(self, index: np.ndarray) -> "TrajectorySet":
+        """The trajectories at `index`, same world and scene."""
+        return TrajectorySet(
+            world=self.world, dt_s=self.dt_s, positions=self.positions[index],
+            headings=self.headings[index], speeds=self.speeds[index],
+            lengths=self.lengths[index],
+            labels={k: v[index] for k, v in self.labels.items()},
+            label_names=self.label_names, scene=self.scene,
+        )
+
+    def save(self, path: Path) -> None:
+        """Write one self-contained .npz (atomic, byte-reproducible)."""
+        header = {"world": self.world, "dt_s": self.dt_s, "label_names": self.label_names,
+                  "scene": self.scene.model_dump()}
+        arrays = {
+            "positions": self.positions, "headings": self.headings, "speeds": self.speeds,
+            "lengths": self.lengths,
+            "header_json": np.frombuffer(json.dumps(header, sort_keys=True).encode(), np.uint8),
+        }
+        arrays.update({f"label__{k}": v for k, v in self.labels.items()})
+        write_npz(path, arrays)
+
+    @classmethod
+    def load(cls, path: Path) -> "TrajectorySet":
+        """Read a file written by `save`."""
+        with np.load(path, allow_pickle=False) as npz:
+            header = json.loads(npz["header_json"].tobytes().decode())
+            labels = {k.removeprefix("label__"): npz[k] for k in npz.files
+                      if k.startswith("label__")}
+            return cls(
+                world=header["world"], dt_s=float(header["dt_s"]),
+                positions=npz["positions"], headings=npz["headings"], speeds=npz["speeds"],
+                lengths=npz["lengths"], labels=labels, label_names=header["label_names"],
+                scene=Scene.model_validate(header["scene"]),
+            )

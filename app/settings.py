@@ -1,0 +1,32 @@
+"""Process-wide settings, read once from the environment (prefix TOMSTUDY_)."""
+
+from functools import lru_cache
+from pathlib import Path
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_ADMIN_TOKEN = "change-me-researcher-token"
+
+
+class Settings(BaseSettings):
+    """Where data lives, which database to use and how researchers authenticate."""
+
+    model_config = SettingsConfigDict(env_prefix="TOMSTUDY_", extra="ignore")
+
+    data_dir: Path = Field(default=REPO_ROOT / "var")
+    configs_dir: Path = Field(default=REPO_ROOT / "study_configs")
+    database_url: str = Field(default="", validation_alias="DATABASE_URL")
+    admin_token: str = DEFAULT_ADMIN_TOKEN
+    production: bool = False
+
+    def resolved_database_url(self) -> str:
+        """The configured URL, or SQLite under the data dir."""
+        return self.database_url or f"sqlite:///{self.data_dir / 'study.db'}"
+
+
+@lru_cache
+def get_settings() -> Settings:
+    """The settings of this process (cached)."""
+    return Settings()
