@@ -32,11 +32,12 @@ def simulate(
     config: Annotated[Path | None, typer.Option(help="world YAML (default: study_configs)")] = None,
     policy: Annotated[str, typer.Option(help="mpc, or sac (obstacle only)")] = "mpc",
     workers: Annotated[int | None, typer.Option(min=1, help="processes (default 2)")] = None,
-    plot: Annotated[bool, typer.Option("--plot", help="also write a PNG of 20 trajectories")] = False,
+    plot: Annotated[bool, typer.Option("--plot", help="also write a PNG of trajectories")] = False,
     if_missing: Annotated[bool, typer.Option("--if-missing", help="skip if data exists")] = False,
 ) -> None:
     """Simulate a world's two-agent trajectories into var/data/<world>/."""
-    from app.worlds.simulate import output_paths, simulate as run
+    from app.worlds.simulate import output_paths
+    from app.worlds.simulate import simulate as run
 
     data_dir = get_settings().data_dir
     npz_path, meta_path = output_paths(data_dir, world)
