@@ -1,0 +1,82 @@
+"""Read the study's predictions, from the exported CSV or straight from the database.
+
+Both readers return the same tidy DataFrame: one row per (participant, trial, start state,
+step), the columns of the export contract (app/study/API.md) with fixed dtypes, sorted
+by participant, trial, start state and step.
+"""
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+# Export contract, in order. Types: the reader casts to these, so CSV and DB agree.
+STRING_COLUMNS = ("study_id", "participant_id", "recruitment", "external_id", "world",
+                  "trial_id", "clip_sha256", "ours_sha256", "vae_sha256", "submission_id",
+                  "submitted_at")
+BOOL_COLUMNS = ("completed", "attention_passed", "is_practice", "attention_check")
+INT_COLUMNS = ("world_position", "trial_index", "start_index", "step", "ours_code",
+               "vae_code", "replays")
+FLOAT_COLUMNS = ("start_x", "start_y", "human_x", "human_y", "click_x", "click_y",
+                 "human_vx", "human_vy", "ours_vx", "ours_vy", "vae_vx", "vae_vy",
+                 "cv_vx", "cv_vy", "policy_vx", "policy_vy", "click_time_ms",
+                 "trial_duration_ms")
+EXPORT_COLUMNS = (
+    "study_id", "participant_id", "recruitment", "external_id", "completed",
+    "attention_passed", "world", "world_position", "trial_id", "trial_index", "is_practice",
+    "attention_check", "clip_sha256", "start_index", "step", "start_x", "start_y", "human_x",
+    "human_y", "click_x", "click_y", "human_vx", "human_vy", "ours_vx", "ours_vy", "vae_vx",
+    "vae_vy", "cv_vx", "cv_vy", "policy_vx", "policy_vy", "ours_code", "vae_code",
+    "ours_sha256", "vae_sha256", "click_time_ms", "trial_duration_ms", "replays",
+    "submission_id", "submitted_at",
+)
+SORT_KEYS = ["participant_id", "trial_index", "trial_id", "start_index", "step"]
+
+
+class DataError(ValueError):
+    """The predictions table is missing columns or holds values of the wrong type."""
+
+
+def _as_bool(values: pd.Series) -> pd.Series:
+    text = values.astype("string").str.strip().str.lower()
+    mapped = text.map({"true": True, "1": True, "t": True, "false": False, "0": False,
+                       "f": False, "1.0": True, "0.0": False})
+    if mapped.isna().any():
+        bad = values[mapped.isna()].iloc[0]
+        raise DataError(f"{values.name}: not a boolean: {bad!r}")
+    return mapped.astype(bool)
+
+
+def normalise(frame: pd.DataFrame) -> pd.DataFrame:
+    """Cast the export columns to fixed dtypes and sort; extra columns are dropped."""
+    missing = [c for c in EXPORT_COLUMNS if c not in frame.columns]
+    if missing:
+        raise DataError(f"missing columns: {', '.join(missing)}")
+    out = pd.DataFrame(index=frame.index)
+    for col in EXPORT_COLUMNS:
+        values = frame[col]
+        if col in STRING_COLUMNS:
+            out[col] = values.astype(object).where(values.notna(), "").astype(str)
+        elif col in BOOL_COLUMNS:
+            out[col] = _as_bool(values)
+        elif col in INT_COLUMNS:
+            numbers = pd.to_numeric(values, errors="coerce")
+            out[col] = numbers.fillna(-1).astype(np.int64)
+        else:
+            out[col] = pd.to_numeric(values, errors="coerce").astype(np.float64)
+    return out.sort_values(SORT_KEYS, kind="stable").reset_index(drop=True)
+
+
+def load_csv(path: Path) -> pd.DataFrame:
+    """The export CSV as a normalised DataFrame."""
+    raw = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
+    return normalise(raw)
+
+
+def data_hash(frame: pd.DataFrame) -> str:
+    """SHA-256 of the normalised rows, independent of where they were read from."""
+    digest = hashlib.sha256()
+    digest.update(",".join(frame.columns).encode())
+    digest.update(pd.util.hash_pandas_object(frame, index=False).to_numpy().tobytes())
+    return digest.hexdigest()

@@ -1,0 +1,117 @@
+"""Paired tests of Ours vs the VAE across participants, and ADE/FDE against clicked positions."""
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from analysis.metrics import UNIT_KEYS
+
+POSITION_MODELS = ("ours", "vae", "cv")
+PREDICTION_KEYS = ["participant_id", "trial_id", "start_index"]
+
+
+@dataclass
+class PairedResult:
+    """Ours vs VAE across participants in one world (diff = a - b, negative favours a)."""
+
+    n: int
+    mean_a: float
+    mean_b: float
+    mean_diff: float
+    sd_diff: float
+    ci95_low: float
+    ci95_high: float
+    t: float
+    p_two_sided: float
+    p_one_sided_less: float
+    wilcoxon_w: float
+    wilcoxon_p: float
+    d_z: float
+
+    def as_dict(self) -> dict[str, float]:
+        """Plain floats for JSON."""
+        return {k: (float(v) if not isinstance(v, int) else v) for k, v in asdict(self).items()}
+
+
+def paired_comparison(a: np.ndarray, b: np.ndarray) -> PairedResult:
+    """ttest_rel, Wilcoxon signed-rank, Cohen's d_z and the t-based 95% CI of mean(a - b)."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    diff = a - b
+    n = len(diff)
+    nan = float("nan")
+    if n < 2:
+        return PairedResult(n, *(float(np.mean(x)) if n else nan for x in (a, b, diff)),
+                            *(nan,) * 10)
+    sd = float(np.std(diff, ddof=1))
+    mean = float(np.mean(diff))
+    half = stats.t.ppf(0.975, n - 1) * sd / np.sqrt(n)
+    t_two = stats.ttest_rel(a, b)
+    t_less = stats.ttest_rel(a, b, alternative="less")
+    if np.any(diff != 0):
+        w = stats.wilcoxon(a, b)
+        w_stat, w_p = float(w.statistic), float(w.pvalue)
+    else:
+        w_stat, w_p = nan, 1.0
+    return PairedResult(
+        n=n, mean_a=float(np.mean(a)), mean_b=float(np.mean(b)), mean_diff=mean, sd_diff=sd,
+        ci95_low=mean - half, ci95_high=mean + half, t=float(t_two.statistic),
+        p_two_sided=float(t_two.pvalue), p_one_sided_less=float(t_less.pvalue),
+        wilcoxon_w=w_stat, wilcoxon_p=w_p, d_z=mean / sd if sd > 0 else nan,
+    )
+
+
+def compare_per_world(means: pd.DataFrame, a: str = "ours",
+                      b: str = "vae") -> dict[str, PairedResult]:
+    """Per world, the paired comparison of per-participant mean errors of models a and b."""
+    return {world: paired_comparison(group[f"err_{a}"], group[f"err_{b}"])
+            for world, group in means.groupby("world", sort=True)}
+
+
+def mean_ci95(values: np.ndarray) -> tuple[float, float, float]:
+    """Mean and the t-based 95% confidence interval of the mean."""
+    values = np.asarray(values, dtype=np.float64)
+    mean = float(np.mean(values))
+    if len(values) < 2:
+        return mean, float("nan"), float("nan")
+    half = stats.t.ppf(0.975, len(values) - 1) * stats.sem(values)
+    return mean, mean - half, mean + half
+
+
+def infer_dt_s(frame: pd.DataFrame) -> pd.Series:
+    """Per world, the step dt [s] implied by clicks and human actions (median of |dp| / |v|)."""
+    prev_x, prev_y = _previous_positions(frame, frame["click_x"], frame["click_y"])
+    moved = np.hypot(frame["click_x"] - prev_x, frame["click_y"] - prev_y)
+    speed = np.hypot(frame["human_vx"], frame["human_vy"])
+    ratio = (moved / speed.where(speed > 0)).rename("dt_s")
+    return ratio.groupby(frame["world"]).median()
+
+
+def _previous_positions(frame: pd.DataFrame, xs: pd.Series, ys: pd.Series):
+    """Position before each step: the start state for the first step, else the last click."""
+    first = frame.groupby(PREDICTION_KEYS, sort=False).cumcount() == 0
+    prev_x = xs.groupby([frame[k] for k in PREDICTION_KEYS], sort=False).shift(1)
+    prev_y = ys.groupby([frame[k] for k in PREDICTION_KEYS], sort=False).shift(1)
+    return prev_x.where(~first, frame["start_x"]), prev_y.where(~first, frame["start_y"])
+
+
+def displacement_errors(frame: pd.DataFrame,
+                        models: tuple[str, ...] = POSITION_MODELS) -> pd.DataFrame:
+    """Per participant x world, ADE and FDE [m] of each model's rolled-out steps vs the clicks.
+
+    Model positions are the start state plus dt times the running sum of the model's
+    actions; dt per world comes from `infer_dt_s`. Rows must be sorted by step.
+    """
+    dt = frame["world"].map(infer_dt_s(frame)).to_numpy()
+    groups = [frame[k] for k in PREDICTION_KEYS]
+    last = frame.groupby(PREDICTION_KEYS, sort=False).cumcount(ascending=False) == 0
+    out = frame[UNIT_KEYS].copy()
+    for model in models:
+        px = frame["start_x"] + dt * frame[f"{model}_vx"].groupby(groups, sort=False).cumsum()
+        py = frame["start_y"] + dt * frame[f"{model}_vy"].groupby(groups, sort=False).cumsum()
+        dist = np.hypot(px - frame["click_x"], py - frame["click_y"])
+        out[f"ade_{model}"] = dist
+        out[f"fde_{model}"] = dist.where(last)
+    return out.groupby(UNIT_KEYS, sort=True).mean().reset_index()

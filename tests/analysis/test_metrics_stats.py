@@ -1,0 +1,113 @@
+"""The analysis numbers against a direct, by-hand computation on a small fixed dataset."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from analysis.load import load_csv
+from analysis.metrics import (
+    ExclusionRules,
+    alignment_error,
+    apply_exclusions,
+    participant_means,
+)
+from analysis.stats import compare_per_world, displacement_errors, infer_dt_s, paired_comparison
+from tests.analysis.fixed_data import DT_S, fixed_predictions
+
+
+def _cos_distance(a, b) -> float:
+    return 1 - (a[0] * b[0] + a[1] * b[1]) / (math.hypot(*a) * math.hypot(*b))
+
+
+def test_alignment_error_known_angles():
+    a = np.array([[1.0, 0.0]] * 4)
+    b = np.array([[2.0, 0.0], [0.0, 3.0], [-1.0, 0.0], [1.0, 1.0]])
+    np.testing.assert_allclose(alignment_error(a, b), [0.0, 1.0, 2.0, 1 - math.sqrt(0.5)])
+
+
+def test_zero_vector_is_uninformative():
+    err = alignment_error(np.array([[1.0, 0.0], [0.0, 0.0]]), np.array([[0.0, 0.0], [1.0, 2.0]]))
+    np.testing.assert_array_equal(err, [1.0, 1.0])
+
+
+def test_participant_means_and_ttest_match_a_hand_computation():
+    frame = fixed_predictions()
+    means = participant_means(frame)
+    results = compare_per_world(means)
+    for world in ("highway", "obstacle"):
+        by_hand = {"ours": [], "vae": []}
+        for pid in sorted(set(frame["participant_id"])):
+            rows = frame[(frame["participant_id"] == pid) & (frame["world"] == world)]
+            for model in by_hand:
+                errs = [_cos_distance((r.human_vx, r.human_vy),
+                                      (r[f"{model}_vx"], r[f"{model}_vy"]))
+                        for _, r in rows.iterrows()]
+                by_hand[model].append(sum(errs) / len(errs))
+        ours, vae = np.array(by_hand["ours"]), np.array(by_hand["vae"])
+        got = means[means["world"] == world]
+        np.testing.assert_allclose(got["err_ours"], ours, rtol=1e-12)
+        np.testing.assert_allclose(got["err_vae"], vae, rtol=1e-12)
+        expected = stats.ttest_rel(ours, vae)
+        diff = ours - vae
+        sd = math.sqrt(sum((d - diff.mean()) ** 2 for d in diff) / (len(diff) - 1))
+        res = results[world]
+        assert res.n == 4
+        assert res.t == pytest.approx(expected.statistic, rel=1e-12)
+        assert res.p_two_sided == pytest.approx(expected.pvalue, rel=1e-12)
+        assert res.d_z == pytest.approx(diff.mean() / sd, rel=1e-12)
+        half = stats.t.ppf(0.975, 3) * sd / 2.0
+        assert res.ci95_low == pytest.approx(diff.mean() - half, rel=1e-12)
+        assert res.ci95_high == pytest.approx(diff.mean() + half, rel=1e-12)
+        assert res.wilcoxon_p == pytest.approx(stats.wilcoxon(ours, vae).pvalue)
+
+
+def test_paired_comparison_one_sided_matches_direction():
+    a = np.array([0.1, 0.2, 0.15, 0.12, 0.18])
+    b = a + np.array([0.1, 0.05, 0.2, 0.1, 0.12])
+    res = paired_comparison(a, b)
+    assert res.mean_diff < 0 and res.p_one_sided_less == pytest.approx(res.p_two_sided / 2)
+
+
+def test_ade_fde_by_hand():
+    frame = fixed_predictions(n_participants=2)
+    assert infer_dt_s(frame).to_dict() == pytest.approx({"highway": DT_S, "obstacle": DT_S})
+    got = displacement_errors(frame)
+    rows = frame[(frame["participant_id"] == "p00") & (frame["world"] == "obstacle")]
+    ade, fde = [], []
+    for _, pred in rows.groupby(["trial_id", "start_index"]):
+        pos = np.array([pred["start_x"].iloc[0], pred["start_y"].iloc[0]])
+        dists = []
+        for _, r in pred.iterrows():
+            pos = pos + DT_S * np.array([r.ours_vx, r.ours_vy])
+            dists.append(math.hypot(pos[0] - r.click_x, pos[1] - r.click_y))
+        ade.extend(dists)
+        fde.append(dists[-1])
+    row = got[(got["participant_id"] == "p00") & (got["world"] == "obstacle")].iloc[0]
+    assert row["ade_ours"] == pytest.approx(np.mean(ade), rel=1e-9)
+    assert row["fde_ours"] == pytest.approx(np.mean(fde), rel=1e-9)
+
+
+def test_exclusions_are_counted_per_rule():
+    frame = fixed_predictions()
+    frame.loc[frame["participant_id"] == "p01", "attention_passed"] = False
+    frame.loc[frame["participant_id"] == "p02", "completed"] = False
+    fast = (frame["participant_id"] == "p03") & (frame["trial_id"] == "highway-0")
+    frame.loc[fast, "trial_duration_ms"] = 500.0
+    rules = ExclusionRules(too_fast_trial_ms=1000, max_too_fast_fraction=0.5)
+    result = apply_exclusions(frame, rules)
+    counts = result.counts()
+    assert counts["excluded_failed_attention_check"] == 1
+    assert counts["excluded_incomplete_session"] == 1
+    assert counts["excluded_too_fast"] == 0
+    assert counts["too_fast_trials_dropped"] == 1
+    assert counts["participants_kept"] == 2
+    assert not (result.kept["trial_duration_ms"] < 1000).any()
+
+
+def test_csv_round_trip_is_identical(tmp_path):
+    frame = fixed_predictions()
+    frame.to_csv(tmp_path / "export.csv", index=False)
+    back = load_csv(tmp_path / "export.csv")
+    assert back.equals(frame)
