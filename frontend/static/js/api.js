@@ -1,0 +1,140 @@
+// Thin client for the study HTTP API (app/study/API.md). No state beyond the token.
+
+/** An HTTP answer outside 2xx, with the server's `detail` message. */
+export class ApiError extends Error {
+  constructor(status, detail) {
+    super(`${status}: ${detail}`);
+    this.status = status;
+    this.detail = detail;
+  }
+}
+
+/** A random RFC 4122 version-4 UUID (crypto.randomUUID needs a secure context). */
+export function newUuid() {
+  if (globalThis.crypto && typeof crypto.randomUUID === "function") return crypto.randomUUID();
+  const bytes = crypto.getRandomValues(new Uint8Array(16));
+  bytes[6] = (bytes[6] & 0x0f) | 0x40;
+  bytes[8] = (bytes[8] & 0x3f) | 0x80;
+  const hex = [...bytes].map((b) => b.toString(16).padStart(2, "0")).join("");
+  return `${hex.slice(0, 8)}-${hex.slice(8, 12)}-${hex.slice(12, 16)}-${hex.slice(16, 20)}-${hex.slice(20)}`;
+}
+
+function detailText(detail) {
+  if (typeof detail === "string") return detail;
+  if (Array.isArray(detail)) {
+    return detail.map((d) => `${(d.loc || []).join(".")}: ${d.msg}`).join("; ");
+  }
+  return JSON.stringify(detail);
+}
+
+/** Send one JSON request; resolve with the parsed body, reject with ApiError or TypeError. */
+export async function requestJson(method, path, body, headers = {}) {
+  const init = { method, headers: { Accept: "application/json", ...headers } };
+  if (body !== undefined) {
+    init.headers["Content-Type"] = "application/json";
+    init.body = JSON.stringify(body);
+  }
+  const response = await fetch(path, init);
+  const text = await response.text();
+  let parsed = null;
+  try {
+    parsed = text ? JSON.parse(text) : null;
+  } catch {
+    parsed = { detail: text };
+  }
+  if (!response.ok) throw new ApiError(response.status, detailText(parsed?.detail ?? text));
+  return parsed;
+}
+
+const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+
+/**
+ * Send a write until the server acknowledges it with a 2xx.
+ * Network failures and 5xx/429 are retried with the same body (same submission_id),
+ * so the server stores it once; other 4xx are final and rethrown.
+ */
+export async function sendUntilAcknowledged(method, path, body, { onRetry, maxDelayMs = 8000 } = {}) {
+  for (let attempt = 0; ; attempt += 1) {
+    try {
+      return await requestJson(method, path, body);
+    } catch (error) {
+      const retryable = !(error instanceof ApiError) || error.status >= 500 || error.status === 429;
+      if (!retryable) throw error;
+      onRetry?.(error, attempt);
+      await sleep(Math.min(maxDelayMs, 500 * 2 ** attempt));
+    }
+  }
+}
+
+const enc = encodeURIComponent;
+
+/** The participant side of the API, bound to one session token once it is known. */
+export class StudyApi {
+  constructor(studyId) {
+    this.studyId = studyId;
+    this.token = null;
+  }
+
+  startSession(recruitment, client) {
+    return sendUntilAcknowledged("POST", "/api/sessions", {
+      study_id: this.studyId, recruitment, client,
+    });
+  }
+
+  base() {
+    return `/api/sessions/${enc(this.token)}`;
+  }
+
+  state() {
+    return requestJson("GET", `${this.base()}/state`);
+  }
+
+  consent(options) {
+    return sendUntilAcknowledged("POST", `${this.base()}/consent`, { submission_id: newUuid(), agree: true }, options);
+  }
+
+  instructionsDone(options) {
+    return sendUntilAcknowledged("POST", `${this.base()}/instructions`, { submission_id: newUuid() }, options);
+  }
+
+  /** `body` must already carry its submission_id so a retry reuses it. */
+  predictions(body, options) {
+    return sendUntilAcknowledged("POST", `${this.base()}/predictions`, body, options);
+  }
+
+  survey(answers, options) {
+    return sendUntilAcknowledged("POST", `${this.base()}/survey`, { submission_id: newUuid(), answers }, options);
+  }
+
+  events(events, { keepalive = false } = {}) {
+    return fetch(`${this.base()}/events`, {
+      method: "POST",
+      headers: { "Content-Type": "application/json" },
+      body: JSON.stringify({ events }),
+      keepalive,
+    });
+  }
+}
+
+/** The researcher side: every call carries the bearer token. */
+export class ResearcherApi {
+  constructor(token) {
+    this.token = token;
+  }
+
+  auth() {
+    return { Authorization: `Bearer ${this.token}` };
+  }
+
+  summary(studyId) {
+    const query = studyId ? `?study_id=${enc(studyId)}` : "";
+    return requestJson("GET", `/api/researcher/summary${query}`, undefined, this.auth());
+  }
+
+  async exportCsv(studyId) {
+    const query = studyId ? `?study_id=${enc(studyId)}` : "";
+    const response = await fetch(`/api/researcher/export.csv${query}`, { headers: this.auth() });
+    if (!response.ok) throw new ApiError(response.status, await response.text());
+    return response.blob();
+  }
+}

@@ -1,0 +1,136 @@
+// Researcher dashboard: token in sessionStorage, summary tables, CSV export with the bearer header.
+import { ApiError, ResearcherApi } from "./api.js";
+
+const TOKEN_KEY = "tomstudy.researcher.token";
+const REFRESH_MS = 15000;
+const $ = (id) => document.getElementById(id);
+
+function title(key) {
+  return key.replace(/_/g, " ");
+}
+
+function formatValue(value) {
+  if (typeof value === "number") return Number.isInteger(value) ? String(value) : value.toFixed(3);
+  if (value === null || value === undefined) return "–";
+  if (typeof value === "object") return JSON.stringify(value);
+  return String(value);
+}
+
+/** A table for a list of flat objects. */
+function rowsTable(rows) {
+  const table = document.createElement("table");
+  table.className = "summary";
+  const columns = [...new Set(rows.flatMap((row) => Object.keys(row)))];
+  const head = table.createTHead().insertRow();
+  for (const column of columns) {
+    const th = document.createElement("th");
+    th.textContent = title(column);
+    head.append(th);
+  }
+  const body = table.createTBody();
+  for (const row of rows) {
+    const tr = body.insertRow();
+    for (const column of columns) tr.insertCell().textContent = formatValue(row[column]);
+  }
+  return table;
+}
+
+/** Render any JSON summary: scalars as a key/value table, lists of objects as tables, objects nested. */
+function renderSummary(data, depth = 3) {
+  const fragment = document.createDocumentFragment();
+  const scalars = Object.entries(data).filter(([, v]) => v === null || typeof v !== "object");
+  if (scalars.length) fragment.append(rowsTable(scalars.map(([key, value]) => ({ item: title(key), value }))));
+  for (const [key, value] of Object.entries(data)) {
+    if (value === null || typeof value !== "object") continue;
+    const heading = document.createElement(`h${Math.min(depth, 5)}`);
+    heading.textContent = title(key);
+    fragment.append(heading);
+    if (Array.isArray(value)) {
+      if (!value.length) fragment.append(Object.assign(document.createElement("p"), { textContent: "none yet" }));
+      else if (value.every((v) => v && typeof v === "object" && !Array.isArray(v))) fragment.append(rowsTable(value));
+      else fragment.append(Object.assign(document.createElement("p"), { textContent: value.map(formatValue).join(", ") }));
+    } else {
+      fragment.append(renderSummary(value, depth + 1));
+    }
+  }
+  return fragment;
+}
+
+class Dashboard {
+  constructor() {
+    this.api = null;
+    this.timer = null;
+  }
+
+  start() {
+    $("token-form").addEventListener("submit", (event) => {
+      event.preventDefault();
+      this.login($("token-input").value.trim());
+    });
+    $("refresh").onclick = () => this.refresh();
+    $("download").onclick = () => this.download();
+    $("logout").onclick = () => this.logout();
+    const saved = sessionStorage.getItem(TOKEN_KEY);
+    if (saved) this.login(saved);
+  }
+
+  studyId() {
+    return $("study-input").value.trim();
+  }
+
+  async login(token) {
+    this.api = new ResearcherApi(token);
+    try {
+      await this.refresh(true);
+    } catch (error) {
+      $("login-message").textContent = error instanceof ApiError && error.status === 401
+        ? "That token is not valid." : `Could not load the summary: ${error.message}`;
+      sessionStorage.removeItem(TOKEN_KEY);
+      return;
+    }
+    sessionStorage.setItem(TOKEN_KEY, token);
+    $("login-message").textContent = "";
+    $("login").hidden = true;
+    $("dashboard").hidden = false;
+    clearInterval(this.timer);
+    this.timer = setInterval(() => this.refresh().catch(() => {}), REFRESH_MS);
+  }
+
+  logout() {
+    sessionStorage.removeItem(TOKEN_KEY);
+    clearInterval(this.timer);
+    this.api = null;
+    $("dashboard").hidden = true;
+    $("login").hidden = false;
+    $("token-input").value = "";
+  }
+
+  async refresh(throwErrors = false) {
+    try {
+      const summary = await this.api.summary(this.studyId());
+      $("summary").replaceChildren(renderSummary(summary));
+      $("dashboard-message").textContent = `Updated ${new Date().toLocaleTimeString()}.`;
+    } catch (error) {
+      if (throwErrors) throw error;
+      $("dashboard-message").textContent = `Could not refresh: ${error.message}`;
+    }
+  }
+
+  async download() {
+    $("dashboard-message").textContent = "Preparing the export…";
+    try {
+      const blob = await this.api.exportCsv(this.studyId());
+      const url = URL.createObjectURL(blob);
+      const link = Object.assign(document.createElement("a"), { href: url, download: `${this.studyId() || "study"}-export.csv` });
+      document.body.append(link);
+      link.click();
+      link.remove();
+      setTimeout(() => URL.revokeObjectURL(url), 10000);
+      $("dashboard-message").textContent = `Downloaded ${(blob.size / 1024).toFixed(1)} kB.`;
+    } catch (error) {
+      $("dashboard-message").textContent = `Export failed: ${error.message}`;
+    }
+  }
+}
+
+new Dashboard().start();
