@@ -1,0 +1,364 @@
+"""INTERACTION dataset track files -> validated tracks -> robot/human pairs -> TrajectorySet.
+
+Two layouts of the public devkit documentation are read (10 Hz, 100 ms between frames):
+- v1.0: <DIR>/recorded_trackfiles/<scenario>/vehicle_tracks_NNN.csv (+ optional
+  pedestrian_tracks_NNN.csv), one continuous recording per file;
+- v1.2: <DIR>/train/<scenario>_train.csv and <DIR>/val/<scenario>_val.csv with a leading
+  `case_id` column; each case is a separate 4 s recording.
+
+Every format problem raises `TrackFileError` whose message names file, line and column.
+
+Pair rule (one pair per robot and window): every car present at every frame of the window
+is a robot; its human is the other car present at every frame of the window with the
+smallest mean distance to the robot, provided the two come within `max_distance_m` of each
+other at some frame. Pedestrians, bicycles and other agent types are never robot or human.
+"""
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from app.data.trajectory import Episode
+
+FRAME_MS = 100
+VEHICLE_COLUMNS = ("track_id", "frame_id", "timestamp_ms", "agent_type", "x", "y", "vx", "vy",
+                   "psi_rad", "length", "width")
+CASE_COLUMNS = ("case_id", *VEHICLE_COLUMNS)
+PEDESTRIAN_COLUMNS = VEHICLE_COLUMNS[:8]
+OPTIONAL_TRAILING = ("interesting_agent", "track_to_predict")
+CAR_TYPES = frozenset({"car"})
+NON_VEHICLE_TYPES = frozenset({"pedestrian/bicycle", "pedestrian", "bicycle"})
+SPLITS = ("train", "val")
+
+
+class TrackFileError(ValueError):
+    """A track file does not follow the documented format; the message names file and line."""
+
+
+@dataclass
+class Track:
+    """One agent in one recording: frames [T] (index of the 100 ms grid), states [T, ...]."""
+
+    track_id: int
+    agent_type: str
+    frames: np.ndarray
+    xy: np.ndarray
+    v: np.ndarray
+    psi: np.ndarray
+    length_m: float
+    width_m: float
+
+    @property
+    def is_car(self) -> bool:
+        """True for the agent types that can be robot or human."""
+        return self.agent_type in CAR_TYPES
+
+
+@dataclass
+class Recording:
+    """The tracks of one v1.0 file or one v1.2 case (frames share one grid)."""
+
+    name: str
+    source: Path
+    tracks: list[Track]
+
+    def counts(self) -> dict[str, int]:
+        """Number of tracks per agent type."""
+        out: dict[str, int] = {}
+        for track in self.tracks:
+            out[track.agent_type] = out.get(track.agent_type, 0) + 1
+        return out
+
+
+@dataclass
+class Pair:
+    """A robot and its human over one window of consecutive frames."""
+
+    recording: str
+    robot_id: int
+    human_id: int
+    first_frame: int
+    positions: np.ndarray  # [W, 2 agents, 2] m
+    headings: np.ndarray  # [W, 2] rad
+    speeds: np.ndarray  # [W, 2] m/s, from the recorded vx, vy
+    extra: dict = field(default_factory=dict)
+
+    def episode(self, step: int, labels: dict[str, int] | None = None) -> Episode:
+        """This pair as an Episode sampled every `step` frames."""
+        return Episode(self.positions[::step].copy(), self.headings[::step].copy(),
+                       self.speeds[::step].copy(), labels or {})
+
+
+# ---------------------------------------------------------------- layout discovery
+
+
+def detect_layout(data_dir: Path, scenario: str) -> str:
+    """'v1.2' if train/<scenario>_train.csv exists, 'v1.0' if recorded_trackfiles/<scenario>/."""
+    data_dir = Path(data_dir)
+    if (data_dir / "train" / f"{scenario}_train.csv").is_file():
+        return "v1.2"
+    if (data_dir / "recorded_trackfiles" / scenario).is_dir():
+        return "v1.0"
+    raise TrackFileError(
+        f"{data_dir}: no tracks for scenario {scenario!r}: looked for "
+        f"{data_dir / 'train' / f'{scenario}_train.csv'} (v1.2) and "
+        f"{data_dir / 'recorded_trackfiles' / scenario}/vehicle_tracks_NNN.csv (v1.0)")
+
+
+def split_files(data_dir: Path, scenario: str, layout: str) -> dict[str, list[Path]]:
+    """The track files of each split ('train', 'val'); v1.0 lists every file under both."""
+    data_dir = Path(data_dir)
+    if layout == "v1.2":
+        files = {s: [data_dir / s / f"{scenario}_{s}.csv"] for s in SPLITS}
+        if not files["val"][0].is_file():
+            raise TrackFileError(f"{files['val'][0]}: validation file not found")
+        return files
+    folder = data_dir / "recorded_trackfiles" / scenario
+    found = sorted(folder.glob("vehicle_tracks_*.csv")) + sorted(
+        folder.glob("pedestrian_tracks_*.csv"))
+    if not any(p.name.startswith("vehicle_tracks_") for p in found):
+        raise TrackFileError(f"{folder}: no vehicle_tracks_NNN.csv files")
+    return {s: found for s in SPLITS}
+
+
+def load_recordings(files: list[Path]) -> list[Recording]:
+    """Read and validate every file; v1.0 pedestrian files join their vehicle file's recording."""
+    by_name: dict[str, Recording] = {}
+    for path in files:
+        for rec in read_track_file(path):
+            key = rec.name.replace("pedestrian_tracks_", "vehicle_tracks_")
+            if key in by_name:
+                by_name[key].tracks.extend(rec.tracks)
+            else:
+                rec.name = key
+                by_name[key] = rec
+    return list(by_name.values())
+
+
+# ---------------------------------------------------------------- one file
+
+
+def read_track_file(path: Path) -> list[Recording]:
+    """Validate and read one track file (any layout) into recordings."""
+    path = Path(path)
+    with open(path, newline="", encoding="utf-8") as fh:
+        reader = csv.reader(fh)
+        header = next(reader, None)
+        if header is None or not any(cell.strip() for cell in header):
+            raise TrackFileError(f"{path}:1: empty file: expected a header line "
+                                 f"({','.join(CASE_COLUMNS)} or {','.join(VEHICLE_COLUMNS)})")
+        columns = _check_header(path, [c.strip() for c in header])
+        rows = _parse_rows(path, reader, columns)
+    if not rows:
+        raise TrackFileError(f"{path}:2: no data rows after the header")
+    return _group_tracks(path, rows, has_case="case_id" in columns)
+
+
+def _expected_columns(header: list[str]) -> tuple[str, ...]:
+    if header and header[0] == "case_id":
+        return CASE_COLUMNS
+    if "case_id" in header:
+        return CASE_COLUMNS
+    if not ({"psi_rad", "length", "width"} & set(header)) and len(header) <= 8:
+        return PEDESTRIAN_COLUMNS
+    return VEHICLE_COLUMNS
+
+
+def _check_header(path: Path, header: list[str]) -> tuple[str, ...]:
+    """The file's columns if they are the documented ones in the documented order."""
+    expected = _expected_columns(header)
+    missing = [c for c in expected if c not in header]
+    if missing:
+        raise TrackFileError(f"{path}:1: header is missing column {missing[0]!r} "
+                             f"(expected {','.join(expected)})")
+    for index, (found, wanted) in enumerate(zip(header, expected, strict=False), start=1):
+        if found != wanted:
+            raise TrackFileError(
+                f"{path}:1: column {index} is {found!r} where {wanted!r} is expected "
+                f"(columns reordered; expected order {','.join(expected)})")
+    for index, extra in enumerate(header[len(expected):], start=len(expected) + 1):
+        if extra not in OPTIONAL_TRAILING:
+            raise TrackFileError(f"{path}:1: column {index} {extra!r} is not a documented column")
+    return tuple(header)
+
+
+def _number(path: Path, line: int, column: str, text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise TrackFileError(f"{path}:{line}: column {column!r}: expected a number, "
+                             f"found {text!r}") from None
+    if not math.isfinite(value):
+        raise TrackFileError(f"{path}:{line}: column {column!r}: {text!r} is not finite")
+    return value
+
+
+def _integer(path: Path, line: int, column: str, text: str) -> int:
+    value = _number(path, line, column, text)
+    if value != int(value):
+        raise TrackFileError(f"{path}:{line}: column {column!r}: expected an integer, "
+                             f"found {text!r}")
+    return int(value)
+
+
+def _parse_rows(path: Path, reader, columns: tuple[str, ...]) -> list[tuple]:
+    """(case, track, frame, type, x, y, vx, vy, psi, length, width, line) per data row."""
+    index = {name: k for k, name in enumerate(columns)}
+    has_shape = "psi_rad" in index
+    rows = []
+    for line, cells in enumerate(reader, start=2):
+        if not cells or (len(cells) == 1 and not cells[0].strip()):
+            continue
+        if len(cells) != len(columns):
+            raise TrackFileError(f"{path}:{line}: expected {len(columns)} fields, "
+                                 f"found {len(cells)}")
+
+        def cell(name: str, _cells=cells) -> str:
+            return _cells[index[name]].strip()
+
+        case = _integer(path, line, "case_id", cell("case_id")) if "case_id" in index else 0
+        agent_type = cell("agent_type")
+        if not agent_type:
+            raise TrackFileError(f"{path}:{line}: column 'agent_type' is empty")
+        stamp = _integer(path, line, "timestamp_ms", cell("timestamp_ms"))
+        if stamp % FRAME_MS:
+            raise TrackFileError(f"{path}:{line}: column 'timestamp_ms': {stamp} is not on the "
+                                 f"{FRAME_MS} ms grid (10 Hz)")
+        values = [_number(path, line, c, cell(c)) for c in ("x", "y", "vx", "vy")]
+        shape = [math.nan] * 3
+        if has_shape:
+            for k, name in enumerate(("psi_rad", "length", "width")):
+                text = cell(name)
+                if text or agent_type not in NON_VEHICLE_TYPES:
+                    shape[k] = _number(path, line, name, text)
+        rows.append((case, _integer(path, line, "track_id", cell("track_id")),
+                     stamp // FRAME_MS, agent_type, *values, *shape, line))
+    return rows
+
+
+def _group_tracks(path: Path, rows: list[tuple], has_case: bool) -> list[Recording]:
+    groups: dict[int, dict[int, list[tuple]]] = {}
+    for row in rows:
+        groups.setdefault(row[0], {}).setdefault(row[1], []).append(row)
+    recordings = []
+    for case, tracks in groups.items():
+        name = f"{path.stem}#case{case}" if has_case else path.stem
+        recordings.append(Recording(name, path, [_track(path, r) for r in tracks.values()]))
+    return recordings
+
+
+def _track(path: Path, rows: list[tuple]) -> Track:
+    rows.sort(key=lambda r: r[2])
+    frames = np.array([r[2] for r in rows], dtype=np.int64)
+    repeated = np.flatnonzero(np.diff(frames) == 0)
+    if len(repeated):
+        bad = rows[repeated[0] + 1]
+        raise TrackFileError(f"{path}:{bad[-1]}: column 'timestamp_ms': track {bad[1]} has "
+                             f"two rows at {bad[2] * FRAME_MS} ms")
+    types = {r[3] for r in rows}
+    if len(types) > 1:
+        raise TrackFileError(f"{path}:{rows[0][-1]}: column 'agent_type': track {rows[0][1]} "
+                             f"has several types {sorted(types)}")
+    data = np.array([r[4:11] for r in rows], dtype=np.float64)
+    return Track(track_id=rows[0][1], agent_type=rows[0][3], frames=frames,
+                 xy=data[:, 0:2], v=data[:, 2:4], psi=data[:, 4],
+                 length_m=float(data[0, 5]), width_m=float(data[0, 6]))
+
+
+# ---------------------------------------------------------------- pairs
+
+
+def _window_states(track: Track, first: int, size: int) -> tuple[np.ndarray, ...] | None:
+    """(xy [W,2], heading [W], speed [W]) if the track is present at all W frames, else None."""
+    start = int(np.searchsorted(track.frames, first))
+    stop = start + size
+    if stop > len(track.frames) or track.frames[start] != first:
+        return None
+    if track.frames[stop - 1] != first + size - 1:
+        return None  # a gap inside the window
+    v = track.v[start:stop]
+    psi = track.psi[start:stop]
+    heading = np.where(np.isfinite(psi), psi, np.arctan2(v[:, 1], v[:, 0]))
+    return track.xy[start:stop], heading, np.hypot(v[:, 0], v[:, 1])
+
+
+def window_starts(recording: Recording, size: int, stride: int,
+                  frame_range: tuple[int, int] | None = None) -> list[int]:
+    """First frames of the windows of `size` frames, every `stride` frames, inside the range."""
+    cars = [t for t in recording.tracks if t.is_car]
+    if not cars:
+        return []
+    lo = min(int(t.frames[0]) for t in cars)
+    hi = max(int(t.frames[-1]) for t in cars)
+    if frame_range is not None:
+        lo, hi = max(lo, frame_range[0]), min(hi, frame_range[1])
+    return list(range(lo, hi - size + 2, stride))
+
+
+def pairs_in_window(recording: Recording, first: int, size: int,
+                    max_distance_m: float) -> list[Pair]:
+    """Every car present over the window paired with its nearest interacting car (rule above)."""
+    present = []
+    for track in recording.tracks:
+        if track.is_car and track.frames[0] <= first and track.frames[-1] >= first + size - 1:
+            states = _window_states(track, first, size)
+            if states is not None:
+                present.append((track, states))
+    if len(present) < 2:
+        return []
+    xy = np.stack([s[0] for _, s in present])  # [C, W, 2]
+    dist = np.linalg.norm(xy[:, None] - xy[None, :], axis=-1)  # [C, C, W]
+    mean = dist.mean(axis=-1)
+    mean[dist.min(axis=-1) > max_distance_m] = np.inf
+    np.fill_diagonal(mean, np.inf)
+    pairs = []
+    for r, (robot, r_states) in enumerate(present):
+        h = int(np.argmin(mean[r]))
+        if not np.isfinite(mean[r, h]):
+            continue
+        human, h_states = present[h]
+        pairs.append(Pair(
+            recording=recording.name, robot_id=robot.track_id, human_id=human.track_id,
+            first_frame=first,
+            positions=np.stack([r_states[0], h_states[0]], axis=1),
+            headings=np.stack([r_states[1], h_states[1]], axis=1),
+            speeds=np.stack([r_states[2], h_states[2]], axis=1)))
+    return pairs
+
+
+def extract_pairs(recordings: list[Recording], size: int, stride: int, max_distance_m: float,
+                  frame_ranges: dict[str, tuple[int, int]] | None = None) -> list[Pair]:
+    """All pairs of all windows of all recordings, in a deterministic order."""
+    pairs = []
+    for rec in sorted(recordings, key=lambda r: r.name):
+        span = (frame_ranges or {}).get(rec.name)
+        for first in window_starts(rec, size, stride, span):
+            pairs.extend(pairs_in_window(rec, first, size, max_distance_m))
+    return pairs
+
+
+def time_split(recordings: list[Recording], train_fraction: float) -> dict[str, dict]:
+    """v1.0 has no val split: per recording, frames before the cut are train, after are val."""
+    ranges: dict[str, dict] = {"train": {}, "val": {}}
+    for rec in recordings:
+        frames = np.concatenate([t.frames for t in rec.tracks])
+        lo, hi = int(frames.min()), int(frames.max())
+        cut = lo + int(round((hi - lo + 1) * train_fraction))
+        ranges["train"][rec.name] = (lo, cut - 1)
+        ranges["val"][rec.name] = (cut, hi)
+    return ranges
+
+
+# ---------------------------------------------------------------- manoeuvre labels (generator)
+
+
+def load_manoeuvres(path: Path) -> dict[tuple[str, int, int], str]:
+    """(recording, track_id, frame) -> manoeuvre, from a generator's sidecar CSV."""
+    out = {}
+    with open(path, newline="", encoding="utf-8") as fh:
+        for row in csv.DictReader(fh):
+            out[(row["recording"], int(row["track_id"]), int(row["frame"]))] = row["manoeuvre"]
+    return out
