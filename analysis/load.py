@@ -80,3 +80,48 @@ def data_hash(frame: pd.DataFrame) -> str:
     digest.update(",".join(frame.columns).encode())
     digest.update(pd.util.hash_pandas_object(frame, index=False).to_numpy().tobytes())
     return digest.hexdigest()
+
+
+def load_database(url: str, study_id: str) -> pd.DataFrame:
+    """The same rows read straight from the server's database (read-only, SQLAlchemy Core).
+
+    Joins the server's tables `predictionrow` (one row per start state and step),
+    `trialresponse` (the answered trial) and `participant`, as the CSV export does.
+    """
+    import sqlalchemy as sa
+
+    engine = sa.create_engine(url)
+    try:
+        meta = sa.MetaData()
+        meta.reflect(engine, only=["participant", "trialresponse", "predictionrow"])
+        part, trial, pred = (meta.tables[n] for n in ("participant", "trialresponse",
+                                                       "predictionrow"))
+        query = (
+            sa.select(
+                part.c.study_id, part.c.id.label("participant_id"), part.c.recruitment,
+                part.c.external_id, part.c.completed,
+                (part.c.attention_failed == 0).label("attention_passed"),
+                trial.c.world, trial.c.world_position, trial.c.trial_id, trial.c.trial_index,
+                trial.c.is_practice, trial.c.attention_check, trial.c.clip_sha256,
+                *[pred.c[c] for c in EXPORT_COLUMNS if c in pred.c and c not in
+                  ("participant_id", "trial_id", "submission_id")],
+                trial.c.duration_ms.label("trial_duration_ms"), trial.c.replays,
+                pred.c.submission_id, trial.c.received_at.label("submitted_at"))
+            .select_from(pred.join(trial, trial.c.submission_id == pred.c.submission_id)
+                         .join(part, part.c.id == pred.c.participant_id))
+            .where(part.c.study_id == study_id))
+        with engine.connect() as conn:
+            frame = pd.DataFrame(conn.execute(query).mappings().all())
+    finally:
+        engine.dispose()
+    if frame.empty:
+        frame = pd.DataFrame(columns=list(EXPORT_COLUMNS))
+    frame["submitted_at"] = frame["submitted_at"].map(_iso_time)
+    return normalise(frame)
+
+
+def _iso_time(value) -> str:
+    """Timestamps as ISO-8601 text, the way the CSV export writes them."""
+    if value is None or value == "":
+        return ""
+    return value.isoformat() if hasattr(value, "isoformat") else str(value)

@@ -66,14 +66,19 @@ def participant_means(frame: pd.DataFrame, models: tuple[str, ...] = MODELS) -> 
 
 
 class ExclusionRules(BaseModel):
-    """Named exclusion rules, read from the study config's `exclusions` section."""
+    """Named exclusion rules, the study config's `exclusions` section (same keys).
+
+    A participant is excluded for a failed attention check, an incomplete session, or
+    more than `too_fast_max_fraction` of scored trials answered within `too_fast_trial_ms`;
+    of the participants kept, single too-fast trials are dropped.
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     failed_attention_check: bool = True
-    incomplete_session: bool = True
-    too_fast_trial_ms: float = Field(default=3000.0, ge=0)
-    max_too_fast_fraction: float = Field(default=0.25, ge=0, le=1)
+    incomplete: bool = True
+    too_fast_trial_ms: float = Field(default=4000.0, ge=0)
+    too_fast_max_fraction: float = Field(default=0.25, ge=0, le=1)
 
 
 @dataclass
@@ -109,14 +114,14 @@ def apply_exclusions(frame: pd.DataFrame, rules: ExclusionRules) -> Exclusions:
     if rules.failed_attention_check:
         failed = ~participants["attention_passed"].all()
         excluded["failed_attention_check"] = sorted(failed[failed].index)
-    if rules.incomplete_session:
+    if rules.incomplete:
         incomplete = ~participants["completed"].all()
-        excluded["incomplete_session"] = sorted(incomplete[incomplete].index)
+        excluded["incomplete"] = sorted(incomplete[incomplete].index)
     scored = frame[~frame["is_practice"] & ~frame["attention_check"]]
     trials = scored.drop_duplicates(["participant_id", "trial_id"])
     fast_trial = trials["trial_duration_ms"] < rules.too_fast_trial_ms
     fast_share = fast_trial.groupby(trials["participant_id"]).mean()
-    too_fast = fast_share[fast_share > rules.max_too_fast_fraction]
+    too_fast = fast_share[fast_share > rules.too_fast_max_fraction]
     excluded["too_fast"] = sorted(too_fast.index)
     dropped_ids = set().union(*excluded.values())
     keep = scored[~scored["participant_id"].isin(dropped_ids)]

@@ -46,3 +46,99 @@ def _row(p, world, w, t, s, k, start, click, human, rng) -> list:
         "submitted_at": "2026-01-01T00:00:00Z",
     }
     return [values[c] for c in EXPORT_COLUMNS]
+
+
+HIGHWAY_SCENE = {
+    "world": "highway", "dt_s": 0.5, "frame": "test", "obstacles": [], "goals": [],
+    "bounds": {"x_min_m": -10.0, "x_max_m": 60.0, "y_min_m": -2.0, "y_max_m": 10.0},
+    "lanes": [{"index": i, "y_center_m": 4.0 * i, "width_m": 4.0} for i in range(3)],
+    "agents": [{"name": "robot", "kind": "car", "length_m": 5.0, "width_m": 2.0,
+                "color": "#0072B2"},
+               {"name": "human", "kind": "car", "length_m": 5.0, "width_m": 2.0,
+                "color": "#E69F00"}],
+}
+OBSTACLE_SCENE = {
+    "world": "obstacle", "dt_s": 0.5, "frame": "test", "lanes": [],
+    "bounds": {"x_min_m": 0.0, "x_max_m": 10.0, "y_min_m": 0.0, "y_max_m": 10.0},
+    "obstacles": [{"x_m": 5.0, "y_m": 5.0, "radius_m": 0.8, "label": ""}],
+    "goals": [{"x_m": gx, "y_m": gy, "radius_m": 0.5, "label": f"g{k}"}
+              for k, (gx, gy) in enumerate([(1.0, 1.0), (9.0, 1.0), (1.0, 9.0), (9.0, 9.0)])],
+    "agents": [{"name": "robot", "kind": "disc", "length_m": 0.6, "width_m": 0.6,
+                "color": "#0072B2"},
+               {"name": "human", "kind": "disc", "length_m": 0.6, "width_m": 0.6,
+                "color": "#E69F00"}],
+}
+
+
+def highway_segment(lane_from: int, lane_to: int, steps: int = 6) -> list:
+    """Robot drives at 10 m/s and drifts from one lane centre towards another."""
+    ys = np.linspace(4.0 * lane_from, 4.0 * lane_from + 0.6 * 4.0 * (lane_to - lane_from),
+                     steps + 1)
+    return [[[5.0 * t, float(y)], [5.0 * t - 10.0, 8.0]] for t, y in enumerate(ys)]
+
+
+def obstacle_segment(start, goal, steps: int = 6) -> list:
+    """Robot moves 0.4 m per step straight at a goal."""
+    start, goal = np.asarray(start, float), np.asarray(goal, float)
+    unit = (goal - start) / np.linalg.norm(goal - start)
+    return [[(start + 0.4 * t * unit).tolist(), [5.0, 1.0]] for t in range(steps + 1)]
+
+
+def payload(scene: dict, segment: list, starts: list, trial_id: str = "t0") -> dict:
+    """A trial payload as the server sends it (only the keys predictors read)."""
+    return {"trial_id": trial_id, "world": scene["world"], "scene": scene, "dt_s": 0.5,
+            "segment": {"positions": segment, "headings": [[0.0, 0.0]] * len(segment)},
+            "start_states": [{"robot": s, "human": segment[-1][1], "robot_heading": 0.0,
+                              "human_heading": 0.0} for s in starts],
+            "steps_to_predict": 3, "max_step_m": 8.0 if scene["lanes"] else 0.6,
+            "min_step_m": 0.8 if scene["lanes"] else 0.06}
+
+
+def toward_actions(scene: dict, starts: list, target, speed: float, steps: int = 3) -> list:
+    """Actions [K, n, 2] that head at a lane (y) or a goal (x, y) from each start state."""
+    out = []
+    for s in starts:
+        if scene["lanes"]:
+            v = np.array([10.0, (target - s[1]) / 1.0])
+        else:
+            v = np.asarray(target) - np.asarray(s)
+        v = speed * v / np.linalg.norm(v)
+        out.append([v.tolist()] * steps)
+    return out
+
+
+def small_bank(trials: int = 6, seed: int = 0) -> dict:
+    """A trial bank in bank.json's layout: Ours heads at the segment's target, the VAE drifts."""
+    rng = np.random.default_rng(seed)
+    worlds = {}
+    for world, scene in (("highway", HIGHWAY_SCENE), ("obstacle", OBSTACLE_SCENE)):
+        records = []
+        for t in range(trials):
+            if scene["lanes"]:
+                lane_from = int(rng.integers(3))
+                lane_to = int(np.clip(lane_from + rng.choice([-1, 0, 1]), 0, 2))
+                segment = highway_segment(lane_from, lane_to)
+                starts = [[float(rng.uniform(20, 40)), float(rng.uniform(0, 8))] for _ in range(5)]
+                target, speed, code = 4.0 * lane_to, 10.0, lane_to
+            else:
+                goal = OBSTACLE_SCENE["goals"][int(rng.integers(4))]
+                target = [goal["x_m"], goal["y_m"]]
+                segment = obstacle_segment([5.0 + rng.uniform(-1, 1), 5.0], target)
+                starts = [[float(rng.uniform(2, 8)), float(rng.uniform(2, 8))] for _ in range(5)]
+                speed, code = 0.8, OBSTACLE_SCENE["goals"].index(goal)
+            ours = toward_actions(scene, starts, target, speed)
+            drift = rng.normal(scale=1.2, size=(5, 3, 2)) * speed
+            vae = (np.asarray(ours) + drift).tolist()
+            records.append({
+                "trial_id": f"{world}-{t}", "kind": "main", "clip_sha256": f"clip{t}",
+                "segment": {"positions": segment, "headings": [[0.0, 0.0]] * len(segment)},
+                "start_states": [{"robot": s, "human": segment[-1][1], "robot_heading": 0.0,
+                                  "human_heading": 0.0, "robot_speed": speed} for s in starts],
+                "predictions": {"ours": {"code": code, "actions": ours, "content_hash": "o1"},
+                                "vae": {"code": t % 3, "actions": vae, "content_hash": "v1"}},
+                "cv_actions": [[[speed, 0.0]] * 3] * 5, "policy_actions": ours,
+            })
+        worlds[world] = {"world": world, "dt_s": 0.5, "scene": scene,
+                         "max_step_m": 8.0 if scene["lanes"] else 0.6,
+                         "min_step_m": 0.8 if scene["lanes"] else 0.06, "trials": records}
+    return {"study_id": "paper_study", "steps_to_predict": 3, "worlds": worlds}

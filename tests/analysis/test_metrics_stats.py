@@ -95,11 +95,11 @@ def test_exclusions_are_counted_per_rule():
     frame.loc[frame["participant_id"] == "p02", "completed"] = False
     fast = (frame["participant_id"] == "p03") & (frame["trial_id"] == "highway-0")
     frame.loc[fast, "trial_duration_ms"] = 500.0
-    rules = ExclusionRules(too_fast_trial_ms=1000, max_too_fast_fraction=0.5)
+    rules = ExclusionRules(too_fast_trial_ms=1000, too_fast_max_fraction=0.5)
     result = apply_exclusions(frame, rules)
     counts = result.counts()
     assert counts["excluded_failed_attention_check"] == 1
-    assert counts["excluded_incomplete_session"] == 1
+    assert counts["excluded_incomplete"] == 1
     assert counts["excluded_too_fast"] == 0
     assert counts["too_fast_trials_dropped"] == 1
     assert counts["participants_kept"] == 2

@@ -1,0 +1,160 @@
+"""The report's figures (matplotlib Agg; each written as PNG and SVG)."""
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from analysis.stats import PairedResult, mean_ci95  # noqa: E402
+
+# Okabe-Ito, as in app.worlds.scene: safe for colour-blind readers.
+MODEL_COLORS = {"ours": "#E69F00", "vae": "#0072B2", "cv": "#009E73", "policy": "#CC79A7",
+                "human": "#000000"}
+MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy",
+                "human": "Participants"}
+
+
+def save(fig, base: Path) -> list[Path]:
+    """Write `base`.png and `base`.svg and close the figure."""
+    base = Path(base)
+    base.parent.mkdir(parents=True, exist_ok=True)
+    paths = [base.with_suffix(".png"), base.with_suffix(".svg")]
+    fig.savefig(paths[0], dpi=130)
+    fig.savefig(paths[1])
+    plt.close(fig)
+    return paths
+
+
+def plot_errors(means: pd.DataFrame, results: dict[str, PairedResult], base: Path,
+                models: tuple[str, ...] = ("ours", "vae", "cv")) -> list[Path]:
+    """Per world: mean alignment error per model with 95% CI, participants as dots, paired lines."""
+    worlds = sorted(means["world"].unique())
+    fig, axes = plt.subplots(1, len(worlds), figsize=(4.2 * len(worlds), 4.2), squeeze=False,
+                             sharey=True)
+    rng = np.random.default_rng(0)
+    for ax, world in zip(axes[0], worlds, strict=True):
+        group = means[means["world"] == world]
+        jitter = rng.uniform(-0.08, 0.08, size=len(group))
+        values = np.stack([group[f"err_{m}"].to_numpy() for m in models])
+        for row in range(values.shape[1]):
+            ax.plot(np.arange(len(models)) + jitter[row], values[:, row], color="#bbbbbb",
+                    lw=0.7, zorder=1)
+        for i, model in enumerate(models):
+            ax.scatter(i + jitter, values[i], s=12, color=MODEL_COLORS[model], alpha=0.6,
+                       zorder=2, edgecolor="none")
+            mean, low, high = mean_ci95(values[i])
+            ax.errorbar(i + 0.28, mean, yerr=[[mean - low], [high - mean]], fmt="o",
+                        color="black", ms=6, capsize=4, zorder=3)
+        res = results.get(world)
+        title = world
+        if res is not None:
+            title += (f"\nOurs-VAE: t={res.t:.2f}, p={res.p_two_sided:.2g}, "
+                      f"d_z={res.d_z:.2f}, n={res.n}")
+        ax.set_title(title, fontsize=9)
+        ax.set_xticks(range(len(models)), [MODEL_LABELS[m] for m in models])
+        ax.set_xlim(-0.5, len(models) - 0.3)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0][0].set_ylabel("alignment error (1 - cos), mean per participant")
+    fig.suptitle("Alignment with participants' predictions (dots: participants; "
+                 "black: mean, 95% CI)", fontsize=9)
+    fig.tight_layout()
+    return save(fig, base)
+
+
+def top_codes(frame: pd.DataFrame, model: str, k: int) -> list[int]:
+    """The model's k most common latent codes over the answered trials (trials, not rows)."""
+    trials = frame.drop_duplicates(["trial_id"])
+    return trials[f"{model}_code"].value_counts().index[:k].tolist()
+
+
+def _unit(vx: np.ndarray, vy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    norm = np.hypot(vx, vy)
+    norm = np.where(norm > 1e-9, norm, 1.0)
+    return vx / norm, vy / norm
+
+
+def field_panel(ax, rows: pd.DataFrame, model: str, scene, arrow_m: float) -> float:
+    """Participants' mean first move and the model's at each start state (unit arrows)."""
+    from app.worlds.scene import draw_scene
+
+    if scene is not None:
+        draw_scene(ax, scene)
+    else:
+        ax.invert_yaxis()
+        ax.set_aspect("equal")
+    first = rows[rows["step"] == rows["step"].min()]
+    per_state = first.groupby(["trial_id", "start_index"]).agg(
+        x=("start_x", "first"), y=("start_y", "first"), hx=("human_vx", "mean"),
+        hy=("human_vy", "mean"), mx=(f"{model}_vx", "first"), my=(f"{model}_vy", "first"))
+    for who, (cx, cy), width in (("human", ("hx", "hy"), 0.006), (model, ("mx", "my"), 0.004)):
+        ux, uy = _unit(per_state[cx].to_numpy(), per_state[cy].to_numpy())
+        ax.quiver(per_state["x"], per_state["y"], ux * arrow_m, uy * arrow_m, angles="xy",
+                  scale_units="xy", scale=1, color=MODEL_COLORS[who], width=width, zorder=4,
+                  label=MODEL_LABELS[who])
+    return float(rows[f"err_{model}"].mean()) if f"err_{model}" in rows else float("nan")
+
+
+def plot_fields(frame: pd.DataFrame, scenes: dict, base: Path, k: int = 3) -> list[Path]:
+    """Per world, for each model's k most common codes: participants' field beside the model's."""
+    worlds = sorted(frame["world"].unique())
+    models = ("ours", "vae")
+    paths: list[Path] = []
+    for world in worlds:
+        rows_w = frame[frame["world"] == world]
+        scene = scenes.get(world)
+        wide = scene is not None and bool(scene.lanes)
+        fig, axes = plt.subplots(len(models), k, squeeze=False,
+                                 figsize=(5.2 * k, 2.4 * len(models)) if wide
+                                 else (3.4 * k, 3.6 * len(models)))
+        arrow_m = _arrow_length(scene)
+        for r, model in enumerate(models):
+            codes = top_codes(rows_w, model, k)
+            for c in range(k):
+                ax = axes[r][c]
+                if c >= len(codes):
+                    ax.axis("off")
+                    continue
+                rows = rows_w[rows_w[f"{model}_code"] == codes[c]]
+                err = field_panel(ax, rows, model, scene, arrow_m)
+                n_trials = rows["trial_id"].nunique()
+                ax.set_title(f"{MODEL_LABELS[model]} code {codes[c]}: {n_trials} trials, "
+                             f"error {err:.2f}", fontsize=8)
+                ax.tick_params(labelsize=6)
+                if c == 0:
+                    ax.legend(fontsize=6, loc="lower left", framealpha=0.8)
+        fig.suptitle(f"{world}: participants' first moves (black, mean per start state) vs "
+                     "each model's, for its most common latent codes", fontsize=9)
+        fig.tight_layout()
+        paths += save(fig, Path(base).with_name(f"{Path(base).name}_{world}"))
+    return paths
+
+
+def _arrow_length(scene) -> float:
+    if scene is None:
+        return 0.5
+    b = scene.bounds
+    return 0.06 * min(b.x_max_m - b.x_min_m, 4 * (b.y_max_m - b.y_min_m))
+
+
+def plot_power(curve: pd.DataFrame, alpha: float, kind: str, base: Path) -> list[Path]:
+    """Power to detect Ours < VAE vs number of participants, one line per world."""
+    fig, ax = plt.subplots(figsize=(5.5, 3.8))
+    colors = ["#0072B2", "#D55E00", "#009E73"]
+    for i, (world, group) in enumerate(curve.groupby("world", sort=True)):
+        ax.plot(group["n"], group["power"], color=colors[i % 3], lw=1.8,
+                label=f"{world} (d_z = {group['d_z'].iloc[0]:.2f})")
+    ax.axhline(0.8, color="grey", ls="--", lw=0.8)
+    ax.axvline(22, color="grey", ls=":", lw=0.8)
+    ax.text(22.5, 0.05, "paper: n = 22", fontsize=7, color="grey")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("participants n")
+    ax.set_ylabel(f"power (one-sided paired t, alpha = {alpha})")
+    ax.set_title(f"Power to find Ours < VAE with '{kind}' simulated participants", fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return save(fig, base)

@@ -1,0 +1,172 @@
+"""Power to detect Ours < VAE, from simulated participants run in process (no HTTP).
+
+The bots' predictors answer the trial bank's trials directly; the models' answers are
+the bank's precomputed actions, exactly what the server stores beside a participant's.
+The rows have the export CSV's columns, so the same analysis code scores them.
+Power at n = the share of `reps` studies of n participants (drawn with replacement from a
+simulated pool) where the one-sided paired t-test gives p < alpha in that world.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+from tqdm import tqdm
+
+from analysis import predictors
+from analysis.load import EXPORT_COLUMNS, normalise
+from analysis.metrics import participant_means
+
+KINDS = ("coarse", "precise", "random")
+SIMULATED_TRIAL_MS = 20000.0
+
+
+def load_bank(path: Path) -> dict:
+    """The study's trial bank (var/trials/<study>/bank.json) as plain JSON."""
+    return json.loads(Path(path).read_text())
+
+
+def trial_payload(world_bank: dict, trial: dict, steps_to_predict: int) -> dict:
+    """What the browser (and a bot) receives for a trial: scene, clip, start states, limits."""
+    return {
+        "trial_id": trial["trial_id"], "world": world_bank["world"], "scene": world_bank["scene"],
+        "dt_s": world_bank["dt_s"], "segment": trial["segment"],
+        "start_states": trial["start_states"], "steps_to_predict": steps_to_predict,
+        "max_step_m": world_bank["max_step_m"], "min_step_m": world_bank["min_step_m"],
+    }
+
+
+def bot_clicks(kind: str, payload: dict, trial: dict, rng: np.random.Generator) -> np.ndarray:
+    """A bot's clicks [K, n, 2] for one trial (precise bots follow the bank's policy actions)."""
+    if kind == "coarse":
+        return predictors.predict_coarse(payload, rng)
+    if kind == "precise":
+        return predictors.predict_from_actions(payload, np.asarray(trial["policy_actions"]), rng)
+    if kind == "random":
+        return predictors.predict_random(payload, rng)
+    raise ValueError(f"kind: unknown bot kind {kind!r}")
+
+
+def trial_rows(participant: str, world_position: int, trial_index: int, payload: dict,
+               trial: dict, clicks: np.ndarray) -> dict[str, np.ndarray]:
+    """Export-shaped columns for one answered trial (K x n rows)."""
+    k, n = clicks.shape[:2]
+    starts = predictors.start_positions(payload)
+    humans = np.array([s["human"] for s in payload["start_states"]], dtype=np.float64)
+    human_v = predictors.clicks_to_actions(payload, clicks)
+    cols = {
+        "participant_id": np.full(k * n, participant),
+        "world": np.full(k * n, payload["world"]),
+        "world_position": np.full(k * n, world_position),
+        "trial_id": np.full(k * n, trial["trial_id"]),
+        "trial_index": np.full(k * n, trial_index), "start_index": np.repeat(np.arange(k), n),
+        "step": np.tile(np.arange(n), k), "start_x": np.repeat(starts[:, 0], n),
+        "start_y": np.repeat(starts[:, 1], n), "human_x": np.repeat(humans[:, 0], n),
+        "human_y": np.repeat(humans[:, 1], n), "click_x": clicks[..., 0].ravel(),
+        "click_y": clicks[..., 1].ravel(), "human_vx": human_v[..., 0].ravel(),
+        "human_vy": human_v[..., 1].ravel(),
+        "click_time_ms": np.arange(1, k * n + 1) * SIMULATED_TRIAL_MS / (k * n),
+        "clip_sha256": np.full(k * n, trial["clip_sha256"]),
+    }
+    answers = {"ours": trial["predictions"]["ours"]["actions"],
+               "vae": trial["predictions"]["vae"]["actions"],
+               "cv": trial["cv_actions"], "policy": trial["policy_actions"]}
+    for model, actions in answers.items():
+        actions = np.asarray(actions, dtype=np.float64)[:, :n]
+        cols[f"{model}_vx"] = actions[..., 0].ravel()
+        cols[f"{model}_vy"] = actions[..., 1].ravel()
+    for model in ("ours", "vae"):
+        cols[f"{model}_code"] = np.full(k * n, trial["predictions"][model]["code"])
+        cols[f"{model}_sha256"] = np.full(k * n, trial["predictions"][model]["content_hash"])
+    return cols
+
+
+def simulate_participants(bank: dict, kind: str, n: int, trials_per_world: int, seed: int = 0,
+                          show_progress: bool = True) -> pd.DataFrame:
+    """Rows of `n` simulated participants of one bot kind, in the export CSV's columns."""
+    rng = np.random.default_rng(seed)
+    steps = bank["steps_to_predict"]
+    worlds = sorted(bank["worlds"])
+    parts: list[dict[str, np.ndarray]] = []
+    for p in tqdm(range(n), desc=f"{kind} participants", disable=not show_progress):
+        order = worlds if p % 2 == 0 else worlds[::-1]
+        for position, world in enumerate(order):
+            world_bank = bank["worlds"][world]
+            main = [t for t in world_bank["trials"] if t["kind"] == "main"]
+            chosen = rng.choice(len(main), size=min(trials_per_world, len(main)), replace=False)
+            for index, t in enumerate(chosen):
+                trial = main[int(t)]
+                payload = trial_payload(world_bank, trial, steps)
+                clicks = bot_clicks(kind, payload, trial, rng)
+                parts.append(trial_rows(f"sim-{p:05d}", position, index, payload, trial, clicks))
+    return export_frame(parts, bank["study_id"], kind)
+
+
+def export_frame(parts: list[dict[str, np.ndarray]], study_id: str, kind: str) -> pd.DataFrame:
+    """Concatenate per-trial columns and fill the constant export columns."""
+    cols = {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
+    frame = pd.DataFrame(cols)
+    size = len(frame)
+    constants = {"study_id": study_id, "recruitment": "simulated", "completed": True,
+                 "attention_passed": True, "is_practice": False, "attention_check": False,
+                 "trial_duration_ms": SIMULATED_TRIAL_MS, "replays": 0, "submitted_at": ""}
+    for name, value in constants.items():
+        frame[name] = np.full(size, value)
+    frame["external_id"] = frame["participant_id"]
+    frame["submission_id"] = frame["participant_id"] + "/" + frame["trial_id"] + f"/{kind}"
+    return normalise(frame[list(EXPORT_COLUMNS)])
+
+
+def power_curve(means: pd.DataFrame, n_values: list[int], reps: int = 2000, alpha: float = 0.01,
+                seed: int = 0) -> pd.DataFrame:
+    """Per world and n, the share of resampled studies where Ours < VAE at p < alpha."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for world, group in means.groupby("world", sort=True):
+        diff = (group["err_ours"] - group["err_vae"]).to_numpy()
+        for n in n_values:
+            sample = diff[rng.integers(len(diff), size=(reps, n))]
+            mean = sample.mean(axis=1)
+            sd = sample.std(axis=1, ddof=1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = mean / (sd / np.sqrt(n))
+            p = stats.t.cdf(t, df=n - 1)
+            p = np.where(sd > 0, p, np.where(mean < 0, 0.0, 1.0))
+            rows.append({"world": world, "n": n, "power": float(np.mean(p < alpha)),
+                         "mean_diff": float(diff.mean()),
+                         "d_z": float(diff.mean() / diff.std(ddof=1))})
+    return pd.DataFrame(rows)
+
+
+def run_power(bank_path: Path, kind: str, trials_per_world: int, out_dir: Path, n_max: int = 60,
+              pool: int = 400, reps: int = 2000, alpha: float = 0.01, seed: int = 0) -> dict:
+    """Simulate a pool of participants, estimate power vs n, write power.json/.csv and a plot."""
+    from analysis.plots import plot_power
+    from app.fileio import write_json
+
+    bank = load_bank(bank_path)
+    frame = simulate_participants(bank, kind, pool, trials_per_world, seed)
+    means = participant_means(frame)
+    n_values = list(range(3, n_max + 1))
+    curve = power_curve(means, n_values, reps, alpha, seed)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    curve.to_csv(out_dir / "power.csv", index=False)
+    figures = plot_power(curve, alpha, kind, out_dir / "power")
+    needed = {world: _smallest_n(group, 0.8) for world, group in curve.groupby("world")}
+    summary = {"kind": kind, "alpha": alpha, "pool": pool, "reps": reps, "seed": seed,
+               "trials_per_world": trials_per_world, "n_for_power_0.8": needed,
+               "d_z": curve.groupby("world")["d_z"].first().to_dict(),
+               "power_at": {f"{w}@{n}": float(g.loc[g["n"] == n, "power"].iloc[0])
+                            for w, g in curve.groupby("world") for n in (10, 22, n_max)
+                            if n in set(g["n"])},
+               "figures": [str(f) for f in figures]}
+    write_json(out_dir / "power.json", summary)
+    return summary
+
+
+def _smallest_n(group: pd.DataFrame, target: float) -> int | None:
+    reached = group[group["power"] >= target]
+    return int(reached["n"].min()) if len(reached) else None
