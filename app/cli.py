@@ -62,6 +62,78 @@ def simulate(
         typer.echo(f"wrote {png}")
 
 
+@cli.command()
+def pilot(
+    url: Annotated[str, typer.Option(help="the study server")] = "http://127.0.0.1:8000",
+    n: Annotated[int, typer.Option("--n", min=1, help="bots to run")] = 22,
+    kind: Annotated[str, typer.Option(help="coarse, precise or random")] = "coarse",
+    concurrency: Annotated[int, typer.Option(min=1, help="bots at once")] = 8,
+    study: Annotated[str, typer.Option(help="study id")] = "paper_study",
+    seed: Annotated[int, typer.Option(min=0)] = 0,
+    bank: Annotated[Path | None, typer.Option(help="trial bank (precise bots)")] = None,
+) -> None:
+    """Pilot the study: simulated participants take it through the real HTTP flow."""
+    from app.study.bots import KINDS, run_pilot
+
+    if kind not in KINDS:
+        fail(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
+    bank = bank or get_settings().data_dir / "trials" / study / "bank.json"
+    if kind == "precise" and not bank.is_file():
+        fail(f"bank: {bank} not found (precise bots read the policy's moves from it)")
+    failed = run_pilot(url, study, kind, n, concurrency, seed, bank)
+    if failed:
+        raise typer.Exit(1)
+
+
+@cli.command()
+def analyze(
+    study: Annotated[str, typer.Option(help="study id")] = "paper_study",
+    out: Annotated[Path | None, typer.Option(help="report folder")] = None,
+    csv: Annotated[Path | None, typer.Option(help="an exported CSV")] = None,
+    database_url: Annotated[str | None, typer.Option(help="read the database instead")] = None,
+) -> None:
+    """Alignment error, paired tests, figures and a self-contained report."""
+    from analysis.report import run_analyze
+
+    if csv is not None and database_url is not None:
+        fail("give either --csv or --database-url, not both")
+    if csv is not None and not csv.is_file():
+        fail(f"csv: {csv} not found")
+    settings = get_settings()
+    out = out or settings.data_dir / "reports" / study
+    run_analyze(study, out, csv, database_url or settings.resolved_database_url(),
+                settings.configs_dir, settings.data_dir)
+
+
+@cli.command()
+def power(
+    study: Annotated[str, typer.Option(help="study id")] = "paper_study",
+    kind: Annotated[str, typer.Option(help="coarse, precise or random")] = "coarse",
+    n_max: Annotated[int, typer.Option("--n-max", min=3, help="largest n")] = 60,
+    pool: Annotated[int, typer.Option(min=3, help="simulated participants")] = 400,
+    reps: Annotated[int, typer.Option(min=10, help="resampled studies per n")] = 2000,
+    alpha: Annotated[float, typer.Option(min=0, max=1)] = 0.01,
+    out: Annotated[Path | None, typer.Option(help="output folder")] = None,
+    seed: Annotated[int, typer.Option(min=0)] = 0,
+) -> None:
+    """Power to detect Ours < VAE vs n, from bots run in process on the trial bank."""
+    from analysis.power import KINDS, run_power
+    from analysis.report import read_study_config
+
+    if kind not in KINDS:
+        fail(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
+    settings = get_settings()
+    bank = settings.data_dir / "trials" / study / "bank.json"
+    if not bank.is_file():
+        fail(f"bank: {bank} not found; run `tomstudy build-trials --study {study}`")
+    trials = int(read_study_config(settings.configs_dir, study).get("trials_per_world", 10))
+    out = out or settings.data_dir / "reports" / f"power-{study}-{kind}"
+    summary = run_power(bank, kind, trials, out, n_max, pool, reps, alpha, seed)
+    for world, needed in summary["n_for_power_0.8"].items():
+        typer.echo(f"{world}: d_z = {summary['d_z'][world]:.3f}, n for power 0.8 = {needed}")
+    typer.echo(f"wrote {out}")
+
+
 def main() -> None:
     """Console-script entry point."""
     try:
