@@ -1,0 +1,495 @@
+"""Obstacle world: a robot and a human disc each drive to one of four goals around obstacles.
+
+Shape legend: A = 2 agents (0 robot, 1 human), D = 2 (x, y), K MPC candidates, H horizon steps.
+Coordinates are metres in the scene frame: origin at the top-left corner, y grows downwards.
+Both agents optimise the same kind of reward (progress along a geodesic distance-to-goal field,
+clearance from obstacles, walls and the other agent predicted at constant velocity, effort),
+with the shared sampling MPC by default or with a soft actor-critic policy (`policy="sac"`).
+"""
+
+from pathlib import Path
+
+import numpy as np
+from pydantic import Field, model_validator
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from app.configio import ConfigError, StrictModel, load_yaml_model
+from app.data.trajectory import HUMAN, ROBOT, Episode, Rejected
+from app.worlds.mpc import SamplingMPC
+from app.worlds.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Circle, Scene
+
+AGENTS = (ROBOT, HUMAN)
+COLLISION_SUBSTEPS = 4  # check each step's straight segment at 4 points, not just its end
+
+
+class GoalConfig(StrictModel):
+    """A goal's centre [m] and name."""
+
+    x_m: float
+    y_m: float
+    label: str
+
+
+class ObstacleCircle(StrictModel):
+    """A static circular obstacle [m]."""
+
+    x_m: float
+    y_m: float
+    radius_m: float = Field(gt=0)
+
+
+class StartConfig(StrictModel):
+    """How random start positions are drawn (rejection sampling)."""
+
+    min_goal_distance_m: float = Field(gt=0)
+    max_goal_distance_m: float = Field(gt=0)
+    min_separation_m: float = Field(ge=0)
+    obstacle_margin_m: float = Field(ge=0)
+    goal_margin_m: float = Field(ge=0)
+
+
+class RewardConfig(StrictModel):
+    """Weights of the per-step reward both agents optimise."""
+
+    progress_weight: float = Field(ge=0)
+    obstacle_clearance_m: float = Field(ge=0)
+    obstacle_weight: float = Field(ge=0)
+    agent_clearance_m: float = Field(ge=0)
+    agent_weight: float = Field(ge=0)
+    bounds_weight: float = Field(ge=0)
+    collision_penalty: float = Field(ge=0)
+    effort_weight: float = Field(ge=0)
+    smoothness_weight: float = Field(ge=0)
+    goal_bonus: float = Field(ge=0)
+    discount: float = Field(gt=0, le=1)
+
+
+class GeodesicConfig(StrictModel):
+    """Grid on which the distance-to-goal fields around the obstacles are computed."""
+
+    grid_step_m: float = Field(gt=0, le=1)
+    inflation_m: float = Field(ge=0)
+    blocked_cost_factor: float = Field(ge=1)
+
+
+class MPCConfig(StrictModel):
+    """Sampling MPC size."""
+
+    horizon_steps: int = Field(ge=1)
+    n_samples: int = Field(ge=4)
+    iterations: int = Field(ge=1)
+
+
+class SACConfig(StrictModel):
+    """Soft actor-critic training of the goal-conditioned agent policy."""
+
+    total_timesteps: int = Field(ge=1)
+    learning_rate: float = Field(gt=0)
+    hidden_units: list[int] = Field(min_length=1)
+    batch_size: int = Field(ge=1)
+    buffer_size: int = Field(ge=1)
+    learning_starts: int = Field(ge=0)
+    gamma: float = Field(gt=0, le=1)
+    torch_threads: int = Field(ge=1, le=2)
+    seed: int = Field(ge=0)
+
+
+class ObstacleConfig(StrictModel):
+    """Everything that defines the Obstacle world."""
+
+    dt_s: float = Field(gt=0)
+    max_steps: int = Field(ge=1)
+    width_m: float = Field(gt=0)
+    height_m: float = Field(gt=0)
+    agent_radius_m: float = Field(gt=0)
+    max_speed_mps: float = Field(gt=0)
+    goal_radius_m: float = Field(gt=0)
+    goals: list[GoalConfig] = Field(min_length=2)
+    obstacles: list[ObstacleCircle]
+    start: StartConfig
+    reward: RewardConfig
+    geodesic: GeodesicConfig
+    mpc: MPCConfig
+    sac: SACConfig
+
+    @model_validator(mode="after")
+    def _distances_ordered(self) -> "ObstacleConfig":
+        if self.start.min_goal_distance_m > self.start.max_goal_distance_m:
+            raise ValueError("start.min_goal_distance_m must not exceed start.max_goal_distance_m")
+        return self
+
+
+class GeodesicFields:
+    """Shortest-path distance [m] to each goal around the obstacles, on a grid, interpolated."""
+
+    def __init__(self, config: ObstacleConfig):
+        step = config.geodesic.grid_step_m
+        self.step = step
+        self.nx = int(round(config.width_m / step)) + 1
+        self.ny = int(round(config.height_m / step)) + 1
+        xs, ys = np.meshgrid(np.arange(self.nx) * step, np.arange(self.ny) * step)
+        nodes = np.stack([xs.ravel(), ys.ravel()], axis=1)
+        blocked = np.zeros(len(nodes), dtype=bool)
+        for obs in config.obstacles:
+            reach = obs.radius_m + config.agent_radius_m + config.geodesic.inflation_m
+            blocked |= np.hypot(nodes[:, 0] - obs.x_m, nodes[:, 1] - obs.y_m) < reach
+        graph = self._grid_graph(blocked, config.geodesic.blocked_cost_factor)
+        sources = [self._node(goal.x_m, goal.y_m) for goal in config.goals]
+        dist = dijkstra(graph, directed=False, indices=sources)
+        self.values = dist.reshape(len(sources), self.ny, self.nx)
+
+    def _node(self, x: float, y: float) -> int:
+        i = int(np.clip(round(x / self.step), 0, self.nx - 1))
+        j = int(np.clip(round(y / self.step), 0, self.ny - 1))
+        return j * self.nx + i
+
+    def _grid_graph(self, blocked: np.ndarray, blocked_factor: float):
+        """16-connected grid; an edge touching a blocked node is `blocked_factor` times longer."""
+        index = np.arange(self.nx * self.ny).reshape(self.ny, self.nx)
+        rows, cols, weights = [], [], []
+        # 16 neighbours (knight moves too) keep the grid metric within ~3% of Euclidean, so
+        # paths in the open are straight rather than axis-or-diagonal
+        for di, dj in ((1, 0), (0, 1), (1, 1), (1, -1), (2, 1), (1, 2), (2, -1), (1, -2)):
+            j_lo, j_hi = max(0, -dj), self.ny - max(0, dj)
+            i_lo, i_hi = max(0, -di), self.nx - max(0, di)
+            src = index[j_lo:j_hi, i_lo:i_hi]
+            dst = index[j_lo + dj:j_hi + dj, i_lo + di:i_hi + di]
+            src, dst = src.ravel(), dst.ravel()
+            length = self.step * np.hypot(di, dj)
+            touches = blocked[src] | blocked[dst]
+            rows.append(src)
+            cols.append(dst)
+            weights.append(np.where(touches, length * blocked_factor, length))
+        n = self.nx * self.ny
+        return coo_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(n, n)).tocsr()
+
+    def distance(self, goal: int, points: np.ndarray) -> np.ndarray:
+        """Bilinearly interpolated distance to `goal` at points [..., 2] -> [...]."""
+        fx = np.clip(points[..., 0] / self.step, 0, self.nx - 1 - 1e-9)
+        fy = np.clip(points[..., 1] / self.step, 0, self.ny - 1 - 1e-9)
+        i0, j0 = fx.astype(np.int64), fy.astype(np.int64)
+        tx, ty = fx - i0, fy - j0
+        v = self.values[goal]
+        top = v[j0, i0] * (1 - tx) + v[j0, i0 + 1] * tx
+        bottom = v[j0 + 1, i0] * (1 - tx) + v[j0 + 1, i0 + 1] * tx
+        return top * (1 - ty) + bottom * ty
+
+    def downhill(self, goal: int, point: np.ndarray) -> np.ndarray:
+        """Unit vector [2] along which the distance to `goal` falls fastest at `point`."""
+        h = self.step
+        offsets = np.array([[h, 0.0], [-h, 0.0], [0.0, h], [0.0, -h]])
+        d = self.distance(goal, point[None] + offsets)
+        grad = np.array([d[0] - d[1], d[2] - d[3]]) / (2 * h)
+        norm = np.linalg.norm(grad)
+        return -grad / norm if norm > 1e-9 else np.zeros(2)
+
+
+class ObstacleWorld:
+    """The Obstacle world: random distinct goals and starts, both agents reward-optimising."""
+
+    name = "obstacle"
+    robot_label = "robot_goal"
+
+    def __init__(self, config: ObstacleConfig, policy: str = "mpc"):
+        if policy not in ("mpc", "sac"):
+            raise ConfigError(f"policy: unknown policy {policy!r}; choose mpc or sac")
+        self.config = config
+        self.policy = policy
+        self.dt_s = config.dt_s
+        self.fields = GeodesicFields(config)
+        goal_names = [goal.label for goal in config.goals]
+        self.label_names = {
+            "robot_goal": goal_names,
+            "human_goal": goal_names,
+            "robot_reached_goal": ["no", "yes"],
+            "human_reached_goal": ["no", "yes"],
+        }
+        self._goal_xy = np.array([[g.x_m, g.y_m] for g in config.goals])
+        self._obs_xy = np.array([[o.x_m, o.y_m] for o in config.obstacles]).reshape(-1, 2)
+        self._obs_r = np.array([o.radius_m for o in config.obstacles])
+        vmax = config.max_speed_mps
+        self.mpc = SamplingMPC(horizon=config.mpc.horizon_steps, n_samples=config.mpc.n_samples,
+                               control_low=(-vmax, -vmax), control_high=(vmax, vmax),
+                               iterations=config.mpc.iterations)
+        self._discounts = config.reward.discount ** np.arange(config.mpc.horizon_steps)
+        self._sac_policy = None
+
+    @classmethod
+    def from_yaml(cls, path: Path, policy: str = "mpc") -> "ObstacleWorld":
+        """Load study_configs/worlds/obstacle.yaml (or another file) into a world."""
+        return cls(load_yaml_model(path, ObstacleConfig), policy=policy)
+
+    # ----- geometry ---------------------------------------------------------------------------
+
+    def scene(self) -> Scene:
+        """Bounds, obstacles and goals for plots and the browser."""
+        c = self.config
+        r = c.agent_radius_m
+        return Scene(
+            world=self.name, dt_s=c.dt_s,
+            frame="metres from the top-left corner of the plane, y grows downwards",
+            bounds=Bounds(x_min_m=0.0, x_max_m=c.width_m, y_min_m=0.0, y_max_m=c.height_m),
+            obstacles=[Circle(x_m=o.x_m, y_m=o.y_m, radius_m=o.radius_m) for o in c.obstacles],
+            goals=[Circle(x_m=g.x_m, y_m=g.y_m, radius_m=c.goal_radius_m, label=g.label)
+                   for g in c.goals],
+            agents=[AgentShape(name="robot", kind="disc", length_m=2 * r, width_m=2 * r,
+                               color=ROBOT_COLOR),
+                    AgentShape(name="human", kind="disc", length_m=2 * r, width_m=2 * r,
+                               color=HUMAN_COLOR)],
+        )
+
+    def limit_speed(self, velocity: np.ndarray) -> np.ndarray:
+        """Scale velocities [..., 2] down to the speed limit, keeping their direction."""
+        speed = norm2(velocity)[..., None]
+        return velocity * np.minimum(1.0, self.config.max_speed_mps / np.maximum(speed, 1e-12))
+
+    def in_goal(self, goal: int | np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Whether points [..., 2] lie inside goal region(s) `goal`."""
+        return norm2(points - self._goal_xy[goal]) <= self.config.goal_radius_m
+
+    def obstacle_gap(self, points: np.ndarray) -> np.ndarray:
+        """Smallest distance [m] between an agent disc at points [..., 2] and any obstacle."""
+        if len(self._obs_r) == 0:
+            return np.full(points.shape[:-1], np.inf)
+        dx = points[..., 0, None] - self._obs_xy[:, 0]
+        dy = points[..., 1, None] - self._obs_xy[:, 1]
+        centre = np.sqrt(dx * dx + dy * dy)
+        return (centre - self._obs_r - self.config.agent_radius_m).min(axis=-1)
+
+    def wall_gap(self, points: np.ndarray) -> np.ndarray:
+        """Smallest distance [m] between an agent disc at points [..., 2] and the walls."""
+        c, r = self.config, self.config.agent_radius_m
+        x, y = points[..., 0], points[..., 1]
+        return np.minimum(np.minimum(x, c.width_m - x), np.minimum(y, c.height_m - y)) - r
+
+    def agent_gap(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Distance [m] between the two agent discs at a, b [..., 2]."""
+        return norm2(a - b) - 2 * self.config.agent_radius_m
+
+    # ----- reward -----------------------------------------------------------------------------
+
+    def reward(self, goal: int, prev: np.ndarray, pos: np.ndarray, other: np.ndarray,
+               velocity: np.ndarray, prev_velocity: np.ndarray,
+               arrived_now: np.ndarray) -> np.ndarray:
+        """Per-step reward [...] of moving prev -> pos [..., 2] at `velocity`, other at `other`."""
+        progress_m = self.fields.distance(goal, prev) - self.fields.distance(goal, pos)
+        return self._reward(progress_m, pos, other, velocity, prev_velocity, arrived_now)
+
+    def _reward(self, progress_m, pos, other, velocity, prev_velocity, arrived_now):
+        w = self.config.reward
+        vmax = self.config.max_speed_mps
+        progress = progress_m / (vmax * self.dt_s)  # 1 per step at full speed downhill
+        penalty = self._clearance_penalty(pos, other)
+        effort = norm2(velocity) ** 2 / vmax**2
+        jerk = norm2(velocity - prev_velocity) ** 2 / vmax**2
+        return (w.progress_weight * progress - penalty - w.effort_weight * effort
+                - w.smoothness_weight * jerk + w.goal_bonus * arrived_now)
+
+    def _clearance_penalty(self, pos: np.ndarray, other: np.ndarray) -> np.ndarray:
+        w = self.config.reward
+        penalty = np.zeros(pos.shape[:-1])
+        for gap, clearance, weight in (
+            (self.obstacle_gap(pos), w.obstacle_clearance_m, w.obstacle_weight),
+            (self.agent_gap(pos, other), w.agent_clearance_m, w.agent_weight),
+            (self.wall_gap(pos), w.obstacle_clearance_m, w.bounds_weight),
+        ):
+            penalty += weight * np.maximum(clearance - gap, 0.0) ** 2
+            penalty += w.collision_penalty * (gap < 0)
+        return penalty
+
+    def mpc_cost(self, agent_pos: np.ndarray, agent_velocity: np.ndarray, goal: int,
+                 other_pos: np.ndarray, other_velocity: np.ndarray):
+        """Cost of controls [K, H, 2] for one agent; the other moves at constant velocity."""
+        dt, horizon = self.dt_s, self.config.mpc.horizon_steps
+        steps = np.arange(1, horizon + 1)[:, None]
+        other_path = other_pos + other_velocity * dt * steps  # [H, 2]
+        start_to_go = self.fields.distance(goal, agent_pos)
+
+        def cost(controls: np.ndarray) -> np.ndarray:
+            velocity = self.limit_speed(controls)
+            path = agent_pos + np.cumsum(velocity * dt, axis=1)
+            inside = self.in_goal(goal, path)
+            arrived = np.logical_or.accumulate(inside, axis=1)
+            arrived_before = np.zeros_like(arrived)
+            arrived_before[:, 1:] = arrived[:, :-1]
+            # an agent stops once it is inside its goal
+            velocity = np.where(arrived_before[..., None], 0.0, velocity)
+            path = agent_pos + np.cumsum(velocity * dt, axis=1)
+            to_go = self.fields.distance(goal, path)
+            progress_m = -np.diff(to_go, axis=1, prepend=start_to_go)
+            prev_velocity = np.concatenate(
+                [np.broadcast_to(agent_velocity, (len(path), 1, 2)), velocity[:, :-1]], axis=1)
+            arrived_now = arrived & ~arrived_before
+            rewards = self._reward(progress_m, path, other_path, velocity, prev_velocity,
+                                   arrived_now)
+            return -(rewards * self._discounts).sum(axis=1)
+
+        return cost
+
+    # ----- tasks and rollouts -----------------------------------------------------------------
+
+    def sample_task(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Distinct random goals [2] and collision-free start positions [2, 2]."""
+        goals = rng.choice(len(self.config.goals), size=2, replace=False)
+        starts = np.zeros((2, 2))
+        for agent in AGENTS:
+            starts[agent] = self._sample_start(goals[agent], starts[:agent], rng)
+        return goals, starts
+
+    def _sample_start(self, goal: int, taken: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        c, s = self.config, self.config.start
+        low = np.array([c.agent_radius_m + s.obstacle_margin_m] * 2)
+        high = np.array([c.width_m, c.height_m]) - low
+        for _ in range(1000):
+            candidates = rng.uniform(low, high, size=(64, 2))
+            ok = self.obstacle_gap(candidates) > s.obstacle_margin_m
+            goal_dist = np.linalg.norm(candidates[:, None] - self._goal_xy, axis=-1)
+            ok &= (goal_dist > c.goal_radius_m + c.agent_radius_m + s.goal_margin_m).all(axis=1)
+            geo = self.fields.distance(goal, candidates)
+            ok &= (geo >= s.min_goal_distance_m) & (geo <= s.max_goal_distance_m)
+            for other in taken:
+                ok &= np.linalg.norm(candidates - other, axis=-1) >= s.min_separation_m
+            if ok.any():
+                return candidates[np.argmax(ok)]
+        raise Rejected("no valid start position")
+
+    def rollout(self, rng: np.random.Generator) -> Episode:
+        """One interaction; raises Rejected on a collision or when the robot misses its goal."""
+        goals, starts = self.sample_task(rng)
+        positions, arrival = self._simulate(starts, np.zeros((2, 2)), goals, rng,
+                                            self.config.max_steps, check_safety=True)
+        if arrival[ROBOT] < 0:
+            raise Rejected("robot did not reach its goal")
+        headings, speeds = headings_and_speeds(positions, self.dt_s)
+        labels = {
+            "robot_goal": int(goals[ROBOT]),
+            "human_goal": int(goals[HUMAN]),
+            "robot_reached_goal": int(arrival[ROBOT] >= 0),
+            "human_reached_goal": int(arrival[HUMAN] >= 0),
+            "robot_arrival_step": int(arrival[ROBOT]),
+        }
+        return Episode(positions=positions, headings=headings, speeds=speeds, labels=labels)
+
+    def _simulate(self, starts: np.ndarray, velocities: np.ndarray, goals: np.ndarray,
+                  rng: np.random.Generator, n_steps: int, check_safety: bool,
+                  human_constant: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Step both agents; returns positions [L+1, 2, 2] and first arrival steps [2] (-1)."""
+        pos, vel = starts.astype(np.float64).copy(), velocities.astype(np.float64).copy()
+        arrival = np.where(self.in_goal(goals, pos), 0, -1)
+        plans = [self._initial_plan(pos[a], vel[a], goals[a]) for a in AGENTS]
+        track = [pos.copy()]
+        for t in range(1, n_steps + 1):
+            new_vel = np.zeros((2, 2))
+            for a in AGENTS:
+                if arrival[a] >= 0:
+                    continue
+                if a == HUMAN and human_constant:
+                    new_vel[a] = vel[a]
+                    continue
+                new_vel[a], plans[a] = self._act(a, pos, vel, goals, plans[a], rng)
+            new_pos = pos + new_vel * self.dt_s
+            if check_safety:
+                self._check_safety(pos, new_pos)
+            pos, vel = new_pos, new_vel
+            track.append(pos.copy())
+            arrival = np.where((arrival < 0) & self.in_goal(goals, pos), t, arrival)
+            if (arrival >= 0).all() and not human_constant:
+                break
+        return np.stack(track), arrival
+
+    def _initial_plan(self, pos: np.ndarray, vel: np.ndarray, goal: int) -> np.ndarray:
+        """Warm start: keep the current velocity, or head downhill at full speed from rest."""
+        if np.linalg.norm(vel) < 1e-6:
+            vel = self.fields.downhill(goal, pos) * self.config.max_speed_mps
+        return np.broadcast_to(vel, (self.config.mpc.horizon_steps, 2)).copy()
+
+    def _act(self, agent: int, pos: np.ndarray, vel: np.ndarray, goals: np.ndarray,
+             plan: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """The agent's next velocity [2] and the warm start for its next plan."""
+        other = 1 - agent
+        if self.policy == "sac":
+            obs = self.observation(pos[agent], goals[agent], pos[other], vel[other])
+            action = self.sac_policy().act(obs)
+            return self.limit_speed(action * self.config.max_speed_mps), plan
+        cost = self.mpc_cost(pos[agent], vel[agent], goals[agent], pos[other], vel[other])
+        best = self.mpc.plan(cost, plan, rng)
+        return self.limit_speed(best[0]), self.mpc.shift(best)
+
+    def _check_safety(self, pos: np.ndarray, new_pos: np.ndarray) -> None:
+        fractions = np.arange(1, COLLISION_SUBSTEPS + 1)[:, None, None] / COLLISION_SUBSTEPS
+        points = pos + (new_pos - pos) * fractions  # [S, 2 agents, 2]
+        if (self.obstacle_gap(points) < 0).any():
+            raise Rejected("collision with an obstacle")
+        if (self.agent_gap(points[:, ROBOT], points[:, HUMAN]) < 0).any():
+            raise Rejected("agents collided")
+        if (self.wall_gap(points) < 0).any():
+            raise Rejected("out of bounds")
+
+    def robot_policy_actions(self, positions: np.ndarray, robot_heading: float,
+                             robot_speed: float, human_velocity: np.ndarray, labels: dict,
+                             n_steps: int, rng: np.random.Generator) -> np.ndarray:
+        """The robot's own policy [n_steps, 2] from any state, the human at constant velocity."""
+        goals = np.array([int(labels["robot_goal"]), int(labels.get("human_goal", 0))])
+        velocities = np.zeros((2, 2))
+        velocities[ROBOT] = robot_speed * np.array([np.cos(robot_heading), np.sin(robot_heading)])
+        velocities[HUMAN] = np.asarray(human_velocity, dtype=np.float64)
+        track, _ = self._simulate(np.asarray(positions, dtype=np.float64), velocities, goals, rng,
+                                  n_steps, check_safety=False, human_constant=True)
+        actions = np.diff(track[:, ROBOT], axis=0) / self.dt_s
+        return np.concatenate([actions, np.zeros((n_steps - len(actions), 2))])
+
+    # ----- SAC --------------------------------------------------------------------------------
+
+    def observation(self, pos: np.ndarray, goal: int, other_pos: np.ndarray,
+                    other_vel: np.ndarray) -> np.ndarray:
+        """Goal-conditioned observation of one agent (scaled to about [-1, 1]), float32."""
+        c = self.config
+        half = np.array([c.width_m, c.height_m]) / 2
+        one_hot = np.eye(len(c.goals))[goal]
+        geo = self.fields.distance(goal, pos) / (c.width_m + c.height_m)
+        return np.concatenate([
+            (pos - half) / half, one_hot, self.fields.downhill(goal, pos), [geo],
+            (other_pos - pos) / half, other_vel / c.max_speed_mps,
+        ]).astype(np.float32)
+
+    def prepare(self, data_dir: Path) -> None:
+        """Train or load the SAC policy once (in the parent, before workers fork)."""
+        if self.policy == "sac":
+            from app.worlds.sac import prepare_policy
+
+            self._sac_policy = prepare_policy(self, Path(data_dir))
+
+    def sac_policy(self):
+        """The SAC policy, loaded on first use from where `prepare` left it."""
+        if self._sac_policy is None:
+            from app.worlds.sac import load_prepared_policy
+
+            self._sac_policy = load_prepared_policy(self)
+        return self._sac_policy
+
+
+def norm2(vectors: np.ndarray) -> np.ndarray:
+    """Euclidean length of 2-D vectors [..., 2] (faster than np.linalg.norm for small D)."""
+    return np.sqrt(vectors[..., 0] ** 2 + vectors[..., 1] ** 2)
+
+
+def headings_and_speeds(positions: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Heading [rad] and speed [m/s] of each agent at each state, from its motion into it."""
+    steps = np.diff(positions, axis=0)  # [L, A, D]
+    speeds = np.concatenate([np.zeros((1, positions.shape[1])),
+                             np.linalg.norm(steps, axis=-1) / dt_s])
+    headings = np.zeros(positions.shape[:2])
+    for a in range(positions.shape[1]):
+        last = np.arctan2(*steps[0, a, ::-1]) if len(steps) else 0.0
+        moving = np.linalg.norm(steps[:, a], axis=-1) > 1e-9
+        first_move = np.flatnonzero(moving)
+        if first_move.size:
+            last = np.arctan2(steps[first_move[0], a, 1], steps[first_move[0], a, 0])
+        headings[0, a] = last
+        for t in range(len(steps)):  # a stopped agent keeps its last heading
+            if moving[t]:
+                last = np.arctan2(steps[t, a, 1], steps[t, a, 0])
+            headings[t + 1, a] = last
+    return headings, speeds
