@@ -1,5 +1,6 @@
 // The participant app: one page driven by GET /api/sessions/{token}/state.
 import { ApiError, StudyApi, newUuid } from "./api.js";
+import { InstructionsDemo } from "./demo.js";
 import { ClipPlayer, trialClips } from "./player.js";
 import { PredictionInput } from "./predict.js";
 
@@ -192,22 +193,17 @@ class ParticipantApp {
   showInstructions(step) {
     setProse($("instructions-text"), step?.text ?? step?.instructions_text ?? "");
     show("instructions");
-    const demo = step?.demo;
-    $("demo-block").hidden = !demo;
-    let player = null;
-    if (demo) {
-      player = new ClipPlayer($("demo-canvas"), demo.scene, trialClips(demo), {
-        onCaption: (text) => { $("demo-caption").textContent = text; },
-      });
-      player.play();
-      $("demo-replay").onclick = () => player.play();
-    }
+    const player = new InstructionsDemo($("demo-canvas"), {
+      onCaption: (text) => { $("demo-caption").textContent = text; },
+    });
+    player.play();
+    $("demo-replay").onclick = () => player.play();
     const button = $("instructions-done");
     button.disabled = false;
     return new Promise((resolve, reject) => {
       button.onclick = () => {
         button.disabled = true;
-        player?.stop();
+        player.stop();
         this.api.instructionsDone().then(resolve, reject);
       };
     });

@@ -265,6 +265,10 @@ export class PredictionInput {
     const path = [this.startState.robot, ...this.current];
     drawAgent(ctx, view, robot, this.startState.robot, this.robotHeading, { alpha: this.current.length ? 0.45 : 1 });
     drawTrace(ctx, view, robot, path, { alpha: 1, width: 3 });
+    if (this.current.length) {
+      const [a, b] = path.slice(-2);
+      drawAgent(ctx, view, robot, b, Math.atan2(b[1] - a[1], b[0] - a[0]), { alpha: 0.9 });
+    }
     this.current.forEach((point, k) => {
       const [px, py] = view.toPx(point);
       ctx.save();
