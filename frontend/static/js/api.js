@@ -42,7 +42,7 @@ export async function requestJson(method, path, body, headers = {}) {
   } catch {
     parsed = { detail: text };
   }
-  if (!response.ok) throw new ApiError(response.status, detailText(parsed?.detail ?? text));
+  if (!response.ok) throw new ApiError(response.status, parsed?.message ?? detailText(parsed?.detail ?? text));
   return parsed;
 }
 

@@ -35,6 +35,17 @@ function rowsTable(rows) {
   return table;
 }
 
+function isFlatObject(value) {
+  return value && typeof value === "object" && !Array.isArray(value)
+    && Object.values(value).every((v) => v === null || typeof v !== "object");
+}
+
+/** An object whose values are all flat objects, e.g. {highway: {ours: .., vae: ..}}. */
+function isTableOfRecords(value) {
+  const rows = Object.values(value ?? {});
+  return !Array.isArray(value) && rows.length > 0 && rows.every(isFlatObject);
+}
+
 /** Render any JSON summary: scalars as a key/value table, lists of objects as tables, objects nested. */
 function renderSummary(data, depth = 3) {
   const fragment = document.createDocumentFragment();
@@ -45,7 +56,9 @@ function renderSummary(data, depth = 3) {
     const heading = document.createElement(`h${Math.min(depth, 5)}`);
     heading.textContent = title(key);
     fragment.append(heading);
-    if (Array.isArray(value)) {
+    if (isTableOfRecords(value)) {
+      fragment.append(rowsTable(Object.entries(value).map(([name, row]) => ({ [key]: name, ...row }))));
+    } else if (Array.isArray(value)) {
       if (!value.length) fragment.append(Object.assign(document.createElement("p"), { textContent: "none yet" }));
       else if (value.every((v) => v && typeof v === "object" && !Array.isArray(v))) fragment.append(rowsTable(value));
       else fragment.append(Object.assign(document.createElement("p"), { textContent: value.map(formatValue).join(", ") }));
@@ -54,6 +67,17 @@ function renderSummary(data, depth = 3) {
     }
   }
   return fragment;
+}
+
+/** "n of target completed" with a bar, when the summary carries progress counts. */
+function progressLine(progress) {
+  const line = document.createElement("p");
+  if (!progress?.target_sample_size) return line;
+  const bar = Object.assign(document.createElement("progress"), {
+    max: progress.target_sample_size, value: Math.min(progress.completed, progress.target_sample_size),
+  });
+  line.append(`Completed ${progress.completed} of ${progress.target_sample_size} participants `, bar);
+  return line;
 }
 
 class Dashboard {
@@ -108,7 +132,7 @@ class Dashboard {
   async refresh(throwErrors = false) {
     try {
       const summary = await this.api.summary(this.studyId());
-      $("summary").replaceChildren(renderSummary(summary));
+      $("summary").replaceChildren(progressLine(summary.progress), renderSummary(summary));
       $("dashboard-message").textContent = `Updated ${new Date().toLocaleTimeString()}.`;
     } catch (error) {
       if (throwErrors) throw error;
