@@ -6,6 +6,7 @@ by participant, trial, start state and step.
 """
 
 import hashlib
+from datetime import UTC
 from pathlib import Path
 
 import numpy as np
@@ -121,7 +122,11 @@ def load_database(url: str, study_id: str) -> pd.DataFrame:
 
 
 def _iso_time(value) -> str:
-    """Timestamps as ISO-8601 text, the way the CSV export writes them."""
+    """Timestamps as ISO-8601 text, as the CSV export writes them (naive = UTC, from SQLite)."""
     if value is None or value == "":
         return ""
-    return value.isoformat() if hasattr(value, "isoformat") else str(value)
+    if not hasattr(value, "isoformat"):
+        return str(value)
+    if value.tzinfo is None:
+        value = value.replace(tzinfo=UTC)
+    return value.isoformat()

@@ -107,19 +107,22 @@ def plot_fields(frame: pd.DataFrame, scenes: dict, base: Path, k: int = 3) -> li
         rows_w = frame[frame["world"] == world]
         scene = scenes.get(world)
         wide = scene is not None and bool(scene.lanes)
-        fig, axes = plt.subplots(len(models), k, squeeze=False,
-                                 figsize=(5.2 * k, 2.4 * len(models)) if wide
-                                 else (3.4 * k, 3.6 * len(models)))
+        # Highway panels are long and thin: models side by side, one code per row.
+        shape = (k, len(models)) if wide else (len(models), k)
+        fig, axes = plt.subplots(*shape, squeeze=False,
+                                 figsize=(13, 1.9 * k) if wide else (3.4 * k, 3.6 * len(models)))
         arrow_m = _arrow_length(scene)
         for r, model in enumerate(models):
             codes = top_codes(rows_w, model, k)
             for c in range(k):
-                ax = axes[r][c]
+                ax = axes[c][r] if wide else axes[r][c]
                 if c >= len(codes):
                     ax.axis("off")
                     continue
                 rows = rows_w[rows_w[f"{model}_code"] == codes[c]]
                 err = field_panel(ax, rows, model, scene, arrow_m)
+                if wide:
+                    _crop_x(ax, rows_w, arrow_m)
                 n_trials = rows["trial_id"].nunique()
                 ax.set_title(f"{MODEL_LABELS[model]} code {codes[c]}: {n_trials} trials, "
                              f"error {err:.2f}", fontsize=8)
@@ -137,7 +140,16 @@ def _arrow_length(scene) -> float:
     if scene is None:
         return 0.5
     b = scene.bounds
-    return 0.06 * min(b.x_max_m - b.x_min_m, 4 * (b.y_max_m - b.y_min_m))
+    if scene.lanes:
+        return 0.25 * (b.y_max_m - b.y_min_m)
+    return 0.06 * (b.x_max_m - b.x_min_m)
+
+
+def _crop_x(ax, rows: pd.DataFrame, margin_m: float) -> None:
+    """Show only the stretch of road where the world's start states lie."""
+    low, high = rows["start_x"].min() - 2 * margin_m, rows["start_x"].max() + 2 * margin_m
+    left, right = ax.get_xlim()
+    ax.set_xlim(max(left, low), min(right, high))
 
 
 def plot_power(curve: pd.DataFrame, alpha: float, kind: str, base: Path) -> list[Path]:
