@@ -91,6 +91,8 @@ def load_database(url: str, study_id: str) -> pd.DataFrame:
     """
     import sqlalchemy as sa
 
+    if url.startswith(("postgresql://", "postgres://")):  # psycopg 3, as the server uses
+        url = "postgresql+psycopg://" + url.split("://", 1)[1]
     engine = sa.create_engine(url)
     try:
         meta = sa.MetaData()

@@ -1,0 +1,53 @@
+"""Reading the server's database gives exactly the DataFrame of its CSV export."""
+
+import io
+
+import pandas as pd
+from sqlalchemy import insert
+from sqlmodel import Session
+
+from analysis.load import load_csv, load_database
+from app.study.db import create_tables, make_engine
+from app.study.export import export_csv
+from app.study.tables import Participant, PredictionRow, TrialResponse
+from tests.analysis.fixed_data import fixed_predictions
+
+
+def _store(engine, frame: pd.DataFrame) -> None:
+    """Write the fixed rows into the server's tables (as crud.py would have)."""
+    pred_cols = [c.name for c in PredictionRow.__table__.columns if c.name != "id"]
+    with engine.begin() as conn:
+        for n, (pid, rows) in enumerate(frame.groupby("participant_id", sort=True)):
+            first = rows.iloc[0]
+            ident = conn.execute(insert(Participant.__table__).values(
+                study_id="paper_study", recruitment=first["recruitment"],
+                external_id=first["external_id"], session_token=f"tok{n}",
+                recruitment_params={}, client={}, world_order="highway,obstacle", plan=[],
+                position=0, completed=bool(n != 1), attention_failed=int(n == 2),
+            )).inserted_primary_key[0]
+            for _, trial in rows.groupby("submission_id", sort=False):
+                t = trial.iloc[0]
+                conn.execute(insert(TrialResponse.__table__).values(
+                    submission_id=t["submission_id"], participant_id=ident,
+                    trial_id=t["trial_id"], world=t["world"],
+                    world_position=int(t["world_position"]),
+                    trial_index=int(t["trial_index"]), is_practice=False, attention_check=False,
+                    shown_at_ms=0.0, submitted_at_ms=9000.0, duration_ms=9000.0, replays=1,
+                    clip_sha256=t["clip_sha256"]))
+                values = trial.assign(participant_id=ident)[pred_cols].to_dict("records")
+                conn.execute(insert(PredictionRow.__table__), values)
+
+
+def test_database_and_csv_export_load_identically(tmp_path):
+    url = f"sqlite:///{tmp_path / 'study.db'}"
+    engine = make_engine(url)
+    create_tables(engine)
+    _store(engine, fixed_predictions())
+    with Session(engine) as db:
+        text = export_csv(db, "paper_study")
+    engine.dispose()
+    from_csv = load_csv(io.StringIO(text))
+    from_db = load_database(url, "paper_study")
+    assert len(from_db) == len(fixed_predictions()) == len(from_csv)
+    pd.testing.assert_frame_equal(from_db, from_csv)
+    assert from_db["completed"].sum() < len(from_db) and (~from_db["attention_passed"]).any()
