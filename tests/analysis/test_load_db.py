@@ -17,7 +17,7 @@ def _store(engine, frame: pd.DataFrame) -> None:
     """Write the fixed rows into the server's tables (as crud.py would have)."""
     pred_cols = [c.name for c in PredictionRow.__table__.columns if c.name != "id"]
     with engine.begin() as conn:
-        for n, (pid, rows) in enumerate(frame.groupby("participant_id", sort=True)):
+        for n, (_pid, rows) in enumerate(frame.groupby("participant_id", sort=True)):
             first = rows.iloc[0]
             ident = conn.execute(insert(Participant.__table__).values(
                 study_id="paper_study", recruitment=first["recruitment"],
