@@ -1,0 +1,61 @@
+"""Typed training config for Ours and the VAE (study_configs/training.yaml)."""
+
+from pathlib import Path
+
+from pydantic import Field, model_validator
+
+from app.configio import StrictModel, load_yaml_model
+from app.settings import get_settings
+
+MODEL_KINDS = ("ours", "vae")
+
+
+class TrainConfig(StrictModel):
+    """Window shape, network sizes, optimiser and loss settings; defaults match the study."""
+
+    segment_len: int = Field(5, ge=1)
+    n_actions: int = Field(3, ge=1)
+    levels: list[int] = Field(default_factory=lambda: [3, 3], min_length=1)
+    encoder_hidden: list[int] = Field(default_factory=lambda: [128, 128])
+    decoder_hidden: list[int] = Field(default_factory=lambda: [128, 128])
+    lr: float = Field(2e-3, gt=0)
+    batch_size: int = Field(256, ge=1)
+    max_epochs: int = Field(60, ge=1)
+    patience_epochs: int = Field(8, ge=1)
+    beta_kl: float = Field(0.01, ge=0)
+    pred_weight: float = Field(1.0, ge=0)
+    recon_weight: float = Field(1.0, ge=0)
+    windows_per_trajectory: int = Field(20, ge=1)
+    split_seed: int = Field(0, ge=0)
+    val_fraction: float = Field(0.15, gt=0, lt=1)
+    test_fraction: float = Field(0.15, gt=0, lt=1)
+    vae_clusters: int = Field(3, ge=1)
+    min_code_share: float = Field(0.01, ge=0, lt=1)
+
+    @model_validator(mode="after")
+    def _check(self) -> "TrainConfig":
+        if any(level < 2 for level in self.levels):
+            raise ValueError("levels: every channel needs at least 2 levels")
+        if any(h < 1 for h in self.encoder_hidden + self.decoder_hidden):
+            raise ValueError("encoder_hidden/decoder_hidden: sizes must be >= 1")
+        if self.val_fraction + self.test_fraction >= 0.9:
+            raise ValueError("val_fraction + test_fraction must leave at least 10% for training")
+        return self
+
+    @property
+    def latent_dim(self) -> int:
+        """Latent channels: one per FSQ level entry (the VAE uses the same dimension)."""
+        return len(self.levels)
+
+
+def default_train_config_path() -> Path:
+    """study_configs/training.yaml under the configured configs dir."""
+    return get_settings().configs_dir / "training.yaml"
+
+
+def load_train_config(path: Path | None = None, overrides: dict | None = None) -> TrainConfig:
+    """Read the training YAML (default study_configs/training.yaml); errors name the field."""
+    path = Path(path) if path else default_train_config_path()
+    if path == default_train_config_path() and not path.exists():
+        return TrainConfig(**(overrides or {}))
+    return load_yaml_model(path, TrainConfig, overrides)

@@ -1,0 +1,110 @@
+"""FSQ: level set, index round trip, straight-through gradients, reference implementation."""
+
+import numpy as np
+import pytest
+import torch
+
+from app.learning.fsq import (
+    FSQ,
+    codes_to_indices_numpy,
+    indices_to_codes_numpy,
+    quantize_numpy,
+)
+
+
+def level_set(levels: int) -> np.ndarray:
+    return 2 * np.arange(levels) / (levels - 1) - 1
+
+
+def away_from_ties(z: torch.Tensor, levels: list[int], margin: float = 0.01) -> torch.Tensor:
+    """Rows whose every channel is not within `margin` of a rounding threshold: there the
+    reference's (1 + 1e-3) range stretch or round-half-to-even may legitimately differ."""
+    scaled = (torch.tensor(levels) - 1) / 2 * (torch.tanh(z) + 1)
+    frac = scaled - scaled.floor()
+    return ((frac - 0.5).abs() > margin).all(dim=-1)
+
+
+@pytest.mark.parametrize("levels", [[2], [3], [4], [5], [8], [2, 2, 2], [3, 5], [5, 5]])
+def test_every_output_lies_in_the_channel_level_set(levels):
+    fsq = FSQ(levels)
+    out = fsq(torch.randn(4000, len(levels)) * 3).detach().numpy()
+    for channel, n in enumerate(levels):
+        distance = np.abs(out[:, channel, None] - level_set(n)[None]).min(axis=1)
+        assert distance.max() < 1e-6
+    # the extremes of the paper's symmetric set are reached: {-1, ..., 1}
+    assert out.min() == pytest.approx(-1) and out.max() == pytest.approx(1)
+
+
+def test_paper_example_d3_l2_gives_the_eight_corners():
+    fsq = FSQ([2, 2, 2])
+    codes = fsq.all_codes().numpy()
+    assert len(codes) == 8
+    assert {tuple(c) for c in codes} == {(a, b, c) for a in (-1, 1) for b in (-1, 1)
+                                         for c in (-1, 1)}
+
+
+@pytest.mark.parametrize("levels", [[2, 2, 2], [3, 3], [3, 5, 4], [8]])
+def test_codes_to_indices_to_codes_round_trips(levels):
+    fsq = FSQ(levels)
+    indices = torch.arange(fsq.codebook_size)
+    codes = fsq.indices_to_codes(indices)
+    assert torch.equal(fsq.codes_to_indices(codes), indices)
+    assert len({tuple(c) for c in codes.tolist()}) == fsq.codebook_size
+    quantised = fsq(torch.randn(500, len(levels)))
+    assert torch.allclose(fsq.indices_to_codes(fsq.codes_to_indices(quantised)), quantised)
+    lv = np.asarray(levels, dtype=np.float32)
+    assert np.array_equal(codes_to_indices_numpy(codes.numpy(), lv), indices.numpy())
+    assert np.allclose(indices_to_codes_numpy(indices.numpy(), lv), codes.numpy())
+
+
+def test_numpy_forward_matches_torch():
+    fsq = FSQ([2, 3, 5])
+    z = torch.randn(1000, 3) * 2
+    assert np.array_equal(quantize_numpy(z.numpy(), np.array([2, 3, 5], np.float32)),
+                          fsq(z).detach().numpy())
+
+
+def test_gradients_pass_straight_through_the_rounding():
+    fsq = FSQ([3, 4])
+    z = torch.randn(64, 2, requires_grad=True)
+    weights = torch.randn(64, 2)
+    (fsq(z) * weights).sum().backward()
+    # d out / d tanh(z) is the identity; the only factor left is tanh's own derivative
+    expected = weights * (1 - torch.tanh(z.detach()) ** 2)
+    assert torch.allclose(z.grad, expected, atol=1e-6)
+    assert (z.grad != 0).all()
+
+
+@pytest.mark.parametrize("levels", [[3], [5], [7], [3, 5], [5, 5]])
+def test_odd_levels_equal_the_reference_fsq(levels):
+    from vector_quantize_pytorch import FSQ as ReferenceFSQ
+
+    z = torch.randn(20000, len(levels)) * 2
+    keep = away_from_ties(z, levels)
+    assert keep.float().mean() > 0.9
+    ref_codes, ref_idx = ReferenceFSQ(levels)(z[None])
+    ours = FSQ(levels)
+    codes = ours(z)
+    assert torch.allclose(codes[keep], ref_codes[0][keep], atol=1e-6)
+    assert torch.equal(ours.codes_to_indices(codes)[keep], ref_idx[0][keep].long())
+
+
+@pytest.mark.parametrize("levels", [[2], [4], [6], [2, 2, 2], [2, 3, 4]])
+def test_even_levels_equal_the_reference_symmetric_mode(levels):
+    from vector_quantize_pytorch import FSQ as ReferenceFSQ
+
+    z = torch.randn(20000, len(levels)) * 2
+    keep = away_from_ties(z, levels, margin=1e-4)
+    ref = ReferenceFSQ(levels, preserve_symmetry=True)
+    ref_codes, ref_idx = ref(z[None])
+    ours = FSQ(levels)
+    codes = ours(z)
+    assert torch.allclose(codes[keep], ref_codes[0][keep], atol=1e-6)
+    assert torch.equal(ours.codes_to_indices(codes)[keep], ref_idx[0][keep].long())
+    assert torch.allclose(ours.all_codes(), ref.implicit_codebook, atol=1e-6)
+
+
+@pytest.mark.parametrize("levels", [[], [1], [3, 0]])
+def test_bad_levels_are_rejected(levels):
+    with pytest.raises(ValueError, match="levels"):
+        FSQ(levels)
