@@ -63,6 +63,55 @@ def simulate(
 
 
 @cli.command()
+def train(
+    world: Annotated[str, typer.Option(help="highway or obstacle (reads var/data/<world>/)")],
+    model: Annotated[str, typer.Option(help="ours or vae")] = "ours",
+    seed: Annotated[int, typer.Option(min=0)] = 0,
+    config: Annotated[Path | None, typer.Option(help="training YAML (default: study_configs)")]
+    = None,
+    out: Annotated[Path | None, typer.Option(help="default var/models/<world>/<model>/")]
+    = None,
+    if_missing: Annotated[bool, typer.Option("--if-missing", help="skip if checkpoint exists")]
+    = False,
+) -> None:
+    """Train Ours (FSQ autoencoder) or the VAE; writes checkpoint.pt, metrics.json, loss.png."""
+    from app.learning.config import MODEL_KINDS, load_train_config
+    from app.learning.train import default_model_dir, train_world
+
+    if model not in MODEL_KINDS:
+        fail(f"--model: unknown model {model!r}; choose one of {', '.join(MODEL_KINDS)}")
+    data_dir = get_settings().data_dir
+    target = (out or default_model_dir(data_dir, world, model)) / "checkpoint.pt"
+    if if_missing and target.exists():
+        typer.echo(f"{target} exists; skipping")
+        return
+    try:
+        path = train_world(data_dir, world, model, seed, load_train_config(config), out)
+    except FileNotFoundError as err:
+        fail(str(err))
+    typer.echo(f"wrote {path}")
+
+
+@cli.command()
+def fields(
+    checkpoint: Annotated[Path, typer.Option(help="a checkpoint.pt from `tomstudy train`")],
+    out: Annotated[Path | None, typer.Option(help="output dir (default: <checkpoint dir>/fields)")]
+    = None,
+    grid_n: Annotated[int, typer.Option(min=2, help="grid points per axis")] = 15,
+) -> None:
+    """Draw one vector field per used code (quiver PNGs over the scene) plus fields.json."""
+    from app.learning.checkpoint import CheckpointError
+    from app.learning.fields import write_fields
+
+    try:
+        paths = write_fields(checkpoint, out, grid_n)
+    except CheckpointError as err:
+        fail(str(err))
+    for path in paths:
+        typer.echo(f"wrote {path}")
+
+
+@cli.command()
 def pilot(
     url: Annotated[str, typer.Option(help="the study server")] = "http://127.0.0.1:8000",
     n: Annotated[int, typer.Option("--n", min=1, help="bots to run")] = 22,
@@ -132,6 +181,60 @@ def power(
     for world, needed in summary["n_for_power_0.8"].items():
         typer.echo(f"{world}: d_z = {summary['d_z'][world]:.3f}, n for power 0.8 = {needed}")
     typer.echo(f"wrote {out}")
+
+
+@cli.command("build-trials")
+def build_trials_cmd(
+    study: Annotated[str, typer.Option(help="study_configs/<study>.yaml")] = "paper_study",
+) -> None:
+    """Build the study's trial bank from held-out trajectories into var/trials/<study>/."""
+    from app.learning.checkpoint import CheckpointError
+    from app.study.config import load_study_config
+    from app.study.trial_builder import build_trials
+
+    settings = get_settings()
+    try:
+        path = build_trials(load_study_config(settings, study), study, settings.data_dir)
+    except (FileNotFoundError, CheckpointError, ValueError) as err:
+        fail(str(err))
+    typer.echo(f"wrote {path}")
+
+
+@cli.command()
+def serve(
+    host: Annotated[str, typer.Option(help="interface to listen on")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(min=1, max=65535)] = 8000,
+    workers: Annotated[int, typer.Option(min=1, help="uvicorn worker processes")] = 1,
+    study: Annotated[str, typer.Option(help="study id(s), comma-separated")] = "paper_study",
+    prepare: Annotated[bool, typer.Option("--prepare", help="first simulate, train and "
+                                          "build-trials whatever is missing")] = False,
+) -> None:
+    """Serve the study (participant app, API, researcher dashboard) with uvicorn."""
+    import os
+
+    import uvicorn
+
+    from app.study.db import create_tables, make_engine
+    from app.study.main import STUDY_ENV, UnsafeSettings, check_production
+
+    settings = get_settings()
+    try:
+        check_production(settings)
+    except UnsafeSettings as err:
+        fail(str(err))
+    if prepare:
+        from app.study.prepare import prepare_study
+
+        for study_id in study.split(","):
+            prepare_study(settings, study_id, say=typer.echo)
+    engine = make_engine(settings.resolved_database_url())
+    create_tables(engine)  # once, before workers race to create them
+    engine.dispose()
+    os.environ[STUDY_ENV] = study
+    typer.echo(f"serving http://{host}:{port}/s/{study.split(',')[0]}  "
+               f"(researcher dashboard: /researcher, API docs: /docs)")
+    uvicorn.run("app.study.main:app_from_env", factory=True, host=host, port=port,
+                workers=workers, log_level="warning")
 
 
 def main() -> None:

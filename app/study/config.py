@@ -1,0 +1,147 @@
+"""The typed study definition (study_configs/<study>.yaml): text, design, recruitment, models."""
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from app.configio import ConfigError, StrictModel, load_yaml_model
+from app.settings import Settings
+
+WorldName = Literal["highway", "obstacle"]
+ModelKind = Literal["ours", "vae"]
+
+
+class SegmentSteps(StrictModel):
+    """How many steps of the partial interaction a participant watches (inclusive range)."""
+
+    min: int = Field(ge=2)
+    max: int = Field(ge=2)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "SegmentSteps":
+        if self.max < self.min:
+            raise ValueError("max must be >= min")
+        return self
+
+
+class AttentionChecks(StrictModel):
+    """Trials whose answer is obvious: the robot keeps moving the way it plainly moves.
+
+    The bank picks, per world, the trials where the world's own policy from every start
+    state moves within `candidate_max_angle_deg` of the robot's last segment velocity.
+    A participant passes one if, in at least `min_passing_starts` of the start states,
+    the first clicked move is within `max_angle_deg` of the policy's first move.
+    """
+
+    per_world: int = Field(default=1, ge=0)
+    max_angle_deg: float = Field(default=45.0, gt=0, le=180)
+    min_passing_starts: int = Field(default=4, ge=1)
+    candidate_max_angle_deg: float = Field(default=15.0, gt=0, le=180)
+
+
+class SurveyQuestion(StrictModel):
+    """One closing question; likert answers are integers in [scale_min, scale_max]."""
+
+    key: str = Field(pattern=r"^[a-z][a-z0-9_]*$")
+    text: str
+    kind: Literal["likert", "text", "choice"]
+    required: bool = True
+    scale_min: int = 1
+    scale_max: int = 7
+    options: list[str] = []
+    max_chars: int = Field(default=2000, ge=1)
+
+
+class Recruitment(StrictModel):
+    """URL parameters of the recruitment platforms and where a finished participant goes."""
+
+    prolific_params: list[str] = ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID"]
+    mturk_params: list[str] = ["workerId", "assignmentId", "hitId"]
+    completion_code: str = Field(min_length=1)
+    prolific_redirect_url: str = "https://app.prolific.com/submissions/complete?cc={completion_code}"
+    mturk_redirect_url: str = ""
+    anonymous_redirect_url: str = ""
+
+
+class Exclusions(StrictModel):
+    """Named exclusion rules the dashboard and the analysis apply to participants."""
+
+    failed_attention_check: bool = True
+    incomplete: bool = True
+    too_fast_trial_ms: int = Field(default=4000, ge=0)
+    too_fast_max_fraction: float = Field(default=0.25, ge=0, le=1)
+
+
+class PredictionInput(StrictModel):
+    """Limits on a clicked move, as fractions of the robot's largest step in the bank data."""
+
+    max_step_factor: float = Field(default=1.5, gt=0)
+    min_step_fraction: float = Field(default=0.1, gt=0, lt=1)
+
+
+class ModelPaths(StrictModel):
+    """Checkpoint files of both models for one world, relative to the data dir."""
+
+    ours: Path
+    vae: Path
+
+
+class StudyConfig(StrictModel):
+    """Everything that defines one online study."""
+
+    title: str
+    consent_text: str
+    instructions_text: str
+    worlds: list[WorldName] = Field(min_length=1)
+    counterbalance_world_order: bool = True
+    trials_per_world: int = Field(ge=1)
+    examples_per_trial: int = Field(ge=0)
+    segment_steps: SegmentSteps
+    start_states: int = Field(ge=1)
+    steps_to_predict: int = Field(ge=1)
+    practice_trials: int = Field(default=1, ge=0)
+    bank_trials_per_world: int = Field(ge=1)
+    bank_seed: int = Field(default=0, ge=0)
+    attention_checks: AttentionChecks = AttentionChecks()
+    prediction_input: PredictionInput = PredictionInput()
+    survey: list[SurveyQuestion] = []
+    recruitment: Recruitment
+    target_sample_size: int = Field(ge=1)
+    exclusions: Exclusions = Exclusions()
+    in_progress_timeout_min: float = Field(default=90.0, gt=0)
+    models: dict[WorldName, ModelPaths]
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "StudyConfig":
+        missing = [w for w in self.worlds if w not in self.models]
+        if missing:
+            raise ValueError(f"models: no checkpoints for world(s) {', '.join(missing)}")
+        if len(set(self.worlds)) != len(self.worlds):
+            raise ValueError("worlds: each world may appear once")
+        if self.bank_trials_per_world < self.trials_per_world:
+            raise ValueError("bank_trials_per_world must be >= trials_per_world")
+        if self.attention_checks.min_passing_starts > self.start_states:
+            raise ValueError("attention_checks.min_passing_starts must be <= start_states")
+        keys = [q.key for q in self.survey]
+        if len(set(keys)) != len(keys):
+            raise ValueError("survey: question keys must be unique")
+        return self
+
+
+def study_config_path(settings: Settings, study_id: str) -> Path:
+    """study_configs/<study_id>.yaml under the configured configs dir."""
+    if not study_id.replace("_", "").replace("-", "").isalnum():
+        raise ConfigError(f"study: invalid study id {study_id!r}")
+    return Path(settings.configs_dir) / f"{study_id}.yaml"
+
+
+def load_study_config(settings: Settings, study_id: str) -> StudyConfig:
+    """Read and validate a study config; a bad key raises ConfigError naming it."""
+    return _load(study_config_path(settings, study_id))
+
+
+@lru_cache(maxsize=16)
+def _load(path: Path) -> StudyConfig:
+    return load_yaml_model(path, StudyConfig)

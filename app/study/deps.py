@@ -1,0 +1,67 @@
+"""FastAPI dependencies: database session, study context, participant, researcher token."""
+
+import secrets
+from collections.abc import Iterator
+from typing import Annotated
+
+from fastapi import Depends, Header, Request
+from sqlmodel import Session
+
+from app.settings import Settings
+from app.study.crud import Refused, StudyContext, participant_by_token
+from app.study.tables import Participant
+
+
+def get_db(request: Request) -> Iterator[Session]:
+    """One database session per request, on the app's engine."""
+    with Session(request.app.state.engine) as session:
+        yield session
+
+
+SessionDep = Annotated[Session, Depends(get_db)]
+
+
+def get_settings_dep(request: Request) -> Settings:
+    """The settings the app was created with."""
+    return request.app.state.settings
+
+
+SettingsDep = Annotated[Settings, Depends(get_settings_dep)]
+
+
+def study_context(request: Request, study_id: str) -> StudyContext:
+    """The loaded study with this id, or 404."""
+    ctx = request.app.state.studies.get(study_id)
+    if ctx is None:
+        known = ", ".join(sorted(request.app.state.studies))
+        raise Refused(404, f"study_id: unknown study {study_id!r} (served: {known})")
+    return ctx
+
+
+def get_participant(token: str, db: SessionDep) -> Participant:
+    """The participant whose session token is in the path."""
+    return participant_by_token(db, token)
+
+
+ParticipantDep = Annotated[Participant, Depends(get_participant)]
+
+
+def participant_context(request: Request, participant: ParticipantDep) -> StudyContext:
+    """The study the participant belongs to."""
+    return study_context(request, participant.study_id)
+
+
+ContextDep = Annotated[StudyContext, Depends(participant_context)]
+
+
+def require_admin(settings: SettingsDep,
+                  authorization: Annotated[str | None, Header()] = None) -> None:
+    """Bearer token check: 401 when missing, 403 when wrong."""
+    if not authorization or not authorization.lower().startswith("bearer "):
+        raise Refused(401, "authorization: missing bearer token (Authorization: Bearer <token>)")
+    token = authorization[7:].strip()
+    if not secrets.compare_digest(token.encode(), settings.admin_token.encode()):
+        raise Refused(403, "authorization: wrong researcher token")
+
+
+AdminDep = Annotated[None, Depends(require_admin)]

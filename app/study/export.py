@@ -1,0 +1,112 @@
+"""Read side for researchers: the tidy export table and the dashboard summary."""
+
+import io
+from datetime import timedelta
+
+import pandas as pd
+from sqlalchemy import select
+from sqlmodel import Session
+
+from app.study.crud import StudyContext, _aware
+from app.study.tables import Participant, PredictionRow, TrialResponse, utcnow
+
+EXPORT_COLUMNS = (
+    "study_id", "participant_id", "recruitment", "external_id", "completed",
+    "attention_passed", "world", "world_position", "trial_id", "trial_index", "is_practice",
+    "attention_check", "clip_sha256", "start_index", "step", "start_x", "start_y", "human_x",
+    "human_y", "click_x", "click_y", "human_vx", "human_vy", "ours_vx", "ours_vy", "vae_vx",
+    "vae_vy", "cv_vx", "cv_vy", "policy_vx", "policy_vy", "ours_code", "vae_code",
+    "ours_sha256", "vae_sha256", "click_time_ms", "trial_duration_ms", "replays",
+    "submission_id", "submitted_at",
+)
+_FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields]
+
+
+def export_frame(db: Session, study_id: str) -> pd.DataFrame:
+    """One row per (participant, trial, start state, step), columns as in API.md."""
+    pred, trial, part = PredictionRow.__table__, TrialResponse.__table__, Participant.__table__
+    query = (
+        select(part.c.study_id, part.c.recruitment, part.c.external_id, part.c.completed,
+               (part.c.attention_failed == 0).label("attention_passed"), trial.c.world,
+               trial.c.world_position, trial.c.trial_index, trial.c.is_practice,
+               trial.c.attention_check, trial.c.clip_sha256,
+               trial.c.duration_ms.label("trial_duration_ms"), trial.c.replays,
+               trial.c.received_at.label("submitted_at"), *[pred.c[c] for c in _FROM_ROWS])
+        .select_from(pred.join(trial, trial.c.submission_id == pred.c.submission_id)
+                     .join(part, part.c.id == pred.c.participant_id))
+        .where(part.c.study_id == study_id)
+        .order_by(pred.c.participant_id, trial.c.id, pred.c.start_index, pred.c.step))
+    rows = db.execute(query).mappings().all()
+    frame = pd.DataFrame(rows, columns=list(rows[0].keys()) if rows else list(EXPORT_COLUMNS))
+    if len(frame):
+        frame["submitted_at"] = [_aware(t).isoformat() for t in frame["submitted_at"]]
+        for col in ("completed", "attention_passed", "is_practice", "attention_check"):
+            frame[col] = frame[col].astype(bool)
+    return frame[list(EXPORT_COLUMNS)]
+
+
+def export_csv(db: Session, study_id: str) -> str:
+    """The export table as CSV text (pandas/R read it with no post-processing)."""
+    buffer = io.StringIO()
+    export_frame(db, study_id).to_csv(buffer, index=False)
+    return buffer.getvalue()
+
+
+def progress(db: Session, ctx: StudyContext) -> dict:
+    """Session counts: started, completed, in progress, stale, per world order."""
+    cutoff = utcnow() - timedelta(minutes=ctx.config.in_progress_timeout_min)
+    people = db.execute(select(Participant).where(
+        Participant.study_id == ctx.study_id)).scalars().all()
+    completed = [p for p in people if p.completed]
+    active = [p for p in people if not p.completed and _aware(p.updated_at) >= cutoff]
+    orders: dict[str, dict[str, int]] = {}
+    for p in people:
+        entry = orders.setdefault(p.world_order, {"completed": 0, "in_progress": 0})
+        if p.completed:
+            entry["completed"] += 1
+        elif p in active:
+            entry["in_progress"] += 1
+    return {"target_sample_size": ctx.config.target_sample_size, "started": len(people),
+            "completed": len(completed), "in_progress": len(active),
+            "stale": len(people) - len(completed) - len(active),
+            "failed_attention_check": sum(p.attention_failed > 0 for p in completed),
+            "world_orders": orders}
+
+
+def alignment_summary(frame: pd.DataFrame, ctx: StudyContext) -> dict:
+    """Running mean alignment error per world and model, with the analysis' exclusion rules.
+
+    `kept` applies every rule (so only completed sessions); `live` waives the
+    `incomplete` rule to show sessions still running.
+    """
+    from analysis.load import normalise
+    from analysis.metrics import ExclusionRules, apply_exclusions, participant_means
+
+    if frame.empty:
+        return {"kept": {}, "live": {}, "exclusions": {}}
+    frame = normalise(frame)
+    rules = ExclusionRules(**ctx.config.exclusions.model_dump())
+    out = {}
+    for name, active in (("kept", rules), ("live", rules.model_copy(update={"incomplete": False}))):
+        result = apply_exclusions(frame, active)
+        out[name] = _world_means(participant_means(result.kept)) if len(result.kept) else {}
+        if name == "kept":
+            out["exclusions"] = result.counts()
+    return out
+
+
+def _world_means(means: pd.DataFrame) -> dict:
+    summary = {}
+    for world, group in means.groupby("world", sort=True):
+        summary[world] = {"participants": int(len(group)), **{
+            model: round(float(group[f"err_{model}"].mean()), 4)
+            for model in ("ours", "vae", "cv", "policy")}}
+    return summary
+
+
+def summary(db: Session, ctx: StudyContext) -> dict:
+    """The dashboard's JSON: progress, exclusions and running alignment error."""
+    frame = export_frame(db, ctx.study_id)
+    return {"study_id": ctx.study_id, "title": ctx.config.title,
+            "progress": progress(db, ctx), "alignment_error": alignment_summary(frame, ctx),
+            "rows": int(len(frame))}

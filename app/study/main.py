@@ -1,0 +1,146 @@
+"""The study server: `create_app(settings)` with a lifespan that loads studies, banks and models.
+
+Per process state is read-only (configs, trial banks, model answers); everything that
+changes lives in the database, so several uvicorn workers can serve one study.
+"""
+
+import os
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI, Request
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from fastapi.staticfiles import StaticFiles
+from fastapi.templating import Jinja2Templates
+from starlette.types import ASGIApp, Receive, Scope, Send
+
+from app.settings import DEFAULT_ADMIN_TOKEN, REPO_ROOT, Settings, get_settings
+from app.study.config import load_study_config
+from app.study.crud import Refused, StudyContext
+from app.study.db import create_tables, make_engine
+from app.study.predictor import Predictor
+from app.study.routes import pages, participant, researcher
+from app.study.trials import TrialBank
+
+MAX_BODY_BYTES = 64 * 1024
+FRONTEND_DIR = REPO_ROOT / "frontend"
+STUDY_ENV = "TOMSTUDY_STUDY"
+
+
+class UnsafeSettings(RuntimeError):
+    """The server must not start with these settings."""
+
+
+def check_production(settings: Settings) -> None:
+    """Refuse production mode with the default researcher token."""
+    if settings.production and settings.admin_token == DEFAULT_ADMIN_TOKEN:
+        raise UnsafeSettings("TOMSTUDY_PRODUCTION=1 needs a TOMSTUDY_ADMIN_TOKEN other than "
+                             "the default; refusing to start")
+
+
+def load_study(settings: Settings, study_id: str) -> StudyContext:
+    """Config, bank and both models of one study (the models verified against the bank)."""
+    config = load_study_config(settings, study_id)
+    bank = TrialBank.load(settings.data_dir, study_id)
+    return StudyContext(study_id, config, bank, Predictor(config, bank, settings.data_dir))
+
+
+def create_app(settings: Settings | None = None, studies: list[str] | None = None) -> FastAPI:
+    """The FastAPI app serving `studies` (default: $TOMSTUDY_STUDY or paper_study)."""
+    settings = settings or get_settings()
+    check_production(settings)
+    studies = studies or os.environ.get(STUDY_ENV, "paper_study").split(",")
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        app.state.engine = make_engine(settings.resolved_database_url())
+        create_tables(app.state.engine)
+        app.state.studies = {sid: load_study(settings, sid) for sid in studies}
+        yield
+        app.state.engine.dispose()
+
+    app = FastAPI(title="tomstudy", lifespan=lifespan,
+                  description="Online study of how people predict a robot (app/study/API.md).")
+    app.state.settings = settings
+    app.state.default_study = studies[0]
+    app.state.templates = Jinja2Templates(directory=FRONTEND_DIR / "templates")
+    app.mount("/static", StaticFiles(directory=FRONTEND_DIR / "static"), name="static")
+    for router in (pages.router, participant.router, researcher.router):
+        app.include_router(router)
+    add_error_handlers(app)
+    app.add_middleware(BodyLimit, max_bytes=MAX_BODY_BYTES)
+    return app
+
+
+def add_error_handlers(app: FastAPI) -> None:
+    """Refusals and validation errors become 4xx JSON naming the field; never echo input."""
+
+    @app.exception_handler(Refused)
+    async def refused(_: Request, err: Refused) -> JSONResponse:
+        headers = {"WWW-Authenticate": "Bearer"} if err.status == 401 else None
+        return JSONResponse({"detail": err.detail}, status_code=err.status, headers=headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def invalid(_: Request, err: RequestValidationError) -> JSONResponse:
+        # FastAPI's default echoes the input, and a NaN in it cannot be written as JSON
+        items = [{"loc": list(e["loc"]), "msg": e["msg"], "type": e["type"]}
+                 for e in err.errors()]
+        message = "; ".join(f"{'.'.join(str(p) for p in i['loc'][1:]) or 'body'}: {i['msg']}"
+                            for i in items)
+        return JSONResponse(jsonable_encoder({"detail": items, "message": message}),
+                            status_code=422)
+
+
+class BodyLimit:
+    """Answer 413 to request bodies over `max_bytes`, declared or streamed.
+
+    The body (at most `max_bytes`) is read before the app runs and replayed to it, so an
+    oversized chunked upload is refused before any handler sees it.
+    """
+
+    def __init__(self, app: ASGIApp, max_bytes: int) -> None:
+        self.app = app
+        self.max_bytes = max_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        declared = dict(scope.get("headers", [])).get(b"content-length")
+        if declared is not None and (not declared.isdigit() or int(declared) > self.max_bytes):
+            return await self._too_large(scope, send)
+        chunks, size, more = [], 0, True
+        while more:
+            message = await receive()
+            if message["type"] != "http.request":  # client went away
+                return None
+            chunks.append(message.get("body", b""))
+            size += len(chunks[-1])
+            more = message.get("more_body", False)
+            if size > self.max_bytes:
+                return await self._too_large(scope, send)
+        body = b"".join(chunks)
+        replayed = False
+
+        async def replay() -> dict:
+            nonlocal replayed
+            if not replayed:
+                replayed = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        await self.app(scope, replay, send)
+
+    async def _too_large(self, scope: Scope, send: Send) -> None:
+        response = JSONResponse({"detail": f"body: request body larger than {self.max_bytes} "
+                                           f"bytes"}, status_code=413)
+        await response(scope, _no_receive, send)
+
+
+async def _no_receive() -> dict:
+    return {"type": "http.disconnect"}
+
+
+def app_from_env() -> FastAPI:
+    """Factory for `uvicorn --factory` (several workers): settings from the environment."""
+    return create_app(get_settings())

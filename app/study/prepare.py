@@ -1,0 +1,81 @@
+"""Run whatever a study still lacks: simulate both worlds, train both models, build the bank.
+
+Each step is skipped when its output exists (and, for the bank, still matches the
+checkpoints it was built from), so `make serve` on a fresh clone does everything once
+and later starts in seconds.
+"""
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+from app.fileio import sha256_file
+from app.settings import Settings
+from app.study.config import load_study_config
+from app.study.trials import BANK_FILE, bank_dir
+from app.worlds.simulate import output_paths
+
+
+def prepare_study(settings: Settings, study_id: str, n_trajectories: int = 2000,
+                  seed: int = 0, say: Callable[[str], None] = print) -> Path:
+    """Simulate, train and build-trials as needed for `study_id`; returns the bank path."""
+    config = load_study_config(settings, study_id)
+    data_dir = Path(settings.data_dir)
+    for world in config.worlds:
+        ensure_trajectories(data_dir, world, n_trajectories, seed, say)
+        for kind in ("ours", "vae"):  # ours first: the VAE's k-means k = codes Ours uses
+            ensure_checkpoint(data_dir, world, kind, data_dir / getattr(config.models[world], kind),
+                              seed, say)
+    bank = bank_dir(data_dir, study_id) / BANK_FILE
+    if bank_is_current(bank):
+        say(f"{bank} is up to date; skipping build-trials")
+        return bank
+    from app.study.trial_builder import build_trials
+
+    say(f"building the trial bank of {study_id}")
+    return build_trials(config, study_id, data_dir)
+
+
+def ensure_trajectories(data_dir: Path, world: str, n: int, seed: int, say) -> None:
+    """Simulate a world unless its trajectory file exists."""
+    npz_path, meta_path = output_paths(data_dir, world)
+    if npz_path.is_file() and meta_path.is_file():
+        say(f"{npz_path} exists; skipping simulate")
+        return
+    from app.worlds.simulate import simulate
+
+    say(f"simulating {n} {world} trajectories")
+    simulate(world, n, seed, data_dir)
+
+
+def ensure_checkpoint(data_dir: Path, world: str, kind: str, checkpoint: Path, seed: int,
+                      say) -> None:
+    """Train one model unless its checkpoint exists (written to checkpoint.parent)."""
+    if checkpoint.is_file():
+        say(f"{checkpoint} exists; skipping train")
+        return
+    from app.data.trajectory import TrajectorySet
+    from app.learning.config import load_train_config
+    from app.learning.train import train_model
+
+    npz_path, meta_path = output_paths(data_dir, world)
+    say(f"training {kind} on {world}")
+    written = train_model(TrajectorySet.load(npz_path), kind, seed, load_train_config(),
+                          checkpoint.parent, data_meta=json.loads(meta_path.read_text()))
+    if written != checkpoint:
+        raise RuntimeError(f"training wrote {written}, the study config expects {checkpoint}")
+
+
+def bank_is_current(bank: Path) -> bool:
+    """True if the bank exists and its checkpoints and trajectories are unchanged."""
+    meta_path = bank.with_name("meta.json")
+    if not bank.is_file() or not meta_path.is_file():
+        return False
+    meta = json.loads(meta_path.read_text())
+    for world in meta.get("worlds", {}).values():
+        inputs = [(world["trajectories"], world["trajectories_sha256"])]
+        inputs += [(c["path"], c["file_sha256"]) for c in world["checkpoints"].values()]
+        for path, digest in inputs:
+            if not Path(path).is_file() or sha256_file(Path(path)) != digest:
+                return False
+    return sha256_file(bank) == meta.get("bank_sha256")

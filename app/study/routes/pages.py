@@ -1,0 +1,33 @@
+"""HTML pages: landing, the participant app and the researcher dashboard (jinja2)."""
+
+from fastapi import APIRouter, Request
+from fastapi.responses import HTMLResponse
+
+from app.study.deps import study_context
+
+router = APIRouter(tags=["pages"], include_in_schema=False)
+
+
+def _render(request: Request, name: str, study_id: str) -> HTMLResponse:
+    ctx = study_context(request, study_id)
+    return request.app.state.templates.TemplateResponse(
+        request, name, {"study_id": study_id, "title": ctx.config.title,
+                        "static_url": "/static", "studies": sorted(request.app.state.studies)})
+
+
+@router.get("/", response_class=HTMLResponse)
+def show_index(request: Request) -> HTMLResponse:
+    """Landing page: the served studies and a link to the default one."""
+    return _render(request, "index.html", request.app.state.default_study)
+
+
+@router.get("/s/{study_id}", response_class=HTMLResponse)
+def show_study(study_id: str, request: Request) -> HTMLResponse:
+    """The participant app (one page; recruitment parameters stay in the URL)."""
+    return _render(request, "study.html", study_id)
+
+
+@router.get("/researcher", response_class=HTMLResponse)
+def show_researcher(request: Request) -> HTMLResponse:
+    """The researcher dashboard (asks for the token, then calls the JSON routes)."""
+    return _render(request, "researcher.html", request.app.state.default_study)

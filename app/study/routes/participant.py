@@ -1,0 +1,79 @@
+"""Participant API: start or resume a session, read its state, submit each step, telemetry."""
+
+from fastapi import APIRouter, Request, Response, status
+
+from app.study import crud
+from app.study.deps import ContextDep, ParticipantDep, SessionDep, study_context
+from app.study.state import session_state
+from app.study.tables import (
+    ConsentCreate,
+    EventsCreate,
+    ParticipantPublic,
+    PredictionCreate,
+    SessionCreate,
+    SubmissionBody,
+    SurveyCreate,
+)
+
+router = APIRouter(prefix="/api/sessions", tags=["participant"])
+
+
+@router.post("", response_model=ParticipantPublic, status_code=status.HTTP_201_CREATED,
+             responses={200: {"description": "resumed an unfinished session"},
+                        409: {"description": "this external id already completed the study"}})
+async def create_session(body: SessionCreate, request: Request, response: Response,
+                         db: SessionDep) -> ParticipantPublic:
+    """Start a session from the recruitment URL parameters, or resume the unfinished one."""
+    ctx = study_context(request, body.study_id)
+    participant, resumed = crud.start_session(db, ctx, body)
+    if resumed:
+        response.status_code = status.HTTP_200_OK
+    return ParticipantPublic(session_token=participant.session_token,
+                             participant_id=participant.id, resumed=resumed)
+
+
+@router.get("/{token}/state")
+async def read_state(participant: ParticipantDep, ctx: ContextDep) -> dict:
+    """The current phase, progress and what the phase needs (a refresh resumes here)."""
+    return session_state(ctx, participant)
+
+
+@router.post("/{token}/consent")
+async def submit_consent(body: ConsentCreate, participant: ParticipantDep, ctx: ContextDep,
+                         db: SessionDep) -> dict:
+    """Record consent; answers the next state."""
+    crud.record_consent(db, participant, body)
+    return session_state(ctx, participant)
+
+
+@router.post("/{token}/instructions")
+async def submit_instructions(body: SubmissionBody, participant: ParticipantDep,
+                              ctx: ContextDep, db: SessionDep) -> dict:
+    """Record that the instructions were read; answers the next state."""
+    crud.record_instructions(db, participant, body)
+    return session_state(ctx, participant)
+
+
+@router.post("/{token}/predictions", status_code=status.HTTP_201_CREATED,
+             responses={200: {"description": "this submission_id was already stored"}})
+async def submit_predictions(body: PredictionCreate, participant: ParticipantDep,
+                             ctx: ContextDep, db: SessionDep, response: Response) -> dict:
+    """Store one trial's clicked positions (5 start states x 3 steps); answers the next state."""
+    if not crud.record_predictions(db, ctx, participant, body):
+        response.status_code = status.HTTP_200_OK
+    return session_state(ctx, participant)
+
+
+@router.post("/{token}/survey")
+async def submit_survey(body: SurveyCreate, participant: ParticipantDep, ctx: ContextDep,
+                        db: SessionDep) -> dict:
+    """Store the closing survey; the session is then done."""
+    crud.record_survey(db, ctx, participant, body)
+    return session_state(ctx, participant)
+
+
+@router.post("/{token}/events", status_code=status.HTTP_202_ACCEPTED)
+async def submit_events(body: EventsCreate, participant: ParticipantDep,
+                        db: SessionDep) -> dict:
+    """Store telemetry events (at most 100); retried events are stored once."""
+    return {"stored": crud.record_events(db, participant, body)}

@@ -1,0 +1,54 @@
+"""What a participant's browser is told at each step (GET .../state and every write's answer)."""
+
+from app.study.config import StudyConfig
+from app.study.crud import TRIAL_PHASES, StudyContext, current_step
+from app.study.tables import Participant
+
+
+def session_state(ctx: StudyContext, participant: Participant) -> dict:
+    """`{phase, progress: {done, total}, step}` for the participant's current position."""
+    step = current_step(participant)
+    trial_positions = [i for i, s in enumerate(participant.plan) if s["phase"] in TRIAL_PHASES]
+    done = sum(1 for i in trial_positions if i < participant.position)
+    return {"phase": step["phase"], "progress": {"done": done, "total": len(trial_positions)},
+            "step": step_payload(ctx, participant, step)}
+
+
+def step_payload(ctx: StudyContext, participant: Participant, step: dict) -> dict:
+    """What the current phase needs: texts, a trial, the survey or the completion code."""
+    cfg = ctx.config
+    phase = step["phase"]
+    if phase == "consent":
+        return {"title": cfg.title, "text": cfg.consent_text}
+    if phase == "instructions":
+        return {"title": cfg.title, "text": cfg.instructions_text,
+                "world_order": participant.world_order.split(",")}
+    if phase in TRIAL_PHASES:
+        return trial_payload(ctx, step)
+    if phase == "survey":
+        return {"questions": [q.model_dump() for q in cfg.survey]}
+    return {"completion_code": cfg.recruitment.completion_code,
+            "redirect_url": redirect_url(cfg, participant)}
+
+
+def trial_payload(ctx: StudyContext, step: dict) -> dict:
+    """A bank trial as the browser sees it (no model predictions)."""
+    trial = ctx.bank.by_id[step["trial_id"]]
+    world = ctx.bank.world(trial.world)
+    return {
+        "trial_id": trial.trial_id, "world": trial.world,
+        "index_in_world": step["trial_index"], "world_position": step["world_position"],
+        "is_practice": step["phase"] == "practice",
+        "attention_check": step["attention_check"], "clip_sha256": trial.clip_sha256,
+        "scene": world.scene, "dt_s": world.dt_s, **trial.browser_payload(),
+        "steps_to_predict": ctx.bank.data.steps_to_predict,
+        "max_step_m": world.max_step_m, "min_step_m": world.min_step_m,
+    }
+
+
+def redirect_url(cfg: StudyConfig, participant: Participant) -> str:
+    """Where the done page sends the participant ('' = show the code only)."""
+    template = {"prolific": cfg.recruitment.prolific_redirect_url,
+                "mturk": cfg.recruitment.mturk_redirect_url}.get(
+        participant.recruitment, cfg.recruitment.anonymous_redirect_url)
+    return template.format(completion_code=cfg.recruitment.completion_code)

@@ -1,0 +1,245 @@
+"""SQLModel tables of the study database and the request/response models around them.
+
+One participant row holds its plan (the ordered steps assigned at start) and its
+position in it; every client write is keyed by a client-made UUID (`submission_id`,
+unique), so a retried request is stored once. Prediction rows are long: one per
+(start state, step), with each model's action and the baselines beside the human's.
+"""
+
+import math
+import uuid
+from datetime import UTC, datetime
+
+from pydantic import ConfigDict, field_validator
+from pydantic import Field as PydField
+from sqlalchemy import JSON, Column, UniqueConstraint
+from sqlmodel import Field, SQLModel
+
+
+def utcnow() -> datetime:
+    """Timezone-aware now (UTC)."""
+    return datetime.now(UTC)
+
+
+# ---------------------------------------------------------------- participants
+
+class ParticipantBase(SQLModel):
+    """Who a participant is and how they arrived."""
+
+    study_id: str = Field(index=True, max_length=64)
+    recruitment: str = Field(max_length=16)  # prolific, mturk or anonymous
+    external_id: str | None = Field(default=None, max_length=128)
+
+
+class Participant(ParticipantBase, table=True):
+    """A participant's session: plan, position, outcome."""
+
+    __table_args__ = (UniqueConstraint("study_id", "external_id", name="uq_participant_ext"),)
+
+    id: int | None = Field(default=None, primary_key=True)
+    session_token: str = Field(unique=True, index=True, max_length=64)
+    recruitment_params: dict = Field(default_factory=dict, sa_column=Column(JSON))
+    client: dict = Field(default_factory=dict, sa_column=Column(JSON))
+    world_order: str = Field(max_length=64)
+    plan: list = Field(default_factory=list, sa_column=Column(JSON))
+    position: int = 0
+    completed: bool = False
+    attention_failed: int = 0
+    created_at: datetime = Field(default_factory=utcnow)
+    updated_at: datetime = Field(default_factory=utcnow)
+    completed_at: datetime | None = None
+
+
+class ParticipantPublic(SQLModel):
+    """What a session start answers."""
+
+    session_token: str
+    participant_id: int
+    resumed: bool
+
+
+# ---------------------------------------------------------------- writes
+
+class Submission(SQLModel, table=True):
+    """Every accepted client write (consent, instructions, predictions, survey), once."""
+
+    id: int | None = Field(default=None, primary_key=True)
+    submission_id: str = Field(unique=True, max_length=36)
+    participant_id: int = Field(foreign_key="participant.id", index=True)
+    kind: str = Field(max_length=16)
+    step_index: int
+    payload: dict = Field(default_factory=dict, sa_column=Column(JSON))
+    received_at: datetime = Field(default_factory=utcnow)
+
+
+class TrialResponse(SQLModel, table=True):
+    """One answered trial: timings, replays and the attention-check verdict."""
+
+    id: int | None = Field(default=None, primary_key=True)
+    submission_id: str = Field(unique=True, max_length=36)
+    participant_id: int = Field(foreign_key="participant.id", index=True)
+    trial_id: str = Field(max_length=64)
+    world: str = Field(max_length=16)
+    world_position: int
+    trial_index: int
+    is_practice: bool
+    attention_check: bool
+    attention_ok: bool | None = None
+    shown_at_ms: float
+    submitted_at_ms: float
+    duration_ms: float
+    replays: int
+    clip_sha256: str = Field(max_length=64)
+    received_at: datetime = Field(default_factory=utcnow)
+
+
+class PredictionRow(SQLModel, table=True):
+    """One (start state, step) of a trial: the human's action beside every predictor's."""
+
+    id: int | None = Field(default=None, primary_key=True)
+    submission_id: str = Field(index=True, max_length=36)
+    participant_id: int = Field(foreign_key="participant.id", index=True)
+    trial_id: str = Field(max_length=64)
+    start_index: int
+    step: int
+    start_x: float
+    start_y: float
+    human_x: float
+    human_y: float
+    click_x: float
+    click_y: float
+    human_vx: float
+    human_vy: float
+    ours_vx: float
+    ours_vy: float
+    vae_vx: float
+    vae_vy: float
+    cv_vx: float
+    cv_vy: float
+    policy_vx: float
+    policy_vy: float
+    ours_code: int
+    vae_code: int
+    ours_sha256: str = Field(max_length=64)
+    vae_sha256: str = Field(max_length=64)
+    click_time_ms: float
+
+
+class Event(SQLModel, table=True):
+    """A telemetry event (clip finished, replay, tab hidden, resize...)."""
+
+    id: int | None = Field(default=None, primary_key=True)
+    submission_id: str = Field(unique=True, max_length=36)
+    participant_id: int = Field(foreign_key="participant.id", index=True)
+    kind: str = Field(max_length=32)
+    t_client_ms: float
+    data: dict = Field(default_factory=dict, sa_column=Column(JSON))
+    received_at: datetime = Field(default_factory=utcnow)
+
+
+# ---------------------------------------------------------------- request bodies
+
+class _Body(SQLModel):
+    """Request bodies: unknown keys and NaN/inf are refused with the field named."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class Recruitment(_Body):
+    """URL parameters from Prolific or MTurk (all optional: none = anonymous)."""
+
+    PROLIFIC_PID: str | None = PydField(default=None, max_length=128)
+    STUDY_ID: str | None = PydField(default=None, max_length=128)
+    SESSION_ID: str | None = PydField(default=None, max_length=128)
+    workerId: str | None = PydField(default=None, max_length=128)
+    assignmentId: str | None = PydField(default=None, max_length=128)
+    hitId: str | None = PydField(default=None, max_length=128)
+
+
+class ClientInfo(_Body):
+    """The participant's device."""
+
+    screen_w: int = PydField(default=0, ge=0, le=100_000)
+    screen_h: int = PydField(default=0, ge=0, le=100_000)
+    touch_only: bool = False
+    user_agent: str = PydField(default="", max_length=512)
+
+
+class SessionCreate(_Body):
+    """POST /api/sessions."""
+
+    study_id: str = PydField(max_length=64)
+    recruitment: Recruitment = Recruitment()
+    client: ClientInfo = ClientInfo()
+
+
+class SubmissionBody(_Body):
+    """Any write: carries the client's UUID."""
+
+    submission_id: uuid.UUID
+
+
+class ConsentCreate(SubmissionBody):
+    """POST .../consent."""
+
+    agree: bool
+
+    @field_validator("agree")
+    @classmethod
+    def _must_agree(cls, value: bool) -> bool:
+        if not value:
+            raise ValueError("consent is required to take part")
+        return value
+
+
+Point = tuple[float, float]
+
+
+class PredictionCreate(SubmissionBody):
+    """POST .../predictions: 5 start states x 3 clicked robot positions (scene metres)."""
+
+    trial_id: str = PydField(max_length=64)
+    points: list[list[Point]]
+    click_times_ms: list[list[float]]
+    shown_at_ms: float = PydField(ge=0)
+    submitted_at_ms: float = PydField(ge=0)
+    replays: int = PydField(default=0, ge=0, le=10_000)
+
+
+class SurveyCreate(SubmissionBody):
+    """POST .../survey."""
+
+    answers: dict[str, str | int | float | None]
+
+
+class EventIn(_Body):
+    """One telemetry event."""
+
+    submission_id: uuid.UUID
+    kind: str = PydField(min_length=1, max_length=32)
+    t_client_ms: float
+    data: dict = {}
+
+    @field_validator("data")
+    @classmethod
+    def _finite(cls, value: dict) -> dict:
+        if not _all_finite(value):
+            raise ValueError("numbers must be finite (no NaN or Infinity)")
+        return value
+
+
+def _all_finite(value: object) -> bool:
+    """True if no float nested in `value` is NaN or infinite."""
+    if isinstance(value, float):
+        return math.isfinite(value)
+    if isinstance(value, dict):
+        return all(_all_finite(v) for v in value.values())
+    if isinstance(value, list):
+        return all(_all_finite(v) for v in value)
+    return True
+
+
+class EventsCreate(_Body):
+    """POST .../events (at most 100 per request)."""
+
+    events: list[EventIn] = PydField(min_length=1, max_length=100)

@@ -1,0 +1,349 @@
+"""`tomstudy build-trials`: held-out trajectories -> the study's trial bank (JSON + meta.json).
+
+Per world: the test split both checkpoints held out; segments cut where the robot's
+behaviour is still visible (before a Highway lane change completes, well before an
+Obstacle goal is reached); five start states spread over free space; both models, a
+constant-velocity baseline and the world's own policy answered for every start state.
+Everything is computed from the rounded numbers the participant is shown.
+"""
+
+import platform
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+import app
+from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
+from app.fileio import sha256_file, write_json
+from app.study.config import StudyConfig
+from app.study.trials import (
+    BANK_FILE,
+    BankFile,
+    Clip,
+    ModelAnswer,
+    StartState,
+    TrialRecord,
+    WorldBank,
+    bank_dir,
+    clip_sha256,
+)
+from app.worlds.simulate import output_paths
+
+POS_DECIMALS = 3
+HEADING_DECIMALS = 4
+STEP_PERCENTILE = 99.5
+CANDIDATE_SUBSET = 40
+EXTRA_CANDIDATES = 60  # built beyond the bank's needs, so attention checks have a choice
+
+
+@dataclass
+class WorldInputs:
+    """What one world's bank is built from."""
+
+    world: object
+    trajs: TrajectorySet
+    models: dict
+    held_out: np.ndarray
+    trajectories_path: Path
+
+
+def build_trials(config: StudyConfig, study_id: str, data_dir: Path) -> Path:
+    """Build var/trials/<study_id>/bank.json and meta.json; returns the bank path."""
+    started = time.perf_counter()
+    worlds, meta_worlds = {}, {}
+    for w_index, name in enumerate(config.worlds):
+        inputs = load_inputs(config, name, Path(data_dir))
+        rng = np.random.default_rng(np.random.SeedSequence([config.bank_seed, w_index]))
+        worlds[name], meta_worlds[name] = build_world_bank(config, inputs, rng)
+    bank = BankFile(study_id=study_id, steps_to_predict=config.steps_to_predict, worlds=worlds)
+    out = bank_dir(data_dir, study_id)
+    write_json(out / BANK_FILE, bank.model_dump())
+    write_json(out / "meta.json", {
+        "study_id": study_id, "config": config.model_dump(mode="json"), "worlds": meta_worlds,
+        "bank_sha256": sha256_file(out / BANK_FILE), "package_version": app.__version__,
+        "python": platform.python_version(), "numpy": np.__version__,
+        "wall_time_s": round(time.perf_counter() - started, 2),
+    })
+    return out / BANK_FILE
+
+
+def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
+    """The world, its trajectories, both checkpoints and the test split they share."""
+    from app.learning.checkpoint import (
+        CheckpointError,
+        check_matches_data,
+        load_model,
+        trajectory_hash,
+    )
+    from app.worlds.registry import build_world
+
+    npz_path, _ = output_paths(data_dir, name)
+    if not npz_path.is_file():
+        raise FileNotFoundError(f"{npz_path}: no trajectories; run `tomstudy simulate {name}`")
+    trajs = TrajectorySet.load(npz_path)
+    data_hash = trajectory_hash(trajs.positions, trajs.lengths, trajs.labels)
+    models, splits = {}, []
+    for kind in ("ours", "vae"):
+        path = data_dir / getattr(config.models[name], kind)
+        model = load_model(path, world=name)
+        check_matches_data(model, name, trajs.dt_s, data_hash)
+        if model.n_actions != config.steps_to_predict:
+            raise CheckpointError(f"{path}: predicts {model.n_actions} steps, the study asks "
+                                  f"for {config.steps_to_predict}")
+        models[kind] = model
+        splits.append(set(model.data_meta["split_trajectories"]["test"]))
+    held_out = np.array(sorted(set.intersection(*splits)), dtype=np.int64)
+    return WorldInputs(build_world(name), trajs, models, held_out, npz_path)
+
+
+def build_world_bank(config: StudyConfig, inputs: WorldInputs,
+                     rng: np.random.Generator) -> tuple[WorldBank, dict]:
+    """One world's trials: main pool, practice and attention checks."""
+    trajs, world = inputs.trajs, inputs.world
+    label_name = world.robot_label
+    max_step = config.prediction_input.max_step_factor * robot_step_percentile(
+        trajs, inputs.held_out)
+    need_segment = max(m.segment_len for m in inputs.models.values())
+    candidates = segment_candidates(config, trajs, inputs.held_out, label_name,
+                                    need_segment, rng)
+    needed = (config.bank_trials_per_world + config.practice_trials
+              + config.attention_checks.per_world)
+    if len(candidates) < needed:
+        raise ValueError(f"{world.name}: only {len(candidates)} held-out trajectories give a "
+                         f"usable segment, the bank needs {needed}; simulate more")
+    scene = trajs.scene.model_dump()
+    built = []
+    for src, start, end in tqdm(candidates[:needed + EXTRA_CANDIDATES],
+                                desc=f"build-trials {world.name}", unit="trial"):
+        built.append(make_trial(config, inputs, src, start, end, max_step, scene, rng))
+    kinds, straightness = assign_kinds(config, built)
+    trials = [t.model_copy(update={"kind": kind, "trial_id": f"{world.name}-{kind}-{i:03d}"})
+              for kind in ("main", "practice", "attention")
+              for i, t in enumerate(t for t, k in zip(built, kinds, strict=True) if k == kind)]
+    bank = WorldBank(world=world.name, dt_s=trajs.dt_s, scene=scene,
+                     robot_label_name=label_name, label_names=trajs.label_names[label_name],
+                     max_step_m=round(max_step, 4),
+                     min_step_m=round(config.prediction_input.min_step_fraction * max_step, 4),
+                     trials=trials)
+    return bank, world_meta(inputs, trials, straightness)
+
+
+def world_meta(inputs: WorldInputs, trials: list[TrialRecord], straightness: dict) -> dict:
+    """Input hashes and counts for meta.json."""
+    labels = [t.robot_label for t in trials if t.kind == "main"]
+    return {
+        "trajectories": str(inputs.trajectories_path),
+        "trajectories_sha256": sha256_file(inputs.trajectories_path),
+        "held_out_trajectories": len(inputs.held_out),
+        "checkpoints": {k: {"path": str(m.path), "content_hash": m.content_hash,
+                            "file_sha256": sha256_file(m.path)}
+                        for k, m in inputs.models.items()},
+        "trials": {kind: sum(t.kind == kind for t in trials)
+                   for kind in ("main", "practice", "attention")},
+        "main_robot_labels": {str(v): labels.count(v) for v in sorted(set(labels))},
+        "attention_max_angle_deg": straightness,
+    }
+
+
+def robot_step_percentile(trajs: TrajectorySet, index: np.ndarray) -> float:
+    """A high percentile of the robot's step length over the valid steps of `index`."""
+    steps = []
+    for i in index:
+        track = trajs.positions[i, : trajs.lengths[i] + 1, ROBOT]
+        steps.append(np.linalg.norm(np.diff(track, axis=0), axis=1))
+    return float(np.percentile(np.concatenate(steps), STEP_PERCENTILE))
+
+
+# ---------------------------------------------------------------- segments
+
+def segment_candidates(config: StudyConfig, trajs: TrajectorySet, held_out: np.ndarray,
+                       label_name: str, need_segment: int,
+                       rng: np.random.Generator) -> list[tuple[int, int, int]]:
+    """(trajectory, segment start, segment end) per usable trajectory, labels interleaved."""
+    by_label: dict[int, list] = {}
+    for i in rng.permutation(held_out):
+        length = int(rng.integers(config.segment_steps.min, config.segment_steps.max + 1))
+        ends = visible_ends(trajs, int(i), max(length, need_segment), config.steps_to_predict)
+        if len(ends):
+            end = int(rng.choice(ends))
+            by_label.setdefault(int(trajs.labels[label_name][i]), []).append(
+                (int(i), end - length, end))
+    return interleave(by_label)
+
+
+def interleave(groups: dict[int, list]) -> list:
+    """Round-robin over groups, so any prefix covers the labels evenly."""
+    out, queues = [], [list(v) for _, v in sorted(groups.items())]
+    while any(queues):
+        for queue in queues:
+            if queue:
+                out.append(queue.pop(0))
+    return out
+
+
+def visible_ends(trajs: TrajectorySet, i: int, history: int, n_after: int) -> np.ndarray:
+    """Segment end steps where the robot's behaviour is under way but not finished."""
+    length = int(trajs.lengths[i])
+    ends = np.arange(history, length - n_after + 1)
+    if not len(ends):
+        return ends
+    robot = trajs.positions[i, : length + 1, ROBOT].astype(np.float64)
+    if trajs.scene.lanes:
+        # Highway: before the lane change completes (or early on, when keeping the lane)
+        lane_w = trajs.scene.lanes[0].width_m
+        shift = robot[:, 1] - robot[0, 1]
+        total = shift[-1]
+        if abs(total) > 0.5 * lane_w:
+            done = shift[ends] / total
+            return ends[(done >= 0.05) & (done <= 0.75)]
+        return ends[ends <= 0.6 * length]
+    # Obstacle: well before the goal (at least 40% of the way still to go)
+    remaining = np.linalg.norm(robot[ends] - robot[-1], axis=1)
+    return ends[remaining >= 0.4 * np.linalg.norm(robot[0] - robot[-1])]
+
+
+# ---------------------------------------------------------------- one trial
+
+def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, end: int,
+               max_step: float, scene: dict, rng: np.random.Generator) -> TrialRecord:
+    """Examples, segment, start states and every predictor's answers for one segment."""
+    trajs = inputs.trajs
+    label_name = inputs.world.robot_label
+    shown = clip_of(trajs, src, start, end, label_name)
+    history = max(m.segment_len for m in inputs.models.values())
+    model_input = clip_of(trajs, src, end - history, end, label_name)
+    segment = np.asarray(shown.positions)
+    states = start_states(trajs, src, end, segment[-1], max_step, rng)
+    examples = [clip_of(trajs, e, 0, int(trajs.lengths[e]), label_name)
+                for e in pick_examples(trajs, inputs.held_out, src, label_name,
+                                       config.examples_per_trial, rng)]
+    joint = np.array([[s.robot, s.human] for s in states])
+    predictions = {}
+    for kind, model in inputs.models.items():
+        z, code, actions = model.trial(np.asarray(model_input.positions), joint)
+        predictions[kind] = ModelAnswer(z=[float(v) for v in z], code=int(code),
+                                        actions=np.round(actions, 5).tolist(),
+                                        content_hash=model.content_hash,
+                                        segment_positions=model_input.positions)
+    dt = trajs.dt_s
+    cv = (segment[-1, ROBOT] - segment[-2, ROBOT]) / dt
+    labels = {k: int(v[src]) for k, v in trajs.labels.items()}
+    human_v = (segment[-1, HUMAN] - segment[-2, HUMAN]) / dt
+    policy = [inputs.world.robot_policy_actions(
+        np.asarray([s.robot, s.human]), s.robot_heading, s.robot_speed, human_v, labels,
+        config.steps_to_predict, rng) for s in states]
+    record = TrialRecord(
+        trial_id="", world=inputs.world.name, kind="", source_index=src, segment_start=start,
+        robot_label=labels[label_name], examples=examples, segment=shown, start_states=states,
+        predictions=predictions,
+        cv_actions=np.round(np.broadcast_to(cv, (len(states), config.steps_to_predict, 2)),
+                            5).tolist(),
+        policy_actions=np.round(np.asarray(policy), 5).tolist(), clip_sha256="")
+    return record.model_copy(update={"clip_sha256": clip_sha256(
+        scene, dt, record.browser_payload())})
+
+
+def clip_of(trajs: TrajectorySet, i: int, start: int, end: int, label_name: str) -> Clip:
+    """Steps start..end of trajectory i, rounded as shown."""
+    return Clip(
+        positions=np.round(trajs.positions[i, start:end + 1], POS_DECIMALS).tolist(),
+        headings=np.round(trajs.headings[i, start:end + 1], HEADING_DECIMALS).tolist(),
+        robot_label=int(trajs.labels[label_name][i]), source_index=i)
+
+
+def pick_examples(trajs: TrajectorySet, held_out: np.ndarray, src: int, label_name: str,
+                  count: int, rng: np.random.Generator) -> list[int]:
+    """`count` other held-out trajectories, covering as many robot labels as possible."""
+    groups: dict[int, list] = {}
+    for i in rng.permutation(held_out[held_out != src]):
+        groups.setdefault(int(trajs.labels[label_name][i]), []).append(int(i))
+    order = list(groups)
+    rng.shuffle(order)
+    return interleave({k: groups[key] for k, key in enumerate(order)})[:count]
+
+
+def start_states(trajs: TrajectorySet, src: int, end: int, joint_end: np.ndarray,
+                 max_step: float, rng: np.random.Generator) -> list[StartState]:
+    """The robot's segment-end state plus others spread over free space; human fixed."""
+    robot, human = joint_end[ROBOT], joint_end[HUMAN]
+    k = 5
+    candidates = free_points(trajs.scene, robot, human, max_step)
+    if len(candidates) > CANDIDATE_SUBSET:
+        candidates = candidates[rng.choice(len(candidates), CANDIDATE_SUBSET, replace=False)]
+    chosen = farthest_points(robot, candidates, k - 1)
+    heading = trajs.headings[src, end]
+    speed = float(trajs.speeds[src, end, ROBOT])
+    points = [robot, *chosen]
+    return [StartState(robot=np.round(p, POS_DECIMALS).tolist(),
+                       human=np.round(human, POS_DECIMALS).tolist(),
+                       robot_heading=round(float(heading[ROBOT]), HEADING_DECIMALS),
+                       human_heading=round(float(heading[HUMAN]), HEADING_DECIMALS),
+                       robot_speed=round(speed, 4)) for p in points]
+
+
+def free_points(scene, robot: np.ndarray, human: np.ndarray, max_step: float) -> np.ndarray:
+    """Candidate robot starts: lane centres at x offsets (Highway), free grid points (Obstacle)."""
+    b = scene.bounds
+    reach = 3 * max_step  # room for three steps inside the view
+    if scene.lanes:
+        width = scene.lanes[0].width_m
+        xs = robot[0] + width * np.arange(-3, 4)
+        xs = xs[(xs > b.x_min_m + reach) & (xs < b.x_max_m - reach)]
+        pts = np.array([(x, lane.y_center_m) for lane in scene.lanes for x in xs])
+        car = max(a.length_m for a in scene.agents)
+        clear = ~((np.abs(pts[:, 0] - human[0]) < 2 * car)
+                  & (np.abs(pts[:, 1] - human[1]) < width / 2))
+    else:
+        margin = 0.5
+        gx = np.arange(b.x_min_m + margin, b.x_max_m - margin + 1e-9, 0.5)
+        gy = np.arange(b.y_min_m + margin, b.y_max_m - margin + 1e-9, 0.5)
+        pts = np.array([(x, y) for x in gx for y in gy])
+        clear = np.linalg.norm(pts - human, axis=1) > 1.0
+        for c in [*scene.obstacles, *scene.goals]:
+            clear &= np.hypot(pts[:, 0] - c.x_m, pts[:, 1] - c.y_m) > c.radius_m + 0.5
+    pts = pts[clear]
+    return pts[np.linalg.norm(pts - robot, axis=1) > 1e-6]
+
+
+def farthest_points(seed: np.ndarray, candidates: np.ndarray, k: int) -> list[np.ndarray]:
+    """k candidates chosen greedily to be far from the seed and from each other."""
+    chosen: list[np.ndarray] = []
+    dist = np.linalg.norm(candidates - seed, axis=1)
+    for _ in range(min(k, len(candidates))):
+        best = int(np.argmax(dist))
+        chosen.append(candidates[best])
+        dist = np.minimum(dist, np.linalg.norm(candidates - candidates[best], axis=1))
+    if len(chosen) < k:
+        raise ValueError("not enough free space for the start states")
+    return chosen
+
+
+# ---------------------------------------------------------------- kinds
+
+def obviousness_deg(trial: TrialRecord) -> float:
+    """Largest angle between the policy's first move and the constant-velocity move."""
+    policy = np.asarray(trial.policy_actions)[:, 0]
+    cv = np.asarray(trial.cv_actions)[:, 0]
+    cos = (policy * cv).sum(-1) / (np.linalg.norm(policy, axis=-1)
+                                   * np.linalg.norm(cv, axis=-1) + 1e-12)
+    return float(np.degrees(np.arccos(np.clip(cos, -1, 1))).max())
+
+
+def assign_kinds(config: StudyConfig, built: list[TrialRecord]) -> tuple[list[str], dict]:
+    """Most obvious trials become attention checks, then practice, then main ("" = unused)."""
+    angles = [obviousness_deg(t) for t in built]
+    kinds = [""] * len(built)
+    for i in np.argsort(angles, kind="stable")[: config.attention_checks.per_world]:
+        kinds[int(i)] = "attention"
+    rest = [i for i, k in enumerate(kinds) if not k]
+    for i in rest[: config.practice_trials]:
+        kinds[i] = "practice"
+    for i in rest[config.practice_trials: config.practice_trials
+                  + config.bank_trials_per_world]:
+        kinds[i] = "main"
+    chosen = [angles[i] for i, k in enumerate(kinds) if k == "attention"]
+    meets = all(a <= config.attention_checks.candidate_max_angle_deg for a in chosen)
+    return kinds, {"chosen": [round(a, 2) for a in chosen], "meets_candidate_rule": meets}

@@ -1,0 +1,149 @@
+"""The trial bank: clips, start states and every predictor's answers, built once per study.
+
+Layout: var/trials/<study>/bank.json (+ meta.json with input hashes). Per world the bank
+holds the scene, dt, the click limits and a list of trials of three kinds: `main` (the
+pool balanced assignment draws from), `practice` and `attention`.
+
+Shape legend per trial: E examples, L segment steps, K start states, n steps to predict.
+- examples[e].positions [len+1, 2, 2], segment.positions [L+1, 2, 2] (m; robot first)
+- start_states[k].robot / .human [2] (m); the human stays at its segment-end position
+- predictions[model].actions, cv_actions, policy_actions [K, n, 2] (m/s)
+"""
+
+import json
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict
+
+from app.fileio import sha256_bytes
+
+BANK_FILE = "bank.json"
+
+
+class _Bank(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Clip(_Bank):
+    """An animation: positions [steps+1, 2, 2] and headings [steps+1, 2]."""
+
+    positions: list[list[list[float]]]
+    headings: list[list[float]]
+    robot_label: int | None = None
+    source_index: int | None = None
+
+
+class StartState(_Bank):
+    """Where the robot starts one prediction; the human is fixed."""
+
+    robot: list[float]
+    human: list[float]
+    robot_heading: float
+    human_heading: float
+    robot_speed: float
+
+
+class ModelAnswer(_Bank):
+    """One model's reading of the segment and its predicted actions [K, n, 2].
+
+    `segment_positions` is what the model read: the latest `segment_len` steps ending at
+    the shown segment's end (it may reach back before the shown segment's start).
+    """
+
+    segment_positions: list[list[list[float]]]
+    z: list[float]
+    code: int
+    actions: list[list[list[float]]]
+    content_hash: str
+
+
+class TrialRecord(_Bank):
+    """One trial as stored in the bank (model predictions never leave the server)."""
+
+    trial_id: str
+    world: str
+    kind: str  # main, practice or attention
+    source_index: int
+    segment_start: int
+    robot_label: int
+    examples: list[Clip]
+    segment: Clip
+    start_states: list[StartState]
+    predictions: dict[str, ModelAnswer]
+    cv_actions: list[list[list[float]]]
+    policy_actions: list[list[list[float]]]
+    clip_sha256: str
+
+    def browser_payload(self) -> dict:
+        """What the participant's browser needs to play and ask this trial."""
+        return {
+            "examples": [{"positions": c.positions, "headings": c.headings}
+                         for c in self.examples],
+            "segment": {"positions": self.segment.positions, "headings": self.segment.headings},
+            "start_states": [s.model_dump(exclude={"robot_speed"}) for s in self.start_states],
+        }
+
+
+class WorldBank(_Bank):
+    """One world's scene, click limits and trials."""
+
+    world: str
+    dt_s: float
+    scene: dict
+    robot_label_name: str
+    label_names: list[str]
+    max_step_m: float
+    min_step_m: float
+    trials: list[TrialRecord]
+
+
+class BankFile(_Bank):
+    """The whole bank.json."""
+
+    study_id: str
+    steps_to_predict: int
+    worlds: dict[str, WorldBank]
+
+
+def clip_sha256(scene: dict, dt_s: float, payload: dict) -> str:
+    """SHA-256 of exactly what a participant is shown (canonical JSON)."""
+    shown = {"scene": scene, "dt_s": dt_s, **payload}
+    return sha256_bytes(json.dumps(shown, sort_keys=True, separators=(",", ":")).encode())
+
+
+def bank_dir(data_dir: Path, study_id: str) -> Path:
+    """var/trials/<study_id>/."""
+    return Path(data_dir) / "trials" / study_id
+
+
+@dataclass
+class TrialBank:
+    """Read-only lookup over a loaded bank."""
+
+    data: BankFile
+    sha256: str
+
+    @classmethod
+    def load(cls, data_dir: Path, study_id: str) -> "TrialBank":
+        """Read var/trials/<study_id>/bank.json; FileNotFoundError says how to build it."""
+        path = bank_dir(data_dir, study_id) / BANK_FILE
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no trial bank; run `tomstudy build-trials "
+                                    f"--study {study_id}`")
+        raw = path.read_bytes()
+        return cls(BankFile.model_validate_json(raw), sha256_bytes(raw))
+
+    @cached_property
+    def by_id(self) -> dict[str, TrialRecord]:
+        """Every trial by its id."""
+        return {t.trial_id: t for w in self.data.worlds.values() for t in w.trials}
+
+    def world(self, name: str) -> WorldBank:
+        """The bank of one world."""
+        return self.data.worlds[name]
+
+    def trials_of(self, world: str, kind: str) -> list[TrialRecord]:
+        """A world's trials of one kind, in bank order."""
+        return [t for t in self.world(world).trials if t.kind == kind]

@@ -1,0 +1,178 @@
+"""Shared fixtures: a small real study pipeline, servers, and a throwaway PostgreSQL cluster."""
+
+import hashlib
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+SMALL_STUDY = "small_study"
+PG_BIN = Path("/usr/lib/postgresql/15/bin")
+
+# The paper's study, shrunk: the same trial shape (4 examples, 5-7 step segment, 5 start
+# states x 3 steps), fewer trials, so the whole pipeline runs in well under a minute.
+SMALL_STUDY_OVERRIDES = {
+    "trials_per_world": 3, "bank_trials_per_world": 5, "practice_trials": 1,
+    "in_progress_timeout_min": 90,
+}
+SMALL_TRAINING = {"max_epochs": 2, "patience_epochs": 2, "encoder_hidden": [32, 32],
+                  "decoder_hidden": [32, 32], "windows_per_trajectory": 5,
+                  "val_fraction": 0.15, "test_fraction": 0.45}
+SMALL_TRAJECTORIES = 70
+PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/study/trial_builder.py",
+                    "app/study/trials.py", "app/study/config.py", "study_configs"]
+
+
+@dataclass(frozen=True)
+class SmallStudy:
+    """A data dir with trajectories, four checkpoints and a trial bank, plus its configs dir."""
+
+    data_dir: Path
+    configs_dir: Path
+    study_id: str = SMALL_STUDY
+
+    def env(self, db_url: str, **extra: str) -> dict:
+        """Environment for a `tomstudy` subprocess using this study and database."""
+        env = dict(os.environ, TOMSTUDY_DATA_DIR=str(self.data_dir),
+                   TOMSTUDY_CONFIGS_DIR=str(self.configs_dir), DATABASE_URL=db_url,
+                   TOMSTUDY_ADMIN_TOKEN="test-token")
+        env.pop("TOMSTUDY_PRODUCTION", None)
+        return env | extra
+
+
+def _sources_hash() -> str:
+    digest = hashlib.sha256()
+    for root in PIPELINE_SOURCES + ["tests/conftest.py"]:
+        path = REPO / root
+        files = sorted(path.rglob("*")) if path.is_dir() else [path]
+        for f in files:
+            if f.is_file() and f.suffix in (".py", ".yaml"):
+                digest.update(str(f.relative_to(REPO)).encode())
+                digest.update(f.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def write_small_configs(configs_dir: Path) -> None:
+    """study_configs copy with a small study and a tiny training config."""
+    import yaml
+
+    shutil.copytree(REPO / "study_configs", configs_dir, dirs_exist_ok=True)
+    study = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
+    study.update(SMALL_STUDY_OVERRIDES)
+    (configs_dir / f"{SMALL_STUDY}.yaml").write_text(yaml.safe_dump(study))
+    (configs_dir / "training.yaml").write_text(yaml.safe_dump(SMALL_TRAINING))
+
+
+def build_small_study(root: Path) -> SmallStudy:
+    """Simulate both worlds, train both models per world for 2 epochs, build the bank."""
+    from app.configio import load_yaml_model
+    from app.data.trajectory import TrajectorySet
+    from app.learning.config import TrainConfig
+    from app.learning.train import train_model
+    from app.study.config import StudyConfig
+    from app.study.trial_builder import build_trials
+    from app.worlds.simulate import simulate
+
+    data_dir, configs_dir = root / "var", root / "configs"
+    write_small_configs(configs_dir)
+    config = load_yaml_model(configs_dir / f"{SMALL_STUDY}.yaml", StudyConfig)
+    for world in config.worlds:
+        result = simulate(world, SMALL_TRAJECTORIES, 0, data_dir,
+                          configs_dir / "worlds" / f"{world}.yaml", workers=2)
+        trajs = TrajectorySet.load(result.npz_path)
+        for kind in ("ours", "vae"):
+            out = data_dir / getattr(config.models[world], kind)
+            train_model(trajs, kind, 0, TrainConfig(**SMALL_TRAINING), out.parent,
+                        data_meta=result.meta, progress=False)
+    build_trials(config, SMALL_STUDY, data_dir)
+    return SmallStudy(data_dir, configs_dir)
+
+
+@pytest.fixture(scope="session")
+def small_study() -> SmallStudy:
+    """The small real pipeline, cached in the temp dir by a hash of the code it runs."""
+    root = Path(tempfile.gettempdir()) / f"tomstudy-small-study-{_sources_hash()}"
+    done = root / "done"
+    if not done.exists():
+        shutil.rmtree(root, ignore_errors=True)
+        root.mkdir(parents=True)
+        build_small_study(root)
+        done.touch()
+    return SmallStudy(root / "var", root / "configs")
+
+
+# ---------------------------------------------------------------- servers
+
+def free_port() -> int:
+    """A TCP port nobody listens on right now."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def start_server(study: SmallStudy, db_url: str, port: int, workers: int = 1,
+                 log: Path | None = None) -> subprocess.Popen:
+    """`tomstudy serve` as a real process; returns once it answers HTTP."""
+    out = open(log, "ab") if log else subprocess.DEVNULL  # noqa: SIM115 (the child keeps it)
+    proc = subprocess.Popen(
+        [str(Path(sys.executable).parent / "tomstudy"), "serve", "--host", "127.0.0.1",
+         "--port", str(port), "--workers", str(workers), "--study", study.study_id],
+        env=study.env(db_url), stdout=out, stderr=subprocess.STDOUT, cwd=REPO)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"server exited with {proc.returncode}; see {log}")
+        try:
+            page = httpx.get(f"http://127.0.0.1:{port}/s/{study.study_id}", timeout=1)
+            if page.status_code == 200:
+                return proc
+        except httpx.TransportError:
+            pass
+        time.sleep(0.2)
+    proc.kill()
+    raise RuntimeError("server did not answer within 60 s")
+
+
+@pytest.fixture(scope="session")
+def live_server(small_study, tmp_path_factory):
+    """A running `tomstudy serve` of the small study on SQLite; yields its base URL."""
+    root = tmp_path_factory.mktemp("live")
+    port = free_port()
+    proc = start_server(small_study, f"sqlite:///{root / 'study.db'}", port,
+                        log=root / "server.log")
+    yield f"http://127.0.0.1:{port}"
+    proc.terminate()
+    proc.wait(timeout=10)
+
+
+# ---------------------------------------------------------------- PostgreSQL
+
+@pytest.fixture(scope="session")
+def postgres_url():
+    """A throwaway PostgreSQL 15 cluster (Debian binaries); yields its SQLAlchemy URL."""
+    if not (PG_BIN / "initdb").exists():
+        pytest.skip(f"PostgreSQL binaries not found in {PG_BIN} (apt-get install postgresql)")
+    root = Path(tempfile.mkdtemp(prefix="tomstudy-pg-"))  # pytest's tmp is private to root
+    data = root / "data"
+    as_postgres = ["runuser", "-u", "postgres", "--"] if os.geteuid() == 0 else []
+    if as_postgres:
+        shutil.chown(root, "postgres")
+    subprocess.run([*as_postgres, str(PG_BIN / "initdb"), "-D", str(data), "-A", "trust",
+                    "--no-sync", "-U", "postgres"], check=True, capture_output=True)
+    port = free_port()
+    options = f"-c listen_addresses=127.0.0.1 -p {port} -k {root} -c fsync=off"
+    subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-o", options,
+                    "-l", str(root / "pg.log"), "-w", "start"], check=True, capture_output=True)
+    yield f"postgresql+psycopg://postgres@127.0.0.1:{port}/postgres"
+    subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-m", "immediate",
+                    "stop"], capture_output=True)
+    shutil.rmtree(root, ignore_errors=True)
