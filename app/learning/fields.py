@@ -1,0 +1,98 @@
+"""Vector fields of a trained model: fix z, decode the robot's next action over a grid.
+
+For Ours each used FSQ code is one field; for the VAE each k-means centre of validation
+latents is one (k = number of codes Ours uses), so the two can be compared side by side.
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+from app.fileio import atomic_path, write_json
+from app.learning.checkpoint import TrainedModel, load_model
+from app.worlds.scene import HUMAN_COLOR, ROBOT_COLOR, Scene, draw_scene
+
+
+def grid_points(scene: Scene, grid_n: int) -> tuple[np.ndarray, np.ndarray]:
+    """grid_n x grid_n robot positions inside the scene bounds (xs, ys, cell centres)."""
+    b = scene.bounds
+    xs = b.x_min_m + (np.arange(grid_n) + 0.5) * (b.x_max_m - b.x_min_m) / grid_n
+    ys = b.y_min_m + (np.arange(grid_n) + 0.5) * (b.y_max_m - b.y_min_m) / grid_n
+    return xs, ys
+
+
+def field_codes(model: TrainedModel) -> list[dict]:
+    """The codes to draw, most used first, with their share and majority labels."""
+    return list(model.codes.get("used", []))
+
+
+def vector_field(model: TrainedModel, scene: Scene, human_position, grid_n: int) -> dict:
+    """JSON-able field per used code: grid xs/ys and the first predicted robot action
+    [grid_n*grid_n, 2] m/s at each robot position (row-major over ys, then xs)."""
+    xs, ys = grid_points(scene, grid_n)
+    gx, gy = np.meshgrid(xs, ys)
+    robot = np.stack([gx.ravel(), gy.ravel()], axis=-1)
+    human = np.broadcast_to(np.asarray(human_position, dtype=np.float32), robot.shape)
+    states = np.stack([robot, human], axis=1).astype(np.float32)
+    fields = []
+    for entry in field_codes(model):
+        z = model.latent_of_code(entry["code"])
+        actions = model.predict(z, states)
+        fields.append({"code": entry["code"], "z": z.tolist(), "share": entry["share"],
+                       "majority": entry["majority"],
+                       "actions": actions[:, 0].round(4).tolist(),
+                       "actions_all_steps": actions.round(4).tolist()})
+    return {"kind": model.kind, "world": model.world, "content_hash": model.content_hash,
+            "grid_n": grid_n, "xs": xs.tolist(), "ys": ys.tolist(),
+            "human_position": [float(v) for v in human_position], "codes": fields}
+
+
+def _title(model: TrainedModel, entry: dict) -> str:
+    label = next(iter(entry["majority"].items()), None)
+    what = f"{label[1]['label']} ({label[1]['fraction']:.0%})" if label else "no label"
+    name = "code" if model.kind == "ours" else "cluster"
+    return f"{model.world} / {model.kind}: {name} {entry['code']}, {entry['share']:.0%} of " \
+           f"windows, mostly {what}"
+
+
+def _plot_field(model: TrainedModel, scene: Scene, field: dict, entry: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    b = scene.bounds
+    aspect = (b.x_max_m - b.x_min_m) / max(b.y_max_m - b.y_min_m, 1e-6)
+    fig, ax = plt.subplots(figsize=(min(12, 3 + 3 * aspect), 4 if aspect > 2 else 6))
+    draw_scene(ax, scene)
+    gx, gy = np.meshgrid(field["xs"], field["ys"])
+    actions = np.asarray(entry["actions"]).reshape(len(field["ys"]), len(field["xs"]), 2)
+    ax.quiver(gx, gy, actions[..., 0], actions[..., 1], color=ROBOT_COLOR, angles="xy",
+              pivot="mid", zorder=3)
+    hx, hy = field["human_position"]
+    ax.plot([hx], [hy], "o", color=HUMAN_COLOR, markersize=10, markeredgecolor="k",
+            zorder=4, label="human (fixed)")
+    ax.set_title(_title(model, entry), fontsize=9)
+    ax.legend(loc="upper right", fontsize=7)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def write_fields(checkpoint: Path, out_dir: Path | None = None, grid_n: int = 15,
+                 human_position=None) -> list[Path]:
+    """One quiver PNG per used code over the checkpoint's scene, plus fields.json."""
+    model = load_model(checkpoint)
+    out_dir = Path(out_dir) if out_dir else Path(checkpoint).parent / "fields"
+    scene = Scene.model_validate(model.data_meta["scene"])
+    human = human_position if human_position is not None \
+        else model.data_meta["human_end_median"]
+    field = vector_field(model, scene, human, grid_n)
+    paths = []
+    for entry in field["codes"]:
+        path = out_dir / f"field_code{entry['code']}.png"
+        _plot_field(model, scene, field, entry, path)
+        paths.append(path)
+    write_json(out_dir / "fields.json", field)
+    return [*paths, out_dir / "fields.json"]

@@ -1,0 +1,304 @@
+"""Train Ours or the VAE on a TrajectorySet; write checkpoint.pt, metrics.json and loss.png."""
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from app.data.trajectory import ROBOT, TrajectorySet
+from app.data.windows import Windows, make_windows, segment_features, split_by_trajectory
+from app.fileio import write_json
+from app.learning.checkpoint import (
+    load_model,
+    model_from_payload,
+    save_checkpoint,
+    trajectory_hash,
+)
+from app.learning.config import MODEL_KINDS, TrainConfig
+from app.learning.metrics import code_usage, derived_labels, evaluate
+from app.learning.networks import Batch, LatentActionModel, Normaliser
+from app.learning.ours import OursModel
+from app.learning.vae import VAEModel
+
+
+def build_model(kind: str, args: dict) -> LatentActionModel:
+    """Construct the torch network of `kind` from plain model args."""
+    common = dict(segment_len=args["segment_len"], n_actions=args["n_actions"],
+                  encoder_hidden=list(args["encoder_hidden"]),
+                  decoder_hidden=list(args["decoder_hidden"]))
+    if kind == "ours":
+        return OursModel(levels=list(args["levels"]), **common)
+    if kind == "vae":
+        return VAEModel(latent_dim=args["latent_dim"], beta_kl=args["beta_kl"], **common)
+    raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
+
+
+def model_args(cfg: TrainConfig) -> dict:
+    """The architecture part of the config, stored in the checkpoint."""
+    return {"segment_len": cfg.segment_len, "n_actions": cfg.n_actions, "levels": cfg.levels,
+            "latent_dim": cfg.latent_dim, "encoder_hidden": cfg.encoder_hidden,
+            "decoder_hidden": cfg.decoder_hidden, "beta_kl": cfg.beta_kl}
+
+
+@dataclass
+class SplitTensors:
+    """All normalised training tensors of one split; recon pairs for every t in 0..T-1."""
+
+    x: torch.Tensor
+    end_state: torch.Tensor
+    pred_target: torch.Tensor
+    recon_state: torch.Tensor
+    recon_target: torch.Tensor
+
+    def batch(self, rows: torch.Tensor, t: torch.Tensor) -> Batch:
+        """Minibatch at `rows` with reconstruction step t per row."""
+        return Batch(self.x[rows], self.end_state[rows], self.pred_target[rows],
+                     self.recon_state[rows, t], self.recon_target[rows, t])
+
+
+def split_tensors(windows: Windows, norm: Normaliser) -> SplitTensors:
+    """Normalise a split's windows into tensors."""
+    T = windows.segment_len
+    pairs = [windows.recon_pair(np.full(len(windows), t)) for t in range(T)]
+    return SplitTensors(
+        x=torch.from_numpy(norm.features(segment_features(windows.segment_positions,
+                                                          windows.dt_s))),
+        end_state=torch.from_numpy(norm.states(windows.end_states)),
+        pred_target=torch.from_numpy(norm.actions(windows.pred_targets)),
+        recon_state=torch.from_numpy(np.stack([norm.states(s) for s, _ in pairs], axis=1)),
+        recon_target=torch.from_numpy(np.stack([norm.actions(a) for _, a in pairs], axis=1)),
+    )
+
+
+def prepare_windows(trajs: TrajectorySet, cfg: TrainConfig) -> dict[str, Windows]:
+    """Split by trajectory (cfg.split_seed) and cut windows per split."""
+    split = split_by_trajectory(len(trajs), cfg.val_fraction, cfg.test_fraction, cfg.split_seed)
+    windows = {name: make_windows(trajs, cfg.segment_len, cfg.n_actions,
+                                  cfg.windows_per_trajectory, index)
+               for name, index in split.items()}
+    for name, w in windows.items():
+        if len(w) == 0:
+            raise ValueError(f"{name} split has no windows: trajectories shorter than "
+                             f"segment_len + n_actions = {cfg.segment_len + cfg.n_actions} steps?")
+    return windows
+
+
+def fit_normaliser(train: Windows) -> Normaliser:
+    """Train-split feature and robot-action statistics."""
+    feats = segment_features(train.segment_positions, train.dt_s)
+    return Normaliser.fit(feats, train.actions[:, :, ROBOT])
+
+
+def _epoch(model, data: SplitTensors, cfg: TrainConfig, gen: torch.Generator,
+           optimiser) -> float:
+    model.train()
+    order = torch.randperm(len(data.x), generator=gen)
+    total, count = 0.0, 0
+    for start in range(0, len(order), cfg.batch_size):
+        rows = order[start:start + cfg.batch_size]
+        t = torch.randint(0, cfg.segment_len, (len(rows),), generator=gen)
+        loss = model.losses(data.batch(rows, t), cfg.pred_weight, cfg.recon_weight)["total"]
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+        total, count = total + float(loss.detach()) * len(rows), count + len(rows)
+    return total / count
+
+
+@torch.no_grad()
+def _validate(model, data: SplitTensors, cfg: TrainConfig, t: torch.Tensor) -> dict:
+    model.eval()
+    parts = model.losses(data.batch(torch.arange(len(data.x)), t), cfg.pred_weight,
+                         cfg.recon_weight)
+    return {k: float(v) for k, v in parts.items()}
+
+
+def fit(model, train: SplitTensors, val: SplitTensors, cfg: TrainConfig, seed: int,
+        progress: bool = True) -> list[dict]:
+    """Adam with early stopping on validation loss; leaves the best weights in `model`."""
+    gen = torch.Generator().manual_seed(seed)
+    val_t = torch.randint(0, cfg.segment_len, (len(val.x),), generator=gen)
+    optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    history, best, best_state, stale = [], float("inf"), None, 0
+    bar = tqdm(range(cfg.max_epochs), desc=f"train {type(model).__name__}", disable=not progress)
+    for epoch in bar:
+        train_loss = _epoch(model, train, cfg, gen, optimiser)
+        scores = _validate(model, val, cfg, val_t)
+        history.append({"epoch": epoch, "train_total": train_loss,
+                        **{f"val_{k}": v for k, v in scores.items()}})
+        bar.set_postfix(train=f"{train_loss:.4f}", val=f"{scores['total']:.4f}")
+        if scores["total"] < best - 1e-5:
+            best, stale = scores["total"], 0
+            best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        else:
+            stale += 1
+            if stale >= cfg.patience_epochs:
+                break
+    model.load_state_dict(best_state)
+    model.eval()
+    return history
+
+
+def _latents(model, data: SplitTensors) -> np.ndarray:
+    with torch.no_grad():
+        return model.infer_latent(data.x).numpy()
+
+
+def vae_cluster_count(out_dir: Path, world: str, cfg: TrainConfig) -> int:
+    """k for the VAE's k-means: codes Ours uses for this world if trained, else the config's."""
+    ours_metrics = Path(out_dir).parent / "ours" / "metrics.json"
+    if ours_metrics.is_file():
+        saved = json.loads(ours_metrics.read_text())
+        if saved.get("world") == world:
+            return int(saved["n_codes_used"])
+    return cfg.vae_clusters
+
+
+def kmeans_centres(latents: np.ndarray, k: int, seed: int) -> np.ndarray:
+    """k-means centres [k, d] of validation latents."""
+    from sklearn.cluster import KMeans
+
+    k = max(1, min(k, len(np.unique(latents.round(6), axis=0))))
+    return KMeans(n_clusters=k, n_init=10, random_state=seed).fit(latents).cluster_centers_
+
+
+def code_summary(codes: np.ndarray, windows: Windows, label_names: dict,
+                 min_share: float) -> dict:
+    """Used codes with their share and majority label (validation windows), JSON-able."""
+    usage = code_usage(codes, min_share)
+    labels = derived_labels(windows, label_names)
+    summary = []
+    for code_str, count in sorted(usage["counts"].items(), key=lambda kv: -kv[1]):
+        share = count / len(codes)
+        if share < min_share:
+            continue
+        mask = codes == int(code_str)
+        majority = {}
+        for name, values in labels.items():
+            scored = values[mask & (values >= 0)]
+            if len(scored) and name in label_names:
+                top = int(np.bincount(scored).argmax())
+                majority[name] = {"label": label_names[name][top],
+                                  "fraction": float((scored == top).mean())}
+        summary.append({"code": int(code_str), "share": float(share), "majority": majority})
+    return {"used": summary, "n_codes_used": len(summary), "perplexity": usage["perplexity"]}
+
+
+def _plot_losses(history: list[dict], path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from app.fileio import atomic_path
+
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    epochs = [h["epoch"] for h in history]
+    ax.plot(epochs, [h["train_total"] for h in history], label="train")
+    ax.plot(epochs, [h["val_total"] for h in history], label="validation")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("loss (normalised MSE)")
+    ax.set_yscale("log")
+    ax.set_title(title, fontsize=9)
+    ax.legend()
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def train_model(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir: Path,
+                data_meta: dict | None = None, progress: bool = True,
+                vae_k: int | None = None) -> Path:
+    """Train one model; write out_dir/checkpoint.pt, metrics.json, loss.png; return the .pt."""
+    if kind not in MODEL_KINDS:
+        raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
+    started = time.perf_counter()
+    out_dir = Path(out_dir)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # small MLPs: a second thread costs more than it gives
+    try:
+        torch.manual_seed(seed)
+        return _train(trajs, kind, seed, cfg, out_dir, data_meta, progress, vae_k, started)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _train(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir: Path,
+           data_meta: dict | None, progress: bool, vae_k: int | None, started: float) -> Path:
+    windows = prepare_windows(trajs, cfg)
+    norm = fit_normaliser(windows["train"])
+    train, val = split_tensors(windows["train"], norm), split_tensors(windows["val"], norm)
+    args = model_args(cfg)
+    model = build_model(kind, args)
+    history = fit(model, train, val, cfg, seed, progress)
+    train_seconds = time.perf_counter() - started
+
+    val_latents = _latents(model, val)
+    centres = None
+    if kind == "vae":
+        k = vae_k or vae_cluster_count(out_dir, trajs.world, cfg)
+        centres = kmeans_centres(val_latents, k, seed)
+    payload = {
+        "kind": kind, "world": trajs.world, "dt_s": float(trajs.dt_s), "model_args": args,
+        "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
+        "norm": norm.to_dict(), "data_meta": _data_meta(trajs, windows, data_meta),
+        "data_hash": trajectory_hash(trajs.positions, trajs.lengths, trajs.labels),
+        "train_config": cfg.model_dump(), "seed": seed,
+        "kmeans_centres": centres.tolist() if centres is not None else None, "codes": {},
+    }
+    ckpt_path = out_dir / "checkpoint.pt"
+    unsaved = model_from_payload(payload)
+    val_codes = unsaved.codes_of(unsaved.encode_batch(windows["val"].segment_positions))
+    payload["codes"] = code_summary(val_codes, windows["val"], trajs.label_names,
+                                    cfg.min_code_share)
+    content = save_checkpoint(ckpt_path, payload)
+    loaded = load_model(ckpt_path)
+    test = evaluate(loaded, windows["test"], trajs.label_names, cfg.min_code_share)
+    metrics = {
+        "kind": kind, "world": trajs.world, "seed": seed, "content_hash": content,
+        "train_wall_time_s": round(train_seconds, 2), "epochs_run": len(history),
+        "best_val": min(h["val_total"] for h in history), "history": history,
+        "n_windows": {k: len(w) for k, w in windows.items()},
+        "n_codes_used": payload["codes"]["n_codes_used"], "codes": payload["codes"],
+        "test": test, "train_config": cfg.model_dump(),
+    }
+    write_json(out_dir / "metrics.json", metrics)
+    _plot_losses(history, out_dir / "loss.png", f"{trajs.world} / {kind} (seed {seed})")
+    return ckpt_path
+
+
+def _data_meta(trajs: TrajectorySet, windows: dict[str, Windows], extra: dict | None) -> dict:
+    human_end = windows["train"].end_states[:, 1]
+    meta = {
+        "world": trajs.world, "dt_s": float(trajs.dt_s), "n_trajectories": len(trajs),
+        "label_names": trajs.label_names, "scene": trajs.scene.model_dump(),
+        "split_trajectories": {k: sorted(set(int(i) for i in w.traj_index))
+                               for k, w in windows.items() if k == "test"},
+        "human_end_median": [float(v) for v in np.median(human_end, axis=0)],
+    }
+    if extra:
+        meta["source"] = json.loads(json.dumps(extra, default=str))
+    return meta
+
+
+def default_model_dir(data_dir: Path, world: str, kind: str) -> Path:
+    """var/models/<world>/<kind>/."""
+    return Path(data_dir) / "models" / world / kind
+
+
+def train_world(data_dir: Path, world: str, kind: str, seed: int, cfg: TrainConfig,
+                out_dir: Path | None = None) -> Path:
+    """Train on var/data/<world>/trajectories.npz; FileNotFoundError names the missing file."""
+    npz = Path(data_dir) / "data" / world / "trajectories.npz"
+    if not npz.is_file():
+        raise FileNotFoundError(f"{npz} not found; run `tomstudy simulate {world}` first")
+    meta_path = npz.with_name("meta.json")
+    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    meta = {"trajectories_file": str(npz), "meta_json": meta}
+    out_dir = Path(out_dir) if out_dir else default_model_dir(data_dir, world, kind)
+    return train_model(TrajectorySet.load(npz), kind, seed, cfg, out_dir, meta)

@@ -1,0 +1,24 @@
+"""Shared fixtures: analytic trajectories and one small trained model of each kind."""
+
+import pytest
+
+from app.learning.config import TrainConfig
+from app.learning.train import train_model
+from tests.learning.synthetic import make_lane_trajs
+
+FAST = TrainConfig(max_epochs=6, windows_per_trajectory=6, encoder_hidden=[32, 32],
+                   decoder_hidden=[32, 32], levels=[3, 3])
+
+
+@pytest.fixture(scope="session")
+def lane_trajs():
+    """300 analytic lane-keeping / merging trajectories."""
+    return make_lane_trajs(300)
+
+
+@pytest.fixture(scope="session")
+def trained(lane_trajs, tmp_path_factory):
+    """Checkpoint paths of a few-epoch Ours and VAE trained on `lane_trajs`."""
+    root = tmp_path_factory.mktemp("models")
+    return {kind: train_model(lane_trajs, kind, 0, FAST, root / kind, progress=False)
+            for kind in ("ours", "vae")}
