@@ -5,8 +5,9 @@ or a four-arm intersection, both centred at ORIGIN_M. Cars arrive on each arm at
 follow a route (roundabout: exit after 1, 2 or 3 quarter turns; intersection: right,
 straight or left), slow down for curvature and for any car just ahead of them, and leave.
 A few pedestrians cross the arms. Every car's manoeuvre per frame goes to a sidecar CSV
-(generator_labels/), since the dataset's own columns have no place for it:
-roundabout: entering / circling / exiting; intersection: straight / left / right.
+(generator_labels/), since the dataset's own columns have no place for it, as
+'<manoeuvre>:<arm>': roundabout entering:<arm entered from> / circling / exiting:<arm left
+by>; intersection straight|left|right:<arm entered from>.
 
 Output layouts: v1.2 (train/<s>_train.csv, val/<s>_val.csv cut into 4 s cases) or v1.0
 (recorded_trackfiles/<s>/vehicle_tracks_000.csv + pedestrian_tracks_000.csv), plus a
@@ -33,6 +34,7 @@ INTERSECTION_BOX_M = 12.0
 CASE_FRAMES = 40
 CAR_LENGTH_M, CAR_WIDTH_M = 4.6, 1.9
 ARM_ANGLES = (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)
+ARM_NAMES = ("east", "north", "west", "south")
 ROUNDABOUT_MANOEUVRES = ["entering", "circling", "exiting"]
 INTERSECTION_MANOEUVRES = ["straight", "left", "right"]
 
@@ -76,6 +78,7 @@ class Route:
     phase: np.ndarray
     label: int
     arm: int = 0
+    exit_arm: int = 0
     box_m: tuple[float, float] | None = None  # arc-length span inside an intersection box
     curvature: np.ndarray = field(init=False)
 
@@ -94,7 +97,7 @@ class Route:
             float(self.curvature[k])
 
 
-def _route(pieces: list[tuple[np.ndarray, int]], label: int, arm: int,
+def _route(pieces: list[tuple[np.ndarray, int]], label: int, arm: int, exit_arm: int,
            box_piece: int | None = None) -> Route:
     points = np.concatenate([p if k == 0 else p[1:] for k, (p, _) in enumerate(pieces)])
     phase = np.concatenate([np.full(len(p) - (k > 0), ph) for k, (p, ph) in enumerate(pieces)])
@@ -105,7 +108,7 @@ def _route(pieces: list[tuple[np.ndarray, int]], label: int, arm: int,
         lengths = [float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) for p, _ in pieces]
         start = sum(lengths[:box_piece])
         box = (start, start + lengths[box_piece])
-    return Route(points[keep], s[keep], phase[keep], label, arm, box)
+    return Route(points[keep], s[keep], phase[keep], label, arm, exit_arm, box)
 
 
 def roundabout_route(arm: int, quarter_turns: int) -> Route:
@@ -131,7 +134,7 @@ def roundabout_route(arm: int, quarter_turns: int) -> Route:
         (_bezier(arc[-1], tangent(arc_b), exit_start, _unit(phi)), 2),
         (_line(exit_start, end), 2),
     ]
-    return _route(pieces, label=-1, arm=arm)
+    return _route(pieces, label=-1, arm=arm, exit_arm=(arm + quarter_turns) % 4)
 
 
 def intersection_route(arm: int, manoeuvre: int) -> Route:
@@ -146,7 +149,8 @@ def intersection_route(arm: int, manoeuvre: int) -> Route:
     pieces = [(_line(start, stop), manoeuvre),
               (_bezier(stop, -_unit(theta), leave, _unit(phi)), manoeuvre),
               (_line(leave, end), manoeuvre)]
-    return _route(pieces, label=manoeuvre, arm=arm, box_piece=1)
+    exit_arm = (arm + (2, 3, 1)[manoeuvre]) % 4
+    return _route(pieces, label=manoeuvre, arm=arm, exit_arm=exit_arm, box_piece=1)
 
 
 @dataclass
@@ -279,9 +283,15 @@ def _car_rows(car: _Car, rng: np.random.Generator, offset: np.ndarray):
 
 
 def _manoeuvre_name(kind: str, car: _Car, phase: int) -> str:
+    """'<manoeuvre>:<arm>' (arm entered from, or exited to); plain 'circling' on the ring."""
     if kind == "roundabout":
-        return ROUNDABOUT_MANOEUVRES[phase]
-    return INTERSECTION_MANOEUVRES[car.route.label]
+        name = ROUNDABOUT_MANOEUVRES[phase]
+        if name == "entering":
+            return f"{name}:{ARM_NAMES[car.route.arm]}"
+        if name == "exiting":
+            return f"{name}:{ARM_NAMES[car.route.exit_arm]}"
+        return name
+    return f"{INTERSECTION_MANOEUVRES[car.route.label]}:{ARM_NAMES[car.route.arm]}"
 
 
 def _collect(kind: str, cars: list[_Car], walkers: list[dict], seed: int):
