@@ -237,6 +237,37 @@ def serve(
                 workers=workers, log_level="warning")
 
 
+@cli.command()
+def interaction(
+    data: Annotated[Path, typer.Option(help="folder with the INTERACTION files (v1.0 or v1.2)")],
+    scenario: Annotated[str, typer.Option(help="e.g. DR_USA_Roundabout_FT")],
+    seeds: Annotated[int | None, typer.Option(min=2, help="training seeds (default 10)")] = None,
+    max_epochs: Annotated[int | None, typer.Option(min=1, help="cap training epochs")] = None,
+    config: Annotated[Path | None, typer.Option(help="experiment YAML (keys of "
+                                                "InteractionConfig)")] = None,
+    train_config: Annotated[Path | None, typer.Option(help="training YAML")] = None,
+    generate: Annotated[str | None, typer.Option(help="first write GENERATED files in this "
+                                                 "layout (v1.0 or v1.2) into --data")] = None,
+) -> None:
+    """Ours vs VAE vs constant velocity on INTERACTION pairs; report in var/reports/interaction/."""
+    from app.data.interaction import TrackFileError
+    from app.data.lanelet_map import MapError
+    from app.learning.interaction_experiment import InteractionError, run_command, verdict
+
+    try:
+        if generate:
+            from app.data.interaction_synth import generate as write_generated
+
+            write_generated(data, scenario, generate)
+        summary = run_command(data, scenario, get_settings().data_dir, config, train_config,
+                              seeds, max_epochs)
+    except (TrackFileError, InteractionError, MapError, ValueError) as err:
+        fail(str(err))
+    out = get_settings().data_dir / "reports" / "interaction" / scenario
+    typer.echo(verdict(summary))
+    typer.echo(f"wrote {out / 'report.html'} and {out / 'summary.json'}")
+
+
 def main() -> None:
     """Console-script entry point."""
     try:
