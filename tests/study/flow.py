@@ -1,0 +1,115 @@
+"""A participant driven through the real HTTP API (any httpx-like client)."""
+
+import uuid
+from dataclasses import dataclass
+
+import numpy as np
+
+TOKEN = "test-token"
+ADMIN = {"Authorization": f"Bearer {TOKEN}"}
+
+
+def new_id() -> str:
+    """A fresh client submission UUID."""
+    return str(uuid.uuid4())
+
+
+def straight_clicks(trial: dict, direction_rad: float | None = None) -> list:
+    """Three equal mid-reach moves per start state, in a direction that stays in the scene.
+
+    With `direction_rad` given, that direction is tried first (attention checks).
+    """
+    b = trial["scene"]["bounds"]
+    reach = (trial["min_step_m"] + trial["max_step_m"]) / 2
+    n = trial["steps_to_predict"]
+    points = []
+    for start in trial["start_states"]:
+        x, y = start["robot"]
+        angles = np.deg2rad(np.arange(0, 360, 15))
+        if direction_rad is not None:
+            angles = np.concatenate([[direction_rad], angles])
+        for a in angles:
+            path = [[x + reach * k * np.cos(a), y + reach * k * np.sin(a)] for k in range(1, n + 1)]
+            if all(b["x_min_m"] <= px <= b["x_max_m"] and b["y_min_m"] <= py <= b["y_max_m"]
+                   for px, py in path):
+                points.append([[float(px), float(py)] for px, py in path])
+                break
+    return points
+
+
+def prediction_body(trial: dict, points: list | None = None, duration_ms: float = 8000) -> dict:
+    """A valid prediction submission for `trial`."""
+    points = points if points is not None else straight_clicks(trial)
+    k, n = len(trial["start_states"]), trial["steps_to_predict"]
+    return {"submission_id": new_id(), "trial_id": trial["trial_id"], "points": points,
+            "click_times_ms": [[1000.0 + 300 * (i * n + j) for j in range(n)] for i in range(k)],
+            "shown_at_ms": 1000.0, "submitted_at_ms": 1000.0 + duration_ms, "replays": 1}
+
+
+@dataclass
+class Participant:
+    """One participant's session on a server."""
+
+    client: object
+    study_id: str
+    token: str = ""
+    status: int = 0
+
+    def start(self, **recruitment) -> dict:
+        """POST /api/sessions."""
+        r = self.client.post("/api/sessions", json={
+            "study_id": self.study_id, "recruitment": recruitment,
+            "client": {"screen_w": 1600, "screen_h": 900, "touch_only": False,
+                       "user_agent": "pytest"}})
+        self.status = r.status_code
+        body = r.json()
+        self.token = body.get("session_token", "")
+        return body
+
+    def url(self, what: str) -> str:
+        """Path of one of this session's routes."""
+        return f"/api/sessions/{self.token}/{what}"
+
+    def state(self) -> dict:
+        """GET .../state."""
+        r = self.client.get(self.url("state"))
+        assert r.status_code == 200, r.text
+        return r.json()
+
+    def post(self, what: str, body: dict):
+        """POST a step; returns the response."""
+        return self.client.post(self.url(what), json=body)
+
+    def pass_intro(self) -> dict:
+        """Consent and instructions."""
+        assert self.post("consent", {"submission_id": new_id(), "agree": True}).status_code == 200
+        r = self.post("instructions", {"submission_id": new_id()})
+        assert r.status_code == 200, r.text
+        return r.json()
+
+    def answer_trial(self, bank: dict | None = None, duration_ms: float = 8000) -> dict:
+        """Answer the current trial (attention checks along the robot's true first move)."""
+        trial = self.state()["step"]
+        points = straight_clicks(trial)
+        if bank is not None and trial["attention_check"]:
+            truth = bank[trial["trial_id"]]["policy_actions"]
+            points = [straight_clicks(_one(trial, i), float(np.arctan2(t[0][1], t[0][0])))[0]
+                      for i, t in enumerate(truth)]
+        body = prediction_body(trial, points, duration_ms)
+        r = self.post("predictions", body)
+        assert r.status_code == 201, r.text
+        return r.json()
+
+    def finish(self, bank: dict | None = None) -> dict:
+        """Answer every remaining trial and the survey."""
+        while self.state()["phase"] in ("practice", "trial"):
+            self.answer_trial(bank)
+        r = self.post("survey", {"submission_id": new_id(),
+                                 "answers": {"difficulty": 4, "confidence": 5, "driving": "yes",
+                                             "strategy": "followed the lanes"}})
+        assert r.status_code == 200, r.text
+        return r.json()
+
+
+def _one(trial: dict, i: int) -> dict:
+    return dict(trial, start_states=[trial["start_states"][i]])

@@ -1,0 +1,288 @@
+"""The participant and researcher API, on SQLite and on PostgreSQL (same tests, both backends)."""
+
+import io
+import itertools
+import json
+import math
+
+import pandas as pd
+import pytest
+from fastapi.testclient import TestClient
+from sqlalchemy import create_engine, text
+
+from app.settings import Settings
+from app.study.main import create_app
+from app.study.trials import BANK_FILE, bank_dir
+from tests.study.flow import ADMIN, TOKEN, Participant, new_id, prediction_body
+
+_db_counter = itertools.count()
+
+
+@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
+def db_url(request, tmp_path):
+    """A fresh empty database of each backend."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'study.db'}"
+    server = request.getfixturevalue("postgres_url")
+    name = f"t{next(_db_counter)}_{tmp_path.name[-20:].lower().replace('-', '_')}"
+    engine = create_engine(server, isolation_level="AUTOCOMMIT")
+    with engine.connect() as conn:
+        conn.execute(text(f'CREATE DATABASE "{name}"'))
+    engine.dispose()
+    return server.rsplit("/", 1)[0] + f"/{name}"
+
+
+def make_client(small_study, db_url: str) -> TestClient:
+    """A TestClient of a fresh app on `db_url` (lifespan runs on enter)."""
+    settings = Settings(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir,
+                        database_url=db_url, admin_token=TOKEN)
+    return TestClient(create_app(settings, [small_study.study_id]))
+
+
+@pytest.fixture
+def client(small_study, db_url):
+    """The app on a fresh database."""
+    with make_client(small_study, db_url) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def bank(small_study) -> dict:
+    """Bank trials by id (the test reads the true moves for attention checks)."""
+    raw = json.loads((bank_dir(small_study.data_dir, small_study.study_id) / BANK_FILE).read_text())
+    return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}
+
+
+def at_first_trial(client, study_id: str, **recruitment) -> Participant:
+    """A participant past consent and instructions, at the practice trial."""
+    p = Participant(client, study_id)
+    p.start(**recruitment)
+    p.pass_intro()
+    return p
+
+
+def test_whole_session_stores_every_prediction_beside_the_models(client, small_study, bank):
+    p = Participant(client, small_study.study_id)
+    body = p.start(PROLIFIC_PID="alice", STUDY_ID="s1", SESSION_ID="x1")
+    assert p.status == 201 and body["resumed"] is False
+    assert p.state()["phase"] == "consent"
+    state = p.pass_intro()
+    assert state["phase"] == "practice"
+    trial = state["step"]
+    assert len(trial["examples"]) == 4 and len(trial["start_states"]) == 5
+    assert 5 <= len(trial["segment"]["positions"]) - 1 <= 7
+    assert "predictions" not in trial and "policy_actions" not in trial
+    done = p.finish(bank)
+    assert done["phase"] == "done" and done["step"]["completion_code"] == "C1TOMSTUDY"
+    assert done["step"]["redirect_url"].endswith("cc=C1TOMSTUDY")
+    total = done["progress"]["total"]
+    assert total == 1 + 2 * (3 + 1)  # practice + per world 3 trials and 1 attention check
+
+    r = client.get(f"/api/researcher/export.csv?study_id={small_study.study_id}", headers=ADMIN)
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
+    frame = pd.read_csv(io.StringIO(r.text))
+    assert len(frame) == total * 5 * 3
+    assert frame["completed"].dtype == bool and frame["attention_passed"].all()
+    assert frame["ours_code"].dtype.kind == "i" and frame["human_vx"].dtype.kind == "f"
+    assert frame.groupby("trial_id").size().eq(15).all()
+    assert frame["is_practice"].sum() == 15 and frame["attention_check"].sum() == 30
+    row = frame.iloc[0]
+    stored = bank[row["trial_id"]]
+    assert row["ours_sha256"] == stored["predictions"]["ours"]["content_hash"]
+    assert row["ours_code"] == stored["predictions"]["ours"]["code"]
+    assert math.isclose(row["ours_vx"], stored["predictions"]["ours"]["actions"][0][0][0],
+                        abs_tol=1e-4)
+    assert math.isclose(row["policy_vy"], stored["policy_actions"][0][0][1], abs_tol=1e-9)
+    assert row["clip_sha256"] == stored["clip_sha256"]
+    dt = json.loads(json.dumps(trial["dt_s"]))
+    first = frame[(frame.trial_id == row.trial_id) & (frame.start_index == 0)]
+    assert math.isclose(first.iloc[0]["human_vx"],
+                        (first.iloc[0]["click_x"] - first.iloc[0]["start_x"]) / dt, rel_tol=1e-6)
+    assert (frame["trial_duration_ms"] == 8000).all()
+
+    summary = client.get(f"/api/researcher/summary?study_id={small_study.study_id}",
+                         headers=ADMIN).json()
+    assert summary["progress"]["completed"] == 1
+    assert summary["alignment_error"]["exclusions"]["participants_kept"] == 1
+    for world in ("highway", "obstacle"):
+        means = summary["alignment_error"]["kept"][world]
+        assert all(0 <= means[m] <= 2 for m in ("ours", "vae", "cv", "policy"))
+
+
+def test_refresh_resumes_and_an_external_id_takes_part_once(client, small_study):
+    p = at_first_trial(client, small_study.study_id, workerId="w1", assignmentId="a", hitId="h")
+    p.answer_trial()
+    before = p.state()
+    again = Participant(client, small_study.study_id)
+    body = again.start(workerId="w1", assignmentId="a", hitId="h")
+    assert again.status == 200 and body["resumed"] and again.token == p.token
+    assert again.state() == before
+    p.finish()
+    late = Participant(client, small_study.study_id)
+    late.start(workerId="w1")
+    assert late.status == 409
+
+
+def test_retried_submission_is_stored_once_with_the_same_answer(client, small_study):
+    p = at_first_trial(client, small_study.study_id, PROLIFIC_PID="retry")
+    body = prediction_body(p.state()["step"])
+    first = p.post("predictions", body)
+    second = p.post("predictions", body)
+    assert (first.status_code, second.status_code) == (201, 200)
+    assert first.json() == second.json()
+    csv = client.get(f"/api/researcher/export.csv?study_id={small_study.study_id}",
+                     headers=ADMIN).text
+    assert len(pd.read_csv(io.StringIO(csv))) == 15
+    consent_again = p.post("consent", {"submission_id": new_id(), "agree": True})
+    assert consent_again.status_code == 409
+
+
+def test_events_are_stored_once(client, small_study):
+    p = at_first_trial(client, small_study.study_id)
+    events = [{"submission_id": new_id(), "kind": "clip_finished", "t_client_ms": 10.0 * i,
+               "data": {"example": i}} for i in range(3)]
+    assert p.post("events", {"events": events}).json() == {"stored": 3}
+    assert p.post("events", {"events": events}).json() == {"stored": 0}
+    assert p.post("events", {"events": events[:1] * 101}).status_code == 422
+
+
+def test_world_orders_and_trials_are_assigned_in_balance(client, small_study, bank):
+    plans = []
+    for i in range(4):
+        p = at_first_trial(client, small_study.study_id, PROLIFIC_PID=f"bal{i}")
+        if i < 2:
+            p.finish(bank)
+        plans.append(p)
+    orders = [tuple(p.state()["step"].get("world_order", [])) for p in plans]
+    assert orders  # completed ones show the done step; read orders from the export instead
+    csv = client.get(f"/api/researcher/export.csv?study_id={small_study.study_id}",
+                     headers=ADMIN).text
+    frame = pd.read_csv(io.StringIO(csv))
+    first_world = frame[frame.world_position == 0].groupby("participant_id")["world"].first()
+    assert sorted(first_world) == ["highway", "obstacle"]  # the two completions split
+    summary = client.get(f"/api/researcher/summary?study_id={small_study.study_id}",
+                         headers=ADMIN).json()
+    counts = {k: v["completed"] + v["in_progress"]
+              for k, v in summary["progress"]["world_orders"].items()}
+    assert sorted(counts.values()) == [2, 2]
+    main = frame[~frame.is_practice & ~frame.attention_check]
+    exposure = main.drop_duplicates(["participant_id", "trial_id"]).groupby("trial_id").size()
+    per_world = {w: exposure[[t for t in exposure.index if t.startswith(w)]]
+                 for w in ("highway", "obstacle")}
+    for world, counts in per_world.items():
+        # 2 completions x 3 trials over a pool of 5: least-exposed first -> counts 1 or 2
+        assert counts.sum() == 6 and counts.max() - counts.min() <= 1, world
+
+
+# ---------------------------------------------------------------- refusals
+
+def bad_prediction_cases(trial: dict) -> dict:
+    """name -> (body, expected status, text the message must contain)."""
+    good = prediction_body(trial)
+    b = trial["scene"]["bounds"]
+    start = trial["start_states"][0]["robot"]
+
+    def with_points(fn):
+        body = json.loads(json.dumps(good))
+        body["submission_id"] = new_id()
+        fn(body["points"])
+        return body
+
+    far = [b["x_max_m"] + 5.0, start[1]]
+    s3 = trial["start_states"][3]["robot"]
+    mid_x = (b["x_min_m"] + b["x_max_m"]) / 2
+    return {
+        "wrong count of start states": (with_points(lambda p: p.pop()), 422, "points: expected 5"),
+        "wrong count of steps": (with_points(lambda p: p[2].pop()), 422, "points.2: expected 3"),
+        "outside the scene": (with_points(lambda p: p[0].__setitem__(2, far)), 422,
+                              "points.0.2"),
+        "zero-length move": (with_points(lambda p: p[1].__setitem__(0, trial["start_states"][1]
+                                                                  ["robot"])), 422, "points.1.0"),
+        "too-short move": (with_points(lambda p: p[1].__setitem__(1, [
+            p[1][0][0] + trial["min_step_m"] / 3, p[1][0][1]])), 422, "shorter than"),
+        "too-long move": (with_points(lambda p: p[3].__setitem__(0, [
+            s3[0] + 1.5 * trial["max_step_m"] * (1 if s3[0] < mid_x else -1), s3[1]])), 422,
+                          "longer than"),
+    }
+
+
+def test_bad_predictions_get_a_4xx_naming_the_field(client, small_study, bank):
+    p = at_first_trial(client, small_study.study_id)
+    trial = p.state()["step"]
+    for name, (body, status, needle) in bad_prediction_cases(trial).items():
+        r = p.post("predictions", body)
+        assert r.status_code == status, (name, r.text)
+        assert needle in r.json()["detail"], (name, r.text)
+    # NaN / Infinity: Python's json accepts these literals; the server must not
+    body = prediction_body(trial)
+    raw = json.dumps(body).replace(str(body["points"][0][0][0]), "NaN", 1)
+    r = client.post(p.url("predictions"), content=raw,
+                    headers={"content-type": "application/json"})
+    assert r.status_code == 422 and "points" in r.json()["message"] and "finite" in r.text
+    raw = json.dumps(body).replace(str(body["points"][4][2][1]), "Infinity", 1)
+    r = client.post(p.url("predictions"), content=raw,
+                    headers={"content-type": "application/json"})
+    assert r.status_code == 422 and "points.4.2.1" in r.json()["message"]
+    unknown = dict(prediction_body(trial), trial_id="highway-main-999")
+    r = p.post("predictions", unknown)
+    assert r.status_code == 404 and r.json()["detail"].startswith("trial_id:")
+    plan_ids = {s["trial_id"] for s in [trial]}
+    other = next(t for t in bank if t not in plan_ids and not _assigned(client, p, t))
+    r = p.post("predictions", dict(prediction_body(trial), trial_id=other))
+    assert r.status_code == 403 and r.json()["detail"].startswith("trial_id:")
+    r = client.post(p.url("predictions"), content=b"{" + b" " * (70 * 1024) + b"}",
+                    headers={"content-type": "application/json"})
+    assert r.status_code == 413 and r.json()["detail"].startswith("body:")
+    assert p.state()["step"]["trial_id"] == trial["trial_id"]  # nothing moved
+
+
+def _assigned(client, participant: Participant, trial_id: str) -> bool:
+    from app.study.tables import Participant as Row
+
+    with client.app.state.engine.connect() as conn:
+        plan = conn.execute(Row.__table__.select().where(
+            Row.__table__.c.session_token == participant.token)).mappings().one()["plan"]
+    return any(s.get("trial_id") == trial_id for s in plan)
+
+
+def test_other_bad_inputs(client, small_study):
+    r = client.post("/api/sessions", json={"study_id": "nope"})
+    assert r.status_code == 404 and r.json()["detail"].startswith("study_id:")
+    r = client.get("/api/sessions/not-a-token/state")
+    assert r.status_code == 404 and r.json()["detail"].startswith("token:")
+    p = Participant(client, small_study.study_id)
+    p.start()
+    r = p.post("consent", {"submission_id": new_id(), "agree": False})
+    assert r.status_code == 422 and "agree" in r.json()["message"]
+    r = p.post("consent", {"submission_id": "not-a-uuid", "agree": True})
+    assert r.status_code == 422 and "submission_id" in r.json()["message"]
+    r = p.post("survey", {"submission_id": new_id(), "answers": {}})
+    assert r.status_code == 409 and r.json()["detail"].startswith("phase:")
+
+
+def test_survey_answers_are_checked(client, small_study, bank):
+    p = at_first_trial(client, small_study.study_id)
+    while p.state()["phase"] != "survey":
+        p.answer_trial(bank)
+    r = p.post("survey", {"submission_id": new_id(), "answers": {"difficulty": 9}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("answers.difficulty")
+    r = p.post("survey", {"submission_id": new_id(), "answers": {"colour": "red"}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("answers.colour")
+
+
+def test_researcher_routes_need_the_token(client, small_study):
+    path = f"/api/researcher/summary?study_id={small_study.study_id}"
+    missing = client.get(path)
+    assert missing.status_code == 401 and missing.json()["detail"].startswith("authorization:")
+    wrong = client.get(path, headers={"Authorization": "Bearer nope"})
+    assert wrong.status_code == 403
+    assert client.get(path.replace("summary", "export.csv"),
+                      headers={"Authorization": "Bearer nope"}).status_code == 403
+    assert client.get(path, headers=ADMIN).status_code == 200
+
+
+def test_pages_render(client, small_study):
+    for path in ("/", f"/s/{small_study.study_id}?PROLIFIC_PID=a", "/researcher"):
+        r = client.get(path)
+        assert r.status_code == 200 and "<html" in r.text.lower(), path
+    assert client.get("/s/unknown").status_code == 404
