@@ -68,10 +68,10 @@ class Windows:
 def segment_features(segment_positions: np.ndarray, dt_s: float) -> np.ndarray:
     """Encoder features [.., T, 8] from segment positions [.., T+1, A, 2]."""
     states = segment_positions[..., 1:, :, :]
-    actions = np.diff(segment_positions, axis=-3) / dt_s
+    actions = (states - segment_positions[..., :-1, :, :]) / dt_s
     lead = states.shape[:-2]
     return np.concatenate([states.reshape(*lead, 4), actions.reshape(*lead, 4)],
-                          axis=-1).astype(np.float32)
+                          axis=-1, dtype=np.float32)
 
 
 def window_starts(length: int, span: int, count: int) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 
 from app.data.windows import segment_features
 from app.fileio import atomic_path
-from app.learning.fsq import codes_to_indices_numpy, indices_to_codes_numpy, quantize_numpy
+from app.learning.fsq import indices_to_codes_numpy
 from app.learning.networks import Normaliser
 
 FORMAT = "tomstudy-model-v1"
@@ -101,6 +101,20 @@ class TrainedModel:
     path: Path | None = None
     _state_dict: dict = field(default_factory=dict, repr=False)
 
+    def __post_init__(self) -> None:
+        # per-call constants of the study server's fast path, computed once
+        levels = self.levels or [2] * self.latent_dim
+        self._levels_arr = np.asarray(levels, dtype=np.float32)
+        self._basis = np.cumprod([1] + levels[:-1]).astype(np.int64)
+        self._half = (self._levels_arr - 1) / 2
+        # the decoder's first layer split into its latent rows and its state rows, so that
+        # one z is applied to K states without tiling it
+        first_w, first_b = self.decoder_layers[0]
+        self._dec_wz, self._dec_ws = first_w[: self.latent_dim], first_w[self.latent_dim:]
+        self._dec_b = first_b
+        self._state_mean = self.norm.feat_mean[:4]
+        self._state_std = self.norm.feat_std[:4]
+
     def encode(self, segment_positions: np.ndarray) -> np.ndarray:
         """Latent z [d] of one segment [L+1, 2, 2] (L >= segment_len); only the latest
         segment_len steps (the last segment_len+1 positions) are used."""
@@ -122,7 +136,8 @@ class TrainedModel:
         x = self.norm.features(segment_features(segments, self.dt_s))
         out = mlp_numpy(x, self.encoder_layers)
         if self.kind == "ours":
-            return quantize_numpy(out, np.asarray(self.levels, dtype=np.float32))
+            k = np.round(self._half * (np.tanh(out) + 1))
+            return (2 * k / (self._levels_arr - 1) - 1).astype(np.float32)
         return out[:, : self.latent_dim].astype(np.float32)  # posterior mean
 
     def code_of(self, z: np.ndarray) -> int:
@@ -132,7 +147,8 @@ class TrainedModel:
     def codes_of(self, z: np.ndarray) -> np.ndarray:
         """Vectorised `code_of` for latents [B, d]."""
         if self.kind == "ours":
-            return codes_to_indices_numpy(z, np.asarray(self.levels, dtype=np.float32))
+            k = np.round((z + 1) * (self._levels_arr - 1) / 2).astype(np.int64)
+            return (k * self._basis).sum(axis=-1)
         dists = ((z[:, None, :] - self.kmeans_centres[None]) ** 2).sum(-1)
         return dists.argmin(axis=1)
 
@@ -147,13 +163,15 @@ class TrainedModel:
         states = np.asarray(states, dtype=np.float32)
         if states.ndim != 3 or states.shape[1:] != (2, 2):
             raise ValueError(f"states must have shape [K, 2, 2], got {states.shape}")
-        z = np.broadcast_to(np.asarray(z, dtype=np.float32), (len(states), self.latent_dim))
-        return self.predict_batch(z, states)
+        return self.predict_batch(np.asarray(z, dtype=np.float32)[None], states)
 
     def predict_batch(self, z: np.ndarray, states: np.ndarray) -> np.ndarray:
-        """Robot velocities [B, n, 2] for paired latents [B, d] and states [B, 2, 2]."""
-        x = np.concatenate([z, self.norm.states(states)], axis=-1)
-        return self.norm.unnormalise_actions(mlp_numpy(x, self.decoder_layers), self.n_actions)
+        """Robot velocities [B, n, 2] for latents [B, d] (or [1, d]) and states [B, 2, 2]."""
+        s = (states.reshape(len(states), 4) - self._state_mean) / self._state_std
+        hidden = s @ self._dec_ws + (z @ self._dec_wz + self._dec_b)
+        if len(self.decoder_layers) > 1:
+            hidden = mlp_numpy(np.maximum(hidden, 0.0), self.decoder_layers[1:])
+        return self.norm.unnormalise_actions(hidden, self.n_actions)
 
     def trial(self, segment_positions: np.ndarray, states: np.ndarray) -> tuple:
         """The study server's fast path: (z, code, actions [K, n, 2]) for one trial."""

@@ -8,6 +8,7 @@ import torch
 
 from app.data.windows import make_windows, segment_features
 from app.learning.checkpoint import CheckpointError, check_matches_data, load_model
+from app.learning.fsq import FSQ
 from app.learning.train import train_model
 from tests.learning.conftest import FAST
 
@@ -76,6 +77,9 @@ def test_ours_codes_are_fsq_indices(trained, lane_trajs):
     z = model.encode(lane_trajs.positions[3, :6])
     assert set(np.round(z, 5)) <= {-1.0, 0.0, 1.0}
     assert 0 <= model.code_of(z) < 9
+    fsq_index = FSQ([3, 3]).codes_to_indices(torch.from_numpy(z)).item()
+    assert model.code_of(z) == fsq_index
+    assert np.allclose(model.latent_of_code(fsq_index), z)
 
 
 def test_same_seed_gives_the_same_checkpoint(lane_trajs, tmp_path, trained):

@@ -1,0 +1,108 @@
+"""Train time per model per world, and one study trial's inference time vs bare numpy.
+
+Run: .venv/bin/python benchmarks/bench_train.py [--worlds highway obstacle] [--models ours vae]
+Needs var/data/<world>/trajectories.npz (`make data`). Prints:
+- wall time of `train_model` (default training.yaml) per model and world; target < 60 s
+  on 2000 trajectories;
+- one trial (encode one segment, predict n steps from 5 states) through `TrainedModel.trial`,
+  as a ratio to a plain-numpy forward of the same weights measured in the same run
+  (target <= 3x); the torch forward (inference_mode) of the same trial for reference.
+"""
+
+import argparse
+import sys
+import tempfile
+import time
+import timeit
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from app.data.trajectory import TrajectorySet
+from app.data.windows import make_windows, segment_features
+from app.learning.checkpoint import load_model, mlp_numpy
+from app.learning.config import load_train_config
+from app.learning.train import train_model
+from app.settings import get_settings
+
+TRAIN_TARGET_S = 60.0
+INFERENCE_TARGET_RATIO = 3.0
+
+
+def best_per_call(fn, number: int = 2000, repeat: int = 7) -> float:
+    """Fastest mean time per call over `repeat` runs (least disturbed by other processes)."""
+    return min(timeit.repeat(fn, number=number, repeat=repeat)) / number
+
+
+def bare_numpy_trial(model, x: np.ndarray, states_norm: np.ndarray):
+    """The same weights with nothing around them: encoder, quantise/mean, decoder."""
+    def run():
+        z = mlp_numpy(x, model.encoder_layers)[:, : model.latent_dim]
+        if model.kind == "ours":
+            half = (np.asarray(model.levels, np.float32) - 1) / 2
+            z = np.round(half * (np.tanh(z) + 1)) / half - 1
+        return mlp_numpy(np.concatenate([np.repeat(z, len(states_norm), 0), states_norm], 1),
+                         model.decoder_layers)
+    return run
+
+
+def torch_trial(model, x: np.ndarray, states_norm: np.ndarray):
+    """The same trial through the torch network in inference_mode."""
+    net = model.torch_module()
+    xt, st = torch.from_numpy(x), torch.from_numpy(states_norm)
+
+    def run():
+        with torch.inference_mode():
+            z = net.infer_latent(xt)
+            return net.decode(z.expand(len(st), -1), st)
+    return run
+
+
+def time_trial(ckpt: Path, trajs: TrajectorySet) -> dict:
+    """Per-call seconds of the API trial, the bare-numpy forward and torch."""
+    model = load_model(ckpt)
+    w = make_windows(trajs, model.segment_len, model.n_actions, per_trajectory=1)
+    segment, states = w.segment_positions[0], w.positions[:5, model.segment_len]
+    x = model.norm.features(segment_features(segment[None], model.dt_s))
+    states_norm = model.norm.states(states)
+    torch.set_num_threads(1)
+    api = best_per_call(lambda: model.trial(segment, states))
+    bare = best_per_call(bare_numpy_trial(model, x, states_norm))
+    torch_s = best_per_call(torch_trial(model, x, states_norm), number=500)
+    return {"api_us": api * 1e6, "bare_us": bare * 1e6, "torch_us": torch_s * 1e6}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--worlds", nargs="+", default=["highway", "obstacle"])
+    parser.add_argument("--models", nargs="+", default=["ours", "vae"])
+    args = parser.parse_args()
+    cfg = load_train_config()
+    data_dir = get_settings().data_dir
+    failed = False
+    for world in args.worlds:
+        npz = data_dir / "data" / world / "trajectories.npz"
+        if not npz.is_file():
+            print(f"{world}: {npz} missing; run `make data` first")
+            failed = True
+            continue
+        trajs = TrajectorySet.load(npz)
+        with tempfile.TemporaryDirectory() as tmp:
+            for kind in args.models:
+                started = time.perf_counter()
+                ckpt = train_model(trajs, kind, 0, cfg, Path(tmp) / kind, progress=False)
+                wall = time.perf_counter() - started
+                t = time_trial(ckpt, trajs)
+                ratio = t["api_us"] / t["bare_us"]
+                print(f"{world:9s} {kind:5s} train {wall:6.1f} s on {len(trajs)} trajectories "
+                      f"(target < {TRAIN_TARGET_S:.0f} s, ratio {wall / TRAIN_TARGET_S:.2f}) | "
+                      f"trial {t['api_us']:6.1f} us vs bare numpy {t['bare_us']:5.1f} us = "
+                      f"{ratio:.2f}x (target <= {INFERENCE_TARGET_RATIO:.0f}x); "
+                      f"torch {t['torch_us']:6.1f} us = {t['torch_us'] / t['bare_us']:.2f}x")
+                failed |= wall >= TRAIN_TARGET_S or ratio > INFERENCE_TARGET_RATIO
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
