@@ -20,8 +20,10 @@ data: $(STAMP)
 	$(BIN)/tomstudy simulate highway --n 2000 --seed 0 --if-missing
 	$(BIN)/tomstudy simulate obstacle --n 2000 --seed 0 --if-missing
 
+# simulate both worlds, train Ours+VAE for both and build the trial bank where missing,
+# then serve the paper's study at http://127.0.0.1:8000/s/paper_study
 serve: $(STAMP)
-	$(BIN)/tomstudy serve
+	$(BIN)/tomstudy serve --prepare --study paper_study
 
 test: $(STAMP)
 	$(BIN)/ruff check app analysis tests benchmarks
