@@ -46,7 +46,7 @@ class MpcSettings(StrictModel):
     """Sampling-MPC sizes; the prediction integrates the bicycle model in sub-steps."""
 
     horizon_steps: int = Field(6, ge=1)
-    n_samples: int = Field(96, ge=4)
+    n_samples: int = Field(64, ge=4)
     iterations: int = Field(2, ge=1)
     prediction_substeps: int = Field(2, ge=1)
     init_std_fraction: float = Field(0.1, gt=0)
@@ -77,7 +77,7 @@ class HighwayConfig(StrictModel):
     episode_steps: int = Field(24, ge=2)
     frame_speed_mps: float = Field(25.0, gt=0)
     initial_speed_mps: RangeF = (22.0, 28.0)
-    target_speed_mps: RangeF = (21.0, 29.0)
+    target_speed_mps: RangeF = (22.5, 27.5)
     initial_gap_m: RangeF = (-24.0, 24.0)
     min_same_lane_gap_m: float = Field(14.0, ge=0)
     human_in_robot_target_lane_prob: float = Field(0.5, ge=0, le=1)
@@ -273,9 +273,16 @@ class HighwayWorld:
         for driver in drivers:
             if driver.vehicle.crashed or driver.vehicle.impact is not None:
                 raise Rejected("collision")
-            ys = driver.vehicle.polygon()[:, 1]
-            if ys.min() < self.road_top_m or ys.max() > self.road_bottom_m:
+            if not self._body_on_road(driver.vehicle):
                 raise Rejected("offroad")
+
+    def _body_on_road(self, vehicle: Vehicle) -> bool:
+        """All four corners of the car's rectangle lie between the road's outer edges."""
+        heading = float(vehicle.heading)
+        reach = (CAR_WIDTH_M / 2 * abs(np.cos(heading))
+                 + CAR_LENGTH_M / 2 * abs(np.sin(heading)))
+        y = float(vehicle.position[1])
+        return self.road_top_m <= y - reach and y + reach <= self.road_bottom_m
 
     def _check_view(self, positions: np.ndarray) -> None:
         limit = self.config.view_half_length_m - CAR_LENGTH_M / 2

@@ -34,7 +34,7 @@ def _write_config(tmp_path: Path, old: str, new: str) -> Path:
 @pytest.mark.parametrize(("old", "new", "field"), [
     ("lanes_count: 3", "lanes_cout: 3", "lanes_cout"),
     ("max_acceleration_mps2: 3.0", "max_acceleration_mps2: -3.0", "max_acceleration_mps2"),
-    ("  n_samples: 96", "  n_samples: -5", "mpc.n_samples"),
+    ("  n_samples: 64", "  n_samples: -5", "mpc.n_samples"),
     ("episode_steps: 24", "episode_steps: -1", "episode_steps"),
 ])
 def test_bad_config_names_the_field(tmp_path, old, new, field):
