@@ -23,7 +23,7 @@ data: $(STAMP)
 # simulate both worlds, train Ours+VAE for both and build the trial bank where missing,
 # then serve the paper's study at http://127.0.0.1:8000/s/paper_study
 serve: $(STAMP)
-	$(BIN)/tomstudy serve --prepare --study paper_study
+	$(BIN)/tomstudy serve --prepare --study paper_study $(SERVE_ARGS)
 
 test: $(STAMP)
 	$(BIN)/ruff check app analysis tests benchmarks
