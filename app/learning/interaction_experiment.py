@@ -175,7 +175,7 @@ def _to_pair_data(world: str, pairs: list[ix.Pair], cfg: InteractionConfig, scen
 
 def _scene(world: str, pairs: list[ix.Pair], dt_s: float) -> Scene:
     xy = np.concatenate([p.positions.reshape(-1, 2) for p in pairs])
-    lo, hi = np.percentile(xy, 0.5, axis=0) - 5, np.percentile(xy, 99.5, axis=0) + 5
+    lo, hi = xy.min(axis=0) - 5, xy.max(axis=0) + 5
     car = dict(kind="car", length_m=4.6, width_m=1.9)
     return Scene(world=world, dt_s=dt_s,
                  frame="INTERACTION map frame: x, y [m] as in the track files (y up)",

@@ -1,0 +1,58 @@
+"""Time `tomstudy interaction` end to end on generated files against one model's training.
+
+Generates the default synthetic scenario (v1.2 layout) in a temporary folder, then times
+(a) one Ours training on its train pairs (baseline) and (b) the whole command: load and
+validate, 2 x 10 trainings, scoring, tests, figures, report. Prints both wall times, the
+CPU time, their ratio and whether the whole command stays under the 2-minute target.
+CPU time is printed too because the machine is shared: wall time depends on the load.
+
+    .venv/bin/python benchmarks/bench_interaction.py [--scenario DR_USA_Roundabout_FT]
+"""
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+from app.data.interaction_synth import generate
+from app.learning.config import load_train_config
+from app.learning.interaction_experiment import (
+    InteractionConfig,
+    experiment_train_config,
+    load_experiment,
+    run_command,
+)
+from app.learning.train import train_model
+
+TARGET_S = 120.0
+
+
+def main() -> None:
+    """Generate, time the baseline training and the full command, print the ratio."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", default="DR_USA_Roundabout_FT")
+    parser.add_argument("--layout", default="v1.2", choices=["v1.0", "v1.2"])
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        generate(root / "data", args.scenario, args.layout)
+        cfg = InteractionConfig()
+        exp = load_experiment(root / "data", args.scenario, cfg)
+        train_cfg = experiment_train_config(load_train_config(), cfg)
+        wall, cpu = time.perf_counter(), time.process_time()
+        train_model(exp.train.trajs, "ours", 0, train_cfg, root / "baseline", progress=False)
+        base_wall, base_cpu = time.perf_counter() - wall, time.process_time() - cpu
+        wall, cpu = time.perf_counter(), time.process_time()
+        summary = run_command(root / "data", args.scenario, root / "var")
+        full_wall, full_cpu = time.perf_counter() - wall, time.process_time() - cpu
+    print(f"pairs: {summary['pairs']}, seeds: {summary['seeds']}")
+    print(f"baseline, one Ours training: {base_wall:.1f} s wall, {base_cpu:.1f} s CPU")
+    print(f"tomstudy interaction:        {full_wall:.1f} s wall, {full_cpu:.1f} s CPU")
+    print(f"ratio full / one training: {full_wall / base_wall:.1f} (wall), "
+          f"{full_cpu / base_cpu:.1f} (CPU)")
+    verdict = "met" if full_wall < TARGET_S else "MISSED"
+    print(f"target: whole command under {TARGET_S:.0f} s wall: {verdict}")
+
+
+if __name__ == "__main__":
+    main()

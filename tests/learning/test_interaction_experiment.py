@@ -1,0 +1,128 @@
+"""The INTERACTION experiment: pair data, labels, scoring, and the full command end to end."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.configio import ConfigError
+from app.data.interaction_synth import generate
+from app.data.trajectory import ROBOT
+from app.learning import interaction_experiment as ie
+
+SCENARIO = "DR_USA_Intersection_EP0"
+
+
+@pytest.fixture(scope="module")
+def small_data(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("ix_small")
+    generate(root, SCENARIO, "v1.2", train_s=60.0, val_s=24.0, seed=5)
+    return root
+
+
+def test_pairs_become_downsampled_trajectories_with_labels(small_data):
+    cfg = ie.InteractionConfig()
+    exp = ie.load_experiment(small_data, SCENARIO, cfg)
+    trajs = exp.train.trajs
+    assert trajs.dt_s == pytest.approx(0.2) and cfg.segment_len == 5
+    assert trajs.positions.shape[1:] == (20, 2, 2)  # 40 frames every 2nd
+    assert trajs.label_names["robot_manoeuvre"] == ["left", "right", "straight"]
+    assert all(":" in name for name in trajs.label_names["robot_manoeuvre_arm"])
+    # an intersection car keeps its route for the whole window: one label per pair
+    steps = exp.train.step_manoeuvre[:, 0]
+    known = steps >= 0
+    assert known.mean() > 0.99
+    rows = np.where(known.all(axis=1))[0]
+    assert (steps[rows] == steps[rows, :1]).all()
+    # the turn label derived from motion agrees with the generator's route label for
+    # pairs that actually turn by more than 60 degrees
+    names = trajs.label_names["robot_manoeuvre"]
+    turn = [ie.TURN_NAMES[k] for k in trajs.labels["robot_turn"]]
+    route = [names[k] for k in trajs.labels["robot_manoeuvre"]]
+    turned = [(t, r) for t, r in zip(turn, route, strict=True) if t != "straight"]
+    assert turned and np.mean([t == r for t, r in turned]) > 0.9
+    assert exp.lane_lines, "the generated map is read and projected"
+    b = trajs.scene.bounds
+    xy = trajs.positions[:, :, ROBOT].reshape(-1, 2)
+    assert (xy[:, 0] > b.x_min_m).all() and (xy[:, 1] < b.y_max_m).all()
+
+
+def test_heading_sector_uses_map_frame_with_y_up():
+    v = np.array([[5.0, 0.1], [0.0, 3.0], [-2.0, 0.0], [0.2, -4.0]])
+    assert [ie.HEADING_NAMES[k] for k in ie.heading_sector(v)] == ["east", "north", "west",
+                                                                    "south"]
+
+
+def test_window_labels_take_the_manoeuvre_at_the_segment_end(small_data):
+    cfg = ie.InteractionConfig()
+    exp = ie.load_experiment(small_data, SCENARIO, cfg)
+    windows = ie.eval_windows(exp.val, cfg)
+    labels = ie.window_labels(windows, exp.val)
+    assert set(labels) == {"robot_turn", "robot_heading", "robot_manoeuvre",
+                           "robot_manoeuvre_arm"}
+    row = len(windows) // 2
+    traj, end = windows.traj_index[row], windows.end_step[row]
+    assert labels["robot_manoeuvre_arm"][row] == exp.val.step_manoeuvre[traj, 1, end]
+    np.testing.assert_allclose(windows.end_states[row], exp.val.trajs.positions[traj, end])
+
+
+def test_constant_velocity_scores_zero_on_straight_constant_motion(small_data):
+    cfg = ie.InteractionConfig()
+    exp = ie.load_experiment(small_data, SCENARIO, cfg)
+    windows = ie.eval_windows(exp.val, cfg)
+    scored = np.ones(len(windows), dtype=bool)
+    straight = windows.positions.copy()
+    straight[:, :, ROBOT] = np.arange(straight.shape[1])[None, :, None] * np.array([1.6, 0.4])
+    windows.positions = straight
+    result = ie.score_constant_velocity(windows, scored)
+    np.testing.assert_allclose(result["errors"], 0.0, atol=1e-6)
+    assert result["displacement"]["ade_m"] == pytest.approx(0.0, abs=1e-5)
+
+
+def test_config_rejects_misspelt_keys_and_too_few_pairs(tmp_path, small_data):
+    bad = tmp_path / "ix.yaml"
+    bad.write_text("seed: 3\n")
+    with pytest.raises(ConfigError, match="seed"):
+        ie.load_config(bad, None)
+    assert ie.load_config(None, 4).seeds == 4
+    far = ie.InteractionConfig(pair_max_distance_m=0.5)
+    with pytest.raises(ie.InteractionError, match="only 0 train pairs"):
+        ie.load_experiment(small_data, SCENARIO, far)
+
+
+@pytest.mark.slow
+def test_full_command_end_to_end_on_generated_roundabout(tmp_path, monkeypatch):
+    """`tomstudy interaction --generate v1.2` with the default 10 seeds, as a user runs it."""
+    from typer.testing import CliRunner
+
+    from app.cli import cli
+    from app.settings import get_settings
+
+    monkeypatch.setenv("TOMSTUDY_DATA_DIR", str(tmp_path / "var"))
+    get_settings.cache_clear()
+    scenario = "DR_USA_Roundabout_FT"
+    try:
+        result = CliRunner().invoke(cli, ["interaction", "--generate", "v1.2", "--data",
+                                          str(tmp_path / "data"), "--scenario", scenario])
+    finally:
+        get_settings.cache_clear()
+    assert result.exit_code == 0, result.output
+    assert "lowest mean next-action alignment error" in result.output
+    out = tmp_path / "var" / "reports" / "interaction" / scenario
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["seeds"] == 10
+    assert all(len(v) == 10 for v in summary["per_seed_alignment_error"].values())
+    assert all(0 <= v <= 2 for v in summary["mean_alignment_error"].values())
+    test = summary["tests"]["ours_vs_vae"]
+    assert test["n"] == 10 and 0 <= test["p_two_sided"] <= 1
+    ours = summary["models"]["ours"]
+    assert {"purity_robot_manoeuvre", "purity_robot_manoeuvre_arm", "nmi_robot_heading"} <= set(
+        ours)
+    assert summary["winner"] in ie.MODELS
+    html = (out / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == 4
+    assert "Ours" in html and "constant velocity" in html
+    meta = json.loads((out / "meta.json").read_text())
+    assert len(meta["checkpoints"]) == 20
+    assert any(path.endswith("DR_USA_Roundabout_FT_val.csv") for path in meta["inputs_sha256"])
