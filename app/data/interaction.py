@@ -16,6 +16,7 @@ other at some frame. Pedestrians, bicycles and other agent types are never robot
 
 import csv
 import math
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -204,11 +205,24 @@ def _integer(path: Path, line: int, column: str, text: str) -> int:
     return int(value)
 
 
-def _parse_rows(path: Path, reader, columns: tuple[str, ...]) -> list[tuple]:
-    """(case, track, frame, type, x, y, vx, vy, psi, length, width, line) per data row."""
+@dataclass
+class _Columns:
+    """Parsed rows column by column (compact for files with millions of rows)."""
+
+    ids: array = field(default_factory=lambda: array("q"))  # case, track, frame, line
+    values: array = field(default_factory=lambda: array("d"))  # x, y, vx, vy, psi, len, wid
+    types: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.types)
+
+
+def _parse_rows(path: Path, reader, columns: tuple[str, ...]) -> _Columns:
+    """Validate every data row; keep (case, track, frame, line) and the 7 numeric values."""
     index = {name: k for k, name in enumerate(columns)}
     has_shape = "psi_rad" in index
-    rows = []
+    out = _Columns()
+    interned: dict[str, str] = {}
     for line, cells in enumerate(reader, start=2):
         if not cells or (len(cells) == 1 and not cells[0].strip()):
             continue
@@ -227,6 +241,7 @@ def _parse_rows(path: Path, reader, columns: tuple[str, ...]) -> list[tuple]:
         if stamp % FRAME_MS:
             raise TrackFileError(f"{path}:{line}: column 'timestamp_ms': {stamp} is not on the "
                                  f"{FRAME_MS} ms grid (10 Hz)")
+        _integer(path, line, "frame_id", cell("frame_id"))
         values = [_number(path, line, c, cell(c)) for c in ("x", "y", "vx", "vy")]
         shape = [math.nan] * 3
         if has_shape:
@@ -234,38 +249,43 @@ def _parse_rows(path: Path, reader, columns: tuple[str, ...]) -> list[tuple]:
                 text = cell(name)
                 if text or agent_type not in NON_VEHICLE_TYPES:
                     shape[k] = _number(path, line, name, text)
-        rows.append((case, _integer(path, line, "track_id", cell("track_id")),
-                     stamp // FRAME_MS, agent_type, *values, *shape, line))
-    return rows
+        out.ids.extend((case, _integer(path, line, "track_id", cell("track_id")),
+                        stamp // FRAME_MS, line))
+        out.values.extend(values + shape)
+        out.types.append(interned.setdefault(agent_type, agent_type))
+    return out
 
 
-def _group_tracks(path: Path, rows: list[tuple], has_case: bool) -> list[Recording]:
-    groups: dict[int, dict[int, list[tuple]]] = {}
-    for row in rows:
-        groups.setdefault(row[0], {}).setdefault(row[1], []).append(row)
-    recordings = []
-    for case, tracks in groups.items():
-        name = f"{path.stem}#case{case}" if has_case else path.stem
-        recordings.append(Recording(name, path, [_track(path, r) for r in tracks.values()]))
-    return recordings
+def _group_tracks(path: Path, cols: _Columns, has_case: bool) -> list[Recording]:
+    ids = np.frombuffer(cols.ids, dtype=np.int64).reshape(-1, 4)
+    values = np.frombuffer(cols.values, dtype=np.float64).reshape(-1, 7)
+    order = np.lexsort((ids[:, 2], ids[:, 1], ids[:, 0]))  # by case, track, frame
+    ids, values = ids[order], values[order]
+    types = [cols.types[k] for k in order]
+    key_change = np.flatnonzero(np.any(np.diff(ids[:, :2], axis=0) != 0, axis=1)) + 1
+    bounds = np.concatenate([[0], key_change, [len(ids)]])
+    by_case: dict[int, list[Track]] = {}
+    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        track = _track(path, ids[lo:hi], values[lo:hi], types[lo:hi])
+        by_case.setdefault(int(ids[lo, 0]), []).append(track)
+    return [Recording(f"{path.stem}#case{case}" if has_case else path.stem, path, tracks)
+            for case, tracks in by_case.items()]
 
 
-def _track(path: Path, rows: list[tuple]) -> Track:
-    rows.sort(key=lambda r: r[2])
-    frames = np.array([r[2] for r in rows], dtype=np.int64)
+def _track(path: Path, ids: np.ndarray, values: np.ndarray, types: list[str]) -> Track:
+    """One track's rows (sorted by frame) -> Track, after consistency checks."""
+    frames = ids[:, 2]
     repeated = np.flatnonzero(np.diff(frames) == 0)
     if len(repeated):
-        bad = rows[repeated[0] + 1]
-        raise TrackFileError(f"{path}:{bad[-1]}: column 'timestamp_ms': track {bad[1]} has "
-                             f"two rows at {bad[2] * FRAME_MS} ms")
-    types = {r[3] for r in rows}
-    if len(types) > 1:
-        raise TrackFileError(f"{path}:{rows[0][-1]}: column 'agent_type': track {rows[0][1]} "
-                             f"has several types {sorted(types)}")
-    data = np.array([r[4:11] for r in rows], dtype=np.float64)
-    return Track(track_id=rows[0][1], agent_type=rows[0][3], frames=frames,
-                 xy=data[:, 0:2], v=data[:, 2:4], psi=data[:, 4],
-                 length_m=float(data[0, 5]), width_m=float(data[0, 6]))
+        row = ids[repeated[0] + 1]
+        raise TrackFileError(f"{path}:{row[3]}: column 'timestamp_ms': track {row[1]} has "
+                             f"two rows at {row[2] * FRAME_MS} ms")
+    if len(set(types)) > 1:
+        raise TrackFileError(f"{path}:{ids[0, 3]}: column 'agent_type': track {ids[0, 1]} "
+                             f"has several types {sorted(set(types))}")
+    return Track(track_id=int(ids[0, 1]), agent_type=types[0], frames=frames.copy(),
+                 xy=values[:, 0:2].copy(), v=values[:, 2:4].copy(), psi=values[:, 4].copy(),
+                 length_m=float(values[0, 5]), width_m=float(values[0, 6]))
 
 
 # ---------------------------------------------------------------- pairs

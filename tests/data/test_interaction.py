@@ -206,3 +206,11 @@ def test_unreadable_map_is_a_clear_error(tmp_path):
     bad = _write(tmp_path / "m.osm", "<osm><node id='1' lat='x' lon='0'/></osm>")
     with pytest.raises(MapError, match="node 1 lacks a numeric lat/lon"):
         read_lanelet_map(bad)
+
+
+def test_duplicate_frame_in_a_track_names_the_line(tmp_path):
+    rows = _car_rows(1, range(1, 4), 0, 0, 5)
+    path = _write(tmp_path / "dup.csv", "\n".join([HEADER, *rows, rows[1]]) + "\n")
+    with pytest.raises(ix.TrackFileError, match=r"dup.csv:5: column 'timestamp_ms': track 1 "
+                                                r"has two rows at 200 ms"):
+        ix.read_track_file(path)
