@@ -8,11 +8,11 @@ import math
 import pandas as pd
 import pytest
 from fastapi.testclient import TestClient
-from sqlalchemy import create_engine, text
 
 from app.settings import Settings
 from app.study.main import create_app
 from app.study.trials import BANK_FILE, bank_dir
+from tests.conftest import fresh_database
 from tests.study.flow import ADMIN, TOKEN, Participant, new_id, prediction_body
 
 _db_counter = itertools.count()
@@ -23,13 +23,7 @@ def db_url(request, tmp_path):
     """A fresh empty database of each backend."""
     if request.param == "sqlite":
         return f"sqlite:///{tmp_path / 'study.db'}"
-    server = request.getfixturevalue("postgres_url")
-    name = f"t{next(_db_counter)}_{tmp_path.name[-20:].lower().replace('-', '_')}"
-    engine = create_engine(server, isolation_level="AUTOCOMMIT")
-    with engine.connect() as conn:
-        conn.execute(text(f'CREATE DATABASE "{name}"'))
-    engine.dispose()
-    return server.rsplit("/", 1)[0] + f"/{name}"
+    return fresh_database(request.getfixturevalue("postgres_url"), f"api{next(_db_counter)}")
 
 
 def make_client(small_study, db_url: str) -> TestClient:

@@ -1,0 +1,90 @@
+"""Real `tomstudy serve` processes: SIGKILL mid-session, and several workers on PostgreSQL."""
+
+import io
+import signal
+from concurrent.futures import ThreadPoolExecutor
+
+import httpx
+import pandas as pd
+import pytest
+
+from tests.conftest import free_port, fresh_database, start_server
+from tests.study.flow import ADMIN, Participant, prediction_body
+
+pytestmark = pytest.mark.slow
+
+
+def export(base_url: str, study_id: str) -> pd.DataFrame:
+    """The researcher export as a DataFrame."""
+    r = httpx.get(f"{base_url}/api/researcher/export.csv?study_id={study_id}", headers=ADMIN)
+    assert r.status_code == 200, r.text
+    return pd.read_csv(io.StringIO(r.text))
+
+
+def test_sigkill_mid_session_loses_no_acknowledged_submission(small_study, tmp_path):
+    db_url = f"sqlite:///{tmp_path / 'study.db'}"
+    port = free_port()
+    base = f"http://127.0.0.1:{port}"
+    proc = start_server(small_study, db_url, port, log=tmp_path / "server.log")
+    try:
+        with httpx.Client(base_url=base, timeout=10) as client:
+            p = Participant(client, small_study.study_id)
+            p.start(PROLIFIC_PID="killed", STUDY_ID="s", SESSION_ID="x")
+            p.pass_intro()
+            acknowledged = [p.answer_trial()["phase"] for _ in range(3)]
+            current = p.state()["step"]["trial_id"]
+            proc.send_signal(signal.SIGKILL)  # right after the last 201, no clean shutdown
+            proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == -signal.SIGKILL
+
+    proc = start_server(small_study, db_url, port, log=tmp_path / "server.log")
+    try:
+        with httpx.Client(base_url=base, timeout=10) as client:
+            again = Participant(client, small_study.study_id)
+            body = again.start(PROLIFIC_PID="killed", STUDY_ID="s", SESSION_ID="x")
+            assert again.status == 200 and body["resumed"] and again.token == p.token
+            state = again.state()
+            assert state["step"]["trial_id"] == current
+            assert state["progress"]["done"] == len(acknowledged)
+            frame = export(base, small_study.study_id)
+            assert len(frame) == len(acknowledged) * 15
+            assert frame["submission_id"].nunique() == len(acknowledged)
+            again.finish()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+@pytest.mark.postgres
+def test_two_workers_on_postgres_serve_concurrent_participants(small_study, postgres_url,
+                                                               tmp_path):
+    port = free_port()
+    base = f"http://127.0.0.1:{port}"
+    db_url = fresh_database(postgres_url, "two_workers")
+    proc = start_server(small_study, db_url, port, workers=2, log=tmp_path / "server.log")
+
+    def one(i: int) -> int:
+        with httpx.Client(base_url=base, timeout=30) as client:
+            p = Participant(client, small_study.study_id)
+            p.start(PROLIFIC_PID=f"w2-{i}")
+            p.pass_intro()
+            p.answer_trial()
+            body = prediction_body(p.state()["step"])
+            statuses = [p.post("predictions", body).status_code for _ in range(2)]  # + a retry
+            assert statuses == [201, 200]
+            return p.state()["progress"]["done"]
+
+    try:
+        with ThreadPoolExecutor(6) as pool:
+            done = list(pool.map(one, range(6)))
+        assert done == [2] * 6
+        frame = export(base, small_study.study_id)
+        assert len(frame) == 6 * 2 * 15
+        assert frame.groupby("participant_id")["submission_id"].nunique().eq(2).all()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=15)
+
