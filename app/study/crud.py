@@ -13,7 +13,7 @@ from datetime import timedelta
 from itertools import permutations
 
 import numpy as np
-from sqlalchemy import func, select, update
+from sqlalchemy import case, func, select, update
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.exc import IntegrityError
 from sqlmodel import Session
@@ -125,17 +125,39 @@ def participant_by_token(db: Session, token: str) -> Participant:
 # ---------------------------------------------------------------- balanced assignment
 
 def counted_participants(db: Session, ctx: StudyContext) -> list[Participant]:
-    """Participants that count for balance: valid completions and recent unfinished sessions."""
+    """Participants that count for balance: valid completions and recent unfinished sessions.
+
+    A completion is valid unless an enabled exclusion rule (failed attention check, too
+    many too-fast trials) removes it; an unfinished session counts while it is younger
+    than `in_progress_timeout_min`, so abandoned ones stop holding their trials.
+    """
     cutoff = utcnow() - timedelta(minutes=ctx.config.in_progress_timeout_min)
     rows = db.execute(select(Participant).where(Participant.study_id == ctx.study_id))
+    people = rows.scalars().all()
+    too_fast = too_fast_participants(db, ctx, [p.id for p in people if p.completed])
     counted = []
-    for p in rows.scalars():
+    for p in people:
         if p.completed:
-            if p.attention_failed == 0 or not ctx.config.exclusions.failed_attention_check:
+            failed = p.attention_failed > 0 and ctx.config.exclusions.failed_attention_check
+            if not failed and p.id not in too_fast:
                 counted.append(p)
         elif _aware(p.updated_at) >= cutoff:
             counted.append(p)
     return counted
+
+
+def too_fast_participants(db: Session, ctx: StudyContext, ids: list[int]) -> set[int]:
+    """Of `ids`, those whose share of too-fast scored trials exceeds the exclusion rule."""
+    rule = ctx.config.exclusions
+    if not ids:
+        return set()
+    fast = func.sum(case((TrialResponse.duration_ms < rule.too_fast_trial_ms, 1), else_=0))
+    query = (select(TrialResponse.participant_id, fast, func.count())
+             .where(TrialResponse.participant_id.in_(ids), TrialResponse.is_practice.is_(False),
+                    TrialResponse.attention_check.is_(False))
+             .group_by(TrialResponse.participant_id))
+    return {pid for pid, n_fast, n in db.execute(query) if n and n_fast / n
+            > rule.too_fast_max_fraction}
 
 
 def _aware(moment):

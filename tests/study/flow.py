@@ -100,10 +100,10 @@ class Participant:
         assert r.status_code == 201, r.text
         return r.json()
 
-    def finish(self, bank: dict | None = None) -> dict:
+    def finish(self, bank: dict | None = None, duration_ms: float = 8000) -> dict:
         """Answer every remaining trial and the survey."""
         while self.state()["phase"] in ("practice", "trial"):
-            self.answer_trial(bank)
+            self.answer_trial(bank, duration_ms)
         r = self.post("survey", {"submission_id": new_id(),
                                  "answers": {"difficulty": 4, "confidence": 5, "driving": "yes",
                                              "strategy": "followed the lanes"}})

@@ -168,6 +168,31 @@ def test_world_orders_and_trials_are_assigned_in_balance(client, small_study, ba
         assert counts.sum() == 6 and counts.max() - counts.min() <= 1, world
 
 
+def test_excluded_completions_do_not_count_for_balance(client, small_study, bank):
+    from sqlmodel import Session
+
+    from app.study.crud import counted_participants
+
+    valid = at_first_trial(client, small_study.study_id, PROLIFIC_PID="valid")
+    valid.finish(bank)
+    hasty = at_first_trial(client, small_study.study_id, PROLIFIC_PID="hasty")
+    hasty.finish(bank, duration_ms=1000)
+    careless = at_first_trial(client, small_study.study_id, PROLIFIC_PID="careless")
+    careless.finish(None)  # straight clicks ignore the attention checks' obvious answer
+    running = at_first_trial(client, small_study.study_id, PROLIFIC_PID="running")
+    running.answer_trial()
+    ctx = client.app.state.studies[small_study.study_id]
+    with Session(client.app.state.engine) as db:
+        counted = {p.external_id for p in counted_participants(db, ctx)}
+    assert "valid" in counted and "running" in counted and "hasty" not in counted
+    summary = client.get(f"/api/researcher/summary?study_id={small_study.study_id}",
+                         headers=ADMIN).json()
+    excluded = summary["alignment_error"]["exclusions"]
+    assert excluded["excluded_too_fast"] == 1 and excluded["excluded_incomplete"] == 1
+    assert excluded["participants_kept"] == 2 - ("careless" not in counted)
+    assert running.state()["phase"] == "trial"
+
+
 # ---------------------------------------------------------------- refusals
 
 def bad_prediction_cases(trial: dict) -> dict:
