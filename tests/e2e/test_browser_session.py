@@ -1,19 +1,27 @@
-"""A whole participant session in Debian's chromium, clicking on the canvas, then the export."""
+"""A whole participant session in Debian's chromium, clicking on the canvas, then the export.
+
+The page runs on Playwright's fake clock: clips are fast-forwarded instead of watched, and
+the clock moves on between clicks like a person's would, so timings look human.
+"""
 
 import csv
 import io
-import json
 import math
 from pathlib import Path
 
 import pytest
+import yaml
+
+from tests.conftest import REPO
+from tests.e2e.conftest import ADMIN_TOKEN, BROWSER_STUDY
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run"]
-CLIP_STEP_MS = 2000  # fake-clock time advanced per poll while clips play
+SCREENSHOTS = REPO / "var" / "screenshots"
+VIEWPORT = {"width": 1280, "height": 900}
+CLIP_JUMP_MS = 2000  # fake-clock jump per poll while clips play
+THINK_MS = 1500  # fake-clock time between two clicks
+RECRUITMENT = "PROLIFIC_PID=e2e-pid-1&STUDY_ID=e2e-study&SESSION_ID=e2e-session"
 
 
 def visible(page, screen: str) -> None:
@@ -21,36 +29,40 @@ def visible(page, screen: str) -> None:
     page.wait_for_selector(f"#screen-{screen}:not([hidden])", timeout=15000)
 
 
-def current_state(page, study_id: str) -> dict:
-    """The server's state for this tab's session (token from sessionStorage, as the app keeps it)."""
+def current_state(page) -> dict:
+    """The server's state for this tab's session (token from sessionStorage, as the app does)."""
     return page.evaluate(
         """async (key) => {
             const { token } = JSON.parse(sessionStorage.getItem(key));
-            const response = await fetch(`/api/sessions/${token}/state`);
-            return response.json();
+            return (await fetch(`/api/sessions/${token}/state`)).json();
         }""",
-        f"tomstudy.{study_id}.session",
+        f"tomstudy.{BROWSER_STUDY}.session",
     )
 
 
+def canvas_view(page) -> tuple[float, float, float]:
+    """(px per m, x and y of the scene origin in CSS px) as the trial canvas publishes them."""
+    return tuple(page.eval_on_selector(
+        "#trial-canvas", "c => [c.dataset.pxPerM, c.dataset.originXPx, c.dataset.originYPx]"
+                         ".map(Number)"))
+
+
 def canvas_px(page, point) -> dict:
-    """CSS-pixel position inside the trial canvas of a scene point (the canvas has no border)."""
-    data = page.eval_on_selector(
-        "#trial-canvas", "c => [Number(c.dataset.pxPerM), Number(c.dataset.originXPx), "
-                         "Number(c.dataset.originYPx)]")
-    scale, origin_x, origin_y = data
+    """Position inside the trial canvas of a scene point (the canvas has no border)."""
+    scale, origin_x, origin_y = canvas_view(page)
     return {"x": origin_x + point[0] * scale, "y": origin_y + point[1] * scale}
 
 
-def planned_path(trial: dict, start: list[float]) -> list[list[float]]:
-    """Three moves of mid reach in the first direction that keeps every point inside the scene."""
+def planned_path(trial: dict, start_state: dict) -> list[list[float]]:
+    """Three mid-reach moves, as straight ahead of the robot as the scene bounds allow."""
     bounds = trial["scene"]["bounds"]
     reach = (trial["min_step_m"] + trial["max_step_m"]) / 2
     margin = 0.02 * (bounds["x_max_m"] - bounds["x_min_m"])
-    steps = trial["steps_to_predict"]
-    for angle_deg in range(0, 360, 15):
-        dx, dy = reach * math.cos(math.radians(angle_deg)), reach * math.sin(math.radians(angle_deg))
-        path = [[start[0] + dx * k, start[1] + dy * k] for k in range(1, steps + 1)]
+    start = start_state["robot"]
+    for offset_deg in (0, 15, -15, 30, -30, 45, -45, 60, -60, 90, -90, 120, -120, 150, -150, 180):
+        angle = start_state["robot_heading"] + math.radians(offset_deg)
+        path = [[start[0] + k * reach * math.cos(angle), start[1] + k * reach * math.sin(angle)]
+                for k in range(1, trial["steps_to_predict"] + 1)]
         if all(bounds["x_min_m"] + margin <= x <= bounds["x_max_m"] - margin
                and bounds["y_min_m"] + margin <= y <= bounds["y_max_m"] - margin for x, y in path):
             return path
@@ -58,57 +70,63 @@ def planned_path(trial: dict, start: list[float]) -> list[list[float]]:
 
 
 def watch_clips(page) -> None:
-    """Advance the page's fake clock until every clip has played and predictions may start."""
+    """Jump the page's fake clock until every clip has played and predictions may start."""
     button = page.locator("#start-predicting")
-    for _ in range(400):
-        if button.is_enabled():
+    for _ in range(500):
+        if button.is_visible() and button.is_enabled():
             return
-        page.clock.run_for(CLIP_STEP_MS)
+        page.clock.fast_forward(CLIP_JUMP_MS)
     raise AssertionError("the clips never finished")
 
 
-def predict_trial(page, study_id: str, screenshot_dir: Path | None = None) -> dict:
-    """Watch one trial, place every point by clicking on the canvas, submit; return the trial."""
-    trial = current_state(page, study_id)["step"]
+def predict_trial(page, screenshot: Path | None = None) -> tuple[dict, dict]:
+    """Watch one trial, click every point on the canvas, submit; return (trial, clicks)."""
+    trial = current_state(page)["step"]
     watch_clips(page)
     page.click("#start-predicting")
+    clicks = {}
     for k, start_state in enumerate(trial["start_states"]):
-        for j, point in enumerate(planned_path(trial, start_state["robot"])):
+        for j, point in enumerate(planned_path(trial, start_state)):
+            page.clock.fast_forward(THINK_MS)
             page.click("#trial-canvas", position=canvas_px(page, point))
-            if screenshot_dir and k == 2 and j == 1:
-                page.screenshot(path=str(screenshot_dir / "predict.png"))
+            clicks[(k, j)] = (point, canvas_view(page)[0])
+            if screenshot and k == 2 and j == 1:
+                page.screenshot(path=str(screenshot))
+        assert page.is_enabled("#next")
         heading = page.inner_text("#trial-heading")
         page.click("#next")
     page.wait_for_function(
         "h => !document.querySelector('#screen-survey').hidden"
         " || document.querySelector('#trial-heading').textContent !== h", arg=heading)
-    return trial
+    return trial, clicks
 
 
-def check_refusals(page, study_id: str) -> None:
+def check_input_rules(page) -> None:
     """On the practice trial: a too-short click is refused; keyboard, undo and reset work."""
-    trial = current_state(page, study_id)["step"]
+    trial = current_state(page)["step"]
     watch_clips(page)
     page.click("#start-predicting")
     start = trial["start_states"][0]["robot"]
-    too_short = [start[0] + trial["min_step_m"] * 0.3, start[1]]
-    page.click("#trial-canvas", position=canvas_px(page, too_short))
+    page.click("#trial-canvas", position=canvas_px(page, [start[0] + trial["min_step_m"] * 0.3,
+                                                          start[1]]))
     assert "Too short" in page.inner_text("#trial-message")
-    assert page.is_disabled("#next")
+    assert "0 of 3 positions placed" in page.inner_text("#trial-caption")
     page.focus("#trial-canvas")
     for _ in range(3):
-        page.keyboard.press("Enter")
+        page.keyboard.press("Enter")  # the keyboard cursor starts one valid move ahead
     assert "3 of 3 positions placed" in page.inner_text("#trial-caption")
+    assert page.is_enabled("#next")
     page.keyboard.press("Backspace")
     assert "2 of 3 positions placed" in page.inner_text("#trial-caption")
     page.click("#reset")
     assert "0 of 3 positions placed" in page.inner_text("#trial-caption")
 
 
-def complete_session(page, base_url: str, study_id: str, screenshot_dir: Path) -> dict:
-    """Consent, instructions, practice, every trial, survey; return the done state."""
+def complete_session(page, base_url: str) -> dict:
+    """Consent, instructions, practice, every trial, survey; returns what the test checks."""
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
     page.clock.install()
-    page.goto(f"{base_url}/s/{study_id}?PROLIFIC_PID=e2e-pid-1&STUDY_ID=e2e&SESSION_ID=e2e-s1")
+    page.goto(f"{base_url}/s/{BROWSER_STUDY}?{RECRUITMENT}")
     visible(page, "consent")
     assert page.is_disabled("#consent-agree")
     page.check("#consent-check")
@@ -117,21 +135,79 @@ def complete_session(page, base_url: str, study_id: str, screenshot_dir: Path) -
     page.click("#instructions-done")
     visible(page, "trial")
     assert "Practice" in page.inner_text("#trial-heading")
-    page.clock.run_for(1200)
-    page.screenshot(path=str(screenshot_dir / "clip.png"))
-    check_refusals(page, study_id)
-    page.reload()  # a refresh resumes the same (practice) trial through sessionStorage
+    page.clock.fast_forward(1200)
+    page.screenshot(path=str(SCREENSHOTS / "clip.png"))
+    check_input_rules(page)
+    page.reload()  # a refresh resumes the same trial through the token in sessionStorage
     visible(page, "trial")
     assert "Practice" in page.inner_text("#trial-heading")
-    predict_trial(page, study_id)
-    n_trials = 0
-    while current_state(page, study_id)["phase"] == "trial":
-        predict_trial(page, study_id, screenshot_dir if n_trials == 0 else None)
-        n_trials += 1
+    clicks = {}
+    trial, trial_clicks = predict_trial(page)
+    clicks[trial["trial_id"]] = trial_clicks
+    while current_state(page)["phase"] == "trial":
+        first = len(clicks) == 1
+        trial, trial_clicks = predict_trial(page, SCREENSHOTS / "predict.png" if first else None)
+        clicks[trial["trial_id"]] = trial_clicks
     visible(page, "survey")
-    for name in set(page.eval_on_selector_all("#survey-form input[type=radio]",
-                                              "els => els.map(e => e.name)")):
+    for name in sorted(set(page.eval_on_selector_all("#survey-form input[type=radio]",
+                                                     "els => els.map(e => e.name)"))):
         page.check(f"#survey-form input[name={name}] >> nth=0")
     page.click("#survey-form button[type=submit]")
     visible(page, "done")
-    return {"n_trials": n_trials, "code": page.inner_text("#completion-code")}
+    return {"clicks": clicks, "code": page.inner_text("#completion-code"),
+            "redirect": page.get_attribute("#redirect-link", "href")}
+
+
+def download_export(page, base_url: str) -> list[dict]:
+    """Log into the researcher dashboard and download export.csv through its button."""
+    page.goto(f"{base_url}/researcher")
+    page.fill("#token-input", ADMIN_TOKEN)
+    page.click("#token-form button[type=submit]")
+    page.wait_for_selector("#dashboard:not([hidden])")
+    page.fill("#study-input", BROWSER_STUDY)
+    page.click("#refresh")
+    page.wait_for_selector("#summary table")
+    with page.expect_download() as download:
+        page.click("#download")
+    return list(csv.DictReader(io.StringIO(Path(download.value.path()).read_text())))
+
+
+def truthy(value: str) -> bool:
+    return value.strip().lower() in ("true", "1")
+
+
+def test_participant_completes_the_study_by_clicking(chromium, browser_server, browser_study):
+    config = yaml.safe_load((browser_study.configs_dir / f"{BROWSER_STUDY}.yaml").read_text())
+    context = chromium.new_context(viewport=VIEWPORT, accept_downloads=True)
+    page = context.new_page()
+    errors = []
+    page.on("pageerror", lambda err: errors.append(str(err)))
+
+    done = complete_session(page, browser_server)
+
+    code = config["recruitment"]["completion_code"]
+    assert done["code"] == code
+    assert done["redirect"].endswith(f"cc={code}")
+    rows = download_export(page, browser_server)
+    assert errors == []
+    context.close()
+
+    mine = [r for r in rows if r["external_id"] == "e2e-pid-1"]
+    main = [r for r in mine if not truthy(r["is_practice"]) and not truthy(r["attention_check"])]
+    practice = [r for r in mine if truthy(r["is_practice"])]
+    checks = [r for r in mine if truthy(r["attention_check"])]
+    n_worlds = len(config["worlds"])
+    per_trial = config["start_states"] * config["steps_to_predict"]
+    assert len(main) == n_worlds * config["trials_per_world"] * per_trial == 300
+    assert len(practice) == config["practice_trials"] * per_trial
+    assert len(checks) == n_worlds * config["attention_checks"]["per_world"] * per_trial
+    assert all(truthy(r["completed"]) for r in mine)
+    assert len({r["trial_id"] for r in mine}) == len(done["clicks"])
+    # Every stored click is where the browser clicked: mouse events carry whole CSS pixels,
+    # so each axis may round by up to a pixel.
+    for row in mine:
+        point, px_per_m = done["clicks"][row["trial_id"]][(int(row["start_index"]),
+                                                           int(row["step"]))]
+        error_px = math.dist(point, (float(row["click_x"]), float(row["click_y"]))) * px_per_m
+        assert error_px <= math.sqrt(2) + 1e-3, (row["trial_id"], error_px)
+        assert float(row["trial_duration_ms"]) >= per_trial * THINK_MS

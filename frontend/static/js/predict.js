@@ -118,17 +118,14 @@ export class PredictionInput {
 
   /** Why `point` cannot be the next position, or null when it can. */
   refusal(point) {
-    const { bounds } = this.scene;
-    if (this.stateDone()) return `All ${this.steps} positions are placed. Press "Next" or undo one.`;
-    if (point[0] < bounds.x_min_m || point[0] > bounds.x_max_m || point[1] < bounds.y_min_m || point[1] > bounds.y_max_m) {
-      return "That point is outside the scene.";
-    }
+    if (this.stateDone()) return `All ${this.steps} positions are placed: press Next, or Undo.`;
+    if (!this.insideScene(point)) return "That point is outside the scene.";
     const d = distance(this.anchor(), point);
     if (d < this.trial.min_step_m) {
-      return `Too short: each move must be at least ${fmt(this.trial.min_step_m)}. Click farther from the last position.`;
+      return `Too short: a move must be at least ${fmt(this.trial.min_step_m)}; click farther away.`;
     }
     if (d > this.trial.max_step_m) {
-      return `Too far: the robot moves at most ${fmt(this.trial.max_step_m)} per step. Click inside the shaded circle.`;
+      return `Too far: at most ${fmt(this.trial.max_step_m)} per step; click inside the shaded circle.`;
     }
     return null;
   }
@@ -191,7 +188,16 @@ export class PredictionInput {
     const prev = n >= 2 ? this.current[n - 2] : this.startState.robot;
     const heading = n ? Math.atan2(anchor[1] - prev[1], anchor[0] - prev[0]) : this.robotHeading;
     const reach = (this.trial.min_step_m + this.trial.max_step_m) / 2;
-    this.cursor = [anchor[0] + reach * Math.cos(heading), anchor[1] + reach * Math.sin(heading)];
+    const ahead = (angle) => [anchor[0] + reach * Math.cos(angle), anchor[1] + reach * Math.sin(angle)];
+    // Straight ahead, or the nearest turn that stays inside the scene.
+    const turns = [0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5, 6].map((k) => (k * Math.PI) / 6);
+    const inside = turns.map((turn) => ahead(heading + turn)).find((p) => this.insideScene(p));
+    this.cursor = inside ?? ahead(heading);
+  }
+
+  insideScene([x, y]) {
+    const { bounds } = this.scene;
+    return x >= bounds.x_min_m && x <= bounds.x_max_m && y >= bounds.y_min_m && y <= bounds.y_max_m;
   }
 
   handleKey(event) {
@@ -236,9 +242,19 @@ export class PredictionInput {
     drawTrace(ctx, view, robot, segment.map((s) => s[0]), { alpha: 0.25 });
     drawTrace(ctx, view, human, segment.map((s) => s[1]), { alpha: 0.25 });
     drawAgent(ctx, view, human, this.startState.human, this.humanHeading);
+    this.drawRobots(ctx, view, robot);
     this.drawReach(ctx, view);
-    this.drawPath(ctx, view, robot);
+    drawTrace(ctx, view, robot, [this.startState.robot, ...this.current], { alpha: 1, width: 3 });
     this.drawPreview(ctx, view);
+    this.drawMarkers(ctx, view);
+  }
+
+  /** The robot at its start state, and (fainter) where the last click puts it. */
+  drawRobots(ctx, view, robot) {
+    drawAgent(ctx, view, robot, this.startState.robot, this.robotHeading, { alpha: this.current.length ? 0.4 : 1 });
+    if (!this.current.length) return;
+    const [a, b] = [this.startState.robot, ...this.current].slice(-2);
+    drawAgent(ctx, view, robot, b, Math.atan2(b[1] - a[1], b[0] - a[0]), { alpha: 0.6 });
   }
 
   drawReach(ctx, view) {
@@ -261,14 +277,8 @@ export class PredictionInput {
     ctx.restore();
   }
 
-  drawPath(ctx, view, robot) {
-    const path = [this.startState.robot, ...this.current];
-    drawAgent(ctx, view, robot, this.startState.robot, this.robotHeading, { alpha: this.current.length ? 0.45 : 1 });
-    drawTrace(ctx, view, robot, path, { alpha: 1, width: 3 });
-    if (this.current.length) {
-      const [a, b] = path.slice(-2);
-      drawAgent(ctx, view, robot, b, Math.atan2(b[1] - a[1], b[0] - a[0]), { alpha: 0.9 });
-    }
+  /** Numbered markers on the clicked positions, drawn last so nothing hides them. */
+  drawMarkers(ctx, view) {
     this.current.forEach((point, k) => {
       const [px, py] = view.toPx(point);
       ctx.save();

@@ -23,8 +23,13 @@ export function fitView(bounds, cssWidth, cssHeight, margin = MARGIN_PX) {
   };
 }
 
+// Vertical room the page needs besides the canvas (header, heading, controls, legend).
+const PAGE_CHROME_PX = 250;
+
 /** CSS height that shows the scene large enough to click on, for a given width. */
-export function preferredHeight(bounds, cssWidth, { minPx = 260, maxPx = 560 } = {}) {
+export function preferredHeight(bounds, cssWidth, {
+  minPx = 160, maxPx = Math.max(320, window.innerHeight - PAGE_CHROME_PX),
+} = {}) {
   const aspect = (bounds.y_max_m - bounds.y_min_m) / (bounds.x_max_m - bounds.x_min_m);
   return Math.round(Math.max(minPx, Math.min(maxPx, (cssWidth - 2 * MARGIN_PX) * aspect + 2 * MARGIN_PX)));
 }
@@ -143,7 +148,14 @@ export function agentStyle(scene, i) {
   };
 }
 
+const stripeTiles = new Map();
+
 function stripes(ctx, color) {
+  if (!stripeTiles.has(color)) stripeTiles.set(color, stripeTile(color));
+  return ctx.createPattern(stripeTiles.get(color), "repeat");
+}
+
+function stripeTile(color) {
   const tile = document.createElement("canvas");
   tile.width = 8;
   tile.height = 8;
@@ -156,7 +168,7 @@ function stripes(ctx, color) {
   t.moveTo(0, 8);
   t.lineTo(8, 0);
   t.stroke();
-  return ctx.createPattern(tile, "repeat");
+  return tile;
 }
 
 /**

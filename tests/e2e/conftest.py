@@ -1,0 +1,62 @@
+"""Browser-test fixtures: the paper's study (20 trials) on the small pipeline's models; chromium."""
+
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+
+from tests.conftest import REPO, SmallStudy, free_port, start_server
+
+BROWSER_STUDY = "browser_study"
+ADMIN_TOKEN = "test-token"  # SmallStudy.env sets it for the server process
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run"]
+# The paper's study as written (2 worlds x 10 trials, 1 attention check per world, 1 practice),
+# with a bank just large enough for one participant, so the small pipeline's data suffice.
+BANK_TRIALS_PER_WORLD = 10
+
+
+@pytest.fixture(scope="session")
+def browser_study(small_study: SmallStudy, tmp_path_factory) -> SmallStudy:
+    """A copy of the small study's data and configs with the paper's study and its own bank."""
+    from app.configio import load_yaml_model
+    from app.study.config import StudyConfig
+    from app.study.trial_builder import build_trials
+
+    root = tmp_path_factory.mktemp("browser-study")
+    data_dir, configs_dir = root / "var", root / "configs"
+    shutil.copytree(small_study.configs_dir, configs_dir)
+    shutil.copytree(small_study.data_dir, data_dir, ignore=shutil.ignore_patterns("trials"))
+    study = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
+    study["bank_trials_per_world"] = BANK_TRIALS_PER_WORLD
+    (configs_dir / f"{BROWSER_STUDY}.yaml").write_text(yaml.safe_dump(study))
+    config = load_yaml_model(configs_dir / f"{BROWSER_STUDY}.yaml", StudyConfig)
+    build_trials(config, BROWSER_STUDY, data_dir)
+    return SmallStudy(data_dir, configs_dir, BROWSER_STUDY)
+
+
+@pytest.fixture(scope="session")
+def browser_server(browser_study: SmallStudy, tmp_path_factory):
+    """`tomstudy serve` of the browser study on a fresh SQLite file; yields its base URL."""
+    root = tmp_path_factory.mktemp("browser-server")
+    port = free_port()
+    proc = start_server(browser_study, f"sqlite:///{root / 'study.db'}", port,
+                        log=root / "server.log")
+    yield f"http://127.0.0.1:{port}"
+    proc.terminate()
+    proc.wait(timeout=10)
+
+
+@pytest.fixture(scope="session")
+def chromium():
+    """Debian's chromium driven by Playwright (never a downloaded browser)."""
+    if not CHROMIUM.exists():
+        pytest.skip(f"{CHROMIUM} is absent: install Debian's chromium (apt-get install chromium)")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield browser
+        browser.close()
