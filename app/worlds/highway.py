@@ -88,6 +88,7 @@ class HighwayConfig(StrictModel):
     clearance_lateral_m: float = Field(1.0, ge=0)
     headway_time_s: float = Field(0.8, ge=0)
     view_half_length_m: float = Field(50.0, gt=0)
+    max_lane_excursion_m: float = Field(1.0, ge=0)
     mpc: MpcSettings = MpcSettings()
     reward: RewardWeights = RewardWeights()
 
@@ -195,6 +196,7 @@ class HighwayWorld:
         positions = np.array([s[0] for s in states])
         self._check_view(positions)
         self._check_merges_done(drivers)
+        self._check_no_swerve(positions, drivers)
         labels = self._labels(setup, positions)
         return Episode(positions=positions, headings=np.array([s[1] for s in states]),
                        speeds=np.array([s[2] for s in states]), labels=labels)
@@ -293,6 +295,15 @@ class HighwayWorld:
         for driver in drivers:
             if abs(driver.vehicle.position[1] - driver.target_y) >= ARRIVED_TOLERANCE_M:
                 raise Rejected("merge_incomplete")
+
+    def _check_no_swerve(self, positions: np.ndarray, drivers: list[Driver]) -> None:
+        """Evasive swerves out of the start-to-target corridor would blur the intent labels."""
+        for agent, driver in enumerate(drivers):
+            low = min(driver.start_y, driver.target_y) - self.config.max_lane_excursion_m
+            high = max(driver.start_y, driver.target_y) + self.config.max_lane_excursion_m
+            ys = positions[:, agent, 1]
+            if ys.min() < low or ys.max() > high:
+                raise Rejected("swerve")
 
     def _snapshot(self, drivers: list[Driver], origin_x: float, step: int):
         """(positions [2,2] in the moving frame, headings [2], world speeds [2]) now."""

@@ -100,6 +100,8 @@ def test_robot_intents_balanced_and_labels_consistent(small_run):
     assert (trajs.labels["robot_final_lane"] == start_lane + shift).all()
     keep = intents == 0
     assert (trajs.labels["robot_change_step"][keep] == -1).all()
+    drift = np.abs(trajs.positions[:, :, ROBOT, 1] - trajs.positions[:, :1, ROBOT, 1])
+    assert drift[keep].max() <= 1.0  # lane keepers never swerve out of their lane
     change = trajs.labels["robot_change_step"][~keep]
     assert (change > 0).all() and (change <= trajs.lengths[~keep]).all()
     merged = trajs.labels["robot_merged_into_human_lane"] == 1
