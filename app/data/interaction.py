@@ -158,10 +158,13 @@ def read_track_file(path: Path) -> list[Recording]:
     return _group_tracks(path, rows, has_case="case_id" in columns)
 
 
-def _expected_columns(header: list[str]) -> tuple[str, ...]:
-    if header and header[0] == "case_id":
-        return CASE_COLUMNS
-    if "case_id" in header:
+def _expected_columns(path: Path, header: list[str]) -> tuple[str, ...]:
+    """The documented columns for this file: by its v1.0 name, else by the header's shape."""
+    if path.stem.startswith("vehicle_tracks_"):
+        return VEHICLE_COLUMNS
+    if path.stem.startswith("pedestrian_tracks_"):
+        return PEDESTRIAN_COLUMNS
+    if path.stem.endswith(("_train", "_val", "_test")) or "case_id" in header:
         return CASE_COLUMNS
     if not ({"psi_rad", "length", "width"} & set(header)) and len(header) <= 8:
         return PEDESTRIAN_COLUMNS
@@ -170,7 +173,7 @@ def _expected_columns(header: list[str]) -> tuple[str, ...]:
 
 def _check_header(path: Path, header: list[str]) -> tuple[str, ...]:
     """The file's columns if they are the documented ones in the documented order."""
-    expected = _expected_columns(header)
+    expected = _expected_columns(path, header)
     missing = [c for c in expected if c not in header]
     if missing:
         raise TrackFileError(f"{path}:1: header is missing column {missing[0]!r} "

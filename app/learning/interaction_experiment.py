@@ -62,6 +62,7 @@ class InteractionConfig(StrictModel):
     turn_threshold_deg: float = Field(30.0, gt=0, description="heading change = a turn")
     v10_train_fraction: float = Field(0.8, gt=0, lt=1, description="v1.0 time split")
     seeds: int = Field(10, ge=2)
+    max_train_pairs: int = Field(0, ge=0, description="0 = all; else an even subsample")
     eval_windows_per_pair: int = Field(20, ge=1)
     field_grid: int = Field(25, ge=5, description="grid points per side of a vector field")
     field_codes: int = Field(6, ge=1, description="most used codes drawn per model")
@@ -226,6 +227,9 @@ def load_experiment(data_dir: Path, scenario: str, cfg: InteractionConfig) -> Ex
             raise InteractionError(f"{scenario}: only {len(pairs[split])} {split} pairs (cars "
                                    f"present for {cfg.window_frames} frames with another car "
                                    f"within {cfg.pair_max_distance_m} m); need at least 3")
+    if 0 < cfg.max_train_pairs < len(pairs["train"]):
+        keep = np.linspace(0, len(pairs["train"]) - 1, cfg.max_train_pairs).round().astype(int)
+        pairs["train"] = [pairs["train"][k] for k in keep]
     world = f"interaction_{scenario}"
     scene = _scene(world, pairs["train"] + pairs["val"], cfg.dt_s)
     lookup = _manoeuvre_lookup(data_dir, scenario)

@@ -214,3 +214,11 @@ def test_duplicate_frame_in_a_track_names_the_line(tmp_path):
     with pytest.raises(ix.TrackFileError, match=r"dup.csv:5: column 'timestamp_ms': track 1 "
                                                 r"has two rows at 200 ms"):
         ix.read_track_file(path)
+
+
+def test_v12_file_without_case_id_is_a_missing_column(tmp_path):
+    rows = _car_rows(1, range(1, 4), 0, 0, 5)
+    path = _write(tmp_path / "train" / "DR_X_train.csv", "\n".join([HEADER, *rows]) + "\n")
+    with pytest.raises(ix.TrackFileError, match=r"DR_X_train.csv:1: header is missing column "
+                                                r"'case_id'"):
+        ix.read_track_file(path)

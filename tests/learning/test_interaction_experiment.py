@@ -126,3 +126,11 @@ def test_full_command_end_to_end_on_generated_roundabout(tmp_path, monkeypatch):
     meta = json.loads((out / "meta.json").read_text())
     assert len(meta["checkpoints"]) == 20
     assert any(path.endswith("DR_USA_Roundabout_FT_val.csv") for path in meta["inputs_sha256"])
+
+
+def test_max_train_pairs_subsamples_evenly(small_data):
+    full = ie.load_experiment(small_data, SCENARIO, ie.InteractionConfig())
+    capped = ie.load_experiment(small_data, SCENARIO, ie.InteractionConfig(max_train_pairs=10))
+    assert capped.train.n_pairs == 10 and full.train.n_pairs > 10
+    assert capped.val.n_pairs == full.val.n_pairs
+    np.testing.assert_array_equal(capped.train.trajs.positions[0], full.train.trajs.positions[0])
