@@ -363,6 +363,40 @@ def extract_pairs(recordings: list[Recording], size: int, stride: int, max_dista
     return pairs
 
 
+OFFICIAL_VAL_LIST = "validation-set-list_INTERACTION-dataset_v1.txt"
+
+
+def official_val_recordings(data_dir: Path, scenario: str) -> list[str]:
+    """v1.0 recordings the devkit lists as validation for `scenario` (empty if no list).
+
+    The list sits in recorded_trackfiles/ of the devkit's folder layout: a scenario name on
+    one line, then its vehicle_tracks_NNN names, blocks separated by blank lines."""
+    path = Path(data_dir) / "recorded_trackfiles" / OFFICIAL_VAL_LIST
+    if not path.is_file():
+        return []
+    names, current = [], None
+    for line in path.read_text().splitlines():
+        word = line.strip()
+        if not word:
+            current = None
+        elif current is None:
+            current = word
+        elif current == scenario:
+            names.append(word)
+    return names
+
+
+def recording_split(recordings: list[Recording], val_names: list[str]) -> dict[str, dict]:
+    """Whole recordings to train or val (by name); the frame ranges `extract_pairs` takes."""
+    ranges: dict[str, dict] = {"train": {}, "val": {}}
+    for rec in recordings:
+        frames = np.concatenate([t.frames for t in rec.tracks])
+        split = "val" if rec.name in val_names else "train"
+        ranges[split][rec.name] = (int(frames.min()), int(frames.max()))
+        ranges["val" if split == "train" else "train"][rec.name] = (0, -1)
+    return ranges
+
+
 def time_split(recordings: list[Recording], train_fraction: float) -> dict[str, dict]:
     """v1.0 has no val split: per recording, frames before the cut are train, after are val."""
     ranges: dict[str, dict] = {"train": {}, "val": {}}

@@ -60,7 +60,8 @@ class InteractionConfig(StrictModel):
     pair_max_distance_m: float = Field(30.0, gt=0)
     min_speed_mps: float = Field(0.5, ge=0, description="true next speed needed to score")
     turn_threshold_deg: float = Field(30.0, gt=0, description="heading change = a turn")
-    v10_train_fraction: float = Field(0.8, gt=0, lt=1, description="v1.0 time split")
+    v10_train_fraction: float = Field(0.8, gt=0, lt=1,
+                                      description="v1.0 time split without a devkit val list")
     seeds: int = Field(10, ge=2)
     max_train_pairs: int = Field(0, ge=0, description="0 = all; else an even subsample")
     eval_windows_per_pair: int = Field(20, ge=1)
@@ -198,9 +199,14 @@ def _split_pairs(data_dir: Path, scenario: str, cfg: InteractionConfig):
                                           cfg.pair_max_distance_m)
     else:
         recs = ix.load_recordings(files["train"])
-        ranges = ix.time_split(recs, cfg.v10_train_fraction)
+        val_names = ix.official_val_recordings(data_dir, scenario)
+        if val_names and {r.name for r in recs} - set(val_names):
+            ranges = ix.recording_split(recs, val_names)
+        else:
+            ranges = ix.time_split(recs, cfg.v10_train_fraction)
         for split in ix.SPLITS:
-            counts[split] = _agent_counts(recs)
+            counts[split] = _agent_counts([r for r in recs if r.name in ranges[split]
+                                           and ranges[split][r.name][1] >= 0])
             out[split] = ix.extract_pairs(recs, cfg.window_frames, cfg.window_stride_frames,
                                           cfg.pair_max_distance_m, ranges[split])
     inputs = {str(p): sha256_file(p) for p in sorted({f for fs in files.values() for f in fs})}

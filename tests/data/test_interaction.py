@@ -222,3 +222,21 @@ def test_v12_file_without_case_id_is_a_missing_column(tmp_path):
     with pytest.raises(ix.TrackFileError, match=r"DR_X_train.csv:1: header is missing column "
                                                 r"'case_id'"):
         ix.read_track_file(path)
+
+
+def test_v10_official_validation_list_splits_whole_recordings(generated, tmp_path):
+    import shutil
+
+    data = tmp_path / "v1.0"
+    shutil.copytree(generated / "v1.0" / "recorded_trackfiles", data / "recorded_trackfiles")
+    (data / "recorded_trackfiles" / ix.OFFICIAL_VAL_LIST).write_text(
+        "DR_OTHER \nvehicle_tracks_000\n\nDR_USA_Intersection_EP0 \nvehicle_tracks_001\n")
+    names = ix.official_val_recordings(data, "DR_USA_Intersection_EP0")
+    assert names == ["vehicle_tracks_001"]
+    recordings = ix.load_recordings(ix.split_files(data, "DR_USA_Intersection_EP0", "v1.0")
+                                    ["train"])
+    ranges = ix.recording_split(recordings, names)
+    val = ix.extract_pairs(recordings, 40, 40, 30.0, ranges["val"])
+    train = ix.extract_pairs(recordings, 40, 40, 30.0, ranges["train"])
+    assert {p.recording for p in val} == {"vehicle_tracks_001"}
+    assert {p.recording for p in train} == {"vehicle_tracks_000"}
