@@ -240,3 +240,20 @@ def test_v10_official_validation_list_splits_whole_recordings(generated, tmp_pat
     train = ix.extract_pairs(recordings, 40, 40, 30.0, ranges["train"])
     assert {p.recording for p in val} == {"vehicle_tracks_001"}
     assert {p.recording for p in train} == {"vehicle_tracks_000"}
+
+
+def test_projection_matches_the_devkit_convention(tmp_path):
+    # nodes of the devkit's public test map, whose track file drives along y = 2.5 and 5.5
+    # between lane lines at y = 1, 4 and 7 m
+    osm = _write(tmp_path / "t.osm", """<?xml version="1.0"?><osm version="0.6">
+      <node id="1" lat="0.00000903483" lon="0.00000897435"/>
+      <node id="2" lat="0.00000903484" lon="0.00090640957"/>
+      <node id="3" lat="0.00003613932" lon="0.00000897435"/>
+      <node id="4" lat="0.00006324382" lon="0.00000897435"/>
+      <way id="10"><nd ref="1"/><nd ref="2"/><tag k="type" v="road_border"/></way>
+      <way id="11"><nd ref="3"/><nd ref="4"/><tag k="type" v="line_thin"/>
+        <tag k="subtype" v="dashed"/></way></osm>""")
+    border, thin = read_lanelet_map(osm, OriginProjector(use_pyproj=False))
+    np.testing.assert_allclose(border.points, [[1, 1], [101, 1]], atol=1e-3)
+    np.testing.assert_allclose(thin.points, [[1, 4], [1, 7]], atol=1e-3)
+    assert (thin.kind, thin.subtype) == ("line_thin", "dashed")
