@@ -153,8 +153,6 @@ def _majority(steps: np.ndarray) -> int:
 def _to_pair_data(world: str, pairs: list[ix.Pair], cfg: InteractionConfig, scene: Scene,
                   lookup: dict | None, names: list[str] | None,
                   agent_counts: dict[str, int]) -> PairData:
-    from app.data.trajectory import Episode
-
     label_names = {"robot_turn": TURN_NAMES}
     if names is not None:
         coarse = coarse_names(names)
@@ -169,8 +167,7 @@ def _to_pair_data(world: str, pairs: list[ix.Pair], cfg: InteractionConfig, scen
             labels.update(robot_manoeuvre=_majority(steps[0]),
                           robot_manoeuvre_arm=_majority(steps[1]))
             per_step.append(steps)
-        ep = pair.episode(cfg.downsample, labels)
-        episodes.append(Episode(ep.positions, ep.headings, ep.speeds, labels))
+        episodes.append(pair.episode(cfg.downsample, labels))
     trajs = TrajectorySet.from_episodes(world, cfg.dt_s, episodes, label_names, scene)
     return PairData(trajs, np.stack(per_step) if per_step else None, len(pairs), agent_counts)
 
@@ -331,7 +328,6 @@ def run_seed(exp: Experiment, seed: int, train_cfg: TrainConfig, models_dir: Pat
             "agreement": agreement(codes, {k: v[scored] for k, v in labels.items()}),
             "checkpoint": str(ckpt), "content_hash": model.content_hash,
         }
-        out[f"_{kind}_errors"] = scores["errors"]
     return out
 
 
@@ -357,9 +353,9 @@ def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Pat
         per_seed.append(run_seed(exp, seed, train_cfg, models_dir, windows, scored, labels))
         bar.set_postfix(ours=f"{per_seed[-1]['ours']['alignment_error']:.3f}",
                         vae=f"{per_seed[-1]['vae']['alignment_error']:.3f}")
-    summary = summarise(exp, cfg, train_cfg, windows, scored, per_seed, cv)
+    summary = summarise(exp, cfg, windows, scored, labels, per_seed, cv)
     out_dir = Path(out_dir)
-    figures = write_figures(exp, cfg, per_seed, summary, windows, scored, labels, out_dir)
+    figures = write_figures(exp, cfg, per_seed, summary, windows, scored, out_dir)
     write_report(out_dir, summary, per_seed, figures)
     write_json(out_dir / "meta.json", {
         "scenario": scenario, "layout": exp.layout, "config": cfg.model_dump(),
@@ -372,8 +368,8 @@ def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Pat
     return summary
 
 
-def summarise(exp: Experiment, cfg: InteractionConfig, train_cfg: TrainConfig, windows,
-              scored, per_seed: list[dict], cv: dict) -> dict:
+def summarise(exp: Experiment, cfg: InteractionConfig, windows: Windows, scored: np.ndarray,
+              labels: dict, per_seed: list[dict], cv: dict) -> dict:
     """Every headline number, JSON-able."""
     from analysis.stats import paired_comparison
 
@@ -404,7 +400,7 @@ def summarise(exp: Experiment, cfg: InteractionConfig, train_cfg: TrainConfig, w
         "pairs": {"train": exp.train.n_pairs, "val": exp.val.n_pairs},
         "agents": {"train": exp.train.agent_counts, "val": exp.val.agent_counts},
         "val_windows": int(len(windows)), "val_windows_scored": int(scored.sum()),
-        "label_counts": _label_counts(exp, window_labels(windows, exp.val), scored),
+        "label_counts": _label_counts(exp, labels, scored),
         "mean_alignment_error": means, "per_seed_alignment_error":
             {m: seed_means[m].tolist() for m in MODELS},
         "tests": tests, "models": models, "winner": winner,
@@ -545,7 +541,7 @@ def plot_fields(exp: Experiment, cfg: InteractionConfig, model, codes: np.ndarra
 
 
 def write_figures(exp: Experiment, cfg: InteractionConfig, per_seed: list[dict], summary: dict,
-                  windows: Windows, scored: np.ndarray, labels: dict, out_dir: Path) -> list:
+                  windows: Windows, scored: np.ndarray, out_dir: Path) -> list:
     """errors.png, pairs.png and one vector-field figure per model (seed 0's models)."""
     import matplotlib
 
@@ -632,6 +628,8 @@ deterministic.</p>
 <h2>Errors</h2><table><tr><th>model</th><th>alignment error</th><th>ADE [m]</th>
 <th>FDE [m]</th></tr>{rows}</table>
 <h2>Paired t-tests over seeds (difference = first - second)</h2>
+<p>Constant velocity gives the same value for every seed, so its comparisons are in effect
+one-sample t-tests of the seed means against that value.</p>
 <table><tr><th>comparison</th><th>mean diff [95% CI]</th><th>t</th><th>p</th><th>d_z</th></tr>
 {tests}</table>
 <h2>Latent codes vs labels (val windows)</h2><table><tr><th>model</th><th>measure</th>
