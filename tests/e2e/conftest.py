@@ -1,6 +1,7 @@
 """Browser-test fixtures: the paper's study (20 trials) on the small pipeline's models; chromium."""
 
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -37,14 +38,22 @@ def browser_study(small_study: SmallStudy, tmp_path_factory) -> SmallStudy:
     return SmallStudy(data_dir, configs_dir, BROWSER_STUDY)
 
 
+@dataclass(frozen=True)
+class BrowserServer:
+    """A running server of the browser study and the SQLite file it writes."""
+
+    url: str
+    db_path: Path
+
+
 @pytest.fixture(scope="session")
 def browser_server(browser_study: SmallStudy, tmp_path_factory):
-    """`tomstudy serve` of the browser study on a fresh SQLite file; yields its base URL."""
+    """`tomstudy serve` of the browser study on a fresh SQLite file."""
     root = tmp_path_factory.mktemp("browser-server")
     port = free_port()
-    proc = start_server(browser_study, f"sqlite:///{root / 'study.db'}", port,
-                        log=root / "server.log")
-    yield f"http://127.0.0.1:{port}"
+    db_path = root / "study.db"
+    proc = start_server(browser_study, f"sqlite:///{db_path}", port, log=root / "server.log")
+    yield BrowserServer(f"http://127.0.0.1:{port}", db_path)
     proc.terminate()
     proc.wait(timeout=10)
 

@@ -6,7 +6,10 @@ the clock moves on between clicks like a person's would, so timings look human.
 
 import csv
 import io
+import json
 import math
+import sqlite3
+from contextlib import closing
 from pathlib import Path
 
 import pytest
@@ -21,6 +24,7 @@ SCREENSHOTS = REPO / "var" / "screenshots"
 VIEWPORT = {"width": 1280, "height": 900}
 CLIP_JUMP_MS = 2000  # fake-clock jump per poll while clips play
 THINK_MS = 1500  # fake-clock time between two clicks
+RESIZED = {"width": 1300, "height": 880}
 RECRUITMENT = "PROLIFIC_PID=e2e-pid-1&STUDY_ID=e2e-study&SESSION_ID=e2e-session"
 
 
@@ -79,10 +83,29 @@ def watch_clips(page) -> None:
     raise AssertionError("the clips never finished")
 
 
-def predict_trial(page, screenshot: Path | None = None) -> tuple[dict, dict]:
+def drop_first_answer(page) -> dict:
+    """Let the next predictions POST reach the server, but cut the connection before the answer."""
+    seen = {"dropped": 0}
+
+    def handle(route):
+        if route.request.method == "POST" and not seen["dropped"]:
+            seen["dropped"] = route.fetch().status  # the server stores it...
+            route.abort("connectionreset")  # ...and the browser never hears back
+        else:
+            route.continue_()
+
+    page.route("**/predictions", handle)
+    return seen
+
+
+def predict_trial(page, screenshot: Path | None = None, replay: bool = False,
+                  lose_answer: bool = False) -> tuple[dict, dict]:
     """Watch one trial, click every point on the canvas, submit; return (trial, clicks)."""
     trial = current_state(page)["step"]
     watch_clips(page)
+    if replay:
+        page.click("#replay")
+        watch_clips(page)
     page.click("#start-predicting")
     clicks = {}
     for k, start_state in enumerate(trial["start_states"]):
@@ -94,10 +117,19 @@ def predict_trial(page, screenshot: Path | None = None) -> tuple[dict, dict]:
                 page.screenshot(path=str(screenshot))
         assert page.is_enabled("#next")
         heading = page.inner_text("#trial-heading")
+        if lose_answer and k == len(trial["start_states"]) - 1:
+            seen = drop_first_answer(page)
         page.click("#next")
+    if lose_answer:
+        page.wait_for_function("() => document.querySelector('#trial-message').textContent"
+                               ".includes('retrying')")
+        assert seen["dropped"] == 201
+        page.clock.fast_forward(1000)  # the app's back-off before the retry
     page.wait_for_function(
         "h => !document.querySelector('#screen-survey').hidden"
         " || document.querySelector('#trial-heading').textContent !== h", arg=heading)
+    if lose_answer:
+        page.unroute("**/predictions")
     return trial, clicks
 
 
@@ -138,6 +170,8 @@ def complete_session(page, base_url: str) -> dict:
     page.clock.fast_forward(1200)
     page.screenshot(path=str(SCREENSHOTS / "clip.png"))
     check_input_rules(page)
+    page.set_viewport_size(RESIZED)  # logged as a resize event
+    page.clock.fast_forward(1500)
     page.reload()  # a refresh resumes the same trial through the token in sessionStorage
     visible(page, "trial")
     assert "Practice" in page.inner_text("#trial-heading")
@@ -145,8 +179,9 @@ def complete_session(page, base_url: str) -> dict:
     trial, trial_clicks = predict_trial(page)
     clicks[trial["trial_id"]] = trial_clicks
     while current_state(page)["phase"] == "trial":
-        first = len(clicks) == 1
-        trial, trial_clicks = predict_trial(page, SCREENSHOTS / "predict.png" if first else None)
+        n = len(clicks)  # 1 = the first main trial
+        trial, trial_clicks = predict_trial(page, SCREENSHOTS / "predict.png" if n == 1 else None,
+                                            replay=n == 2, lose_answer=n == 3)
         clicks[trial["trial_id"]] = trial_clicks
     visible(page, "survey")
     for name in sorted(set(page.eval_on_selector_all("#survey-form input[type=radio]",
@@ -183,12 +218,12 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
     errors = []
     page.on("pageerror", lambda err: errors.append(str(err)))
 
-    done = complete_session(page, browser_server)
+    done = complete_session(page, browser_server.url)
 
     code = config["recruitment"]["completion_code"]
     assert done["code"] == code
     assert done["redirect"].endswith(f"cc={code}")
-    rows = download_export(page, browser_server)
+    rows = download_export(page, browser_server.url)
     assert errors == []
     context.close()
 
@@ -211,3 +246,36 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
         error_px = math.dist(point, (float(row["click_x"]), float(row["click_y"]))) * px_per_m
         assert error_px <= math.sqrt(2) + 1e-3, (row["trial_id"], error_px)
         assert float(row["trial_duration_ms"]) >= per_trial * THINK_MS
+    trial_ids = list(done["clicks"])
+    replays = {r["trial_id"]: int(r["replays"]) for r in mine}
+    assert replays[trial_ids[2]] == 1 and sum(replays.values()) == 1
+    assert sum(r["trial_id"] == trial_ids[3] for r in mine) == per_trial  # retried, stored once
+    events = stored_events(browser_server.db_path)
+    assert sum(kind == "clip_finished" for kind, _ in events) >= len(trial_ids)
+    assert [data["trial_id"] for kind, data in events if kind == "replay"] == [trial_ids[2]]
+    resized = {"w": RESIZED["width"], "h": RESIZED["height"]}
+    assert resized in [data for kind, data in events if kind == "resize"]
+
+
+def stored_events(db_path: Path) -> list[tuple[str, dict]]:
+    """(kind, data) of every telemetry event the server stored."""
+    with closing(sqlite3.connect(db_path)) as db:
+        rows = db.execute("SELECT kind, data FROM event").fetchall()
+    return [(kind, json.loads(data)) for kind, data in rows]
+
+
+def test_small_window_and_touch_only_devices_get_a_message(chromium, browser_server):
+    context = chromium.new_context(viewport={"width": 800, "height": 600})
+    page = context.new_page()
+    page.goto(f"{browser_server.url}/s/{BROWSER_STUDY}")
+    visible(page, "unsupported")
+    assert "800 × 600" in page.inner_text("#unsupported-reason")
+    page.set_viewport_size({"width": 1000, "height": 700})  # enlarging the window starts it
+    visible(page, "consent")
+    context.close()
+    context = chromium.new_context(viewport=VIEWPORT, has_touch=True, is_mobile=True)
+    page = context.new_page()
+    page.goto(f"{browser_server.url}/s/{BROWSER_STUDY}")
+    visible(page, "unsupported")
+    assert "touch" in page.inner_text("#unsupported-reason")
+    context.close()
