@@ -18,7 +18,10 @@ function formatValue(value) {
 
 /** A table for a list of flat objects. */
 function rowsTable(rows) {
+  const wrap = document.createElement("div");
+  wrap.className = "table-wrap";
   const table = document.createElement("table");
+  wrap.append(table);
   table.className = "summary";
   const columns = [...new Set(rows.flatMap((row) => Object.keys(row)))];
   const head = table.createTHead().insertRow();
@@ -32,12 +35,17 @@ function rowsTable(rows) {
     const tr = body.insertRow();
     for (const column of columns) tr.insertCell().textContent = formatValue(row[column]);
   }
-  return table;
+  return wrap;
 }
 
 function isFlatObject(value) {
-  return value && typeof value === "object" && !Array.isArray(value)
+  return Boolean(value) && typeof value === "object" && !Array.isArray(value)
+    && Object.keys(value).length > 0
     && Object.values(value).every((v) => v === null || typeof v !== "object");
+}
+
+function note(text) {
+  return Object.assign(document.createElement("p"), { textContent: text });
 }
 
 /** An object whose values are all flat objects, e.g. {highway: {ours: .., vae: ..}}. */
@@ -59,9 +67,11 @@ function renderSummary(data, depth = 3) {
     if (isTableOfRecords(value)) {
       fragment.append(rowsTable(Object.entries(value).map(([name, row]) => ({ [key]: name, ...row }))));
     } else if (Array.isArray(value)) {
-      if (!value.length) fragment.append(Object.assign(document.createElement("p"), { textContent: "none yet" }));
+      if (!value.length) fragment.append(note("none yet"));
       else if (value.every((v) => v && typeof v === "object" && !Array.isArray(v))) fragment.append(rowsTable(value));
-      else fragment.append(Object.assign(document.createElement("p"), { textContent: value.map(formatValue).join(", ") }));
+      else fragment.append(note(value.map(formatValue).join(", ")));
+    } else if (!Object.keys(value).length) {
+      fragment.append(note("none yet"));
     } else {
       fragment.append(renderSummary(value, depth + 1));
     }
