@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from app.data.trajectory import Episode
 
@@ -145,8 +146,10 @@ def load_recordings(files: list[Path]) -> list[Recording]:
 def read_track_file(path: Path) -> list[Recording]:
     """Validate and read one track file (any layout) into recordings."""
     path = Path(path)
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.reader(fh)
+    with open(path, newline="", encoding="utf-8") as fh, \
+            tqdm(total=path.stat().st_size, unit="B", unit_scale=True, leave=False,
+                 desc=f"read {path.name}") as bar:
+        reader = csv.reader(_counted_lines(fh, bar))
         header = next(reader, None)
         if header is None or not any(cell.strip() for cell in header):
             raise TrackFileError(f"{path}:1: empty file: expected a header line "
@@ -156,6 +159,17 @@ def read_track_file(path: Path) -> list[Recording]:
     if not rows:
         raise TrackFileError(f"{path}:2: no data rows after the header")
     return _group_tracks(path, rows, has_case="case_id" in columns)
+
+
+def _counted_lines(fh, bar, every: int = 20000):
+    """The file's lines, advancing a byte progress bar every `every` lines."""
+    done = 0
+    for k, line in enumerate(fh, start=1):
+        done += len(line)
+        if k % every == 0:
+            bar.update(done - bar.n)
+        yield line
+    bar.update(done - bar.n)
 
 
 def _expected_columns(path: Path, header: list[str]) -> tuple[str, ...]:
@@ -356,7 +370,8 @@ def extract_pairs(recordings: list[Recording], size: int, stride: int, max_dista
                   frame_ranges: dict[str, tuple[int, int]] | None = None) -> list[Pair]:
     """All pairs of all windows of all recordings, in a deterministic order."""
     pairs = []
-    for rec in sorted(recordings, key=lambda r: r.name):
+    for rec in tqdm(sorted(recordings, key=lambda r: r.name), desc="pairs", unit="recording",
+                    leave=False):
         span = (frame_ranges or {}).get(rec.name)
         for first in window_starts(rec, size, stride, span):
             pairs.extend(pairs_in_window(rec, first, size, max_distance_m))
