@@ -279,3 +279,54 @@ def test_small_window_and_touch_only_devices_get_a_message(chromium, browser_ser
     visible(page, "unsupported")
     assert "touch" in page.inner_text("#unsupported-reason")
     context.close()
+
+
+MODULE_CHECKS = """async () => {
+    const { fitView } = await import("/static/js/scene.js");
+    const { poseAt } = await import("/static/js/player.js");
+    const { PredictionInput } = await import("/static/js/predict.js");
+    const bounds = { x_min_m: -50, x_max_m: 50, y_min_m: -3, y_max_m: 11 };
+    const view = fitView(bounds, 1000, 300, 24);
+    const corner = view.toPx([bounds.x_max_m, bounds.y_max_m]);
+    const back = view.toM(view.toPx([12.5, 4.25]));
+    const clip = { positions: [[[0, 0], [5, 5]], [[2, 4], [5, 5]]],
+                   headings: [[3.1, 0], [-3.1, 0]] };
+    const mid = poseAt(clip, 0.5);
+    const wrap = document.createElement("div");
+    wrap.style.width = "1000px";
+    const canvas = document.createElement("canvas");
+    wrap.append(canvas);
+    document.body.append(wrap);
+    const start = { robot: [0, 4], human: [10, 8], robot_heading: 0, human_heading: 0 };
+    const trial = { trial_id: "t", scene: { bounds, lanes: [], obstacles: [], goals: [],
+                    agents: [] }, segment: clip, start_states: [start, start],
+                    steps_to_predict: 3, max_step_m: 4, min_step_m: 0.4 };
+    const input = new PredictionInput(canvas, trial);
+    input.shownAtPerf = performance.now();
+    const refusals = [[0.1, 4], [5, 4], [2, 6], [0, 11.5]].map((p) => input.refusal(p));
+    const placed = [[3, 4], [6, 4], [9, 4], [12, 4]].map((p) => input.place(p));
+    input.undo();
+    const metreY = view.toPx([0, 1])[1] - view.toPx([0, 0])[1];
+    const metreX = view.toPx([1, 0])[0] - view.toPx([0, 0])[0];
+    return { scale: view.scale, metreX, metreY, corner, back, mid, refusals, placed,
+             done: input.stateDone(), next: input.next(), index: input.index };
+}"""
+
+
+def test_frontend_modules_scale_interpolate_and_refuse(chromium, browser_server):
+    page = chromium.new_page()
+    page.goto(f"{browser_server.url}/")
+    out = page.evaluate(MODULE_CHECKS)
+    page.close()
+    # the same px per metre in x and y, limited here by the width: (1000 - 2 * 24) / 100
+    assert out["scale"] == pytest.approx(9.52)
+    assert out["metreX"] == pytest.approx(9.52) and out["metreY"] == pytest.approx(9.52)
+    assert out["corner"] == pytest.approx([1000 - 24, (300 + 9.52 * 14) / 2])  # centred in y
+    assert out["back"] == pytest.approx([12.5, 4.25])
+    assert out["mid"][0]["position"] == pytest.approx([1, 2])
+    assert abs(math.cos(out["mid"][0]["heading"]) + 1) < 1e-3  # turns through pi, not 0
+    too_short, too_far, ok, outside = out["refusals"]
+    assert too_short.startswith("Too short") and too_far.startswith("Too far")
+    assert ok is None and "outside" in outside
+    assert out["placed"] == [True, True, True, False]  # a 4th point is refused
+    assert out["done"] is False and out["next"] is False and out["index"] == 0  # after undo
