@@ -92,6 +92,7 @@ class SACConfig(StrictModel):
     learning_starts: int = Field(ge=0)
     gamma: float = Field(gt=0, le=1)
     torch_threads: int = Field(ge=1, le=2)
+    eval_episodes: int = Field(ge=1)
     seed: int = Field(ge=0)
 
 
@@ -378,7 +379,7 @@ class ObstacleWorld:
         """Step both agents; returns positions [L+1, 2, 2] and first arrival steps [2] (-1)."""
         pos, vel = starts.astype(np.float64).copy(), velocities.astype(np.float64).copy()
         arrival = np.where(self.in_goal(goals, pos), 0, -1)
-        plans = [self._initial_plan(pos[a], vel[a], goals[a]) for a in AGENTS]
+        plans = [self.initial_plan(pos[a], vel[a], goals[a]) for a in AGENTS]
         track = [pos.copy()]
         for t in range(1, n_steps + 1):
             new_vel = np.zeros((2, 2))
@@ -391,7 +392,7 @@ class ObstacleWorld:
                 new_vel[a], plans[a] = self._act(a, pos, vel, goals, plans[a], rng)
             new_pos = pos + new_vel * self.dt_s
             if check_safety:
-                self._check_safety(pos, new_pos)
+                self.check_safety(pos, new_pos)
             pos, vel = new_pos, new_vel
             track.append(pos.copy())
             arrival = np.where((arrival < 0) & self.in_goal(goals, pos), t, arrival)
@@ -399,7 +400,7 @@ class ObstacleWorld:
                 break
         return np.stack(track), arrival
 
-    def _initial_plan(self, pos: np.ndarray, vel: np.ndarray, goal: int) -> np.ndarray:
+    def initial_plan(self, pos: np.ndarray, vel: np.ndarray, goal: int) -> np.ndarray:
         """Warm start: keep the current velocity, or head downhill at full speed from rest."""
         if np.linalg.norm(vel) < 1e-6:
             vel = self.fields.downhill(goal, pos) * self.config.max_speed_mps
@@ -413,11 +414,18 @@ class ObstacleWorld:
             obs = self.observation(pos[agent], goals[agent], pos[other], vel[other])
             action = self.sac_policy().act(obs)
             return self.limit_speed(action * self.config.max_speed_mps), plan
+        return self.mpc_action(agent, pos, vel, goals, plan, rng)
+
+    def mpc_action(self, agent: int, pos: np.ndarray, vel: np.ndarray, goals: np.ndarray,
+                   plan: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """The MPC's next velocity [2] for `agent` and the warm start for its next plan."""
+        other = 1 - agent
         cost = self.mpc_cost(pos[agent], vel[agent], goals[agent], pos[other], vel[other])
         best = self.mpc.plan(cost, plan, rng)
         return self.limit_speed(best[0]), self.mpc.shift(best)
 
-    def _check_safety(self, pos: np.ndarray, new_pos: np.ndarray) -> None:
+    def check_safety(self, pos: np.ndarray, new_pos: np.ndarray) -> None:
+        """Raise Rejected if the straight moves pos -> new_pos [2, 2] hit anything."""
         fractions = np.arange(1, COLLISION_SUBSTEPS + 1)[:, None, None] / COLLISION_SUBSTEPS
         points = pos + (new_pos - pos) * fractions  # [S, 2 agents, 2]
         if (self.obstacle_gap(points) < 0).any():
