@@ -92,6 +92,17 @@ def world_summary(means: pd.DataFrame, ade: pd.DataFrame) -> dict:
     return out
 
 
+def per_code(kept: pd.DataFrame) -> dict:
+    """Per world and Ours code: trials, and mean error of Ours and the VAE on those rows."""
+    out: dict = {}
+    for (world, code), rows in kept.groupby(["world", "ours_code"], sort=True):
+        out.setdefault(world, {})[str(code)] = {
+            "trials": int(rows["trial_id"].nunique()), "rows": int(len(rows)),
+            "err_ours": float(rows["err_ours"].mean()), "err_vae": float(rows["err_vae"].mean()),
+            "err_policy": float(rows["err_policy"].mean())}
+    return out
+
+
 def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, configs_dir: Path,
             data_dir: Path, source: str) -> dict:
     """Run the whole analysis on the export rows and write the report folder."""
@@ -130,6 +141,7 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, configs_dir: Path
         "worlds": world_summary(means, ade),
         "ours_vs_vae": {w: r.as_dict() for w, r in results.items()},
         "ours_vs_cv": {w: r.as_dict() for w, r in versus_cv.items()},
+        "per_ours_code": per_code(kept),
         "hypothesis_supported": {w: bool(r.p_one_sided_less < ALPHA)
                                  for w, r in results.items()},
         "figures": sorted(p.name for p in figures),
