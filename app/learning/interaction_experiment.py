@@ -400,7 +400,9 @@ def summarise(exp: Experiment, cfg: InteractionConfig, windows: Windows, scored:
         "pairs": {"train": exp.train.n_pairs, "val": exp.val.n_pairs},
         "agents": {"train": exp.train.agent_counts, "val": exp.val.agent_counts},
         "val_windows": int(len(windows)), "val_windows_scored": int(scored.sum()),
-        "label_counts": _label_counts(exp, labels, scored),
+        "label_counts": (counts := _label_counts(exp, labels, scored)),
+        "purity_chance": {k: max(v.values()) / max(1, sum(v.values()))
+                          for k, v in counts.items()},
         "mean_alignment_error": means, "per_seed_alignment_error":
             {m: seed_means[m].tolist() for m in MODELS},
         "tests": tests, "models": models, "winner": winner,
@@ -585,8 +587,8 @@ def verdict(summary: dict) -> str:
     w, r = summary["winner"], summary["runner_up"]
     test = summary["tests"].get(f"{w}_vs_{r}") or summary["tests"].get(f"{r}_vs_{w}")
     return (f"{MODEL_NAMES[w]} has the lowest mean next-action alignment error "
-            f"({means[w]:.3f}), {summary['winner_margin']:.3f} below {MODEL_NAMES[r]} "
-            f"({means[r]:.3f}; paired t-test over seeds p = {test['p_two_sided']:.2g}).")
+            f"({means[w]:.4f}), {summary['winner_margin']:.4f} below {MODEL_NAMES[r]} "
+            f"({means[r]:.4f}; paired t-test over seeds p = {test['p_two_sided']:.2g}).")
 
 
 def render_html(summary: dict, figures: list[Path]) -> str:
@@ -634,6 +636,8 @@ one-sample t-tests of the seed means against that value.</p>
 {tests}</table>
 <h2>Latent codes vs labels (val windows)</h2><table><tr><th>model</th><th>measure</th>
 <th>mean &plusmn; SD</th></tr>{latent}</table>
+<p>Purity if every window got the most common label (chance level):
+{html.escape(", ".join(f"{k} {v:.3f}" for k, v in s["purity_chance"].items()))}.</p>
 <p>Label counts: {html.escape(json.dumps(s['label_counts']))}</p>
 <h2>Figures</h2>{images}
 <p>All numbers: summary.json and per_seed.csv beside this file.</p></body></html>
