@@ -95,12 +95,15 @@ export class ClipPlayer {
   }
 
   animate(clip, run) {
-    const { ctx, view } = prepareCanvas(this.canvas, this.scene);
+    let { ctx, view, cssWidth } = prepareCanvas(this.canvas, this.scene);
     const steps = clip.positions.length - 1;
     return new Promise((resolve) => {
       const start = performance.now();
       const frame = (now) => {
         if (run !== this.run) return resolve(false);
+        if (this.canvas.parentElement.clientWidth !== cssWidth) {
+          ({ ctx, view, cssWidth } = prepareCanvas(this.canvas, this.scene)); // window resized
+        }
         const t = Math.min(steps, (now - start) / 1000 / STEP_SECONDS);
         drawClipFrame(ctx, view, this.scene, clip, t);
         if (t >= steps) return resolve(true);
