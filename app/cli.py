@@ -252,7 +252,8 @@ def interaction(
     """Ours vs VAE vs constant velocity on INTERACTION pairs; report in var/reports/interaction/."""
     from app.data.interaction import TrackFileError
     from app.data.lanelet_map import MapError
-    from app.learning.interaction_experiment import InteractionError, run_command, verdict
+    from app.learning.interaction_experiment import InteractionError, run_command
+    from app.learning.interaction_report import verdict
 
     try:
         if generate:
