@@ -99,15 +99,29 @@ def build_small_study(root: Path) -> SmallStudy:
 
 @pytest.fixture(scope="session")
 def small_study() -> SmallStudy:
-    """The small real pipeline, cached in the temp dir by a hash of the code it runs."""
+    """The small real pipeline, cached in the temp dir by a hash of the code it runs.
+
+    A lock file serialises test sessions that share the machine (and the cache).
+    """
+    import fcntl
+
     root = Path(tempfile.gettempdir()) / f"tomstudy-small-study-{_sources_hash()}"
-    done = root / "done"
-    if not done.exists():
-        shutil.rmtree(root, ignore_errors=True)
-        root.mkdir(parents=True)
-        build_small_study(root)
-        done.touch()
+    with open(f"{root}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (root / "done").exists():
+            shutil.rmtree(root, ignore_errors=True)
+            root.mkdir(parents=True)
+            build_small_study(root)
+            (root / "done").touch()
+            remove_stale_caches(root)
     return SmallStudy(root / "var", root / "configs")
+
+
+def remove_stale_caches(keep: Path, max_age_s: float = 3 * 3600) -> None:
+    """Delete other small-study caches untouched for 3 hours (the code they ran changed)."""
+    for other in keep.parent.glob("tomstudy-small-study-*"):
+        if other != keep and other.is_dir() and time.time() - other.stat().st_mtime > max_age_s:
+            shutil.rmtree(other, ignore_errors=True)
 
 
 # ---------------------------------------------------------------- servers

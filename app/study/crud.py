@@ -8,7 +8,8 @@ a retried request a no-op that answers the current state.
 
 import secrets
 import uuid
-from dataclasses import dataclass
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from datetime import timedelta
 from itertools import permutations
 
@@ -56,6 +57,8 @@ class StudyContext:
     config: StudyConfig
     bank: TrialBank
     predictor: Predictor
+    # trial id -> the trial's static browser JSON, encoded once (see app/study/state.py)
+    trial_json: dict[str, str] = field(default_factory=dict, compare=False, repr=False)
 
 
 # ---------------------------------------------------------------- sessions
@@ -285,34 +288,58 @@ def advance(db: Session, participant: Participant, body: SubmissionBody, kind: s
     except Refused:
         db.rollback()
         raise
-    db.refresh(participant)
+    for key, value in values.items():  # mirror the UPDATE instead of reading the row back
+        if key != "attention_failed":
+            setattr(participant, key, value)
+    if "attention_failed" in values:
+        participant.attention_failed += 1
     return True
 
 
 def record_consent(db: Session, participant: Participant, body: ConsentCreate) -> None:
     """The participant agreed to take part."""
-    if already_stored(db, participant, body.submission_id):
-        return
-    expect_phase(participant, "consent")
-    advance(db, participant, body, "consent", {"agree": True})
+    with replay_if_stored(db, participant, body) as fresh:
+        expect_phase(participant, "consent")
+        fresh.stored = advance(db, participant, body, "consent", {"agree": True})
 
 
 def record_instructions(db: Session, participant: Participant, body: SubmissionBody) -> None:
     """The participant has read the instructions."""
-    if already_stored(db, participant, body.submission_id):
-        return
-    expect_phase(participant, "instructions")
-    advance(db, participant, body, "instructions", {})
+    with replay_if_stored(db, participant, body) as fresh:
+        expect_phase(participant, "instructions")
+        fresh.stored = advance(db, participant, body, "instructions", {})
 
 
 def record_survey(db: Session, ctx: StudyContext, participant: Participant,
                   body: SurveyCreate) -> None:
     """Closing answers; the session is then complete."""
-    if already_stored(db, participant, body.submission_id):
-        return
-    expect_phase(participant, "survey")
-    answers = validate_survey(ctx.config, body.answers)
-    advance(db, participant, body, "survey", {"answers": answers}, completes=True)
+    with replay_if_stored(db, participant, body) as fresh:
+        expect_phase(participant, "survey")
+        answers = validate_survey(ctx.config, body.answers)
+        fresh.stored = advance(db, participant, body, "survey", {"answers": answers},
+                               completes=True)
+
+
+class _Outcome:
+    stored = False
+
+
+@contextmanager
+def replay_if_stored(db: Session, participant: Participant, body: SubmissionBody):
+    """Run a write; if it is refused, a retry of a stored UUID is not an error.
+
+    The common first-time path costs no lookup: a retry is recognised only when the
+    write is refused (the session has moved on), and a concurrent duplicate by the
+    unique key inside `advance`.
+    """
+    outcome = _Outcome()
+    try:
+        yield outcome
+    except Refused:
+        if already_stored(db, participant, body.submission_id):
+            outcome.stored = False
+            return
+        raise
 
 
 def validate_survey(config: StudyConfig, answers: dict) -> dict:
@@ -352,8 +379,13 @@ def _survey_value(q, key: str, value):
 def record_predictions(db: Session, ctx: StudyContext, participant: Participant,
                        body: PredictionCreate) -> bool:
     """Validate and store one trial's clicks with every predictor's actions. True if new."""
-    if already_stored(db, participant, body.submission_id):
-        return False
+    with replay_if_stored(db, participant, body) as fresh:
+        fresh.stored = _store_predictions(db, ctx, participant, body)
+    return fresh.stored
+
+
+def _store_predictions(db: Session, ctx: StudyContext, participant: Participant,
+                       body: PredictionCreate) -> bool:
     trial = ctx.bank.by_id.get(body.trial_id)
     if trial is None:
         raise Refused(404, f"trial_id: unknown trial {body.trial_id!r}")

@@ -13,8 +13,9 @@ from app.study.tables import Participant
 
 
 def get_db(request: Request) -> Iterator[Session]:
-    """One database session per request, on the app's engine."""
-    with Session(request.app.state.engine) as session:
+    """One database session per request; objects stay readable after commit (crud keeps
+    them in step with what it wrote, saving a read-back per request)."""
+    with Session(request.app.state.engine, expire_on_commit=False) as session:
         yield session
 
 

@@ -1,4 +1,11 @@
-"""What a participant's browser is told at each step (GET .../state and every write's answer)."""
+"""What a participant's browser is told at each step (GET .../state and every write's answer).
+
+A trial's static part (scene, clips, start states: ~15 KB of numbers) is encoded to JSON
+once per process and spliced into each answer: encoding it per request through FastAPI's
+`jsonable_encoder` cost ~5 ms, most of a state request.
+"""
+
+import json
 
 from app.study.config import StudyConfig
 from app.study.crud import TRIAL_PHASES, StudyContext, current_step
@@ -8,10 +15,15 @@ from app.study.tables import Participant
 def session_state(ctx: StudyContext, participant: Participant) -> dict:
     """`{phase, progress: {done, total}, step}` for the participant's current position."""
     step = current_step(participant)
+    return {"phase": step["phase"], "progress": progress_of(participant),
+            "step": step_payload(ctx, participant, step)}
+
+
+def progress_of(participant: Participant) -> dict:
+    """Trials (practice included) done and in total."""
     trial_positions = [i for i, s in enumerate(participant.plan) if s["phase"] in TRIAL_PHASES]
     done = sum(1 for i in trial_positions if i < participant.position)
-    return {"phase": step["phase"], "progress": {"done": done, "total": len(trial_positions)},
-            "step": step_payload(ctx, participant, step)}
+    return {"done": done, "total": len(trial_positions)}
 
 
 def step_payload(ctx: StudyContext, participant: Participant, step: dict) -> dict:
@@ -33,17 +45,39 @@ def step_payload(ctx: StudyContext, participant: Participant, step: dict) -> dic
 
 def trial_payload(ctx: StudyContext, step: dict) -> dict:
     """A bank trial as the browser sees it (no model predictions)."""
+    return {**step_fields(ctx, step), **static_trial(ctx, step["trial_id"])}
+
+
+def step_fields(ctx: StudyContext, step: dict) -> dict:
+    """The parts of a trial payload that depend on the participant's plan."""
     trial = ctx.bank.by_id[step["trial_id"]]
+    return {"trial_id": trial.trial_id, "world": trial.world,
+            "index_in_world": step["trial_index"], "world_position": step["world_position"],
+            "is_practice": step["phase"] == "practice",
+            "attention_check": step["attention_check"]}
+
+
+def static_trial(ctx: StudyContext, trial_id: str) -> dict:
+    """The parts of a trial payload that are the same for everyone."""
+    trial = ctx.bank.by_id[trial_id]
     world = ctx.bank.world(trial.world)
-    return {
-        "trial_id": trial.trial_id, "world": trial.world,
-        "index_in_world": step["trial_index"], "world_position": step["world_position"],
-        "is_practice": step["phase"] == "practice",
-        "attention_check": step["attention_check"], "clip_sha256": trial.clip_sha256,
-        "scene": world.scene, "dt_s": world.dt_s, **trial.browser_payload(),
-        "steps_to_predict": ctx.bank.data.steps_to_predict,
-        "max_step_m": world.max_step_m, "min_step_m": world.min_step_m,
-    }
+    return {"clip_sha256": trial.clip_sha256, "scene": world.scene, "dt_s": world.dt_s,
+            **trial.browser_payload(), "steps_to_predict": ctx.bank.data.steps_to_predict,
+            "max_step_m": world.max_step_m, "min_step_m": world.min_step_m}
+
+
+def state_json(ctx: StudyContext, participant: Participant) -> str:
+    """`session_state` encoded as JSON, with the trial's static part encoded only once."""
+    step = current_step(participant)
+    if step["phase"] not in TRIAL_PHASES:
+        return json.dumps(session_state(ctx, participant))
+    static = ctx.trial_json.get(step["trial_id"])
+    if static is None:
+        static = json.dumps(static_trial(ctx, step["trial_id"]))
+        ctx.trial_json[step["trial_id"]] = static
+    head = json.dumps({"phase": step["phase"], "progress": progress_of(participant),
+                       "step": step_fields(ctx, step)})
+    return f"{head[:-2]}, {static[1:]}}}"
 
 
 def redirect_url(cfg: StudyConfig, participant: Participant) -> str:

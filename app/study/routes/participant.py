@@ -4,7 +4,7 @@ from fastapi import APIRouter, Request, Response, status
 
 from app.study import crud
 from app.study.deps import ContextDep, ParticipantDep, SessionDep, study_context
-from app.study.state import session_state
+from app.study.state import state_json
 from app.study.tables import (
     ConsentCreate,
     EventsCreate,
@@ -16,6 +16,13 @@ from app.study.tables import (
 )
 
 router = APIRouter(prefix="/api/sessions", tags=["participant"])
+STATE_DOC = "`{phase, progress: {done, total}, step}` (app/study/API.md)"
+
+
+def state_response(ctx, participant, status_code: int = 200) -> Response:
+    """The participant's state as JSON (trial payloads pre-encoded, see app/study/state.py)."""
+    return Response(state_json(ctx, participant), status_code=status_code,
+                    media_type="application/json")
 
 
 @router.post("", response_model=ParticipantPublic, status_code=status.HTTP_201_CREATED,
@@ -32,44 +39,43 @@ async def create_session(body: SessionCreate, request: Request, response: Respon
                              participant_id=participant.id, resumed=resumed)
 
 
-@router.get("/{token}/state")
-async def read_state(participant: ParticipantDep, ctx: ContextDep) -> dict:
+@router.get("/{token}/state", response_description=STATE_DOC)
+async def read_state(participant: ParticipantDep, ctx: ContextDep) -> Response:
     """The current phase, progress and what the phase needs (a refresh resumes here)."""
-    return session_state(ctx, participant)
+    return state_response(ctx, participant)
 
 
 @router.post("/{token}/consent")
 async def submit_consent(body: ConsentCreate, participant: ParticipantDep, ctx: ContextDep,
-                         db: SessionDep) -> dict:
+                         db: SessionDep) -> Response:
     """Record consent; answers the next state."""
     crud.record_consent(db, participant, body)
-    return session_state(ctx, participant)
+    return state_response(ctx, participant)
 
 
 @router.post("/{token}/instructions")
 async def submit_instructions(body: SubmissionBody, participant: ParticipantDep,
-                              ctx: ContextDep, db: SessionDep) -> dict:
+                              ctx: ContextDep, db: SessionDep) -> Response:
     """Record that the instructions were read; answers the next state."""
     crud.record_instructions(db, participant, body)
-    return session_state(ctx, participant)
+    return state_response(ctx, participant)
 
 
 @router.post("/{token}/predictions", status_code=status.HTTP_201_CREATED,
              responses={200: {"description": "this submission_id was already stored"}})
 async def submit_predictions(body: PredictionCreate, participant: ParticipantDep,
-                             ctx: ContextDep, db: SessionDep, response: Response) -> dict:
+                             ctx: ContextDep, db: SessionDep) -> Response:
     """Store one trial's clicked positions (5 start states x 3 steps); answers the next state."""
-    if not crud.record_predictions(db, ctx, participant, body):
-        response.status_code = status.HTTP_200_OK
-    return session_state(ctx, participant)
+    stored = crud.record_predictions(db, ctx, participant, body)
+    return state_response(ctx, participant, 201 if stored else 200)
 
 
 @router.post("/{token}/survey")
 async def submit_survey(body: SurveyCreate, participant: ParticipantDep, ctx: ContextDep,
-                        db: SessionDep) -> dict:
+                        db: SessionDep) -> Response:
     """Store the closing survey; the session is then done."""
     crud.record_survey(db, ctx, participant, body)
-    return session_state(ctx, participant)
+    return state_response(ctx, participant)
 
 
 @router.post("/{token}/events", status_code=status.HTTP_202_ACCEPTED)

@@ -1,0 +1,150 @@
+"""Study server hot path: prediction POSTs (15 rows each) vs GET state, same server, same run.
+
+Starts a real `tomstudy serve` (1 worker, SQLite WAL) on the small test study, creates
+participants, then per round: every participant GETs its state (baseline), then every
+participant POSTs its trial's predictions. A raw asyncio HTTP/1.1 client keeps the load
+generator lighter than the server. Prints req/s and p99 of both and the POST/GET ratio.
+
+    .venv/bin/python benchmarks/study_writes.py [--participants 100] [--concurrency 50]
+"""
+
+import argparse
+import asyncio
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from tests.conftest import SmallStudy, build_small_study, free_port, start_server  # noqa: E402
+from tests.study.flow import prediction_body  # noqa: E402
+
+
+class RawClient:
+    """One keep-alive HTTP/1.1 connection; JSON in, (status, JSON) out."""
+
+    def __init__(self, port: int) -> None:
+        self.port = port
+        self.reader = self.writer = None
+
+    async def request(self, method: str, path: str, body: dict | None = None):
+        if self.writer is None:
+            self.reader, self.writer = await asyncio.open_connection("127.0.0.1", self.port)
+        data = json.dumps(body).encode() if body is not None else b""
+        head = (f"{method} {path} HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+                f"Content-Length: {len(data)}\r\n\r\n").encode()
+        self.writer.write(head + data)
+        await self.writer.drain()
+        status_line = await self.reader.readline()
+        length = 0
+        while (line := await self.reader.readline()) not in (b"\r\n", b""):
+            name, _, value = line.decode().partition(":")
+            if name.lower() == "content-length":
+                length = int(value)
+        payload = await self.reader.readexactly(length)
+        try:
+            return int(status_line.split()[1]), json.loads(payload)
+        except (ValueError, IndexError) as err:
+            raise RuntimeError(f"{method} {path}: bad answer {status_line!r} {payload[:200]!r}"
+                               ) from err
+
+
+async def timed_batch(clients, jobs) -> tuple[float, list[float]]:
+    """Run jobs (client -> coroutine factories) over the clients; (wall s, latencies s)."""
+    queue: asyncio.Queue = asyncio.Queue()
+    for job in jobs:
+        queue.put_nowait(job)
+    latencies: list[float] = []
+
+    async def worker(client):
+        while not queue.empty():
+            job = queue.get_nowait()
+            t0 = time.perf_counter()
+            status, _ = await job(client)
+            latencies.append(time.perf_counter() - t0)
+            assert status in (200, 201), status
+
+    start = time.perf_counter()
+    await asyncio.gather(*(worker(c) for c in clients))
+    return time.perf_counter() - start, latencies
+
+
+async def run(port: int, study_id: str, participants: int, concurrency: int) -> dict:
+    clients = [RawClient(port) for _ in range(concurrency)]
+    tokens = []
+    for i in range(participants):
+        _, body = await clients[0].request("POST", "/api/sessions", {
+            "study_id": study_id, "recruitment": {"PROLIFIC_PID": f"bench{i}"}})
+        tokens.append(body["session_token"])
+        for step in ("consent", "instructions"):
+            await clients[0].request("POST", f"/api/sessions/{body['session_token']}/{step}",
+                                     {"submission_id": _uuid(), "agree": True}
+                                     if step == "consent" else {"submission_id": _uuid()})
+    gets, posts, states = [], [], {}
+    for _ in range(3):
+        wall, lat = await timed_batch(clients, [get_job(t, states) for t in tokens])
+        gets.append((len(tokens) / wall, lat))
+        wall, lat = await timed_batch(clients, [post_job(t, states) for t in tokens])
+        posts.append((len(tokens) / wall, lat))
+    return {"get": gets, "post": posts}
+
+
+def get_job(token: str, states: dict):
+    """GET the state; remember it for the following POST."""
+    async def job(client):
+        status, body = await client.request("GET", f"/api/sessions/{token}/state")
+        states[token] = body
+        return status, body
+    return job
+
+
+def post_job(token: str, states: dict):
+    """POST a valid answer to the trial of the last GET."""
+    body = prediction_body(states[token]["step"])
+    return lambda client: client.request("POST", f"/api/sessions/{token}/predictions", body)
+
+
+def _uuid() -> str:
+    import uuid
+
+    return str(uuid.uuid4())
+
+
+def summarise(rounds) -> tuple[float, float]:
+    rates = [r for r, _ in rounds]
+    lat = np.concatenate([np.asarray(times) for _, times in rounds])
+    return float(np.median(rates)), float(np.percentile(lat, 99) * 1000)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--participants", type=int, default=100)
+    parser.add_argument("--concurrency", type=int, default=50)
+    args = parser.parse_args()
+    root = Path(tempfile.gettempdir()) / "tomstudy-bench-study"
+    if not (root / "done").exists():
+        build_small_study(root)
+        (root / "done").touch()
+    study = SmallStudy(root / "var", root / "configs")
+    port = free_port()
+    with tempfile.TemporaryDirectory() as tmp:
+        proc = start_server(study, f"sqlite:///{tmp}/bench.db", port)
+        try:
+            result = asyncio.run(run(port, study.study_id, args.participants, args.concurrency))
+        finally:
+            proc.terminate()
+            proc.wait(timeout=10)
+    get_rate, get_p99 = summarise(result["get"])
+    post_rate, post_p99 = summarise(result["post"])
+    print(f"GET state          : {get_rate:8.0f} req/s  p99 {get_p99:6.1f} ms  (baseline)")
+    print(f"POST predictions   : {post_rate:8.0f} req/s  p99 {post_p99:6.1f} ms  (15 rows each)")
+    print(f"ratio POST/GET     : {post_rate / get_rate:.2f}  "
+          f"({args.participants} participants, {args.concurrency} connections, SQLite WAL)")
+
+
+if __name__ == "__main__":
+    main()
