@@ -2,6 +2,8 @@
 
 import io
 import signal
+import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import httpx
@@ -53,6 +55,64 @@ def test_sigkill_mid_session_loses_no_acknowledged_submission(small_study, tmp_p
             assert len(frame) == len(acknowledged) * 15
             assert frame["submission_id"].nunique() == len(acknowledged)
             again.finish()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def test_sigkill_under_load_keeps_every_acknowledged_submission(small_study, tmp_path):
+    """Participants submit without pause while the server is killed; after a restart every
+    acknowledged submission is stored and each participant resumes where the rows end."""
+    db_url = f"sqlite:///{tmp_path / 'study.db'}"
+    port = free_port()
+    base = f"http://127.0.0.1:{port}"
+    proc = start_server(small_study, db_url, port, log=tmp_path / "server.log")
+    acknowledged: dict[str, list[str]] = {}
+    stop = threading.Event()
+
+    def keep_submitting(i: int) -> None:
+        with httpx.Client(base_url=base, timeout=5) as client:
+            p = Participant(client, small_study.study_id)
+            p.start(PROLIFIC_PID=f"load{i}")
+            p.pass_intro()
+            acknowledged[p.token] = []
+            while not stop.is_set():
+                try:
+                    state = p.state()
+                    if state["phase"] not in ("practice", "trial"):
+                        return
+                    body = prediction_body(state["step"])
+                    if p.post("predictions", body).status_code == 201:
+                        acknowledged[p.token].append(body["submission_id"])
+                except httpx.TransportError:
+                    return
+
+    threads = [threading.Thread(target=keep_submitting, args=(i,)) for i in range(4)]
+    try:
+        for t in threads:
+            t.start()
+        while sum(map(len, acknowledged.values())) < 6:
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+    finally:
+        stop.set()
+        for t in threads:
+            t.join(timeout=30)
+        if proc.poll() is None:
+            proc.kill()
+
+    proc = start_server(small_study, db_url, port, log=tmp_path / "server.log")
+    try:
+        frame = export(base, small_study.study_id)
+        stored = set(frame["submission_id"])
+        with httpx.Client(base_url=base, timeout=10) as client:
+            for token, ids in acknowledged.items():
+                assert set(ids) <= stored  # nothing acknowledged was lost
+                state = client.get(f"/api/sessions/{token}/state").json()
+                # at most one more than acknowledged: committed, answer lost in the kill
+                assert state["progress"]["done"] in (len(ids), len(ids) + 1)
+        assert frame.groupby("submission_id").size().eq(15).all()
     finally:
         proc.terminate()
         proc.wait(timeout=10)
