@@ -227,6 +227,13 @@ def serve(
 
         for study_id in study.split(","):
             prepare_study(settings, study_id, say=typer.echo)
+    from app.study.prepare import missing_inputs
+
+    for study_id in study.split(","):
+        missing = missing_inputs(settings, study_id)
+        if missing:
+            fail(f"{study_id}: missing {', '.join(map(str, missing))}; run "
+                 f"`tomstudy serve --prepare` (or simulate, train and build-trials)")
     engine = make_engine(settings.resolved_database_url())
     create_tables(engine)  # once, before workers race to create them
     engine.dispose()

@@ -36,6 +36,16 @@ def prepare_study(settings: Settings, study_id: str, n_trajectories: int = 2000,
     return build_trials(config, study_id, data_dir)
 
 
+def missing_inputs(settings: Settings, study_id: str) -> list[Path]:
+    """The files a server of `study_id` needs that do not exist (config errors raise)."""
+    config = load_study_config(settings, study_id)
+    data_dir = Path(settings.data_dir)
+    needed = [bank_dir(data_dir, study_id) / BANK_FILE]
+    needed += [data_dir / getattr(config.models[w], kind)
+               for w in config.worlds for kind in ("ours", "vae")]
+    return [path for path in needed if not path.is_file()]
+
+
 def ensure_trajectories(data_dir: Path, world: str, n: int, seed: int, say) -> None:
     """Simulate a world unless its trajectory file exists."""
     npz_path, meta_path = output_paths(data_dir, world)

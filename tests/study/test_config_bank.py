@@ -161,3 +161,12 @@ def test_in_memory_database_through_dependency_override(small_study, tmp_path):
         stored = session.execute(select(Participant)).scalars().one()
     assert stored.position == 1 and stored.recruitment == "anonymous"
     shutil.rmtree(tmp_path, ignore_errors=True)
+
+
+def test_serve_without_a_bank_says_what_is_missing(small_study, tmp_path):
+    env = small_study.env(f"sqlite:///{tmp_path / 'x.db'}", TOMSTUDY_DATA_DIR=str(tmp_path))
+    run = subprocess.run([str(Path(sys.executable).parent / "tomstudy"), "serve", "--port", "1",
+                          "--study", small_study.study_id],
+                         env=env, capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2
+    assert "bank.json" in run.stderr and "--prepare" in run.stderr
