@@ -18,13 +18,15 @@ class TrainConfig(StrictModel):
     levels: list[int] = Field(default_factory=lambda: [3, 3], min_length=1)
     encoder_hidden: list[int] = Field(default_factory=lambda: [128, 128])
     decoder_hidden: list[int] = Field(default_factory=lambda: [128, 128])
-    lr: float = Field(2e-3, gt=0)
-    batch_size: int = Field(256, ge=1)
-    max_epochs: int = Field(60, ge=1)
-    patience_epochs: int = Field(8, ge=1)
+    lr: float = Field(3e-3, gt=0)
+    batch_size: int = Field(512, ge=1)
+    max_epochs: int = Field(50, ge=1)
+    patience_epochs: int = Field(6, ge=1)
     beta_kl: float = Field(0.01, ge=0)
     pred_weight: float = Field(1.0, ge=0)
     recon_weight: float = Field(1.0, ge=0)
+    action_axis_weights: list[float] = Field(default_factory=lambda: [1.0, 1.0], min_length=2,
+                                             max_length=2)
     windows_per_trajectory: int = Field(20, ge=1)
     split_seed: int = Field(0, ge=0)
     val_fraction: float = Field(0.15, gt=0, lt=1)
@@ -36,6 +38,8 @@ class TrainConfig(StrictModel):
     def _check(self) -> "TrainConfig":
         if any(level < 2 for level in self.levels):
             raise ValueError("levels: every channel needs at least 2 levels")
+        if any(w <= 0 for w in self.action_axis_weights):
+            raise ValueError("action_axis_weights: both weights must be > 0")
         if any(h < 1 for h in self.encoder_hidden + self.decoder_hidden):
             raise ValueError("encoder_hidden/decoder_hidden: sizes must be >= 1")
         if self.val_fraction + self.test_fraction >= 0.9:

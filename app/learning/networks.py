@@ -75,12 +75,17 @@ class Normaliser:
     act_std: np.ndarray
 
     @classmethod
-    def fit(cls, features: np.ndarray, robot_actions: np.ndarray) -> "Normaliser":
-        """Per-channel mean/std of features [.., 8] and robot actions [.., 2]."""
+    def fit(cls, features: np.ndarray, robot_actions: np.ndarray,
+            action_axis_weights=(1.0, 1.0)) -> "Normaliser":
+        """Per-channel mean/std of features [.., 8] and robot actions [.., 2].
+
+        An action axis weight w scales that axis' normalised MSE by w: its std is divided
+        by sqrt(w), which leaves the un-normalised predictions exact."""
         feats = features.reshape(-1, 8).astype(np.float64)
         acts = robot_actions.reshape(-1, 2).astype(np.float64)
+        act_std = _safe_std(acts) / np.sqrt(np.asarray(action_axis_weights, dtype=np.float32))
         return cls(feats.mean(0).astype(np.float32), _safe_std(feats),
-                   acts.mean(0).astype(np.float32), _safe_std(acts))
+                   acts.mean(0).astype(np.float32), act_std.astype(np.float32))
 
     def features(self, feats: np.ndarray) -> np.ndarray:
         """Normalise features [.., T, 8] and flatten to [.., T*8]."""

@@ -87,10 +87,10 @@ def prepare_windows(trajs: TrajectorySet, cfg: TrainConfig) -> dict[str, Windows
     return windows
 
 
-def fit_normaliser(train: Windows) -> Normaliser:
-    """Train-split feature and robot-action statistics."""
+def fit_normaliser(train: Windows, cfg: TrainConfig) -> Normaliser:
+    """Train-split feature and robot-action statistics (action std scaled by axis weights)."""
     feats = segment_features(train.segment_positions, train.dt_s)
-    return Normaliser.fit(feats, train.actions[:, :, ROBOT])
+    return Normaliser.fit(feats, train.actions[:, :, ROBOT], cfg.action_axis_weights)
 
 
 def _epoch(model, data: SplitTensors, cfg: TrainConfig, gen: torch.Generator,
@@ -231,7 +231,7 @@ def train_model(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, ou
 def _train(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir: Path,
            data_meta: dict | None, progress: bool, vae_k: int | None, started: float) -> Path:
     windows = prepare_windows(trajs, cfg)
-    norm = fit_normaliser(windows["train"])
+    norm = fit_normaliser(windows["train"], cfg)
     train, val = split_tensors(windows["train"], norm), split_tensors(windows["val"], norm)
     args = model_args(cfg)
     model = build_model(kind, args)
