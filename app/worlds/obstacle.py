@@ -315,9 +315,9 @@ class ObstacleWorld:
             arrived = np.logical_or.accumulate(inside, axis=1)
             arrived_before = np.zeros_like(arrived)
             arrived_before[:, 1:] = arrived[:, :-1]
-            # an agent stops once it is inside its goal
-            velocity = np.where(arrived_before[..., None], 0.0, velocity)
-            path = agent_pos + np.cumsum(velocity * dt, axis=1)
+            if arrived_before.any():  # an agent stops once it is inside its goal
+                velocity = np.where(arrived_before[..., None], 0.0, velocity)
+                path = agent_pos + np.cumsum(velocity * dt, axis=1)
             to_go = self.fields.distance(goal, path)
             progress_m = -np.diff(to_go, axis=1, prepend=start_to_go)
             prev_velocity = np.concatenate(
