@@ -52,6 +52,26 @@ def exclusion_rules(config: dict) -> ExclusionRules:
         raise ConfigError(describe_validation_error(err, "exclusions")) from err
 
 
+WAIVABLE = ("failed_attention_check", "incomplete", "too_fast")
+
+
+def waive_rules(rules: ExclusionRules, waive: tuple[str, ...]) -> ExclusionRules:
+    """The rules with the named ones switched off (a sensitivity analysis, reported as such)."""
+    from app.configio import ConfigError
+
+    unknown = [w for w in waive if w not in WAIVABLE]
+    if unknown:
+        raise ConfigError(f"waive: unknown rule(s) {', '.join(unknown)}; "
+                          f"choose from {', '.join(WAIVABLE)}")
+    changes: dict = {}
+    for rule in waive:
+        if rule == "too_fast":
+            changes.update(too_fast_trial_ms=0.0, too_fast_max_fraction=1.0)
+        else:
+            changes[rule] = False
+    return rules.model_copy(update=changes)
+
+
 def checkpoint_hashes(config: dict, data_dir: Path) -> dict:
     """SHA-256 of each configured checkpoint file (None where the file is absent)."""
     from app.fileio import sha256_file
@@ -104,14 +124,14 @@ def per_code(kept: pd.DataFrame) -> dict:
 
 
 def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, configs_dir: Path,
-            data_dir: Path, source: str) -> dict:
+            data_dir: Path, source: str, waive: tuple[str, ...] = ()) -> dict:
     """Run the whole analysis on the export rows and write the report folder."""
     started = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     steps = tqdm(total=6, desc="analyze", unit="step")
     config = read_study_config(configs_dir, study_id)
-    rules = exclusion_rules(config)
+    rules = waive_rules(exclusion_rules(config), waive)
     frame = frame[frame["study_id"] == study_id].reset_index(drop=True)
     if frame.empty:
         from app.configio import ConfigError
@@ -120,6 +140,11 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, configs_dir: Path
     digest = data_hash(frame)
     steps.update(1)
     exclusions = apply_exclusions(frame, rules)
+    if exclusions.kept.empty:
+        from app.configio import ConfigError
+
+        raise ConfigError(f"exclusions: every participant was excluded {exclusions.counts()}; "
+                          "a sensitivity analysis can waive a rule with --waive RULE")
     kept = add_alignment_errors(exclusions.kept)
     means = participant_means(kept)
     steps.update(1)
@@ -135,7 +160,8 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, configs_dir: Path
     per_participant.to_csv(out_dir / "per_participant.csv", index=False, float_format="%.10g")
     summary = {
         "study_id": study_id, "source": source, "alpha": ALPHA,
-        "exclusion_rules": rules.model_dump(), "exclusions": exclusions.counts(),
+        "exclusion_rules": rules.model_dump(), "waived_rules": list(waive),
+        "exclusions": exclusions.counts(),
         "excluded_participants": exclusions.participants_excluded,
         "zero_vectors": zero_vector_counts(kept),
         "worlds": world_summary(means, ade),
@@ -209,6 +235,7 @@ def render_html(summary: dict, pngs: list[Path]) -> str:
             for k in ("ade", "fde")) + "</tr>")
     excl = "".join(f"<tr><td>{html.escape(k)}</td><td>{v}</td></tr>"
                    for k, v in summary["exclusions"].items())
+    waived = html.escape(", ".join(summary["waived_rules"]) or "none")
     zero = ", ".join(f"{k}: {v}" for k, v in summary["zero_vectors"].items())
     images = "".join(
         f"<figure><img alt='{html.escape(p.stem)}' src='data:image/png;base64,"
@@ -233,7 +260,7 @@ participants.</p>
 <table><tr>{head}</tr>{''.join(rows)}</table>
 <h2>Displacement from the clicked positions [m]</h2><table><tr><th>world</th>{dhead}</tr>
 {''.join(disp)}</table>
-<h2>Exclusions</h2><table>{excl}</table>
+<h2>Exclusions</h2><p>Waived rules (sensitivity analysis): {waived}.</p><table>{excl}</table>
 <p>Actions shorter than 1e-6 m/s (alignment error defined as 1): {html.escape(zero)}.</p>
 <h2>Figures</h2>{images}
 <p>Every number above is in summary.json and per_participant.csv next to this file.</p>
@@ -242,7 +269,7 @@ participants.</p>
 
 
 def run_analyze(study_id: str, out_dir: Path, csv: Path | None, database_url: str,
-                configs_dir: Path, data_dir: Path) -> dict:
+                configs_dir: Path, data_dir: Path, waive: tuple[str, ...] = ()) -> dict:
     """Load from the CSV (if given) or the database, analyse, print the headline numbers."""
     from analysis.load import load_database
 
@@ -250,7 +277,7 @@ def run_analyze(study_id: str, out_dir: Path, csv: Path | None, database_url: st
         frame, source = load_csv(csv), f"csv {csv}"
     else:
         frame, source = load_database(database_url, study_id), "database"
-    summary = analyze(frame, study_id, out_dir, configs_dir, data_dir, source)
+    summary = analyze(frame, study_id, out_dir, configs_dir, data_dir, source, waive)
     for world, res in summary["ours_vs_vae"].items():
         w = summary["worlds"][world]
         print(f"{world}: n={res['n']} Ours {w['err_ours']['mean']:.3f} VAE "

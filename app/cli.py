@@ -140,6 +140,8 @@ def analyze(
     out: Annotated[Path | None, typer.Option(help="report folder")] = None,
     csv: Annotated[Path | None, typer.Option(help="an exported CSV")] = None,
     database_url: Annotated[str | None, typer.Option(help="read the database instead")] = None,
+    waive: Annotated[list[str] | None, typer.Option(help="switch off an exclusion rule "
+                                                    "(sensitivity analysis; repeatable)")] = None,
 ) -> None:
     """Alignment error, paired tests, figures and a self-contained report."""
     from analysis.report import run_analyze
@@ -151,7 +153,7 @@ def analyze(
     settings = get_settings()
     out = out or settings.data_dir / "reports" / study
     run_analyze(study, out, csv, database_url or settings.resolved_database_url(),
-                settings.configs_dir, settings.data_dir)
+                settings.configs_dir, settings.data_dir, tuple(waive or ()))
 
 
 @cli.command()
