@@ -3,13 +3,15 @@
 Run: .venv/bin/python benchmarks/bench_train.py [--worlds highway obstacle] [--models ours vae]
 Needs var/data/<world>/trajectories.npz (`make data`). Prints:
 - wall time of `train_model` (default training.yaml) per model and world; target < 60 s
-  on 2000 trajectories;
+  on 2000 trajectories (its CPU time and the load average are printed too: on a machine
+  shared with other jobs, wall time overstates the cost);
 - one trial (encode one segment, predict n steps from 5 states) through `TrainedModel.trial`,
   as a ratio to a plain-numpy forward of the same weights measured in the same run
   (target <= 3x); the torch forward (inference_mode) of the same trial for reference.
 """
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -90,13 +92,15 @@ def main() -> int:
         trajs = TrajectorySet.load(npz)
         with tempfile.TemporaryDirectory() as tmp:
             for kind in args.models:
-                started = time.perf_counter()
+                started, cpu_started = time.perf_counter(), time.process_time()
                 ckpt = train_model(trajs, kind, 0, cfg, Path(tmp) / kind, progress=False)
                 wall = time.perf_counter() - started
+                cpu = time.process_time() - cpu_started
                 t = time_trial(ckpt, trajs)
                 ratio = t["api_us"] / t["bare_us"]
-                print(f"{world:9s} {kind:5s} train {wall:6.1f} s on {len(trajs)} trajectories "
-                      f"(target < {TRAIN_TARGET_S:.0f} s, ratio {wall / TRAIN_TARGET_S:.2f}) | "
+                print(f"{world:9s} {kind:5s} train {wall:6.1f} s wall ({cpu:5.1f} s CPU) on "
+                      f"{len(trajs)} trajectories (target < {TRAIN_TARGET_S:.0f} s, ratio "
+                      f"{wall / TRAIN_TARGET_S:.2f}; load average {os.getloadavg()[0]:.1f}) | "
                       f"trial {t['api_us']:6.1f} us vs bare numpy {t['bare_us']:5.1f} us = "
                       f"{ratio:.2f}x (target <= {INFERENCE_TARGET_RATIO:.0f}x); "
                       f"torch {t['torch_us']:6.1f} us = {t['torch_us'] / t['bare_us']:.2f}x")

@@ -10,7 +10,7 @@ import numpy as np
 
 from app.fileio import atomic_path, write_json
 from app.learning.checkpoint import TrainedModel, load_model
-from app.worlds.scene import HUMAN_COLOR, ROBOT_COLOR, Scene, draw_scene
+from app.worlds.scene import HUMAN_COLOR, Scene, draw_scene
 
 
 def grid_points(scene: Scene, grid_n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -47,12 +47,24 @@ def vector_field(model: TrainedModel, scene: Scene, human_position, grid_n: int)
             "human_position": [float(v) for v in human_position], "codes": fields}
 
 
+def primary_label(names) -> str | None:
+    """The robot label a title reports: one with a derived variant (intent/goal) first."""
+    names = list(names)
+    derived = [n for n in names if n.startswith("robot_")
+               and (f"{n}_in_progress" in names or f"{n}_before_arrival" in names)]
+    robot = [n for n in names if n.startswith("robot_")]
+    return (derived or robot or names or [None])[0]
+
+
 def _title(model: TrainedModel, entry: dict) -> str:
-    label = next(iter(entry["majority"].items()), None)
-    what = f"{label[1]['label']} ({label[1]['fraction']:.0%})" if label else "no label"
-    name = "code" if model.kind == "ours" else "cluster"
-    return f"{model.world} / {model.kind}: {name} {entry['code']}, {entry['share']:.0%} of " \
-           f"windows, mostly {what}"
+    name = primary_label(entry["majority"])
+    what = "no label"
+    if name:
+        top = entry["majority"][name]
+        what = f"{name} = {top['label']} ({top['fraction']:.0%})"
+    kind = "code" if model.kind == "ours" else "k-means cluster"
+    return f"{model.world} / {model.kind}: {kind} {entry['code']}, {entry['share']:.0%} of " \
+           f"validation windows; mostly {what}"
 
 
 def _plot_field(model: TrainedModel, scene: Scene, field: dict, entry: dict, path: Path) -> None:
@@ -67,8 +79,12 @@ def _plot_field(model: TrainedModel, scene: Scene, field: dict, entry: dict, pat
     draw_scene(ax, scene)
     gx, gy = np.meshgrid(field["xs"], field["ys"])
     actions = np.asarray(entry["actions"]).reshape(len(field["ys"]), len(field["xs"]), 2)
-    ax.quiver(gx, gy, actions[..., 0], actions[..., 1], color=ROBOT_COLOR, angles="xy",
-              pivot="mid", zorder=3)
+    # colour by the y component so that lateral moves (merges) stand out even where
+    # the x component dominates the arrow's length
+    limit = max(float(np.abs(actions[..., 1]).max()), 1e-3)
+    arrows = ax.quiver(gx, gy, actions[..., 0], actions[..., 1], actions[..., 1], cmap="PuOr_r",
+                       clim=(-limit, limit), angles="xy", pivot="mid", zorder=3)
+    fig.colorbar(arrows, ax=ax, shrink=0.6, pad=0.01, label="vy [m/s] (y grows downwards)")
     hx, hy = field["human_position"]
     ax.plot([hx], [hy], "o", color=HUMAN_COLOR, markersize=10, markeredgecolor="k",
             zorder=4, label="human (fixed)")

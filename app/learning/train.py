@@ -179,13 +179,19 @@ def code_summary(codes: np.ndarray, windows: Windows, label_names: dict,
         mask = codes == int(code_str)
         majority = {}
         for name, values in labels.items():
+            classes = label_names.get(name) or label_names.get(_base_label(name, label_names))
             scored = values[mask & (values >= 0)]
-            if len(scored) and name in label_names:
+            if len(scored) and classes:
                 top = int(np.bincount(scored).argmax())
-                majority[name] = {"label": label_names[name][top],
+                majority[name] = {"label": classes[top],
                                   "fraction": float((scored == top).mean())}
         summary.append({"code": int(code_str), "share": float(share), "majority": majority})
     return {"used": summary, "n_codes_used": len(summary), "perplexity": usage["perplexity"]}
+
+
+def _base_label(name: str, label_names: dict) -> str | None:
+    """The raw label a derived one (e.g. robot_intent_in_progress) comes from."""
+    return next((base for base in label_names if name.startswith(base + "_")), None)
 
 
 def _plot_losses(history: list[dict], path: Path, title: str) -> None:

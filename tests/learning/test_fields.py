@@ -48,3 +48,14 @@ def test_cli_fields_and_train_give_clean_errors(tmp_path, monkeypatch):
         assert result.exit_code == 2 and "unknown model" in result.output
     finally:
         get_settings.cache_clear()
+
+
+def test_code_summaries_name_the_robot_label_first(trained):
+    from app.learning.fields import primary_label
+
+    model = load_model(trained["ours"])
+    majority = model.codes["used"][0]["majority"]
+    assert {"robot_intent", "robot_intent_in_progress"} <= set(majority)
+    assert majority["robot_intent"]["label"] in ("keep", "left", "right")
+    assert primary_label(majority) == "robot_intent"
+    assert primary_label(["robot_goal_before_arrival", "human_goal", "robot_goal"]) == "robot_goal"
