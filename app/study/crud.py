@@ -144,7 +144,7 @@ def counted_participants(db: Session, ctx: StudyContext) -> list[Participant]:
             failed = p.attention_failed > 0 and ctx.config.exclusions.failed_attention_check
             if not failed and p.id not in too_fast:
                 counted.append(p)
-        elif _aware(p.updated_at) >= cutoff:
+        elif as_utc(p.updated_at) >= cutoff:
             counted.append(p)
     return counted
 
@@ -163,7 +163,7 @@ def too_fast_participants(db: Session, ctx: StudyContext, ids: list[int]) -> set
             > rule.too_fast_max_fraction}
 
 
-def _aware(moment):
+def as_utc(moment):
     """SQLite returns naive datetimes; they were written in UTC."""
     return moment if moment.tzinfo else moment.replace(tzinfo=utcnow().tzinfo)
 
@@ -512,7 +512,14 @@ def record_events(db: Session, participant: Participant, body: EventsCreate) -> 
     rows = list({r["submission_id"]: r for r in rows}.values())
     conn = db.connection()
     before = _count_events(conn, participant.id)
-    conn.execute(_insert_ignore(conn.dialect.name, Event.__table__), rows)
+    if conn.dialect.name in ("postgresql", "sqlite"):
+        conn.execute(_insert_ignore(conn.dialect.name, Event.__table__), rows)
+    else:  # portable fallback: skip UUIDs already stored, then insert
+        known = set(conn.execute(select(Event.submission_id).where(
+            Event.submission_id.in_([r["submission_id"] for r in rows]))).scalars())
+        fresh = [r for r in rows if r["submission_id"] not in known]
+        if fresh:
+            conn.execute(Event.__table__.insert(), fresh)
     stored = _count_events(conn, participant.id) - before
     db.commit()
     return stored
@@ -525,8 +532,5 @@ def _count_events(conn, participant_id: int) -> int:
 
 def _insert_ignore(dialect: str, table):
     """INSERT that skips rows whose unique key exists (SQLite and PostgreSQL)."""
-    if dialect == "postgresql":
-        return postgresql.insert(table).on_conflict_do_nothing()
-    if dialect == "sqlite":
-        return sqlite.insert(table).on_conflict_do_nothing()
-    raise Refused(500, f"database: {dialect} is not supported for telemetry")
+    module = postgresql if dialect == "postgresql" else sqlite
+    return module.insert(table).on_conflict_do_nothing()

@@ -7,7 +7,7 @@ import pandas as pd
 from sqlalchemy import select
 from sqlmodel import Session
 
-from app.study.crud import StudyContext, _aware
+from app.study.crud import StudyContext, as_utc
 from app.study.tables import Participant, PredictionRow, TrialResponse, utcnow
 
 EXPORT_COLUMNS = (
@@ -39,7 +39,7 @@ def export_frame(db: Session, study_id: str) -> pd.DataFrame:
     rows = db.execute(query).mappings().all()
     frame = pd.DataFrame(rows, columns=list(rows[0].keys()) if rows else list(EXPORT_COLUMNS))
     if len(frame):
-        frame["submitted_at"] = [_aware(t).isoformat() for t in frame["submitted_at"]]
+        frame["submitted_at"] = [as_utc(t).isoformat() for t in frame["submitted_at"]]
         for col in ("completed", "attention_passed", "is_practice", "attention_check"):
             frame[col] = frame[col].astype(bool)
     return frame[list(EXPORT_COLUMNS)]
@@ -58,7 +58,7 @@ def progress(db: Session, ctx: StudyContext) -> dict:
     people = db.execute(select(Participant).where(
         Participant.study_id == ctx.study_id)).scalars().all()
     completed = [p for p in people if p.completed]
-    active = [p for p in people if not p.completed and _aware(p.updated_at) >= cutoff]
+    active = [p for p in people if not p.completed and as_utc(p.updated_at) >= cutoff]
     orders: dict[str, dict[str, int]] = {}
     for p in people:
         entry = orders.setdefault(p.world_order, {"completed": 0, "in_progress": 0})
