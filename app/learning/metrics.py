@@ -67,6 +67,8 @@ def agreement(codes: np.ndarray, labels: dict[str, np.ndarray]) -> dict:
             continue
         result[name] = {
             "purity": purity(codes[keep], values[keep]),
+            # purity of a single cluster: the floor any clustering reaches
+            "majority": float(np.bincount(values[keep]).max() / keep.sum()),
             "nmi": float(normalized_mutual_info_score(values[keep], codes[keep])),
             "n_windows": int(keep.sum()),
         }

@@ -26,7 +26,7 @@ def test_purity_and_usage_on_a_small_example():
     assert code_usage(np.arange(8))["perplexity"] == pytest.approx(8)
     perfect = agreement(codes, {"x": np.array([0, 0, 0, 1, 1, SKIP])})
     assert perfect["x"]["purity"] == 1 and perfect["x"]["nmi"] == pytest.approx(1)
-    assert perfect["x"]["n_windows"] == 5
+    assert perfect["x"]["n_windows"] == 5 and perfect["x"]["majority"] == pytest.approx(0.6)
 
 
 def test_trajectory_errors_integrate_velocities():
