@@ -36,7 +36,7 @@ POS_DECIMALS = 3
 HEADING_DECIMALS = 4
 STEP_PERCENTILE = 99.5
 CANDIDATE_SUBSET = 40
-EXTRA_CANDIDATES = 60  # built beyond the bank's needs, so attention checks have a choice
+EXTRA_CANDIDATES = 40  # segments tried as attention checks (the most obvious win)
 
 
 @dataclass
@@ -115,11 +115,15 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
         raise ValueError(f"{world.name}: only {len(candidates)} held-out trajectories give a "
                          f"usable segment, the bank needs {needed}; simulate more")
     scene = trajs.scene.model_dump()
-    built = []
-    for src, start, end in tqdm(candidates[:needed + EXTRA_CANDIDATES],
-                                desc=f"build-trials {world.name}", unit="trial"):
-        built.append(make_trial(config, inputs, src, start, end, max_step, scene, rng))
-    kinds, straightness = assign_kinds(config, built)
+    regular = config.bank_trials_per_world + config.practice_trials
+    built = [make_trial(config, inputs, src, start, end, max_step, scene, rng)
+             for src, start, end in tqdm(candidates[:regular], desc=f"build-trials {world.name}",
+                                         unit="trial")]
+    kinds = ["practice"] * config.practice_trials + ["main"] * config.bank_trials_per_world
+    checks, straightness = attention_trials(config, inputs, candidates[regular:], max_step,
+                                            scene, rng)
+    built += checks
+    kinds += ["attention"] * len(checks)
     trials = [t.model_copy(update={"kind": kind, "trial_id": f"{world.name}-{kind}-{i:03d}"})
               for kind in ("main", "practice", "attention")
               for i, t in enumerate(t for t, k in zip(built, kinds, strict=True) if k == kind)]
@@ -208,7 +212,8 @@ def visible_ends(trajs: TrajectorySet, i: int, history: int, n_after: int) -> np
 # ---------------------------------------------------------------- one trial
 
 def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, end: int,
-               max_step: float, scene: dict, rng: np.random.Generator) -> TrialRecord:
+               max_step: float, scene: dict, rng: np.random.Generator,
+               near: bool = False) -> TrialRecord:
     """Examples, segment, start states and every predictor's answers for one segment."""
     trajs = inputs.trajs
     label_name = inputs.world.robot_label
@@ -216,7 +221,7 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
     history = max(m.segment_len for m in inputs.models.values())
     model_input = clip_of(trajs, src, end - history, end, label_name)
     segment = np.asarray(shown.positions)
-    states = start_states(trajs, src, end, segment[-1], max_step, rng)
+    states = start_states(trajs, src, end, segment, max_step, rng, near)
     examples = [clip_of(trajs, e, 0, int(trajs.lengths[e]), label_name)
                 for e in pick_examples(trajs, inputs.held_out, src, label_name,
                                        config.examples_per_trial, rng)]
@@ -265,12 +270,17 @@ def pick_examples(trajs: TrajectorySet, held_out: np.ndarray, src: int, label_na
     return interleave({k: groups[key] for k, key in enumerate(order)})[:count]
 
 
-def start_states(trajs: TrajectorySet, src: int, end: int, joint_end: np.ndarray,
-                 max_step: float, rng: np.random.Generator) -> list[StartState]:
-    """The robot's segment-end state plus others spread over free space; human fixed."""
-    robot, human = joint_end[ROBOT], joint_end[HUMAN]
+def start_states(trajs: TrajectorySet, src: int, end: int, segment: np.ndarray,
+                 max_step: float, rng: np.random.Generator, near: bool = False
+                 ) -> list[StartState]:
+    """The robot's segment-end state plus 4 others (spread over free space, or `near` it);
+    the human stays at its segment-end position."""
+    robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
     k = 5
-    candidates = free_points(trajs.scene, robot, human, max_step)
+    if near:
+        candidates = near_points(trajs.scene, segment, max_step)
+    else:
+        candidates = free_points(trajs.scene, robot, human, max_step)
     if len(candidates) > CANDIDATE_SUBSET:
         candidates = candidates[rng.choice(len(candidates), CANDIDATE_SUBSET, replace=False)]
     chosen = farthest_points(robot, candidates, k - 1)
@@ -282,6 +292,31 @@ def start_states(trajs: TrajectorySet, src: int, end: int, joint_end: np.ndarray
                        robot_heading=round(float(heading[ROBOT]), HEADING_DECIMALS),
                        human_heading=round(float(heading[HUMAN]), HEADING_DECIMALS),
                        robot_speed=round(speed, 4)) for p in points]
+
+
+def near_points(scene, segment: np.ndarray, max_step: float) -> np.ndarray:
+    """Points 0.5-1 step beside or behind the robot's segment end, inside free space."""
+    robot = segment[-1, ROBOT]
+    motion = segment[-1, ROBOT] - segment[-2, ROBOT]
+    ahead = motion / (np.linalg.norm(motion) + 1e-12)
+    side = np.array([-ahead[1], ahead[0]])
+    offsets = [a * ahead + b * side for a in (-1.0, -0.5, 0.0) for b in (-1.0, -0.5, 0.5, 1.0)]
+    pts = robot + max_step * np.array(offsets + [-ahead, -0.5 * ahead])
+    b = scene.bounds
+    ends = pts + 3 * max_step * ahead  # the obvious continuation must stay in view
+    keep = np.ones(len(pts), dtype=bool)
+    for p in (pts, ends):
+        keep &= (p[:, 0] > b.x_min_m) & (p[:, 0] < b.x_max_m) \
+            & (p[:, 1] > b.y_min_m) & (p[:, 1] < b.y_max_m)
+    if scene.lanes:  # stay on the road
+        top = min(lane.y_center_m - lane.width_m / 2 for lane in scene.lanes)
+        bottom = max(lane.y_center_m + lane.width_m / 2 for lane in scene.lanes)
+        keep &= (pts[:, 1] > top + 1.0) & (pts[:, 1] < bottom - 1.0)
+    for c in scene.obstacles:
+        keep &= np.hypot(pts[:, 0] - c.x_m, pts[:, 1] - c.y_m) > c.radius_m + 0.3
+    human = segment[-1, HUMAN]
+    keep &= np.linalg.norm(pts - human, axis=1) > 2 * max(a.width_m for a in scene.agents)
+    return pts[keep]
 
 
 def free_points(scene, robot: np.ndarray, human: np.ndarray, max_step: float) -> np.ndarray:
@@ -332,18 +367,28 @@ def obviousness_deg(trial: TrialRecord) -> float:
     return float(np.degrees(np.arccos(np.clip(cos, -1, 1))).max())
 
 
-def assign_kinds(config: StudyConfig, built: list[TrialRecord]) -> tuple[list[str], dict]:
-    """Most obvious trials become attention checks, then practice, then main ("" = unused)."""
-    angles = [obviousness_deg(t) for t in built]
-    kinds = [""] * len(built)
-    for i in np.argsort(angles, kind="stable")[: config.attention_checks.per_world]:
-        kinds[int(i)] = "attention"
-    rest = [i for i, k in enumerate(kinds) if not k]
-    for i in rest[: config.practice_trials]:
-        kinds[i] = "practice"
-    for i in rest[config.practice_trials: config.practice_trials
-                  + config.bank_trials_per_world]:
-        kinds[i] = "main"
-    chosen = [angles[i] for i, k in enumerate(kinds) if k == "attention"]
-    meets = all(a <= config.attention_checks.candidate_max_angle_deg for a in chosen)
-    return kinds, {"chosen": [round(a, 2) for a in chosen], "meets_candidate_rule": meets}
+def attention_trials(config: StudyConfig, inputs: WorldInputs, candidates: list, max_step: float,
+                     scene: dict, rng: np.random.Generator) -> tuple[list[TrialRecord], dict]:
+    """The most obvious of up to EXTRA_CANDIDATES segments, start states near the robot.
+
+    Start states a step or so beside and behind the robot keep it in the situation the
+    segment shows, so "it keeps doing what it was doing" is the plainly right answer.
+    """
+    rule = config.attention_checks
+    pool = []
+    for src, start, end in tqdm(candidates[:EXTRA_CANDIDATES],
+                                desc=f"attention checks {inputs.world.name}", unit="trial"):
+        try:
+            pool.append(make_trial(config, inputs, src, start, end, max_step, scene, rng,
+                                   near=True))
+        except ValueError:  # too little free room around the robot for 4 start states
+            continue
+    angles = [obviousness_deg(t) for t in pool]
+    chosen = [int(i) for i in np.argsort(angles, kind="stable")[: rule.per_world]]
+    if len(chosen) < rule.per_world:
+        raise ValueError(f"{inputs.world.name}: not enough segments left for "
+                         f"{rule.per_world} attention check(s); simulate more")
+    picked = [round(angles[i], 2) for i in chosen]
+    return [pool[i] for i in chosen], {
+        "chosen": picked, "candidates": len(pool),
+        "meets_candidate_rule": all(a <= rule.candidate_max_angle_deg for a in picked)}
