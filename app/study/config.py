@@ -29,10 +29,12 @@ class SegmentSteps(StrictModel):
 class AttentionChecks(StrictModel):
     """Trials whose answer is obvious: the robot keeps moving the way it plainly moves.
 
-    The bank picks, per world, the trials where the world's own policy from every start
-    state moves within `candidate_max_angle_deg` of the robot's last segment velocity.
-    A participant passes one if, in at least `min_passing_starts` of the start states,
-    the first clicked move is within `max_angle_deg` of the policy's first move.
+    For these trials the bank places the start states a step beside or behind the
+    robot, and picks the segments where the world's own policy from every start state
+    moves closest to the robot's last segment velocity (meta.json reports the angle and
+    whether it is within `candidate_max_angle_deg`). A participant passes one if, in at
+    least `min_passing_starts` of the start states, the first clicked move is within
+    `max_angle_deg` of the policy's first move.
     """
 
     per_world: int = Field(default=1, ge=0)
