@@ -170,8 +170,11 @@ def complete_session(page, base_url: str) -> dict:
     page.clock.fast_forward(1200)
     page.screenshot(path=str(SCREENSHOTS / "clip.png"))
     check_input_rules(page)
-    page.set_viewport_size(RESIZED)  # logged as a resize event
-    page.clock.fast_forward(1500)
+    page.set_viewport_size(RESIZED)  # logged as a resize event once the size settles
+    page.wait_for_function("w => innerWidth === w", arg=RESIZED["width"])
+    page.clock.fast_forward(500)
+    with page.expect_request(lambda r: r.url.endswith("/events") and "resize" in r.post_data):
+        page.clock.fast_forward(1500)  # the telemetry batch goes out
     page.reload()  # a refresh resumes the same trial through the token in sessionStorage
     visible(page, "trial")
     assert "Practice" in page.inner_text("#trial-heading")

@@ -139,6 +139,8 @@ class ParticipantApp {
       this.telemetry.log(hidden ? "visibility_hidden" : "visibility_shown");
       if (hidden) this.telemetry.flush({ keepalive: true });
     });
+    // A reload or close may skip visibilitychange: send what is queued while the page goes.
+    addEventListener("pagehide", () => this.telemetry.flush({ keepalive: true }));
     let resizeTimer = null;
     addEventListener("resize", () => {
       clearTimeout(resizeTimer);
