@@ -64,7 +64,7 @@ def _title(model: TrainedModel, entry: dict) -> str:
         what = f"{name} = {top['label']} ({top['fraction']:.0%})"
     kind = "code" if model.kind == "ours" else "k-means cluster"
     return f"{model.world} / {model.kind}: {kind} {entry['code']}, {entry['share']:.0%} of " \
-           f"validation windows; mostly {what}"
+           f"validation windows\nmostly {what}"
 
 
 def _plot_field(model: TrainedModel, scene: Scene, field: dict, entry: dict, path: Path) -> None:
