@@ -40,6 +40,8 @@ class DataError(ValueError):
 
 
 def _as_bool(values: pd.Series) -> pd.Series:
+    if pd.api.types.is_bool_dtype(values) and not values.isna().any():
+        return values.astype(bool)
     text = values.astype("string").str.strip().str.lower()
     mapped = text.map({"true": True, "1": True, "t": True, "false": False, "0": False,
                        "f": False, "1.0": True, "0.0": False})
@@ -58,7 +60,7 @@ def normalise(frame: pd.DataFrame) -> pd.DataFrame:
     for col in EXPORT_COLUMNS:
         values = frame[col]
         if col in STRING_COLUMNS:
-            out[col] = values.astype(object).where(values.notna(), "").astype(str)
+            out[col] = values.fillna("").astype(str) if values.hasnans else values.astype(str)
         elif col in BOOL_COLUMNS:
             out[col] = _as_bool(values)
         elif col in INT_COLUMNS:
@@ -70,8 +72,15 @@ def normalise(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 def load_csv(path: Path) -> pd.DataFrame:
-    """The export CSV as a normalised DataFrame."""
-    raw = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
+    """The export CSV as a normalised DataFrame (typed while parsing, which is fast)."""
+    dtypes = {c: str for c in STRING_COLUMNS}
+    dtypes |= {c: np.float64 for c in (*FLOAT_COLUMNS, *INT_COLUMNS)}
+    try:
+        raw = pd.read_csv(path, dtype=dtypes, keep_default_na=False,
+                          na_values={c: [""] for c in (*FLOAT_COLUMNS, *INT_COLUMNS)},
+                          true_values=["True", "true"], false_values=["False", "false"])
+    except ValueError as err:
+        raise DataError(f"{path}: {err}") from err
     return normalise(raw)
 
 

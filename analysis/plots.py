@@ -8,6 +8,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
 
 from analysis.stats import PairedResult, mean_ci95  # noqa: E402
 
@@ -40,9 +41,9 @@ def plot_errors(means: pd.DataFrame, results: dict[str, PairedResult], base: Pat
         group = means[means["world"] == world]
         jitter = rng.uniform(-0.08, 0.08, size=len(group))
         values = np.stack([group[f"err_{m}"].to_numpy() for m in models])
-        for row in range(values.shape[1]):
-            ax.plot(np.arange(len(models)) + jitter[row], values[:, row], color="#bbbbbb",
-                    lw=0.7, zorder=1)
+        xs = np.arange(len(models))[None, :] + jitter[:, None]
+        lines = np.stack([xs, values.T], axis=-1)  # one polyline per participant
+        ax.add_collection(LineCollection(lines, colors="#bbbbbb", linewidths=0.7, zorder=1))
         for i, model in enumerate(models):
             ax.scatter(i + jitter, values[i], s=12, color=MODEL_COLORS[model], alpha=0.6,
                        zorder=2, edgecolor="none")
@@ -65,9 +66,23 @@ def plot_errors(means: pd.DataFrame, results: dict[str, PairedResult], base: Pat
     return save(fig, base)
 
 
-def top_codes(frame: pd.DataFrame, model: str, k: int) -> list[int]:
+def state_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per (trial, start state): position, participants' mean first move, each model's first
+    move and code, and the sums and counts of each model's error over all steps."""
+    first = rows[rows["step"] == rows["step"].min()]
+    table = first.groupby(["trial_id", "start_index"], sort=True).agg(
+        x=("start_x", "first"), y=("start_y", "first"), human_vx=("human_vx", "mean"),
+        human_vy=("human_vy", "mean"), ours_vx=("ours_vx", "first"),
+        ours_vy=("ours_vy", "first"), vae_vx=("vae_vx", "first"), vae_vy=("vae_vy", "first"),
+        ours_code=("ours_code", "first"), vae_code=("vae_code", "first"))
+    errors = rows.groupby(["trial_id", "start_index"], sort=True).agg(
+        ours_sum=("err_ours", "sum"), vae_sum=("err_vae", "sum"), count=("err_ours", "size"))
+    return table.join(errors).reset_index()
+
+
+def top_codes(states: pd.DataFrame, model: str, k: int) -> list[int]:
     """The model's k most common latent codes over the answered trials (trials, not rows)."""
-    trials = frame.drop_duplicates(["trial_id"])
+    trials = states.drop_duplicates(["trial_id"])
     return trials[f"{model}_code"].value_counts().index[:k].tolist()
 
 
@@ -77,7 +92,7 @@ def _unit(vx: np.ndarray, vy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return vx / norm, vy / norm
 
 
-def field_panel(ax, rows: pd.DataFrame, model: str, scene, arrow_m: float) -> float:
+def field_panel(ax, states: pd.DataFrame, model: str, scene, arrow_m: float) -> float:
     """Participants' mean first move and the model's at each start state (unit arrows)."""
     from app.worlds.scene import draw_scene
 
@@ -86,16 +101,12 @@ def field_panel(ax, rows: pd.DataFrame, model: str, scene, arrow_m: float) -> fl
     else:
         ax.invert_yaxis()
         ax.set_aspect("equal")
-    first = rows[rows["step"] == rows["step"].min()]
-    per_state = first.groupby(["trial_id", "start_index"]).agg(
-        x=("start_x", "first"), y=("start_y", "first"), hx=("human_vx", "mean"),
-        hy=("human_vy", "mean"), mx=(f"{model}_vx", "first"), my=(f"{model}_vy", "first"))
-    for who, (cx, cy), width in (("human", ("hx", "hy"), 0.006), (model, ("mx", "my"), 0.004)):
-        ux, uy = _unit(per_state[cx].to_numpy(), per_state[cy].to_numpy())
-        ax.quiver(per_state["x"], per_state["y"], ux * arrow_m, uy * arrow_m, angles="xy",
+    for who, width in (("human", 0.006), (model, 0.004)):
+        ux, uy = _unit(states[f"{who}_vx"].to_numpy(), states[f"{who}_vy"].to_numpy())
+        ax.quiver(states["x"], states["y"], ux * arrow_m, uy * arrow_m, angles="xy",
                   scale_units="xy", scale=1, color=MODEL_COLORS[who], width=width, zorder=4,
                   label=MODEL_LABELS[who])
-    return float(rows[f"err_{model}"].mean()) if f"err_{model}" in rows else float("nan")
+    return float(states[f"{model}_sum"].sum() / states["count"].sum())
 
 
 def plot_fields(frame: pd.DataFrame, scenes: dict, base: Path, k: int = 3) -> list[Path]:
@@ -104,7 +115,7 @@ def plot_fields(frame: pd.DataFrame, scenes: dict, base: Path, k: int = 3) -> li
     models = ("ours", "vae")
     paths: list[Path] = []
     for world in worlds:
-        rows_w = frame[frame["world"] == world]
+        states_w = state_table(frame[frame["world"] == world])
         scene = scenes.get(world)
         wide = scene is not None and bool(scene.lanes)
         # Highway panels are long and thin: models side by side, one code per row.
@@ -113,25 +124,25 @@ def plot_fields(frame: pd.DataFrame, scenes: dict, base: Path, k: int = 3) -> li
                                  figsize=(13, 1.9 * k) if wide else (3.4 * k, 3.6 * len(models)))
         arrow_m = _arrow_length(scene)
         for r, model in enumerate(models):
-            codes = top_codes(rows_w, model, k)
+            codes = top_codes(states_w, model, k)
             for c in range(k):
                 ax = axes[c][r] if wide else axes[r][c]
                 if c >= len(codes):
                     ax.axis("off")
                     continue
-                rows = rows_w[rows_w[f"{model}_code"] == codes[c]]
-                err = field_panel(ax, rows, model, scene, arrow_m)
+                states = states_w[states_w[f"{model}_code"] == codes[c]]
+                err = field_panel(ax, states, model, scene, arrow_m)
                 if wide:
-                    _crop_x(ax, rows_w, arrow_m)
-                n_trials = rows["trial_id"].nunique()
-                ax.set_title(f"{MODEL_LABELS[model]} code {codes[c]}: {n_trials} trials, "
-                             f"error {err:.2f}", fontsize=8)
+                    _crop_x(ax, states_w, arrow_m)
+                ax.set_title(f"{MODEL_LABELS[model]} code {codes[c]}: "
+                             f"{states['trial_id'].nunique()} trials, error {err:.2f}", fontsize=8)
                 ax.tick_params(labelsize=6)
                 if c == 0:
-                    ax.legend(fontsize=6, loc="lower left", framealpha=0.8)
+                    fig.legend(*ax.get_legend_handles_labels(), fontsize=7, ncols=2,
+                               loc="upper right" if r == 0 else "upper left", framealpha=0.8)
         fig.suptitle(f"{world}: participants' first moves (black, mean per start state) vs "
                      "each model's, for its most common latent codes", fontsize=9)
-        fig.tight_layout()
+        fig.subplots_adjust(left=0.05, right=0.98, bottom=0.06, top=0.86, wspace=0.15, hspace=0.35)
         paths += save(fig, Path(base).with_name(f"{Path(base).name}_{world}"))
     return paths
 
@@ -142,12 +153,12 @@ def _arrow_length(scene) -> float:
     b = scene.bounds
     if scene.lanes:
         return 0.25 * (b.y_max_m - b.y_min_m)
-    return 0.06 * (b.x_max_m - b.x_min_m)
+    return 0.08 * (b.x_max_m - b.x_min_m)
 
 
-def _crop_x(ax, rows: pd.DataFrame, margin_m: float) -> None:
+def _crop_x(ax, states: pd.DataFrame, margin_m: float) -> None:
     """Show only the stretch of road where the world's start states lie."""
-    low, high = rows["start_x"].min() - 2 * margin_m, rows["start_x"].max() + 2 * margin_m
+    low, high = states["x"].min() - 2 * margin_m, states["x"].max() + 2 * margin_m
     left, right = ax.get_xlim()
     ax.set_xlim(max(left, low), min(right, high))
 

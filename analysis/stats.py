@@ -80,21 +80,42 @@ def mean_ci95(values: np.ndarray) -> tuple[float, float, float]:
     return mean, mean - half, mean + half
 
 
-def infer_dt_s(frame: pd.DataFrame) -> pd.Series:
+def prediction_ids(frame: pd.DataFrame) -> np.ndarray:
+    """An integer id per prediction (participant, trial, start state); rows of one id are
+    contiguous and in step order, as `analysis.load.normalise` sorts them."""
+    keys = frame[PREDICTION_KEYS]
+    changed = (keys != keys.shift()).any(axis=1).to_numpy()
+    return np.cumsum(changed) - 1
+
+
+def _first_rows(ids: np.ndarray) -> np.ndarray:
+    return np.r_[True, ids[1:] != ids[:-1]]
+
+
+def _last_rows(ids: np.ndarray) -> np.ndarray:
+    return np.r_[ids[1:] != ids[:-1], True]
+
+
+def _cumsum_within(values: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """Running sum that restarts at each new id (ids contiguous)."""
+    total = np.cumsum(values)
+    starts = np.flatnonzero(_first_rows(ids))
+    before = np.r_[0.0, total[starts[1:] - 1]]
+    return total - np.repeat(before, np.diff(np.r_[starts, len(values)]))
+
+
+def infer_dt_s(frame: pd.DataFrame, ids: np.ndarray | None = None) -> pd.Series:
     """Per world, the step dt [s] implied by clicks and human actions (median of |dp| / |v|)."""
-    prev_x, prev_y = _previous_positions(frame, frame["click_x"], frame["click_y"])
-    moved = np.hypot(frame["click_x"] - prev_x, frame["click_y"] - prev_y)
-    speed = np.hypot(frame["human_vx"], frame["human_vy"])
-    ratio = (moved / speed.where(speed > 0)).rename("dt_s")
-    return ratio.groupby(frame["world"]).median()
-
-
-def _previous_positions(frame: pd.DataFrame, xs: pd.Series, ys: pd.Series):
-    """Position before each step: the start state for the first step, else the last click."""
-    first = frame.groupby(PREDICTION_KEYS, sort=False).cumcount() == 0
-    prev_x = xs.groupby([frame[k] for k in PREDICTION_KEYS], sort=False).shift(1)
-    prev_y = ys.groupby([frame[k] for k in PREDICTION_KEYS], sort=False).shift(1)
-    return prev_x.where(~first, frame["start_x"]), prev_y.where(~first, frame["start_y"])
+    ids = prediction_ids(frame) if ids is None else ids
+    first = _first_rows(ids)
+    click_x, click_y = frame["click_x"].to_numpy(), frame["click_y"].to_numpy()
+    prev_x = np.where(first, frame["start_x"].to_numpy(), np.r_[np.nan, click_x[:-1]])
+    prev_y = np.where(first, frame["start_y"].to_numpy(), np.r_[np.nan, click_y[:-1]])
+    moved = np.hypot(click_x - prev_x, click_y - prev_y)
+    speed = np.hypot(frame["human_vx"].to_numpy(), frame["human_vy"].to_numpy())
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = pd.Series(np.where(speed > 0, moved / speed, np.nan), index=frame.index)
+    return ratio.groupby(frame["world"]).median().rename("dt_s")
 
 
 def displacement_errors(frame: pd.DataFrame,
@@ -104,14 +125,15 @@ def displacement_errors(frame: pd.DataFrame,
     Model positions are the start state plus dt times the running sum of the model's
     actions; dt per world comes from `infer_dt_s`. Rows must be sorted by step.
     """
-    dt = frame["world"].map(infer_dt_s(frame)).to_numpy()
-    groups = [frame[k] for k in PREDICTION_KEYS]
-    last = frame.groupby(PREDICTION_KEYS, sort=False).cumcount(ascending=False) == 0
+    ids = prediction_ids(frame)
+    dt = frame["world"].map(infer_dt_s(frame, ids)).to_numpy()
+    last = _last_rows(ids)
     out = frame[UNIT_KEYS].copy()
+    click_x, click_y = frame["click_x"].to_numpy(), frame["click_y"].to_numpy()
     for model in models:
-        px = frame["start_x"] + dt * frame[f"{model}_vx"].groupby(groups, sort=False).cumsum()
-        py = frame["start_y"] + dt * frame[f"{model}_vy"].groupby(groups, sort=False).cumsum()
-        dist = np.hypot(px - frame["click_x"], py - frame["click_y"])
+        px = frame["start_x"].to_numpy() + dt * _cumsum_within(frame[f"{model}_vx"].to_numpy(), ids)
+        py = frame["start_y"].to_numpy() + dt * _cumsum_within(frame[f"{model}_vy"].to_numpy(), ids)
+        dist = np.hypot(px - click_x, py - click_y)
         out[f"ade_{model}"] = dist
-        out[f"fde_{model}"] = dist.where(last)
+        out[f"fde_{model}"] = np.where(last, dist, np.nan)
     return out.groupby(UNIT_KEYS, sort=True).mean().reset_index()
