@@ -137,14 +137,22 @@ def plot_fields(frame: pd.DataFrame, scenes: dict, base: Path, k: int = 3) -> li
                 ax.set_title(f"{MODEL_LABELS[model]} code {codes[c]}: "
                              f"{states['trial_id'].nunique()} trials, error {err:.2f}", fontsize=8)
                 ax.tick_params(labelsize=6)
-                if c == 0:
-                    fig.legend(*ax.get_legend_handles_labels(), fontsize=7, ncols=2,
-                               loc="upper right" if r == 0 else "upper left", framealpha=0.8)
+        _figure_legend(fig)
         fig.suptitle(f"{world}: participants' first moves (black, mean per start state) vs "
                      "each model's, for its most common latent codes", fontsize=9)
-        fig.subplots_adjust(left=0.05, right=0.98, bottom=0.06, top=0.86, wspace=0.15, hspace=0.35)
+        fig.subplots_adjust(left=0.05, right=0.98, bottom=0.1, top=0.9, wspace=0.15, hspace=0.35)
         paths += save(fig, Path(base).with_name(f"{Path(base).name}_{world}"))
     return paths
+
+
+def _figure_legend(fig) -> None:
+    """One legend for the whole figure (participants, Ours, VAE), under the panels."""
+    entries: dict = {}
+    for ax in fig.axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            entries.setdefault(label, handle)
+    fig.legend(list(entries.values()), list(entries), loc="lower center", ncols=len(entries),
+               fontsize=8, frameon=False)
 
 
 def _arrow_length(scene) -> float:
