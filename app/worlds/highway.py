@@ -132,20 +132,16 @@ class HighwayWorld:
 
     name = "highway"
     robot_label = "robot_intent"
-    label_names = {
-        "robot_intent": INTENTS,
-        "human_intent": INTENTS,
-        "robot_final_lane": [f"lane_{k}" for k in range(3)],
-        "human_final_lane": [f"lane_{k}" for k in range(3)],
-        "robot_merged_into_human_lane": ["no", "yes"],
-        "merge_relation": MERGE_RELATIONS,
-    }
 
     def __init__(self, config: HighwayConfig) -> None:
         self.config = config
         lanes = [f"lane_{k}" for k in range(config.lanes_count)]
-        self.label_names = {**self.label_names, "robot_final_lane": lanes,
-                            "human_final_lane": lanes}
+        self.label_names = {
+            "robot_intent": INTENTS, "human_intent": INTENTS,
+            "robot_final_lane": lanes, "human_final_lane": lanes,
+            "robot_merged_into_human_lane": ["no", "yes"], "merge_relation": MERGE_RELATIONS,
+        }  # also per-trajectory ints without classes: robot/human_change_step (-1 = keep),
+        # robot_target_speed_cmps
         self.dt_s = config.policy_dt_s
         self.substeps = round(config.policy_dt_s * config.simulation_frequency_hz)
         self.network = RoadNetwork.straight_road_network(config.lanes_count, speed_limit=30)
@@ -214,8 +210,8 @@ class HighwayWorld:
         human_intent = int(rng.choice(self._feasible_intents(human_lane)))
         gap = float(rng.uniform(*c.initial_gap_m))
         if human_lane == robot_lane and abs(gap) < c.min_same_lane_gap_m:
-            low = min(c.min_same_lane_gap_m, max(abs(v) for v in c.initial_gap_m))
-            gap = float(np.copysign(rng.uniform(low, max(abs(v) for v in c.initial_gap_m)), gap))
+            widest = max(c.min_same_lane_gap_m, *(abs(v) for v in c.initial_gap_m))
+            gap = float(np.copysign(rng.uniform(c.min_same_lane_gap_m, widest), gap))
         delays = rng.integers(c.merge_delay_steps[0], c.merge_delay_steps[1] + 1, size=2)
         return {
             "intent": (robot_intent, human_intent),
