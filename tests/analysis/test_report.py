@@ -51,3 +51,21 @@ def test_report_from_csv(tmp_path, study_dirs):
     assert "data:image/png;base64," in html and "src='http" not in html
     meta = json.loads((out / "meta.json").read_text())
     assert len(meta["data_sha256"]) == 64 and meta["trial_bank_sha256"]
+
+
+def test_all_excluded_is_a_clear_error_and_waive_is_reported(tmp_path, study_dirs):
+    from app.configio import ConfigError
+
+    configs, data = study_dirs
+    frame = simulate_participants(small_bank(), "random", 6, 5, seed=4, show_progress=False)
+    frame["attention_passed"] = False
+    frame.to_csv(tmp_path / "export.csv", index=False)
+    with pytest.raises(ConfigError, match="every participant was excluded"):
+        run_analyze("paper_study", tmp_path / "r1", tmp_path / "export.csv", "", configs, data)
+    summary = run_analyze("paper_study", tmp_path / "r2", tmp_path / "export.csv", "", configs,
+                          data, waive=("failed_attention_check",))
+    assert summary["waived_rules"] == ["failed_attention_check"]
+    assert summary["exclusions"]["participants_kept"] == 6
+    with pytest.raises(ConfigError, match="waive: unknown"):
+        run_analyze("paper_study", tmp_path / "r3", tmp_path / "export.csv", "", configs, data,
+                    waive=("attention",))
