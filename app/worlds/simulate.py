@@ -36,9 +36,10 @@ def episode_rng(seed: int, index: int, attempt: int) -> np.random.Generator:
 
 def _init_worker(world: str, config_path: Path | None, policy: str) -> None:
     global _WORKER_WORLD
-    import torch
+    if policy == "sac":  # only the SAC policy needs torch; importing it costs ~3 s per worker
+        import torch
 
-    torch.set_num_threads(1)
+        torch.set_num_threads(1)
     _WORKER_WORLD = build_world(world, config_path, policy)
 
 
