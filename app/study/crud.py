@@ -79,6 +79,7 @@ def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
     recruitment, external_id = external_identity(body)
     existing = find_participant(db, ctx.study_id, external_id)
     if existing is not None:
+        db.commit()  # end the read transaction
         return _resume(existing), True
     rng = rng or np.random.default_rng()
     order, plan = assign_plan(db, ctx, rng)

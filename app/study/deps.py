@@ -1,7 +1,14 @@
-"""FastAPI dependencies: database session, study context, participant, researcher token."""
+"""FastAPI dependencies: database session, study context, participant, researcher token.
+
+The participant path is async end to end: its database work runs in short synchronous
+blocks on the event loop, each ending its transaction (so its pooled connection goes
+back at once). Sync dependencies would run in the thread pool and hold a connection
+from lookup until clean-up; under many concurrent requests the pool and the thread pool
+then wait on each other until the pool times out.
+"""
 
 import secrets
-from collections.abc import Iterator
+from collections.abc import AsyncIterator
 from typing import Annotated
 
 from fastapi import Depends, Header, Request
@@ -12,7 +19,7 @@ from app.study.crud import Refused, StudyContext, participant_by_token
 from app.study.tables import Participant
 
 
-def get_db(request: Request) -> Iterator[Session]:
+async def get_db(request: Request) -> AsyncIterator[Session]:
     """One database session per request; objects stay readable after commit (crud keeps
     them in step with what it wrote, saving a read-back per request)."""
     with Session(request.app.state.engine, expire_on_commit=False) as session:
@@ -22,7 +29,7 @@ def get_db(request: Request) -> Iterator[Session]:
 SessionDep = Annotated[Session, Depends(get_db)]
 
 
-def get_settings_dep(request: Request) -> Settings:
+async def get_settings_dep(request: Request) -> Settings:
     """The settings the app was created with."""
     return request.app.state.settings
 
@@ -39,15 +46,18 @@ def study_context(request: Request, study_id: str) -> StudyContext:
     return ctx
 
 
-def get_participant(token: str, db: SessionDep) -> Participant:
+async def get_participant(token: str, db: SessionDep) -> Participant:
     """The participant whose session token is in the path."""
-    return participant_by_token(db, token)
+    try:
+        return participant_by_token(db, token)
+    finally:
+        db.commit()  # end the read transaction (connection back to the pool, row kept)
 
 
 ParticipantDep = Annotated[Participant, Depends(get_participant)]
 
 
-def participant_context(request: Request, participant: ParticipantDep) -> StudyContext:
+async def participant_context(request: Request, participant: ParticipantDep) -> StudyContext:
     """The study the participant belongs to."""
     return study_context(request, participant.study_id)
 
@@ -55,7 +65,7 @@ def participant_context(request: Request, participant: ParticipantDep) -> StudyC
 ContextDep = Annotated[StudyContext, Depends(participant_context)]
 
 
-def require_admin(settings: SettingsDep,
+async def require_admin(settings: SettingsDep,
                   authorization: Annotated[str | None, Header()] = None) -> None:
     """Bearer token check: 401 when missing, 403 when wrong."""
     if not authorization or not authorization.lower().startswith("bearer "):
