@@ -384,10 +384,10 @@ class ObstacleWorld:
         for t in range(1, n_steps + 1):
             new_vel = np.zeros((2, 2))
             for a in AGENTS:
-                if arrival[a] >= 0:
-                    continue
                 if a == HUMAN and human_constant:
                     new_vel[a] = vel[a]
+                    continue
+                if arrival[a] >= 0:
                     continue
                 new_vel[a], plans[a] = self._act(a, pos, vel, goals, plans[a], rng)
             new_pos = pos + new_vel * self.dt_s
