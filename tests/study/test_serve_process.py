@@ -1,5 +1,6 @@
 """Real `tomstudy serve` processes: SIGKILL mid-session, and several workers on PostgreSQL."""
 
+import asyncio
 import io
 import signal
 import threading
@@ -11,7 +12,7 @@ import pandas as pd
 import pytest
 
 from tests.conftest import free_port, fresh_database, start_server
-from tests.study.flow import ADMIN, Participant, prediction_body
+from tests.study.flow import ADMIN, Participant, new_id, prediction_body
 
 pytestmark = pytest.mark.slow
 
@@ -148,3 +149,34 @@ def test_two_workers_on_postgres_serve_concurrent_participants(small_study, post
         proc.terminate()
         proc.wait(timeout=15)
 
+
+
+def test_many_concurrent_participants_on_one_sqlite_worker(small_study, live_server):
+    """More clients than pooled connections and worker threads: nothing may wait on the
+    pool (a regression: sync dependencies held connections until a thread-pool clean-up
+    that could not run while the thread pool waited for connections)."""
+    crowd = 60
+
+    async def one(client: httpx.AsyncClient, i: int) -> int:
+        r = await client.post("/api/sessions", json={
+            "study_id": small_study.study_id, "recruitment": {"PROLIFIC_PID": f"crowd-{i}"}})
+        token = r.json()["session_token"]
+        await client.post(f"/api/sessions/{token}/consent",
+                          json={"submission_id": new_id(), "agree": True})
+        await client.post(f"/api/sessions/{token}/instructions", json={"submission_id": new_id()})
+        for _ in range(2):
+            state = (await client.get(f"/api/sessions/{token}/state")).json()
+            r = await client.post(f"/api/sessions/{token}/predictions",
+                                  json=prediction_body(state["step"]))
+            assert r.status_code == 201, r.text
+        return (await client.get(f"/api/sessions/{token}/state")).json()["progress"]["done"]
+
+    async def run() -> list[int]:
+        limits = httpx.Limits(max_connections=crowd)
+        async with httpx.AsyncClient(base_url=live_server, timeout=20, limits=limits) as client:
+            return await asyncio.gather(*(one(client, i) for i in range(crowd)))
+
+    assert asyncio.run(run()) == [2] * crowd
+    frame = export(live_server, small_study.study_id)
+    mine = frame[frame["external_id"].astype(str).str.startswith("crowd-")]
+    assert len(mine) == crowd * 2 * 15
