@@ -7,6 +7,7 @@ for all candidates at once and sums its reward terms; the sampler only proposes 
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -31,11 +32,11 @@ class SamplingMPC:
         if len(self.control_low) != len(self.control_high):
             raise ValueError("control_low and control_high must have the same length")
 
-    @property
+    @cached_property
     def _low(self) -> np.ndarray:
         return np.asarray(self.control_low, dtype=np.float64)
 
-    @property
+    @cached_property
     def _high(self) -> np.ndarray:
         return np.asarray(self.control_high, dtype=np.float64)
 
@@ -56,7 +57,7 @@ class SamplingMPC:
         n_elite = max(2, int(self.elite_fraction * self.n_samples))
         for _ in range(self.iterations):
             samples = mean + std * rng.standard_normal((self.n_samples, *mean.shape))
-            samples[: len(low) * 2] = self._constant_extremes()
+            samples[: len(low) * 2] = self._constant_extremes
             samples = np.clip(samples, low, high)
             costs = cost(samples)
             order = np.argsort(costs, kind="stable")
@@ -66,6 +67,7 @@ class SamplingMPC:
             mean, std = elites.mean(axis=0), elites.std(axis=0) + 1e-3 * (high - low)
         return best_plan
 
+    @cached_property
     def _constant_extremes(self) -> np.ndarray:
         """Constant sequences at each control's bounds (others mid-range): cheap coverage."""
         mid = (self._low + self._high) / 2
