@@ -5,6 +5,10 @@ Trains Ours (seed 0) once per setting on var/data/<world>/trajectories.npz and p
 row per setting: codes used, perplexity, held-out purity / NMI against the robot's labels
 (raw and derived; "majority" is the purity of putting every window in one cluster), MSE and
 wall time. Rows are also appended to <out>/<world>/sweep.jsonl.
+
+--ceiling instead prints, per robot label, the test accuracy of a supervised classifier
+(gradient-boosted trees) on the same segment features: an estimate of how well *any*
+function of the segment, hence any clustering's purity, can match that label.
 """
 
 import argparse
@@ -45,6 +49,33 @@ def sweep_row(trajs: TrajectorySet, overrides: dict, out_dir: Path) -> dict:
             "mse_constant_velocity": round(test["constant_velocity"]["mse"], 4)}
 
 
+def label_ceiling(trajs: TrajectorySet, overrides: dict | None = None) -> dict:
+    """Held-out accuracy of a supervised segment -> label classifier, per robot label."""
+    from sklearn.ensemble import HistGradientBoostingClassifier
+
+    from app.data.windows import segment_features
+    from app.learning.metrics import derived_labels
+    from app.learning.train import prepare_windows
+
+    windows = prepare_windows(trajs, load_train_config(overrides=overrides or {}))
+    data = {}
+    for split in ("train", "test"):
+        w = windows[split]
+        data[split] = (segment_features(w.segment_positions, w.dt_s).reshape(len(w), -1),
+                       derived_labels(w, trajs.label_names))
+    result = {}
+    for name, train_labels in data["train"][1].items():
+        if not name.startswith("robot_"):
+            continue
+        test_labels = data["test"][1][name]
+        fit_rows, score_rows = train_labels >= 0, test_labels >= 0
+        classifier = HistGradientBoostingClassifier(max_iter=200, random_state=0)
+        classifier.fit(data["train"][0][fit_rows], train_labels[fit_rows])
+        predicted = classifier.predict(data["test"][0][score_rows])
+        result[name] = round(float((predicted == test_labels[score_rows]).mean()), 3)
+    return result
+
+
 def format_row(row: dict) -> str:
     """One line: settings, codes, and purity/NMI per robot label."""
     scores = "  ".join(f"{k} {v['purity']:.3f}/{v['nmi']:.3f} (maj {v['majority']:.3f})"
@@ -58,9 +89,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--world", required=True)
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--ceiling", action="store_true", help="supervised ceiling only")
     args = parser.parse_args()
     data_dir = get_settings().data_dir
     trajs = TrajectorySet.load(data_dir / "data" / args.world / "trajectories.npz")
+    if args.ceiling:
+        print(json.dumps({"world": args.world, "classifier_accuracy": label_ceiling(trajs)}))
+        return
     out = (args.out or data_dir / "models" / "sweep") / args.world
     for i, overrides in enumerate(SETTINGS):
         row = sweep_row(trajs, overrides, out / f"setting{i}")
