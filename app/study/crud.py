@@ -80,7 +80,7 @@ def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
     existing = find_participant(db, ctx.study_id, external_id)
     if existing is not None:
         db.commit()  # end the read transaction
-        return _resume(existing), True
+        return _resume(existing, body), True
     rng = rng or np.random.default_rng()
     order, plan = assign_plan(db, ctx, rng)
     participant = Participant(
@@ -97,14 +97,23 @@ def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
         existing = find_participant(db, ctx.study_id, external_id)
         if existing is None:
             raise
-        return _resume(existing), True
+        return _resume(existing, body), True
     db.refresh(participant)
     return participant, False
 
 
-def _resume(participant: Participant) -> Participant:
+# The platform's per-attempt id: knowing a worker's public id alone must not open their session.
+_ATTEMPT_KEYS = {"prolific": "SESSION_ID", "mturk": "assignmentId"}
+
+
+def _resume(participant: Participant, body: SessionCreate) -> Participant:
     if participant.completed:
         raise Refused(409, "recruitment: this participant has already completed the study")
+    key = _ATTEMPT_KEYS.get(participant.recruitment)
+    stored = participant.recruitment_params.get(key) if key else None
+    if stored is not None and getattr(body.recruitment, key) != stored:
+        raise Refused(409, f"recruitment.{key}: does not match the session in progress for "
+                           "this participant id; reopen the study from the original link")
     return participant
 
 

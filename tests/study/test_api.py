@@ -117,6 +117,18 @@ def test_refresh_resumes_and_an_external_id_takes_part_once(client, small_study)
     assert late.status == 409
 
 
+def test_knowing_a_participant_id_alone_does_not_open_their_session(client, small_study):
+    owner = at_first_trial(client, small_study.study_id, PROLIFIC_PID="pid-9",
+                           STUDY_ID="s", SESSION_ID="attempt-1")
+    intruder = Participant(client, small_study.study_id)
+    body = intruder.start(PROLIFIC_PID="pid-9", STUDY_ID="s", SESSION_ID="guess")
+    assert intruder.status == 409 and "SESSION_ID" in body["detail"]
+    assert intruder.token != owner.token
+    same = Participant(client, small_study.study_id)
+    same.start(PROLIFIC_PID="pid-9", STUDY_ID="s", SESSION_ID="attempt-1")
+    assert same.status == 200 and same.token == owner.token
+
+
 def test_retried_submission_is_stored_once_with_the_same_answer(client, small_study):
     p = at_first_trial(client, small_study.study_id, PROLIFIC_PID="retry")
     body = prediction_body(p.state()["step"])
