@@ -7,18 +7,10 @@ import pandas as pd
 from sqlalchemy import select
 from sqlmodel import Session
 
+from analysis.load import EXPORT_COLUMNS  # one column contract for writer and reader
 from app.study.crud import StudyContext, as_utc
 from app.study.tables import Participant, PredictionRow, TrialResponse, utcnow
 
-EXPORT_COLUMNS = (
-    "study_id", "participant_id", "recruitment", "external_id", "completed",
-    "attention_passed", "world", "world_position", "trial_id", "trial_index", "is_practice",
-    "attention_check", "clip_sha256", "start_index", "step", "start_x", "start_y", "human_x",
-    "human_y", "click_x", "click_y", "human_vx", "human_vy", "ours_vx", "ours_vy", "vae_vx",
-    "vae_vy", "cv_vx", "cv_vy", "policy_vx", "policy_vy", "ours_code", "vae_code",
-    "ours_sha256", "vae_sha256", "click_time_ms", "trial_duration_ms", "replays",
-    "submission_id", "submitted_at",
-)
 _FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields]
 
 
