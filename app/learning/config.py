@@ -16,6 +16,7 @@ class TrainConfig(StrictModel):
     segment_len: int = Field(5, ge=1)
     n_actions: int = Field(3, ge=1)
     levels: list[int] = Field(default_factory=lambda: [3, 3], min_length=1)
+    fsq_noise_fraction: float = Field(0.5, ge=0, le=1)
     encoder_hidden: list[int] = Field(default_factory=lambda: [128, 128])
     decoder_hidden: list[int] = Field(default_factory=lambda: [128, 128])
     lr: float = Field(3e-3, gt=0)

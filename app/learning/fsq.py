@@ -13,6 +13,15 @@ The paper prints this formula without the bracket and the -1; its L=2 example
 out = b + (z_q - b).detach() with b = tanh(z), so d out / d b = 1 (as in the reference
 FSQ, whose straight-through rounding also sits after the tanh bound). Applying it to the
 raw z instead lets z drift far past saturation with nothing pulling it back.
+
+Optional noise substitution (`noise_fraction` > 0, training mode only): for that share of
+the entries, the rounding is replaced by uniform noise one bin wide around tanh(z), as in
+the noise-approximated symmetric FSQ that introduced this level set. With straight-through
+rounding alone the decoder only ever sees the exact levels, so nothing pushes windows of
+different behaviour into different bins. With noise, the decoder must predict well from
+anywhere within half a bin of the encoder's value. Behaviours that need different
+predictions therefore end up at least a bin apart, which is what rounding needs at test
+time. Evaluation (model.eval()) always rounds, so codes stay exactly the level set.
 """
 
 import numpy as np
@@ -23,8 +32,11 @@ from torch import nn
 class FSQ(nn.Module):
     """Quantise each channel to its own symmetric level set, straight-through."""
 
-    def __init__(self, levels: list[int]):
+    def __init__(self, levels: list[int], noise_fraction: float = 0.0):
         super().__init__()
+        if not 0.0 <= noise_fraction <= 1.0:
+            raise ValueError(f"noise_fraction must be in [0, 1], got {noise_fraction}")
+        self.noise_fraction = float(noise_fraction)
         if not levels or any(int(level) < 2 for level in levels):
             raise ValueError(f"levels must be a non-empty list of integers >= 2, got {levels}")
         self.levels_list = [int(level) for level in levels]
@@ -52,7 +64,17 @@ class FSQ(nn.Module):
         """Quantised codes; the gradient passes straight through the rounding to tanh(z)."""
         bounded = torch.tanh(z)
         z_q = self.level_indices_to_codes(self.level_indices(z))
-        return bounded + (z_q - bounded).detach()
+        out = bounded + (z_q - bounded).detach()
+        if self.training and self.noise_fraction > 0:
+            out = self._substitute_noise(bounded, out)
+        return out
+
+    def _substitute_noise(self, bounded: torch.Tensor, rounded: torch.Tensor) -> torch.Tensor:
+        """Replace a random `noise_fraction` of entries by tanh(z) + uniform noise, one bin wide."""
+        bin_width = 2 / (self.levels - 1)
+        noisy = bounded + (torch.rand_like(bounded) - 0.5) * bin_width
+        chosen = torch.rand_like(bounded) < self.noise_fraction
+        return torch.where(chosen, noisy, rounded)
 
     def level_indices_to_codes(self, k: torch.Tensor) -> torch.Tensor:
         """Level indices [.., d] -> code values in [-1, 1]."""

@@ -10,10 +10,11 @@ class OursModel(LatentActionModel):
     """The paper's autoencoder with a finite-scalar-quantised latent."""
 
     def __init__(self, segment_len: int, n_actions: int, levels: list[int],
-                 encoder_hidden: list[int], decoder_hidden: list[int]):
+                 encoder_hidden: list[int], decoder_hidden: list[int],
+                 fsq_noise_fraction: float = 0.0):
         super().__init__(segment_len, n_actions, len(levels), encoder_hidden, decoder_hidden,
                          encoder_out=len(levels))
-        self.fsq = FSQ(levels)
+        self.fsq = FSQ(levels, fsq_noise_fraction)
 
     def latent(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Straight-through quantised z; FSQ needs no regulariser."""

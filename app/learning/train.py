@@ -31,7 +31,9 @@ def build_model(kind: str, args: dict) -> LatentActionModel:
                   encoder_hidden=list(args["encoder_hidden"]),
                   decoder_hidden=list(args["decoder_hidden"]))
     if kind == "ours":
-        return OursModel(levels=list(args["levels"]), **common)
+        # checkpoints written before the option existed trained without noise
+        return OursModel(levels=list(args["levels"]),
+                         fsq_noise_fraction=float(args.get("fsq_noise_fraction", 0.0)), **common)
     if kind == "vae":
         return VAEModel(latent_dim=args["latent_dim"], beta_kl=args["beta_kl"], **common)
     raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
@@ -41,7 +43,8 @@ def model_args(cfg: TrainConfig) -> dict:
     """The architecture part of the config, stored in the checkpoint."""
     return {"segment_len": cfg.segment_len, "n_actions": cfg.n_actions, "levels": cfg.levels,
             "latent_dim": cfg.latent_dim, "encoder_hidden": cfg.encoder_hidden,
-            "decoder_hidden": cfg.decoder_hidden, "beta_kl": cfg.beta_kl}
+            "decoder_hidden": cfg.decoder_hidden, "beta_kl": cfg.beta_kl,
+            "fsq_noise_fraction": cfg.fsq_noise_fraction}
 
 
 @dataclass

@@ -108,3 +108,29 @@ def test_even_levels_equal_the_reference_symmetric_mode(levels):
 def test_bad_levels_are_rejected(levels):
     with pytest.raises(ValueError, match="levels"):
         FSQ(levels)
+
+
+def test_noise_substitution_trains_near_tanh_and_evaluates_on_the_levels():
+    levels = [3, 5]
+    fsq = FSQ(levels, noise_fraction=1.0)
+    z = torch.randn(4000, 2, requires_grad=True)
+    bounded = torch.tanh(z.detach())
+    half_bin = 1 / (torch.tensor(levels, dtype=torch.float32) - 1)
+    noisy = fsq(z)
+    assert ((noisy.detach() - bounded).abs() <= half_bin + 1e-6).all()
+    # noise, not rounding: almost no training value sits on a level
+    assert torch.isin(noisy.detach(), fsq.all_codes().unique()).float().mean() < 0.01
+    noisy.sum().backward()
+    assert torch.allclose(z.grad, 1 - bounded ** 2, atol=1e-6)
+    fsq.eval()
+    assert torch.equal(fsq(z).detach(), FSQ(levels)(z).detach())
+
+
+def test_noise_fraction_picks_that_share_of_entries():
+    torch.manual_seed(0)
+    fsq = FSQ([3], noise_fraction=0.3)
+    z = torch.randn(20000, 1)
+    on_levels = torch.isin(fsq(z), torch.tensor([-1.0, 0.0, 1.0])).float().mean()
+    assert abs(float(on_levels) - 0.7) < 0.02
+    with pytest.raises(ValueError, match="noise_fraction"):
+        FSQ([3], noise_fraction=1.5)
