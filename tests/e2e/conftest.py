@@ -58,9 +58,12 @@ def browser_server(browser_study: SmallStudy, tmp_path_factory):
     proc.wait(timeout=10)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def chromium():
-    """Debian's chromium driven by Playwright (never a downloaded browser)."""
+    """Debian's chromium driven by Playwright (never a downloaded browser).
+
+    Module scope: Playwright's sync API keeps an event loop running in the main thread
+    while it is open, which would break later tests that call asyncio.run()."""
     if not CHROMIUM.exists():
         pytest.skip(f"{CHROMIUM} is absent: install Debian's chromium (apt-get install chromium)")
     from playwright.sync_api import sync_playwright
