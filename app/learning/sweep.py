@@ -29,6 +29,9 @@ SETTINGS = [
     {"levels": [3, 3], "segment_len": 7},
     {"levels": [3, 3], "recon_weight": 2.0},
     {"levels": [3, 3], "action_axis_weights": [1.0, 4.0]},
+    {"levels": [3, 3], "fsq_noise_fraction": 0.0},  # straight-through rounding only
+    {"levels": [3, 3], "fsq_noise_fraction": 1.0},
+    {"levels": [5, 3]},
 ]
 
 
