@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install serve test lint data bench clean
+.PHONY: install serve test lint data bench pilot clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -28,6 +28,19 @@ serve: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check app analysis tests benchmarks
 	$(BIN)/pytest -q
+
+# Pilot end to end on a fresh database: serve, KIND bots (coarse|precise|random), analyze.
+KIND ?= coarse
+PILOT_PORT ?= 8765
+pilot: $(STAMP)
+	rm -f var/pilot_$(KIND).db*
+	DATABASE_URL=sqlite:///$(CURDIR)/var/pilot_$(KIND).db $(BIN)/tomstudy serve --prepare \
+	  --study paper_study --port $(PILOT_PORT) & pid=$$!; \
+	for i in $$(seq 600); do curl -sf http://127.0.0.1:$(PILOT_PORT)/s/paper_study >/dev/null && break; sleep 1; done; \
+	$(BIN)/tomstudy pilot --url http://127.0.0.1:$(PILOT_PORT) --n 22 --kind $(KIND) --concurrency 8; \
+	status=$$?; kill $$pid; wait $$pid; test $$status -eq 0
+	$(BIN)/tomstudy analyze --study paper_study --database-url sqlite:///$(CURDIR)/var/pilot_$(KIND).db \
+	  --out var/reports/pilot_$(KIND)
 
 bench: $(STAMP)
 	for f in benchmarks/*.py; do $(BIN)/python $$f || exit 1; done
