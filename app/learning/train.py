@@ -11,7 +11,7 @@ from tqdm import tqdm
 
 from app.data.trajectory import ROBOT, TrajectorySet
 from app.data.windows import Windows, make_windows, segment_features, split_by_trajectory
-from app.fileio import write_json
+from app.fileio import atomic_path, write_json
 from app.learning.checkpoint import (
     load_model,
     model_from_payload,
@@ -203,8 +203,6 @@ def _plot_losses(history: list[dict], path: Path, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from app.fileio import atomic_path
-
     fig, ax = plt.subplots(figsize=(5, 3.2))
     epochs = [h["epoch"] for h in history]
     ax.plot(epochs, [h["train_total"] for h in history], label="train")
@@ -286,8 +284,7 @@ def _data_meta(trajs: TrajectorySet, windows: dict[str, Windows], extra: dict | 
     meta = {
         "world": trajs.world, "dt_s": float(trajs.dt_s), "n_trajectories": len(trajs),
         "label_names": trajs.label_names, "scene": trajs.scene.model_dump(),
-        "split_trajectories": {k: sorted(set(int(i) for i in w.traj_index))
-                               for k, w in windows.items() if k == "test"},
+        "split_trajectories": {"test": sorted({int(i) for i in windows["test"].traj_index})},
         "human_end_median": [float(v) for v in np.median(human_end, axis=0)],
     }
     if extra:
