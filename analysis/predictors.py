@@ -78,11 +78,14 @@ def rotate(vector: np.ndarray, angle_rad: float) -> np.ndarray:
     return np.array([c * vector[0] - s * vector[1], s * vector[0] + c * vector[1]])
 
 
+def step_limits(payload: dict) -> tuple[float, float]:
+    """The shortest and longest move [m] a bot clicks, just inside the server's limits."""
+    return payload["min_step_m"] * (1 + STEP_MARGIN), payload["max_step_m"] * (1 - STEP_MARGIN)
+
+
 def step_length(payload: dict, speed_mps: float) -> float:
     """A move of `speed_mps` for one dt, clipped inside the server's accepted lengths."""
-    low = payload["min_step_m"] * (1 + STEP_MARGIN)
-    high = payload["max_step_m"] * (1 - STEP_MARGIN)
-    return float(np.clip(speed_mps * payload["dt_s"], low, high))
+    return float(np.clip(speed_mps * payload["dt_s"], *step_limits(payload)))
 
 
 def inside_bounds(payload: dict, point: np.ndarray) -> bool:
@@ -115,6 +118,18 @@ def start_positions(payload: dict) -> np.ndarray:
     return np.array([s["robot"] for s in payload["start_states"]], dtype=np.float64)
 
 
+def walk(payload: dict, next_move) -> np.ndarray:
+    """Clicks [S, K, 2]: from each start state, K valid moves; next_move(i, k, position)
+    returns the (direction, length) of start state i's k-th move."""
+    clicks = np.zeros((len(payload["start_states"]), payload["steps_to_predict"], 2))
+    for i, start in enumerate(start_positions(payload)):
+        position = start
+        for k in range(payload["steps_to_predict"]):
+            position = valid_move(payload, position, *next_move(i, k, position))
+            clicks[i, k] = position
+    return clicks
+
+
 def predict_coarse(payload: dict, rng: np.random.Generator,
                    noise_deg: float = COARSE_NOISE_DEG) -> np.ndarray:
     """Clicks of a high-level predictor: towards the inferred lane or goal, with angular noise."""
@@ -123,44 +138,34 @@ def predict_coarse(payload: dict, rng: np.random.Generator,
     track = robot_track(payload)
     forward_vx = float((track[-1, 0] - track[0, 0]) / (payload["dt_s"] * (len(track) - 1)))
     length = step_length(payload, segment_speed(payload))
-    clicks = np.zeros((len(payload["start_states"]), payload["steps_to_predict"], 2))
-    for i, start in enumerate(start_positions(payload)):
-        position = start
-        for k in range(payload["steps_to_predict"]):
-            direction = coarse_direction(payload, position, forward_vx, target)
-            direction = rotate(direction, np.deg2rad(rng.normal(0.0, noise_deg)))
-            position = valid_move(payload, position, direction, length)
-            clicks[i, k] = position
-    return clicks
+
+    def next_move(i: int, k: int, position: np.ndarray) -> tuple[np.ndarray, float]:
+        direction = coarse_direction(payload, position, forward_vx, target)
+        return rotate(direction, np.deg2rad(rng.normal(0.0, noise_deg))), length
+
+    return walk(payload, next_move)
 
 
 def predict_from_actions(payload: dict, actions: np.ndarray, rng: np.random.Generator,
                          noise_deg: float = PRECISE_NOISE_DEG) -> np.ndarray:
     """Clicks that follow given actions [S, K, 2] (m/s) from each start state, with noise."""
-    clicks = np.zeros((len(payload["start_states"]), payload["steps_to_predict"], 2))
-    for i, start in enumerate(start_positions(payload)):
-        position = start
-        for k in range(payload["steps_to_predict"]):
-            action = np.asarray(actions[i, k], dtype=np.float64)
-            direction = rotate(action, np.deg2rad(rng.normal(0.0, noise_deg)))
-            length = step_length(payload, float(np.linalg.norm(action)))
-            position = valid_move(payload, position, direction, length)
-            clicks[i, k] = position
-    return clicks
+    def next_move(i: int, k: int, position: np.ndarray) -> tuple[np.ndarray, float]:
+        action = np.asarray(actions[i, k], dtype=np.float64)
+        direction = rotate(action, np.deg2rad(rng.normal(0.0, noise_deg)))
+        return direction, step_length(payload, float(np.linalg.norm(action)))
+
+    return walk(payload, next_move)
 
 
 def predict_random(payload: dict, rng: np.random.Generator) -> np.ndarray:
     """Clicks in uniformly random directions with uniformly random valid lengths."""
-    low = payload["min_step_m"] * (1 + STEP_MARGIN)
-    high = payload["max_step_m"] * (1 - STEP_MARGIN)
-    clicks = np.zeros((len(payload["start_states"]), payload["steps_to_predict"], 2))
-    for i, start in enumerate(start_positions(payload)):
-        position = start
-        for k in range(payload["steps_to_predict"]):
-            direction = rotate(np.array([1.0, 0.0]), rng.uniform(0, 2 * np.pi))
-            position = valid_move(payload, position, direction, rng.uniform(low, high))
-            clicks[i, k] = position
-    return clicks
+    low, high = step_limits(payload)
+
+    def next_move(i: int, k: int, position: np.ndarray) -> tuple[np.ndarray, float]:
+        direction = rotate(np.array([1.0, 0.0]), rng.uniform(0, 2 * np.pi))
+        return direction, rng.uniform(low, high)
+
+    return walk(payload, next_move)
 
 
 def clicks_to_actions(payload: dict, clicks: np.ndarray) -> np.ndarray:
