@@ -326,12 +326,8 @@ class HighwayWorld:
         def cost(controls: np.ndarray) -> np.ndarray:
             horizon = controls.shape[1]
             accel, steer = controls[..., 0], controls[..., 1]
-            accel_rate = accel.copy()
-            accel_rate[:, 1:] -= accel[:, :-1]
-            accel_rate[:, 0] -= last[0]
-            steer_rate = steer.copy()
-            steer_rate[:, 1:] -= steer[:, :-1]
-            steer_rate[:, 0] -= last[1]
+            rates = np.diff(controls, axis=1, prepend=np.broadcast_to(last, (len(controls), 1, 2)))
+            accel_rate, steer_rate = rates[..., 0], rates[..., 1]
             comfort = (w.acceleration_per_mps2_sq * accel * accel
                        + w.steering_per_rad2 * steer * steer
                        + w.acceleration_rate * accel_rate * accel_rate
