@@ -21,11 +21,6 @@ def grid_points(scene: Scene, grid_n: int) -> tuple[np.ndarray, np.ndarray]:
     return xs, ys
 
 
-def field_codes(model: TrainedModel) -> list[dict]:
-    """The codes to draw, most used first, with their share and majority labels."""
-    return list(model.codes.get("used", []))
-
-
 def vector_field(model: TrainedModel, scene: Scene, human_position, grid_n: int) -> dict:
     """JSON-able field per used code: grid xs/ys and the first predicted robot action
     [grid_n*grid_n, 2] m/s at each robot position (row-major over ys, then xs)."""
@@ -35,7 +30,7 @@ def vector_field(model: TrainedModel, scene: Scene, human_position, grid_n: int)
     human = np.broadcast_to(np.asarray(human_position, dtype=np.float32), robot.shape)
     states = np.stack([robot, human], axis=1).astype(np.float32)
     fields = []
-    for entry in field_codes(model):
+    for entry in model.codes.get("used", []):  # most used first
         z = model.latent_of_code(entry["code"])
         actions = model.predict(z, states)
         fields.append({"code": entry["code"], "z": z.tolist(), "share": entry["share"],
