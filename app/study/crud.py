@@ -438,8 +438,7 @@ def validate_points(ctx: StudyContext, trial: TrialRecord, body: PredictionCreat
         raise Refused(422, f"points.{i}.{j}: ({x:g}, {y:g}) is outside the scene "
                            f"x [{bounds['x_min_m']:g}, {bounds['x_max_m']:g}] "
                            f"y [{bounds['y_min_m']:g}, {bounds['y_max_m']:g}] m")
-    starts = np.asarray([s.robot for s in trial.start_states], dtype=np.float64)
-    moves = np.diff(np.concatenate([starts[:, None], points], axis=1), axis=1)
+    moves = step_moves(trial, points)
     lengths = np.hypot(moves[..., 0], moves[..., 1])
     for i, j in np.argwhere(lengths < world.min_step_m):
         raise Refused(422, f"points.{i}.{j}: move of {lengths[i, j]:.3g} m is shorter than "
@@ -464,16 +463,21 @@ def _inside(points: np.ndarray, bounds: dict) -> np.ndarray:
             & (y >= bounds["y_min_m"]) & (y <= bounds["y_max_m"]))
 
 
+def step_moves(trial: TrialRecord, points: np.ndarray) -> np.ndarray:
+    """Clicked positions [K, n, 2] -> moves [K, n, 2] (m) from each start state, step by step."""
+    starts = np.asarray([s.robot for s in trial.start_states], dtype=np.float64)
+    return np.diff(np.concatenate([starts[:, None], points], axis=1), axis=1)
+
+
 def human_actions(trial: TrialRecord, points: np.ndarray, dt_s: float) -> np.ndarray:
     """Clicked positions [K, n, 2] -> actions [K, n, 2] = position differences / dt."""
-    starts = np.asarray([s.robot for s in trial.start_states], dtype=np.float64)
-    return np.diff(np.concatenate([starts[:, None], points], axis=1), axis=1) / dt_s
+    return step_moves(trial, points) / dt_s
 
 
 def attention_verdict(config: StudyConfig, trial: TrialRecord, points: np.ndarray) -> bool:
     """Passed if enough first moves point within the allowed angle of the robot's true move."""
     rule = config.attention_checks
-    first = points[:, 0] - np.asarray([s.robot for s in trial.start_states])
+    first = step_moves(trial, points)[:, 0]
     truth = np.asarray(trial.policy_actions, dtype=np.float64)[:, 0]
     cos = (first * truth).sum(-1) / (np.linalg.norm(first, axis=-1)
                                      * np.linalg.norm(truth, axis=-1) + 1e-12)
