@@ -489,18 +489,14 @@ def norm2(vectors: np.ndarray) -> np.ndarray:
 def headings_and_speeds(positions: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Heading [rad] and speed [m/s] of each agent at each state, from its motion into it."""
     steps = np.diff(positions, axis=0)  # [L, A, D]
-    speeds = np.concatenate([np.zeros((1, positions.shape[1])),
-                             np.linalg.norm(steps, axis=-1) / dt_s])
-    headings = np.zeros(positions.shape[:2])
-    for a in range(positions.shape[1]):
-        last = np.arctan2(*steps[0, a, ::-1]) if len(steps) else 0.0
-        moving = np.linalg.norm(steps[:, a], axis=-1) > 1e-9
-        first_move = np.flatnonzero(moving)
-        if first_move.size:
-            last = np.arctan2(steps[first_move[0], a, 1], steps[first_move[0], a, 0])
-        headings[0, a] = last
-        for t in range(len(steps)):  # a stopped agent keeps its last heading
-            if moving[t]:
-                last = np.arctan2(steps[t, a, 1], steps[t, a, 0])
-            headings[t + 1, a] = last
-    return headings, speeds
+    lengths = np.linalg.norm(steps, axis=-1)  # [L, A]
+    speeds = np.concatenate([np.zeros((1, positions.shape[1])), lengths / dt_s])
+    if len(steps) == 0:
+        return np.zeros(positions.shape[:2]), speeds
+    angles = np.arctan2(steps[..., 1], steps[..., 0])
+    moving = lengths > 1e-9
+    first = moving.argmax(axis=0)  # first moving step (0 if it never moves)
+    latest = np.maximum.accumulate(np.where(moving, np.arange(len(steps))[:, None], -1), axis=0)
+    source = np.where(latest >= 0, latest, first)  # a stopped agent keeps its last heading
+    agents = np.arange(positions.shape[1])
+    return np.concatenate([angles[first, agents][None], angles[source, agents]]), speeds
