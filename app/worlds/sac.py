@@ -117,7 +117,7 @@ def prepare_policy(world: ObstacleWorld, data_dir: Path) -> SACPolicy:
     """Load the policy trained on this exact config, or train, evaluate and save it."""
     zip_path, meta_path = policy_paths(data_dir)
     key = config_key(world)
-    if not _is_current(meta_path, key) or not zip_path.exists():
+    if not _is_current(zip_path, meta_path, key):
         model, train_s = train_model(world)
         with atomic_path(zip_path) as tmp, open(tmp, "wb") as fh:
             model.save(fh)
@@ -131,8 +131,9 @@ def prepare_policy(world: ObstacleWorld, data_dir: Path) -> SACPolicy:
     return load_policy(zip_path)
 
 
-def _is_current(meta_path: Path, key: str) -> bool:
-    if not meta_path.exists():
+def _is_current(zip_path: Path, meta_path: Path, key: str) -> bool:
+    """A saved policy exists and its meta.json names this config."""
+    if not (zip_path.exists() and meta_path.exists()):
         return False
     return json.loads(meta_path.read_text()).get("config_sha256") == key
 
@@ -148,7 +149,7 @@ def load_prepared_policy(world: ObstacleWorld) -> SACPolicy:
     zip_path = _PREPARED.get(key)
     if zip_path is None:
         zip_path, meta_path = policy_paths(get_settings().data_dir)
-        if not (zip_path.exists() and _is_current(meta_path, key)):
+        if not _is_current(zip_path, meta_path, key):
             raise RuntimeError(f"no SAC policy trained on this obstacle config at {zip_path}; "
                                "call ObstacleWorld.prepare(data_dir) first")
     return load_policy(zip_path)
