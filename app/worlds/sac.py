@@ -7,7 +7,6 @@ names the exact world config it was trained on, so a changed config retrains ins
 silently reusing a stale policy.
 """
 
-import hashlib
 import json
 import time
 from collections import Counter
@@ -21,7 +20,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from tqdm import tqdm
 
 from app.data.trajectory import HUMAN, ROBOT, Rejected
-from app.fileio import atomic_path, write_json
+from app.fileio import atomic_path, sha256_bytes, write_json
 from app.settings import get_settings
 from app.worlds.obstacle import ObstacleWorld
 
@@ -104,7 +103,7 @@ class SACPolicy:
 def config_key(world: ObstacleWorld) -> str:
     """SHA-256 of the world config the policy depends on (all of it: reward, geometry, SAC)."""
     text = json.dumps(world.config.model_dump(), sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()
+    return sha256_bytes(text.encode())
 
 
 def policy_paths(data_dir: Path) -> tuple[Path, Path]:
