@@ -12,13 +12,6 @@ from app.study.crud import TRIAL_PHASES, StudyContext, current_step
 from app.study.tables import Participant
 
 
-def session_state(ctx: StudyContext, participant: Participant) -> dict:
-    """`{phase, progress: {done, total}, step}` for the participant's current position."""
-    step = current_step(participant)
-    return {"phase": step["phase"], "progress": progress_of(participant),
-            "step": step_payload(ctx, participant, step)}
-
-
 def progress_of(participant: Participant) -> dict:
     """Trials (practice included) done and in total."""
     trial_positions = [i for i, s in enumerate(participant.plan) if s["phase"] in TRIAL_PHASES]
@@ -27,7 +20,7 @@ def progress_of(participant: Participant) -> dict:
 
 
 def step_payload(ctx: StudyContext, participant: Participant, step: dict) -> dict:
-    """What the current phase needs: texts, a trial, the survey or the completion code."""
+    """What a non-trial phase needs: texts, the survey or the completion code."""
     cfg = ctx.config
     phase = step["phase"]
     if phase == "consent":
@@ -35,17 +28,10 @@ def step_payload(ctx: StudyContext, participant: Participant, step: dict) -> dic
     if phase == "instructions":
         return {"title": cfg.title, "text": cfg.instructions_text,
                 "world_order": participant.world_order.split(",")}
-    if phase in TRIAL_PHASES:
-        return trial_payload(ctx, step)
     if phase == "survey":
         return {"questions": [q.model_dump() for q in cfg.survey]}
     return {"completion_code": cfg.recruitment.completion_code,
             "redirect_url": redirect_url(cfg, participant)}
-
-
-def trial_payload(ctx: StudyContext, step: dict) -> dict:
-    """A bank trial as the browser sees it (no model predictions)."""
-    return {**step_fields(ctx, step), **static_trial(ctx, step["trial_id"])}
 
 
 def step_fields(ctx: StudyContext, step: dict) -> dict:
@@ -67,16 +53,16 @@ def static_trial(ctx: StudyContext, trial_id: str) -> dict:
 
 
 def state_json(ctx: StudyContext, participant: Participant) -> str:
-    """`session_state` encoded as JSON, with the trial's static part encoded only once."""
+    """`{phase, progress: {done, total}, step}` as JSON; a trial's static part is encoded once."""
     step = current_step(participant)
+    state = {"phase": step["phase"], "progress": progress_of(participant)}
     if step["phase"] not in TRIAL_PHASES:
-        return json.dumps(session_state(ctx, participant))
+        return json.dumps({**state, "step": step_payload(ctx, participant, step)})
     static = ctx.trial_json.get(step["trial_id"])
     if static is None:
         static = json.dumps(static_trial(ctx, step["trial_id"]))
         ctx.trial_json[step["trial_id"]] = static
-    head = json.dumps({"phase": step["phase"], "progress": progress_of(participant),
-                       "step": step_fields(ctx, step)})
+    head = json.dumps({**state, "step": step_fields(ctx, step)})
     return f"{head[:-2]}, {static[1:]}}}"
 
 
