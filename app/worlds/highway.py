@@ -224,11 +224,13 @@ class HighwayWorld:
         }
 
     def _feasible_lanes(self, intent: int) -> list[int]:
-        lanes = range(self.config.lanes_count)
-        return [k for k in lanes if 0 <= k + LANE_SHIFT[intent] < self.config.lanes_count]
+        return [k for k in range(self.config.lanes_count) if self._stays_on_road(k, intent)]
 
     def _feasible_intents(self, lane: int) -> list[int]:
-        return [i for i in range(3) if 0 <= lane + LANE_SHIFT[i] < self.config.lanes_count]
+        return [i for i in range(len(INTENTS)) if self._stays_on_road(lane, i)]
+
+    def _stays_on_road(self, lane: int, intent: int) -> bool:
+        return 0 <= lane + LANE_SHIFT[intent] < self.config.lanes_count
 
     def _place_cars(self, setup: dict) -> tuple[Road, list[Driver]]:
         road = Road(network=self.network, np_random=np.random.RandomState(0),
