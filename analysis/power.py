@@ -19,7 +19,7 @@ from analysis import predictors
 from analysis.load import EXPORT_COLUMNS, normalise
 from analysis.metrics import participant_means
 
-KINDS = ("coarse", "precise", "random")
+KINDS = predictors.KINDS
 SIMULATED_TRIAL_MS = 20000.0
 
 
@@ -36,17 +36,6 @@ def trial_payload(world_bank: dict, trial: dict, steps_to_predict: int) -> dict:
         "start_states": trial["start_states"], "steps_to_predict": steps_to_predict,
         "max_step_m": world_bank["max_step_m"], "min_step_m": world_bank["min_step_m"],
     }
-
-
-def bot_clicks(kind: str, payload: dict, trial: dict, rng: np.random.Generator) -> np.ndarray:
-    """A bot's clicks [K, n, 2] for one trial (precise bots follow the bank's policy actions)."""
-    if kind == "coarse":
-        return predictors.predict_coarse(payload, rng)
-    if kind == "precise":
-        return predictors.predict_from_actions(payload, np.asarray(trial["policy_actions"]), rng)
-    if kind == "random":
-        return predictors.predict_random(payload, rng)
-    raise ValueError(f"kind: unknown bot kind {kind!r}")
 
 
 def trial_rows(participant: str, world_position: int, trial_index: int, payload: dict,
@@ -99,7 +88,7 @@ def simulate_participants(bank: dict, kind: str, n: int, trials_per_world: int, 
             for index, t in enumerate(chosen):
                 trial = main[int(t)]
                 payload = trial_payload(world_bank, trial, steps)
-                clicks = bot_clicks(kind, payload, trial, rng)
+                clicks = predictors.predict(kind, payload, rng, trial["policy_actions"])
                 parts.append(trial_rows(f"sim-{p:05d}", position, index, payload, trial, clicks))
     return export_frame(parts, bank["study_id"], kind)
 

@@ -16,6 +16,7 @@ predictor returns clicked robot positions [starts, steps, 2] that the server acc
 
 import numpy as np
 
+KINDS = ("coarse", "precise", "random")
 COARSE_NOISE_DEG = 15.0
 PRECISE_NOISE_DEG = 5.0
 LANE_TIME_CONSTANT_S = 1.0  # a coarse predictor closes the gap to its target lane in ~1 s
@@ -166,6 +167,20 @@ def predict_random(payload: dict, rng: np.random.Generator) -> np.ndarray:
         return direction, rng.uniform(low, high)
 
     return walk(payload, next_move)
+
+
+def predict(kind: str, payload: dict, rng: np.random.Generator,
+            policy_actions: np.ndarray | None = None) -> np.ndarray:
+    """Clicks [S, K, 2] of a bot of `kind`; a precise bot follows `policy_actions` [S, K, 2]."""
+    if kind == "coarse":
+        return predict_coarse(payload, rng)
+    if kind == "precise":
+        if policy_actions is None:
+            raise ValueError(f"precise bot: no policy actions for trial {payload['trial_id']}")
+        return predict_from_actions(payload, np.asarray(policy_actions), rng)
+    if kind == "random":
+        return predict_random(payload, rng)
+    raise ValueError(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
 
 
 def clicks_to_actions(payload: dict, clicks: np.ndarray) -> np.ndarray:

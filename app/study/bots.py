@@ -30,7 +30,7 @@ import numpy as np
 
 from analysis import predictors
 
-KINDS = ("coarse", "precise", "random")
+KINDS = predictors.KINDS
 THINK_MEDIAN_S = 2.5
 MAX_STEPS = 200  # no study has this many phases; a bot that gets here is stuck
 RETRIES = 3
@@ -65,15 +65,12 @@ def load_policy_actions(bank_path: Path) -> dict[str, np.ndarray]:
 def choose_clicks(kind: str, payload: dict, rng: np.random.Generator,
                   policy: dict[str, np.ndarray] | None) -> np.ndarray:
     """The bot's clicked positions [K, n, 2] for one trial payload."""
-    if kind == "coarse":
-        return predictors.predict_coarse(payload, rng)
-    if kind == "precise":
-        if policy is None or payload["trial_id"] not in policy:
-            raise BotError(f"precise bot: no policy actions for trial {payload['trial_id']}")
-        return predictors.predict_from_actions(payload, policy[payload["trial_id"]], rng)
-    if kind == "random":
-        return predictors.predict_random(payload, rng)
-    raise BotError(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
+    if kind not in KINDS:
+        raise BotError(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
+    actions = (policy or {}).get(payload["trial_id"])
+    if kind == "precise" and actions is None:
+        raise BotError(f"precise bot: no policy actions for trial {payload['trial_id']}")
+    return predictors.predict(kind, payload, rng, actions)
 
 
 def survey_answers(step: dict, rng: np.random.Generator) -> dict:
