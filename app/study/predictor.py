@@ -27,7 +27,6 @@ class BankMismatch(RuntimeError):
 class Answer:
     """One model's answer to one trial."""
 
-    z: np.ndarray
     code: int
     actions: np.ndarray  # [K, n, 2] m/s
     content_hash: str
@@ -55,11 +54,11 @@ class Predictor:
                 raise BankMismatch(f"{trial.trial_id}: bank holds {kind} {stored.content_hash[:12]}"
                                    f", server loaded {model.content_hash[:12]}; rebuild the bank "
                                    f"(tomstudy build-trials)")
-            z, code, actions = model.trial(np.asarray(stored.segment_positions), states)
+            _, code, actions = model.trial(np.asarray(stored.segment_positions), states)
             if code != stored.code or not np.allclose(actions, stored.actions,
                                                       atol=ACTION_TOLERANCE_MPS):
                 raise BankMismatch(f"{trial.trial_id}: {kind} answers differ from the bank")
-            answers[kind] = Answer(z=z, code=int(code), actions=actions.astype(np.float64),
+            answers[kind] = Answer(code=int(code), actions=actions.astype(np.float64),
                                    content_hash=model.content_hash)
         return answers
 
