@@ -46,12 +46,8 @@ def highway_target_lane_y(payload: dict) -> float:
     direction = np.sign(recent) if abs(recent) > 0.1 * width else 0.0
     if direction == 0 and abs(drift) > 0.3 * width:
         direction = np.sign(drift)
-    if direction == 0:
-        return min(lanes, key=lambda c: abs(c - y_end))
     ahead = [c for c in lanes if (c - y_end) * direction > -0.25 * width]
-    if not ahead:
-        return min(lanes, key=lambda c: abs(c - y_end))
-    return min(ahead, key=lambda c: abs(c - y_end))
+    return min(ahead if direction != 0 and ahead else lanes, key=lambda c: abs(c - y_end))
 
 
 def obstacle_target_goal(payload: dict) -> np.ndarray:
