@@ -86,7 +86,6 @@ class Pair:
     positions: np.ndarray  # [W, 2 agents, 2] m
     headings: np.ndarray  # [W, 2] rad
     speeds: np.ndarray  # [W, 2] m/s, from the recorded vx, vy
-    extra: dict = field(default_factory=dict)
 
     def episode(self, step: int, labels: dict[str, int] | None = None) -> Episode:
         """This pair as an Episode sampled every `step` frames."""
