@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tests.conftest import SmallStudy, build_small_study, free_port, start_server  # noqa: E402
+from tests.conftest import cached_small_study, free_port, start_server  # noqa: E402
 from tests.study.flow import prediction_body  # noqa: E402
 
 
@@ -125,11 +125,7 @@ def main() -> None:
     parser.add_argument("--participants", type=int, default=100)
     parser.add_argument("--concurrency", type=int, default=50)
     args = parser.parse_args()
-    root = Path(tempfile.gettempdir()) / "tomstudy-bench-study"
-    if not (root / "done").exists():
-        build_small_study(root)
-        (root / "done").touch()
-    study = SmallStudy(root / "var", root / "configs")
+    study = cached_small_study()  # the tests' cache, rebuilt when the pipeline code changes
     port = free_port()
     with tempfile.TemporaryDirectory() as tmp:
         proc = start_server(study, f"sqlite:///{tmp}/bench.db", port)

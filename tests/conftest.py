@@ -99,6 +99,11 @@ def build_small_study(root: Path) -> SmallStudy:
 
 @pytest.fixture(scope="session")
 def small_study() -> SmallStudy:
+    """The small real pipeline (see `cached_small_study`)."""
+    return cached_small_study()
+
+
+def cached_small_study() -> SmallStudy:
     """The small real pipeline, cached in the temp dir by a hash of the code it runs.
 
     A lock file serialises test sessions that share the machine (and the cache).
