@@ -6,6 +6,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
+from analysis.metrics import ExclusionRules  # the analysis' own rules: one definition
 from app.configio import ConfigError, StrictModel, load_yaml_model
 from app.settings import Settings
 
@@ -67,15 +68,6 @@ class Recruitment(StrictModel):
     anonymous_redirect_url: str = ""
 
 
-class Exclusions(StrictModel):
-    """Named exclusion rules the dashboard and the analysis apply to participants."""
-
-    failed_attention_check: bool = True
-    incomplete: bool = True
-    too_fast_trial_ms: int = Field(default=4000, ge=0)
-    too_fast_max_fraction: float = Field(default=0.25, ge=0, le=1)
-
-
 class PredictionInput(StrictModel):
     """Limits on a clicked move, as fractions of the robot's largest step in the bank data."""
 
@@ -111,7 +103,7 @@ class StudyConfig(StrictModel):
     survey: list[SurveyQuestion] = []
     recruitment: Recruitment
     target_sample_size: int = Field(ge=1)
-    exclusions: Exclusions = Exclusions()
+    exclusions: ExclusionRules = ExclusionRules()
     in_progress_timeout_min: float = Field(default=90.0, gt=0)
     models: dict[WorldName, ModelPaths]
 

@@ -72,12 +72,12 @@ def alignment_summary(frame: pd.DataFrame, ctx: StudyContext) -> dict:
     `incomplete` rule to show sessions still running.
     """
     from analysis.load import normalise
-    from analysis.metrics import ExclusionRules, apply_exclusions, participant_means
+    from analysis.metrics import apply_exclusions, participant_means
 
     if frame.empty:
         return {"kept": {}, "live": {}, "exclusions": {}}
     frame = normalise(frame)
-    rules = ExclusionRules(**ctx.config.exclusions.model_dump())
+    rules = ctx.config.exclusions
     out = {}
     for name, active in (("kept", rules), ("live", rules.model_copy(update={"incomplete": False}))):
         result = apply_exclusions(frame, active)
