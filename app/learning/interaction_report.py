@@ -10,7 +10,7 @@ import numpy as np
 
 from app.data.trajectory import HUMAN, ROBOT
 from app.data.windows import Windows
-from app.fileio import write_json
+from app.fileio import atomic_path, write_json
 from app.learning.interaction_experiment import MODELS, Experiment, InteractionConfig
 from app.worlds.scene import HUMAN_COLOR, LABEL_COLORS, ROBOT_COLOR
 
@@ -32,8 +32,6 @@ def _axes_over_scene(ax, exp: Experiment) -> None:
 
 
 def _save(fig, path: Path) -> Path:
-    from app.fileio import atomic_path
-
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     import matplotlib.pyplot as plt
@@ -160,7 +158,7 @@ def write_figures(exp: Experiment, cfg: InteractionConfig, per_seed: list[dict],
 def write_report(out_dir: Path, summary: dict, per_seed: list[dict], figures: list[Path]) -> None:
     """summary.json, per_seed.csv and report.html (figures embedded)."""
     write_json(out_dir / "summary.json", summary)
-    with open(out_dir / "per_seed.csv", "w", newline="") as fh:
+    with atomic_path(out_dir / "per_seed.csv") as tmp, open(tmp, "w", newline="") as fh:
         writer = csv.writer(fh, lineterminator="\n")
         writer.writerow(["seed", "model", "alignment_error", "ade_m", "fde_m", "codes_used"])
         for r in per_seed:
@@ -168,7 +166,8 @@ def write_report(out_dir: Path, summary: dict, per_seed: list[dict], figures: li
                 writer.writerow([r["seed"], m, f"{r[m]['alignment_error']:.6f}",
                                  f"{r[m]['ade_m']:.6f}", f"{r[m]['fde_m']:.6f}",
                                  r[m]["usage"]["n_codes_used"]])
-    (out_dir / "report.html").write_text(render_html(summary, figures))
+    with atomic_path(out_dir / "report.html") as tmp:
+        tmp.write_text(render_html(summary, figures))
 
 
 def _f(value: float, digits: int = 3) -> str:
