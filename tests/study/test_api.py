@@ -153,14 +153,10 @@ def test_events_are_stored_once(client, small_study):
 
 
 def test_world_orders_and_trials_are_assigned_in_balance(client, small_study, bank):
-    plans = []
-    for i in range(4):
+    for i in range(4):  # two completions, two sessions still running
         p = at_first_trial(client, small_study.study_id, PROLIFIC_PID=f"bal{i}")
         if i < 2:
             p.finish(bank)
-        plans.append(p)
-    orders = [tuple(p.state()["step"].get("world_order", [])) for p in plans]
-    assert orders  # completed ones show the done step; read orders from the export instead
     csv = client.get(f"/api/researcher/export.csv?study_id={small_study.study_id}",
                      headers=ADMIN).text
     frame = pd.read_csv(io.StringIO(csv))
