@@ -115,8 +115,7 @@ def roundabout_route(arm: int, quarter_turns: int) -> Route:
     """Enter on `arm`, drive counter-clockwise for `quarter_turns`, exit on the arm reached."""
     theta = ARM_ANGLES[arm]
     phi = theta + quarter_turns * 0.5 * math.pi
-    entry_far = theta + 0.0
-    start = _unit(entry_far) * ARM_LENGTH_M + _left_of_inbound(theta) * LANE_OFFSET_M
+    start = _unit(theta) * ARM_LENGTH_M + _left_of_inbound(theta) * LANE_OFFSET_M
     entry_end = _unit(theta) * (RING_RADIUS_M + 9) + _left_of_inbound(theta) * LANE_OFFSET_M
     arc_a, arc_b = theta + 0.45, phi - 0.45
     angles = np.linspace(arc_a, arc_b, max(8, int(24 * (arc_b - arc_a))))
