@@ -46,11 +46,6 @@ class FSQ(nn.Module):
         self.register_buffer("basis", torch.tensor(basis, dtype=torch.int64), persistent=False)
 
     @property
-    def dim(self) -> int:
-        """Number of latent channels."""
-        return len(self.levels_list)
-
-    @property
     def codebook_size(self) -> int:
         """Number of distinct codes, the product of the levels."""
         return int(np.prod(self.levels_list))
