@@ -10,7 +10,7 @@ import secrets
 import uuid
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from datetime import timedelta
+from datetime import datetime, timedelta
 from itertools import permutations
 
 import numpy as np
@@ -144,7 +144,7 @@ def counted_participants(db: Session, ctx: StudyContext) -> list[Participant]:
     many too-fast trials) removes it; an unfinished session counts while it is younger
     than `in_progress_timeout_min`, so abandoned ones stop holding their trials.
     """
-    cutoff = utcnow() - timedelta(minutes=ctx.config.in_progress_timeout_min)
+    cutoff = in_progress_cutoff(ctx.config)
     rows = db.execute(select(Participant).where(Participant.study_id == ctx.study_id))
     people = rows.scalars().all()
     too_fast = too_fast_participants(db, ctx, [p.id for p in people if p.completed])
@@ -154,9 +154,19 @@ def counted_participants(db: Session, ctx: StudyContext) -> list[Participant]:
             failed = p.attention_failed > 0 and ctx.config.exclusions.failed_attention_check
             if not failed and p.id not in too_fast:
                 counted.append(p)
-        elif as_utc(p.updated_at) >= cutoff:
+        elif is_in_progress(p, cutoff):
             counted.append(p)
     return counted
+
+
+def in_progress_cutoff(config: StudyConfig) -> datetime:
+    """Unfinished sessions last updated before this are abandoned (stale)."""
+    return utcnow() - timedelta(minutes=config.in_progress_timeout_min)
+
+
+def is_in_progress(participant: Participant, cutoff: datetime) -> bool:
+    """Unfinished and updated since `cutoff`."""
+    return not participant.completed and as_utc(participant.updated_at) >= cutoff
 
 
 def too_fast_participants(db: Session, ctx: StudyContext, ids: list[int]) -> set[int]:

@@ -1,15 +1,14 @@
 """Read side for researchers: the tidy export table and the dashboard summary."""
 
 import io
-from datetime import timedelta
 
 import pandas as pd
 from sqlalchemy import select
 from sqlmodel import Session
 
 from analysis.load import EXPORT_COLUMNS  # one column contract for writer and reader
-from app.study.crud import StudyContext, as_utc
-from app.study.tables import Participant, PredictionRow, TrialResponse, utcnow
+from app.study.crud import StudyContext, as_utc, in_progress_cutoff, is_in_progress
+from app.study.tables import Participant, PredictionRow, TrialResponse
 
 _FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields]
 
@@ -46,17 +45,17 @@ def export_csv(db: Session, study_id: str) -> str:
 
 def progress(db: Session, ctx: StudyContext) -> dict:
     """Session counts: started, completed, in progress, stale, per world order."""
-    cutoff = utcnow() - timedelta(minutes=ctx.config.in_progress_timeout_min)
+    cutoff = in_progress_cutoff(ctx.config)
     people = db.execute(select(Participant).where(
         Participant.study_id == ctx.study_id)).scalars().all()
     completed = [p for p in people if p.completed]
-    active = [p for p in people if not p.completed and as_utc(p.updated_at) >= cutoff]
+    active = [p for p in people if is_in_progress(p, cutoff)]
     orders: dict[str, dict[str, int]] = {}
     for p in people:
         entry = orders.setdefault(p.world_order, {"completed": 0, "in_progress": 0})
         if p.completed:
             entry["completed"] += 1
-        elif p in active:
+        elif is_in_progress(p, cutoff):
             entry["in_progress"] += 1
     return {"target_sample_size": ctx.config.target_sample_size, "started": len(people),
             "completed": len(completed), "in_progress": len(active),
