@@ -6,10 +6,14 @@ vehicle kinematics (`Vehicle.act` / `Vehicle.step`, a kinematic bicycle) and the
 check (`Road.step` -> `handle_collisions`). Rewards, crash and off-road checks are per agent
 and written here, because highway-v0 only scores its first vehicle.
 
-Frame of the stored positions: x is measured along the road relative to a point that starts at
-the two cars' initial midpoint and moves forward at the constant `frame_speed_mps`; y is
-highway-env's lateral coordinate. So positions do not drift along the road and actions
-(position differences / dt) compare lateral and relative longitudinal motion directly.
+Frame of the stored positions: x is measured along the road relative to a point that moves
+forward at the constant `frame_speed_mps`, slower than every car (19 m/s against cars at
+22.5-25.5 m/s), and that starts `frame_start_x_m` behind the cars' initial midpoint; y is
+highway-env's lateral coordinate. So every car drives forward on screen (rollouts where a
+car's on-screen speed drops below `min_display_speed_mps` are rejected as `slow_on_screen`),
+keeping the lane is a forward move and merging a forward-sideways one, and positions stay
+in a view of fixed size. The browser scrolls the lane markings backwards at the frame's
+speed, so the clip reads as traffic driving forward on a road seen from a slower camera.
 
 Shape legend inside the MPC cost: K candidates, H horizon steps, U = 2 controls
 (acceleration [m/s^2], steering [rad]).
@@ -74,20 +78,22 @@ class HighwayConfig(StrictModel):
     lanes_count: int = Field(3, ge=3)
     policy_dt_s: float = Field(0.5, gt=0)
     simulation_frequency_hz: int = Field(10, ge=1)
-    episode_steps: int = Field(24, ge=2)
-    frame_speed_mps: float = Field(25.0, gt=0)
-    initial_speed_mps: RangeF = (22.0, 28.0)
-    target_speed_mps: RangeF = (22.5, 27.5)
-    initial_gap_m: RangeF = (-24.0, 24.0)
+    episode_steps: int = Field(16, ge=2)
+    frame_speed_mps: float = Field(19.0, ge=0)
+    frame_start_x_m: float = Field(-26.0)
+    min_display_speed_mps: float = Field(1.0, ge=0)
+    initial_speed_mps: RangeF = (22.5, 25.5)
+    target_speed_mps: RangeF = (23.0, 25.0)
+    initial_gap_m: RangeF = (-20.0, 20.0)
     min_same_lane_gap_m: float = Field(14.0, ge=0)
     human_in_robot_target_lane_prob: float = Field(0.5, ge=0, le=1)
-    merge_delay_steps: RangeI = (0, 4)
+    merge_delay_steps: RangeI = (0, 2)
     max_acceleration_mps2: float = Field(3.0, gt=0)
     max_steering_rad: float = Field(0.08, gt=0)
     clearance_longitudinal_m: float = Field(4.0, ge=0)
     clearance_lateral_m: float = Field(1.0, ge=0)
     headway_time_s: float = Field(0.8, ge=0)
-    view_half_length_m: float = Field(50.0, gt=0)
+    view_half_length_m: float = Field(45.0, gt=0)
     max_lane_excursion_m: float = Field(1.0, ge=0)
     mpc: MpcSettings = MpcSettings()
     reward: RewardWeights = RewardWeights()
@@ -102,6 +108,11 @@ class HighwayConfig(StrictModel):
         for name in ("initial_speed_mps", "target_speed_mps", "merge_delay_steps"):
             if getattr(self, name)[0] < 0:
                 raise ValueError(f"{name}: must not be negative")
+        slowest = min(self.initial_speed_mps[0], self.target_speed_mps[0])
+        if self.frame_speed_mps + self.min_display_speed_mps > slowest:
+            raise ValueError(f"frame_speed_mps: {self.frame_speed_mps} m/s plus "
+                             f"min_display_speed_mps must stay below the slowest car "
+                             f"({slowest} m/s), or cars drift backwards on screen")
         substeps = self.policy_dt_s * self.simulation_frequency_hz
         if abs(substeps - round(substeps)) > 1e-9 or round(substeps) < 1:
             raise ValueError("simulation_frequency_hz: policy_dt_s must be a whole number "
@@ -163,9 +174,10 @@ class HighwayWorld:
         c = self.config
         half = c.view_half_length_m
         return Scene(
-            world=self.name, dt_s=self.dt_s,
-            frame=(f"x [m] along the road relative to a point that starts at the two cars' "
-                   f"initial midpoint and moves forward at a constant {c.frame_speed_mps} m/s; "
+            world=self.name, dt_s=self.dt_s, frame_speed_mps=c.frame_speed_mps,
+            frame=(f"x [m] along the road relative to a camera point that starts "
+                   f"{-c.frame_start_x_m} m behind the two cars' initial midpoint and moves "
+                   f"forward at a constant {c.frame_speed_mps} m/s, slower than every car; "
                    f"y [m] is highway-env's lateral coordinate (lane 0 on top, y grows "
                    f"downwards); cars drive towards +x; dt = {self.dt_s} s per step, "
                    f"{c.episode_steps} steps per interaction"),
@@ -184,13 +196,15 @@ class HighwayWorld:
         """One two-car interaction; raises Rejected on collision, off-road or unfinished merge."""
         setup = self._draw_setup(rng)
         road, drivers = self._place_cars(setup)
-        origin_x = START_X_M + setup["gap"] / 2
+        origin_x = START_X_M + setup["gap"] / 2 - self.config.frame_start_x_m
         states = [self._snapshot(drivers, origin_x, 0)]
         for step in range(self.config.episode_steps):
             self._advance(road, drivers, step, rng, check=True)
             states.append(self._snapshot(drivers, origin_x, step + 1))
         positions = np.array([s[0] for s in states])
         self._check_view(positions)
+        self._check_moves_forward(np.array([s[1] for s in states]),
+                                  np.array([s[2] for s in states]))
         self._check_merges_done(drivers)
         self._check_no_swerve(positions, drivers)
         labels = self._labels(setup, positions)
@@ -288,6 +302,12 @@ class HighwayWorld:
         limit = self.config.view_half_length_m - CAR_LENGTH_M / 2
         if np.abs(positions[..., 0]).max() > limit:
             raise Rejected("out_of_view")
+
+    def _check_moves_forward(self, headings: np.ndarray, speeds: np.ndarray) -> None:
+        """Both cars must visibly drive forward on screen at every step of the clip."""
+        shown = speeds * np.cos(headings) - self.config.frame_speed_mps
+        if shown.min() < self.config.min_display_speed_mps:
+            raise Rejected("slow_on_screen")
 
     def _check_merges_done(self, drivers: list[Driver]) -> None:
         for driver in drivers:

@@ -49,6 +49,7 @@ class Scene(_Frozen):
     world: str
     dt_s: float
     frame: str
+    frame_speed_mps: float = 0.0  # speed of the displayed frame along +x (markings scroll)
     bounds: Bounds
     lanes: list[Lane] = []
     obstacles: list[Circle] = []

@@ -35,7 +35,8 @@ def _write_config(tmp_path: Path, old: str, new: str) -> Path:
     ("lanes_count: 3", "lanes_cout: 3", "lanes_cout"),
     ("max_acceleration_mps2: 3.0", "max_acceleration_mps2: -3.0", "max_acceleration_mps2"),
     ("  n_samples: 64", "  n_samples: -5", "mpc.n_samples"),
-    ("episode_steps: 24", "episode_steps: -1", "episode_steps"),
+    ("episode_steps: 16", "episode_steps: -1", "episode_steps"),
+    ("frame_speed_mps: 19.0", "frame_speed_mps: 23.0", "frame_speed_mps"),
 ])
 def test_bad_config_names_the_field(tmp_path, old, new, field):
     with pytest.raises(ConfigError, match=field):
@@ -120,6 +121,20 @@ def test_actions_are_position_differences_in_the_moving_frame(small_run):
     mean_forward = (forward[:, 1:] + forward[:, :-1]) / 2
     assert np.abs(trajs.actions[..., 0] + frame_speed - mean_forward).mean() < 0.3
     assert np.abs(trajs.positions[..., 0]).max() < trajs.scene.bounds.x_max_m
+
+
+def test_every_car_drives_forward_on_screen(small_run):
+    """The frame is slower than every car: keep-lane steps point along +x, merges sideways."""
+    trajs, meta = small_run
+    steps = np.concatenate([np.diff(trajs.positions[i, : trajs.lengths[i] + 1], axis=0)
+                            for i in range(len(trajs))])
+    assert (steps[..., 0] >= meta["config"]["min_display_speed_mps"] * trajs.dt_s - 0.05).all()
+    keep = trajs.labels["robot_intent"] == 0
+    robot = [np.diff(trajs.positions[i, : trajs.lengths[i] + 1, ROBOT], axis=0)
+             for i in np.flatnonzero(keep)]
+    angles = np.degrees(np.arctan2(np.abs(np.concatenate(robot)[:, 1]),
+                                   np.concatenate(robot)[:, 0]))
+    assert np.percentile(angles, 95) < 10  # lane keeping is a forward move
 
 
 def test_same_seed_gives_identical_bytes_for_any_worker_count(tmp_path):

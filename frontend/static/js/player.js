@@ -33,7 +33,7 @@ export function poseAt(clip, t) {
 
 /** Draw a clip frame at fractional step `t`, with each agent's trace so far. */
 export function drawClipFrame(ctx, view, scene, clip, t) {
-  drawBackground(ctx, view, scene);
+  drawBackground(ctx, view, scene, t);
   const poses = poseAt(clip, t);
   poses.forEach((pose, agent) => {
     const style = agentStyle(scene, agent);

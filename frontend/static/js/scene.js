@@ -57,15 +57,18 @@ export function prepareCanvas(canvas, scene) {
   return { ctx, view, cssWidth, cssHeight };
 }
 
-/** Background: bounds, road and lanes, obstacles and goals. */
-export function drawBackground(ctx, view, scene) {
+/**
+ * Background: bounds, road and lanes, obstacles and goals. `t` is the clip's fractional
+ * step: in a moving frame the lane markings slide backwards by the distance it has moved.
+ */
+export function drawBackground(ctx, view, scene, t = 0) {
   const { bounds } = scene;
   const [x0, y0] = view.toPx([bounds.x_min_m, bounds.y_min_m]);
   const [x1, y1] = view.toPx([bounds.x_max_m, bounds.y_max_m]);
   ctx.clearRect(0, 0, ctx.canvas.width, ctx.canvas.height);
   ctx.fillStyle = scene.lanes?.length ? "#d9dde1" : "#fbfbf8";
   ctx.fillRect(x0, y0, x1 - x0, y1 - y0);
-  drawLanes(ctx, view, scene);
+  drawLanes(ctx, view, scene, t);
   (scene.obstacles || []).forEach((obstacle) => drawObstacle(ctx, view, obstacle));
   (scene.goals || []).forEach((goal, k) => drawGoal(ctx, view, goal, k));
   ctx.strokeStyle = "#6b6b6b";
@@ -74,7 +77,11 @@ export function drawBackground(ctx, view, scene) {
   ctx.strokeRect(x0, y0, x1 - x0, y1 - y0);
 }
 
-function drawLanes(ctx, view, scene) {
+// Highway lane markings: 3 m painted, 9 m gap (the US MUTCD broken line), drawn in metres so
+// their scroll speed on screen is the frame's speed.
+const DASH_M = [3, 9];
+
+function drawLanes(ctx, view, scene, t) {
   const { bounds, lanes = [] } = scene;
   if (!lanes.length) return;
   const sorted = [...lanes].sort((a, b) => a.y_center_m - b.y_center_m);
@@ -91,7 +98,8 @@ function drawLanes(ctx, view, scene) {
     edges.forEach((edgeY, side) => {
       const outer = (i === 0 && side === 0) || (i === sorted.length - 1 && side === 1);
       if (!outer && side === 0) return; // shared edge: drawn once, dashed
-      ctx.setLineDash(outer ? [] : [12, 10]);
+      ctx.setLineDash(outer ? [] : DASH_M.map((m) => m * view.scale));
+      ctx.lineDashOffset = (scene.frame_speed_mps || 0) * scene.dt_s * t * view.scale;
       const [ax, ay] = view.toPx([bounds.x_min_m, edgeY]);
       const [bx] = view.toPx([bounds.x_max_m, edgeY]);
       ctx.beginPath();
@@ -101,6 +109,7 @@ function drawLanes(ctx, view, scene) {
     });
   });
   ctx.setLineDash([]);
+  ctx.lineDashOffset = 0;
 }
 
 function drawObstacle(ctx, view, obstacle) {
