@@ -185,6 +185,21 @@ def power(
     typer.echo(f"wrote {out}")
 
 
+@cli.command("check-display")
+def check_display_cmd(
+    study: Annotated[str, typer.Option(help="study id (reads its bank and the worlds' data)")]
+    = "paper_study",
+) -> None:
+    """Can a person click the robot's true moves, and is a behaviour one direction?"""
+    from app.study.display_check import check_display, format_table
+
+    try:
+        result = check_display(get_settings().data_dir, study)
+    except FileNotFoundError as err:
+        fail(str(err))
+    typer.echo(format_table(result))
+
+
 @cli.command("build-trials")
 def build_trials_cmd(
     study: Annotated[str, typer.Option(help="study_configs/<study>.yaml")] = "paper_study",

@@ -1,0 +1,107 @@
+"""`tomstudy check-display`: can a person give the robot's true moves as clicks, and do they
+point one way per behaviour? Three figures per world, on the built data and the trial bank.
+
+- short_steps: share of the robot's true steps (all 2000 trajectories) shorter than the
+  smallest click the study accepts (the bank's `min_step_m`): a person cannot answer those.
+- against_travel: share of the robot's moving steps whose direction is more than 90 degrees
+  from the direction of travel, measured two ways: the data's mean step direction (what
+  "forward" means on a road) and each trajectory's own start-to-end displacement.
+- same_label_spread: mean 1 - cos between the world policy's first moves at the bank's start
+  states, over pairs of main trials that share a robot label (pairs within one trial are
+  left out). 0 = one direction per behaviour; 1 = what random directions give.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from app.data.trajectory import ROBOT, TrajectorySet
+from app.fileio import write_json
+from app.study.trials import BANK_FILE, bank_dir
+from app.worlds.simulate import output_paths
+
+MOVING_M = 1e-3  # a step shorter than this has no direction
+
+
+def robot_steps(trajs: TrajectorySet) -> tuple[np.ndarray, np.ndarray]:
+    """Every valid robot step [S, 2] (m) and its trajectory's net displacement [S, 2]."""
+    steps, net = [], []
+    for i in range(len(trajs)):
+        track = trajs.positions[i, : trajs.lengths[i] + 1, ROBOT].astype(np.float64)
+        steps.append(np.diff(track, axis=0))
+        net.append(np.broadcast_to(track[-1] - track[0], steps[-1].shape))
+    return np.concatenate(steps), np.concatenate(net)
+
+
+def against_share(steps: np.ndarray, direction: np.ndarray) -> float:
+    """Share of moving steps whose dot product with `direction` ([2] or [S, 2]) is negative."""
+    moving = np.linalg.norm(steps, axis=1) > MOVING_M
+    dots = (steps * direction).sum(-1) if direction.ndim > 1 else steps @ direction
+    return float((dots[moving] < 0).mean())
+
+
+def same_label_spread(world_bank: dict) -> dict:
+    """Mean pairwise 1-cos of policy first moves between main trials sharing a robot label."""
+    by_label: dict[int, list[tuple[int, np.ndarray]]] = {}
+    for index, trial in enumerate(t for t in world_bank["trials"] if t["kind"] == "main"):
+        for move in np.asarray(trial["policy_actions"], dtype=np.float64)[:, 0]:
+            by_label.setdefault(int(trial["robot_label"]), []).append((index, move))
+    per_label, pairs_total, sum_total = {}, 0, 0.0
+    for label, items in sorted(by_label.items()):
+        trial_of = np.array([i for i, _ in items])
+        moves = np.array([m for _, m in items])
+        unit = moves / (np.linalg.norm(moves, axis=1, keepdims=True) + 1e-12)
+        distance = 1 - unit @ unit.T
+        other_trial = trial_of[:, None] != trial_of[None, :]
+        upper = np.triu(other_trial, 1)
+        if upper.any():
+            per_label[world_bank["label_names"][label]] = round(float(distance[upper].mean()), 4)
+            pairs_total += int(upper.sum())
+            sum_total += float(distance[upper].sum())
+    return {"mean": round(sum_total / max(pairs_total, 1), 4), "per_label": per_label}
+
+
+def world_figures(trajs: TrajectorySet, world_bank: dict) -> dict:
+    """The three figures of one world."""
+    steps, net = robot_steps(trajs)
+    lengths = np.linalg.norm(steps, axis=1)
+    mean_direction = steps.mean(axis=0)
+    return {
+        "trajectories": len(trajs),
+        "robot_steps": len(steps),
+        "min_click_m": world_bank["min_step_m"],
+        "short_steps": round(float((lengths < world_bank["min_step_m"]).mean()), 4),
+        "against_mean_direction": round(against_share(steps, mean_direction), 4),
+        "against_own_displacement": round(against_share(steps, net), 4),
+        "mean_direction": np.round(mean_direction / (np.linalg.norm(mean_direction) + 1e-12),
+                                   3).tolist(),
+        "same_label_spread": same_label_spread(world_bank),
+    }
+
+
+def check_display(data_dir: Path, study_id: str) -> dict:
+    """Figures for every world of the study's bank; also written to the bank folder."""
+    bank_path = bank_dir(data_dir, study_id) / BANK_FILE
+    if not bank_path.is_file():
+        raise FileNotFoundError(f"{bank_path}: no trial bank; run `tomstudy build-trials "
+                                f"--study {study_id}`")
+    bank = json.loads(bank_path.read_text())
+    result = {}
+    for name, world_bank in sorted(bank["worlds"].items()):
+        npz_path, _ = output_paths(data_dir, name)
+        result[name] = world_figures(TrajectorySet.load(npz_path), world_bank)
+    write_json(bank_path.parent / "display_check.json", result)
+    return result
+
+
+def format_table(result: dict) -> str:
+    """A markdown table, one row per world."""
+    lines = ["| world | min click (m) | true steps shorter | against mean direction "
+             "| against own displacement | same-label policy 1-cos |",
+             "|---|---|---|---|---|---|"]
+    for name, f in result.items():
+        lines.append(f"| {name} | {f['min_click_m']:.3f} | {f['short_steps']:.1%} "
+                     f"| {f['against_mean_direction']:.1%} | {f['against_own_displacement']:.1%} "
+                     f"| {f['same_label_spread']['mean']:.3f} |")
+    return "\n".join(lines)

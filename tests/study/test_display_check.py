@@ -1,0 +1,55 @@
+"""The display check's three figures, against hand-made tracks and bank entries."""
+
+import numpy as np
+import pytest
+
+from app.data.trajectory import TrajectorySet
+from app.study.display_check import against_share, same_label_spread, world_figures
+from app.worlds.scene import AgentShape, Bounds, Scene
+
+SCENE = Scene(world="toy", dt_s=0.5, frame="toy", bounds=Bounds(x_min_m=-10, x_max_m=10,
+              y_min_m=-10, y_max_m=10),
+              agents=[AgentShape(name="robot", kind="disc", length_m=1, width_m=1, color="#000"),
+                      AgentShape(name="human", kind="disc", length_m=1, width_m=1, color="#000")])
+
+
+def _trajectories(robot_tracks: list[list[tuple[float, float]]]) -> TrajectorySet:
+    steps = len(robot_tracks[0])
+    positions = np.zeros((len(robot_tracks), steps, 2, 2), dtype=np.float32)
+    positions[:, :, 0] = np.array(robot_tracks, dtype=np.float32)
+    zeros = np.zeros((len(robot_tracks), steps, 2), dtype=np.float32)
+    return TrajectorySet(world="toy", dt_s=0.5, positions=positions, headings=zeros,
+                         speeds=zeros, lengths=np.full(len(robot_tracks), steps - 1),
+                         labels={}, label_names={}, scene=SCENE)
+
+
+def _trial(label: int, first_moves: list[tuple[float, float]]) -> dict:
+    actions = [[list(m), list(m)] for m in first_moves]
+    return {"kind": "main", "robot_label": label, "policy_actions": actions}
+
+
+def test_short_and_backward_steps_are_counted():
+    forward = [(0, 0), (1, 0), (2, 0), (3, 0), (3.05, 0)]  # last step shorter than 0.1 m
+    backward = [(0, 0), (1, 0), (0.5, 0), (1.5, 0), (2.5, 0)]  # one step against travel
+    bank = {"min_step_m": 0.1, "label_names": ["a"], "trials": [_trial(0, [(1, 0)] * 2)]}
+    figures = world_figures(_trajectories([forward, backward]), bank)
+    assert figures["short_steps"] == pytest.approx(1 / 8)
+    assert figures["against_mean_direction"] == pytest.approx(1 / 8)
+    assert figures["against_own_displacement"] == pytest.approx(1 / 8)
+
+
+def test_against_share_ignores_standing_still():
+    steps = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 0.0]])
+    assert against_share(steps, np.array([1.0, 0.0])) == pytest.approx(0.5)
+
+
+def test_same_label_spread_is_zero_for_one_direction_and_one_for_opposites():
+    same = {"label_names": ["keep"], "trials": [_trial(0, [(2, 0), (1, 0)]),
+                                                _trial(0, [(3, 0)])]}
+    assert same_label_spread(same)["mean"] == pytest.approx(0.0, abs=1e-9)
+    opposite = {"label_names": ["keep"], "trials": [_trial(0, [(1, 0)]), _trial(0, [(-1, 0)])]}
+    assert same_label_spread(opposite)["mean"] == pytest.approx(2.0)
+    # pairs inside one trial are left out: only the cross-trial pair (1-cos 90 deg) counts
+    mixed = {"label_names": ["a", "b"], "trials": [_trial(0, [(1, 0), (-1, 0)]),
+                                                   _trial(1, [(0, 1)])]}
+    assert same_label_spread(mixed)["per_label"] == {}
