@@ -253,4 +253,9 @@ def model_from_payload(payload: dict, path: Path | None = None) -> TrainedModel:
     expected_in = model.segment_len * 8
     if model.encoder_layers[0][0].shape[0] != expected_in:
         raise CheckpointError(f"{path}: encoder weights do not match segment_len")
+    # model_args["latent_dim"] is the VAE's own latent size (vae_latent_dim), not len(levels)
+    if model.decoder_layers[0][0].shape[0] != model.latent_dim + 4:
+        raise CheckpointError(f"{path}: decoder weights take a latent of size "
+                              f"{model.decoder_layers[0][0].shape[0] - 4}, model_args say "
+                              f"latent_dim {model.latent_dim}")
     return model

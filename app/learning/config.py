@@ -10,6 +10,14 @@ from app.settings import get_settings
 MODEL_KINDS = ("ours", "vae")
 
 
+class WorldSelection(StrictModel):
+    """Values `python -m app.learning.select` chose for one world; unset keys keep the default."""
+
+    levels: list[int] | None = Field(None, min_length=1)
+    beta_kl: float | None = Field(None, ge=0)
+    vae_latent_dim: int | None = Field(None, ge=1)
+
+
 class TrainConfig(StrictModel):
     """Window shape, network sizes, optimiser and loss settings; defaults match the study."""
 
@@ -24,6 +32,7 @@ class TrainConfig(StrictModel):
     max_epochs: int = Field(100, ge=1)
     patience_epochs: int = Field(12, ge=1)
     beta_kl: float = Field(0.01, ge=0)
+    vae_latent_dim: int = Field(2, ge=1)
     pred_weight: float = Field(1.0, ge=0)
     recon_weight: float = Field(1.0, ge=0)
     action_axis_weights: list[float] = Field(default_factory=lambda: [1.0, 1.0], min_length=2,
@@ -34,6 +43,8 @@ class TrainConfig(StrictModel):
     test_fraction: float = Field(0.15, gt=0, lt=1)
     vae_clusters: int = Field(3, ge=1)
     min_code_share: float = Field(0.01, ge=0, lt=1)
+    # world name -> chosen values; train_model applies them on top of the keys above
+    selected: dict[str, WorldSelection] = Field(default_factory=dict)
 
     @model_validator(mode="after")
     def _check(self) -> "TrainConfig":
@@ -47,10 +58,15 @@ class TrainConfig(StrictModel):
             raise ValueError("val_fraction + test_fraction must leave at least 10% for training")
         return self
 
-    @property
-    def latent_dim(self) -> int:
-        """Latent channels: one per FSQ level entry (the VAE uses the same dimension)."""
-        return len(self.levels)
+    def latent_dim(self, kind: str) -> int:
+        """Latent size of `kind`: one channel per FSQ level entry (Ours), vae_latent_dim (VAE)."""
+        return len(self.levels) if kind == "ours" else self.vae_latent_dim
+
+    def for_world(self, world: str) -> "TrainConfig":
+        """The config training uses for `world`: selected[world] applied, `selected` emptied."""
+        chosen = self.selected.get(world)
+        update = chosen.model_dump(exclude_none=True) if chosen else {}
+        return type(self).model_validate({**self.model_dump(), **update, "selected": {}})
 
 
 def default_train_config_path() -> Path:

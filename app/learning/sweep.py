@@ -6,6 +6,10 @@ row per setting: codes used, perplexity, held-out purity / NMI against the robot
 (raw and derived; "majority" is the purity of putting every window in one cluster), MSE and
 wall time. Rows are also appended to <out>/<world>/sweep.jsonl.
 
+Exploratory only: it reports label metrics on the test split, so it must not choose a
+default. Defaults are chosen on validation data by `python -m app.learning.select`. A row is
+training.yaml plus the keys it names; training.yaml's per-world `selected:` values are ignored.
+
 --ceiling instead prints, per robot label, the test accuracy of a supervised classifier
 (gradient-boosted trees) on the same segment features: an estimate of how well *any*
 function of the segment, hence any clustering's purity, can match that label.
@@ -38,8 +42,8 @@ SETTINGS = [
 def sweep_row(trajs: TrajectorySet, overrides: dict, out_dir: Path) -> dict:
     """Train one setting and summarise its held-out metrics."""
     started = time.perf_counter()
-    ckpt = train_model(trajs, "ours", 0, load_train_config(overrides=overrides), out_dir,
-                       progress=False)
+    cfg = load_train_config(overrides={**overrides, "selected": {}})
+    ckpt = train_model(trajs, "ours", 0, cfg, out_dir, progress=False)
     metrics = json.loads((ckpt.parent / "metrics.json").read_text())
     test = metrics["test"]
     return {"world": trajs.world, "settings": overrides,

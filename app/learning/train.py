@@ -2,6 +2,7 @@
 
 import json
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,10 +40,10 @@ def build_model(kind: str, args: dict) -> LatentActionModel:
     raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
 
 
-def model_args(cfg: TrainConfig) -> dict:
+def model_args(cfg: TrainConfig, kind: str) -> dict:
     """The architecture part of the config, stored in the checkpoint."""
     return {"segment_len": cfg.segment_len, "n_actions": cfg.n_actions, "levels": cfg.levels,
-            "latent_dim": cfg.latent_dim, "encoder_hidden": cfg.encoder_hidden,
+            "latent_dim": cfg.latent_dim(kind), "encoder_hidden": cfg.encoder_hidden,
             "decoder_hidden": cfg.decoder_hidden, "beta_kl": cfg.beta_kl,
             "fsq_noise_fraction": cfg.fsq_noise_fraction}
 
@@ -94,6 +95,44 @@ def fit_normaliser(train: Windows, cfg: TrainConfig) -> Normaliser:
     """Train-split feature and robot-action statistics (action std scaled by axis weights)."""
     feats = segment_features(train.segment_positions, train.dt_s)
     return Normaliser.fit(feats, train.actions[:, :, ROBOT], cfg.action_axis_weights)
+
+
+@dataclass
+class Prepared:
+    """One dataset's split windows, train-split normaliser and normalised train/val tensors."""
+
+    windows: dict[str, Windows]
+    norm: Normaliser
+    train: SplitTensors
+    val: SplitTensors
+
+
+def prepare(trajs: TrajectorySet, cfg: TrainConfig) -> Prepared:
+    """Split, cut windows, fit the normaliser and build the train/val tensors."""
+    windows = prepare_windows(trajs, cfg)
+    norm = fit_normaliser(windows["train"], cfg)
+    return Prepared(windows, norm, split_tensors(windows["train"], norm),
+                    split_tensors(windows["val"], norm))
+
+
+@contextmanager
+def one_thread():
+    """Run torch on one thread: for these small MLPs a second thread costs more than it gives."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+
+
+def fit_network(kind: str, seed: int, cfg: TrainConfig, data: Prepared,
+                progress: bool = True) -> tuple[LatentActionModel, dict, list[dict]]:
+    """Seed torch, build `kind` from cfg and fit it; returns (model in eval mode, args, history)."""
+    torch.manual_seed(seed)
+    args = model_args(cfg, kind)
+    model = build_model(kind, args)
+    return model, args, fit(model, data.train, data.val, cfg, seed, progress)
 
 
 def _epoch(model, data: SplitTensors, cfg: TrainConfig, gen: torch.Generator,
@@ -221,50 +260,51 @@ def _plot_losses(history: list[dict], path: Path, title: str) -> None:
 def train_model(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir: Path,
                 data_meta: dict | None = None, progress: bool = True,
                 vae_k: int | None = None) -> Path:
-    """Train one model; write out_dir/checkpoint.pt, metrics.json, loss.png; return the .pt."""
+    """Train one model; write out_dir/checkpoint.pt, metrics.json, loss.png; return the .pt.
+
+    cfg.selected[trajs.world] (the values model selection chose) is applied on top of cfg."""
     if kind not in MODEL_KINDS:
         raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
     started = time.perf_counter()
-    out_dir = Path(out_dir)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # small MLPs: a second thread costs more than it gives
-    try:
-        torch.manual_seed(seed)
-        return _train(trajs, kind, seed, cfg, out_dir, data_meta, progress, vae_k, started)
-    finally:
-        torch.set_num_threads(threads)
+    with one_thread():
+        return _train(trajs, kind, seed, cfg.for_world(trajs.world), Path(out_dir), data_meta,
+                      progress, vae_k, started)
 
 
-def _train(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir: Path,
-           data_meta: dict | None, progress: bool, vae_k: int | None, started: float) -> Path:
-    windows = prepare_windows(trajs, cfg)
-    norm = fit_normaliser(windows["train"], cfg)
-    train, val = split_tensors(windows["train"], norm), split_tensors(windows["val"], norm)
-    args = model_args(cfg)
-    model = build_model(kind, args)
-    history = fit(model, train, val, cfg, seed, progress)
-    train_seconds = time.perf_counter() - started
-
-    val_latents = _latents(model, val)
-    centres = None
-    if kind == "vae":
-        k = vae_k or vae_cluster_count(out_dir, trajs.world, cfg)
-        centres = kmeans_centres(val_latents, k, seed)
+def build_payload(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig,
+                  model: LatentActionModel, args: dict, data: Prepared,
+                  centres: np.ndarray | None = None, data_meta: dict | None = None) -> dict:
+    """The checkpoint dict of a fitted network (codes summarised on validation windows)."""
     payload = {
         "kind": kind, "world": trajs.world, "dt_s": float(trajs.dt_s), "model_args": args,
         "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
-        "norm": norm.to_dict(), "data_meta": _data_meta(trajs, windows, data_meta),
+        "norm": data.norm.to_dict(), "data_meta": _data_meta(trajs, data.windows, data_meta),
         "data_hash": trajectory_hash(trajs.positions, trajs.lengths, trajs.labels),
         "train_config": cfg.model_dump(), "seed": seed,
         "kmeans_centres": centres.tolist() if centres is not None else None, "codes": {},
     }
-    ckpt_path = out_dir / "checkpoint.pt"
     unsaved = model_from_payload(payload)
-    val_codes = unsaved.codes_of(unsaved.encode_batch(windows["val"].segment_positions))
-    payload["codes"] = code_summary(val_codes, windows["val"], trajs.label_names,
+    val_codes = unsaved.codes_of(unsaved.encode_batch(data.windows["val"].segment_positions))
+    payload["codes"] = code_summary(val_codes, data.windows["val"], trajs.label_names,
                                     cfg.min_code_share)
+    return payload
+
+
+def _train(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir: Path,
+           data_meta: dict | None, progress: bool, vae_k: int | None, started: float) -> Path:
+    data = prepare(trajs, cfg)
+    model, args, history = fit_network(kind, seed, cfg, data, progress)
+    train_seconds = time.perf_counter() - started
+
+    centres = None
+    if kind == "vae":
+        k = vae_k or vae_cluster_count(out_dir, trajs.world, cfg)
+        centres = kmeans_centres(_latents(model, data.val), k, seed)
+    payload = build_payload(trajs, kind, seed, cfg, model, args, data, centres, data_meta)
+    ckpt_path = out_dir / "checkpoint.pt"
     content = save_checkpoint(ckpt_path, payload)
     loaded = load_model(ckpt_path)
+    windows = data.windows
     test = evaluate(loaded, windows["test"], trajs.label_names, cfg.min_code_share)
     metrics = {
         "kind": kind, "world": trajs.world, "seed": seed, "content_hash": content,

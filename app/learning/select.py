@@ -1,0 +1,307 @@
+"""Choose the VAE's beta_kl and latent size and Ours' FSQ levels on validation data only.
+
+Run: .venv/bin/python -m app.learning.select --world highway [--config FILE] [--out DIR]
+
+The grids and rules are in study_configs/model_selection.yaml, fixed before any run. Every
+grid cell trains on the train split of var/data/<world>/trajectories.npz (training.yaml's
+values plus the cell's, its `selected:` section ignored, seed from the selection config) and
+is scored on the validation split only:
+- criterion: validation task loss, pred_weight * L_pred + recon_weight * L_recon (normalised
+  MSE as in training; L_recon averaged over every step t of the segment), in eval mode (the
+  VAE's posterior mean, Ours' rounded codes), as the deployed models run. The KL term is
+  left out because beta_kl scales it: with it, different betas would not be comparable;
+- VAE: the lowest validation task loss;
+- Ours: the rule in `choose_ours` (used-code share, then fewest used codes within a loss
+  tolerance of the best).
+No label, test window or study output enters the choice. After the choice, Ours at the
+chosen levels is trained once more with the paper's quantiser (fsq_noise_fraction 0): a
+sensitivity row, never chosen. For information only, the chosen Ours and that row are then
+scored on the test split (purity against the robot's labels, prediction MSE).
+
+Writes <out>/<world>/selection.json, selection.md and selected.yaml (default out:
+var/models/selection) and prints the lines to paste under `selected:` in
+study_configs/training.yaml, which `tomstudy train` then applies to that world.
+"""
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from pydantic import Field
+from tqdm import tqdm
+
+from app.configio import ConfigError, StrictModel, load_yaml_model
+from app.data.trajectory import TrajectorySet
+from app.fileio import atomic_path, write_json
+from app.learning.checkpoint import model_from_payload, trajectory_hash
+from app.learning.config import TrainConfig, load_train_config
+from app.learning.metrics import code_usage, evaluate
+from app.learning.networks import LatentActionModel
+from app.learning.train import (
+    Prepared,
+    SplitTensors,
+    build_payload,
+    fit_network,
+    model_args,
+    one_thread,
+    prepare,
+)
+from app.settings import get_settings
+
+VAE_RULE = "lowest validation task loss (prediction + reconstruction MSE, no KL term)"
+
+
+class VaeGrid(StrictModel):
+    """VAE cells: every beta_kl x latent_dim pair."""
+
+    beta_kl: list[float] = Field(min_length=1)
+    latent_dim: list[int] = Field(min_length=1)
+
+
+class OursGrid(StrictModel):
+    """Ours cells (one per levels list) and the parameters of the selection rule."""
+
+    levels: list[list[int]] = Field(min_length=1)
+    min_used_fraction: float = Field(0.5, ge=0, le=1)
+    loss_tolerance: float = Field(0.05, ge=0)
+
+
+class SelectionConfig(StrictModel):
+    """study_configs/model_selection.yaml."""
+
+    seed: int = Field(0, ge=0)
+    vae: VaeGrid
+    ours: OursGrid
+    sensitivity_fsq_noise_fraction: float = Field(0.0, ge=0, le=1)
+
+
+def load_selection_config(path: Path | None = None) -> SelectionConfig:
+    """Read the selection YAML (default study_configs/model_selection.yaml); errors name keys."""
+    return load_yaml_model(path or get_settings().configs_dir / "model_selection.yaml",
+                           SelectionConfig)
+
+
+def ours_rule(grid: OursGrid) -> str:
+    """The Ours rule in words, with its parameters."""
+    return (f"eligible: used codes >= {grid.min_used_fraction:g} x codebook size; among "
+            f"eligible cells within {grid.loss_tolerance:.0%} of the lowest eligible validation "
+            "task loss, the fewest used codes, ties by lower loss; none eligible: lowest loss")
+
+
+def grid_cells(sel: SelectionConfig) -> list[tuple[str, dict]]:
+    """(kind, training-config values) of every cell, VAE first."""
+    vae = [("vae", {"beta_kl": beta, "vae_latent_dim": dim})
+           for dim in sel.vae.latent_dim for beta in sel.vae.beta_kl]
+    return vae + [("ours", {"levels": levels}) for levels in sel.ours.levels]
+
+
+@torch.no_grad()
+def task_loss(model: LatentActionModel, data: SplitTensors, cfg: TrainConfig) -> dict:
+    """Validation task loss in eval mode, reconstruction averaged over every step t; no KL."""
+    model.eval()
+    rows = torch.arange(len(data.x))
+    recon = 0.0
+    for t in range(cfg.segment_len):
+        parts = model.losses(data.batch(rows, torch.full_like(rows, t)), cfg.pred_weight,
+                             cfg.recon_weight)
+        recon += float(parts["recon"]) / cfg.segment_len
+    pred, reg = float(parts["pred"]), float(parts["reg"])
+    beta = getattr(model, "beta_kl", 0.0)
+    return {"val_task_loss": cfg.pred_weight * pred + cfg.recon_weight * recon,
+            "val_pred": pred, "val_recon": recon, "val_kl": reg / beta if beta > 0 else None}
+
+
+@torch.no_grad()
+def val_code_usage(model: LatentActionModel, data: SplitTensors, min_share: float) -> dict:
+    """Ours' FSQ codes on validation windows: codes used, codebook size, perplexity."""
+    codes = model.fsq.codes_to_indices(model.infer_latent(data.x)).numpy()
+    usage = code_usage(codes, min_share)
+    return {"codes_used": usage["n_codes_used"], "codebook_size": model.fsq.codebook_size,
+            "perplexity": usage["perplexity"]}
+
+
+def cell_config(base: TrainConfig, values: dict) -> TrainConfig:
+    """training.yaml's values with the cell's on top and no per-world selection."""
+    return TrainConfig.model_validate({**base.model_dump(), **values, "selected": {}})
+
+
+def score_cell(kind: str, values: dict, base: TrainConfig, data: Prepared,
+               seed: int) -> tuple[dict, LatentActionModel]:
+    """Train one cell on the train split and score it on validation; (row, model)."""
+    started = time.perf_counter()
+    cfg = cell_config(base, values)
+    model, _, history = fit_network(kind, seed, cfg, data, progress=False)
+    row = {"model": kind, "settings": values, **task_loss(model, data.val, cfg),
+           "epochs": len(history), "wall_s": round(time.perf_counter() - started, 1)}
+    if kind == "ours":
+        row.update(val_code_usage(model, data.val, cfg.min_code_share))
+    return row, model
+
+
+def choose_vae(rows: list[dict]) -> int:
+    """Index of the row with the lowest validation task loss."""
+    return int(np.argmin([row["val_task_loss"] for row in rows]))
+
+
+def choose_ours(rows: list[dict], grid: OursGrid) -> tuple[int, bool]:
+    """(index chosen by the rule in `ours_rule`, whether any cell was eligible)."""
+    eligible = [i for i, row in enumerate(rows)
+                if row["codes_used"] >= grid.min_used_fraction * row["codebook_size"]]
+    if not eligible:
+        return choose_vae(rows), False
+    best = min(rows[i]["val_task_loss"] for i in eligible)
+    near = [i for i in eligible if rows[i]["val_task_loss"] <= best * (1 + grid.loss_tolerance)]
+    return min(near, key=lambda i: (rows[i]["codes_used"], rows[i]["val_task_loss"])), True
+
+
+def held_out_information(trajs: TrajectorySet, seed: int, cfg: TrainConfig,
+                     model: LatentActionModel, data: Prepared) -> dict:
+    """Ours' held-out test purity (robot labels) and MSE: reported, never used to choose."""
+    payload = build_payload(trajs, "ours", seed, cfg, model, model_args(cfg, "ours"), data)
+    scores = evaluate(model_from_payload(payload), data.windows["test"], trajs.label_names,
+                      cfg.min_code_share)
+    return {"test_purity": {name: round(v["purity"], 3)
+                            for name, v in scores["agreement"].items()
+                            if name.startswith("robot_")},
+            "test_mse": scores["prediction"]["mse"]}
+
+
+def run_selection(trajs: TrajectorySet, base: TrainConfig, sel: SelectionConfig,
+                  progress: bool = True) -> dict:
+    """Train and score every cell, apply the rules, add the sensitivity row; JSON-able dict."""
+    started = time.perf_counter()
+    base = cell_config(base, {})
+    cells = grid_cells(sel)
+    with one_thread(), tqdm(total=len(cells) + 1, desc=f"select {trajs.world}",
+                            disable=not progress) as bar:
+        data = prepare(trajs, base)
+        rows, models = [], []
+        for kind, values in cells:
+            bar.set_postfix_str(f"{kind} {json.dumps(values)}")
+            row, model = score_cell(kind, values, base, data, sel.seed)
+            rows.append(row)
+            models.append(model)
+            bar.update()
+        result = _choose(rows, sel)
+        chosen = result["chosen"]["ours"]
+        default = models[next(i for i, row in enumerate(rows)
+                              if row["model"] == "ours" and row["chosen"])]
+        # the sensitivity row: chosen levels, the paper's quantiser; scored, never chosen
+        paper = {**chosen, "fsq_noise_fraction": sel.sensitivity_fsq_noise_fraction}
+        bar.set_postfix_str(f"ours {json.dumps(paper)}")
+        sensitivity, paper_model = score_cell("ours", paper, base, data, sel.seed)
+        sensitivity["paper_quantiser"] = True
+        bar.update()
+        information = {
+            "default": held_out_information(trajs, sel.seed, cell_config(base, chosen), default,
+                                        data),
+            "paper_quantiser": held_out_information(trajs, sel.seed, cell_config(base, paper),
+                                                paper_model, data),
+        }
+    return {**result, "world": trajs.world, "seed": sel.seed, "sensitivity": sensitivity,
+            "test_information_only": information, "selection_config": sel.model_dump(),
+            "base_train_config": base.model_dump(),
+            "data_hash": trajectory_hash(trajs.positions, trajs.lengths, trajs.labels),
+            "n_windows": {k: len(w) for k, w in data.windows.items() if k != "test"},
+            "wall_s": round(time.perf_counter() - started, 1)}
+
+
+def _choose(rows: list[dict], sel: SelectionConfig) -> dict:
+    """Mark the chosen VAE and Ours rows; the chosen values and the rules in words."""
+    vae = [row for row in rows if row["model"] == "vae"]
+    ours = [row for row in rows if row["model"] == "ours"]
+    vae_i = choose_vae(vae)
+    ours_i, any_eligible = choose_ours(ours, sel.ours)
+    for i, row in enumerate(ours):
+        row["eligible"] = row["codes_used"] >= sel.ours.min_used_fraction * row["codebook_size"]
+        row["chosen"] = i == ours_i
+    for i, row in enumerate(vae):
+        row["chosen"] = i == vae_i
+    return {"rows": rows, "rules": {"vae": VAE_RULE, "ours": ours_rule(sel.ours)},
+            "ours_any_eligible": any_eligible,
+            "chosen": {"vae": vae[vae_i]["settings"], "ours": ours[ours_i]["settings"]}}
+
+
+def yaml_lines(result: dict) -> str:
+    """The block to paste under `selected:` in study_configs/training.yaml."""
+    vae, ours = result["chosen"]["vae"], result["chosen"]["ours"]
+    return "\n".join([f"  {result['world']}:", f"    levels: {json.dumps(ours['levels'])}",
+                      f"    beta_kl: {vae['beta_kl']}",
+                      f"    vae_latent_dim: {vae['vae_latent_dim']}"]) + "\n"
+
+
+def markdown(result: dict) -> str:
+    """One table of every cell (chosen cells in bold) plus the sensitivity row and rules."""
+    lines = [f"# Model selection: {result['world']} (seed {result['seed']}, validation split)",
+             "", f"- VAE rule: {result['rules']['vae']}", f"- Ours rule: {result['rules']['ours']}",
+             "", "| model | setting | val task loss | val pred | val recon | val KL | codes used "
+             "| perplexity | epochs | chosen |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for row in result["rows"] + [result["sensitivity"]]:
+        lines.append(_markdown_row(row))
+    lines += ["", "Test split, for information only (never used to choose):", ""]
+    for name, info in result["test_information_only"].items():
+        lines.append(f"- Ours {name}: MSE {info['test_mse']:.4f}, purity "
+                     + ", ".join(f"{k} {v:.3f}" for k, v in info["test_purity"].items()))
+    return "\n".join(lines) + "\n"
+
+
+def _markdown_row(row: dict) -> str:
+    setting = ", ".join(f"{k} {json.dumps(v)}" for k, v in row["settings"].items())
+    kl = "-" if row["val_kl"] is None else f"{row['val_kl']:.3f}"
+    codes = (f"{row['codes_used']}/{row['codebook_size']}" if "codes_used" in row else "-")
+    ppl = f"{row['perplexity']:.2f}" if "perplexity" in row else "-"
+    mark = ("sensitivity" if row.get("paper_quantiser") else
+            "**chosen**" if row.get("chosen") else
+            "not eligible" if row.get("eligible") is False else "")
+    cells = [row["model"], setting, f"{row['val_task_loss']:.4f}", f"{row['val_pred']:.4f}",
+             f"{row['val_recon']:.4f}", kl, codes, ppl, str(row["epochs"]), mark]
+    if row.get("chosen"):
+        cells[2] = f"**{cells[2]}**"
+    return "| " + " | ".join(cells) + " |"
+
+
+def write_outputs(result: dict, out_dir: Path) -> None:
+    """selection.json, selection.md and selected.yaml in out_dir."""
+    write_json(out_dir / "selection.json", {**result, "yaml": yaml_lines(result)})
+    for name, text in (("selection.md", markdown(result)), ("selected.yaml", yaml_lines(result))):
+        with atomic_path(out_dir / name) as tmp:
+            tmp.write_text(text)
+
+
+def _fail(message: str) -> None:
+    print(message, file=sys.stderr)
+    sys.exit(2)
+
+
+def main() -> None:
+    """Parse arguments, run the selection for one world, write and print the results."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--world", required=True)
+    parser.add_argument("--config", type=Path, default=None, help="model_selection.yaml")
+    parser.add_argument("--train-config", type=Path, default=None, help="training.yaml")
+    parser.add_argument("--out", type=Path, default=None, help="default var/models/selection")
+    args = parser.parse_args()
+    data_dir = get_settings().data_dir
+    npz = data_dir / "data" / args.world / "trajectories.npz"
+    if not npz.is_file():
+        _fail(f"{npz} not found; run `tomstudy simulate {args.world}` first")
+    try:
+        sel, base = load_selection_config(args.config), load_train_config(args.train_config)
+    except ConfigError as err:
+        _fail(str(err))
+    result = run_selection(TrajectorySet.load(npz), base, sel)
+    result["data_file"] = str(npz)
+    out = (args.out or data_dir / "models" / "selection") / args.world
+    write_outputs(result, out)
+    print(markdown(result))
+    print(f"wrote {out}/selection.json, selection.md, selected.yaml")
+    print("in study_configs/training.yaml, put this under `selected:` (replacing `{}`; keep "
+          "other worlds' entries):\n" + yaml_lines(result))
+
+
+if __name__ == "__main__":
+    main()
