@@ -142,8 +142,8 @@ def score_cell(kind: str, values: dict, base: TrainConfig, data: Prepared,
     return row, model
 
 
-def choose_vae(rows: list[dict]) -> int:
-    """Index of the row with the lowest validation task loss."""
+def lowest_loss(rows: list[dict]) -> int:
+    """Index of the row with the lowest validation task loss (the VAE rule)."""
     return int(np.argmin([row["val_task_loss"] for row in rows]))
 
 
@@ -152,7 +152,7 @@ def choose_ours(rows: list[dict], grid: OursGrid) -> tuple[int, bool]:
     eligible = [i for i, row in enumerate(rows)
                 if row["codes_used"] >= grid.min_used_fraction * row["codebook_size"]]
     if not eligible:
-        return choose_vae(rows), False
+        return lowest_loss(rows), False
     best = min(rows[i]["val_task_loss"] for i in eligible)
     near = [i for i in eligible if rows[i]["val_task_loss"] <= best * (1 + grid.loss_tolerance)]
     return min(near, key=lambda i: (rows[i]["codes_used"], rows[i]["val_task_loss"])), True
@@ -214,7 +214,7 @@ def _choose(rows: list[dict], sel: SelectionConfig) -> dict:
     """Mark the chosen VAE and Ours rows; the chosen values and the rules in words."""
     vae = [row for row in rows if row["model"] == "vae"]
     ours = [row for row in rows if row["model"] == "ours"]
-    vae_i = choose_vae(vae)
+    vae_i = lowest_loss(vae)
     ours_i, any_eligible = choose_ours(ours, sel.ours)
     for i, row in enumerate(ours):
         row["eligible"] = row["codes_used"] >= sel.ours.min_used_fraction * row["codebook_size"]
