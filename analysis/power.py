@@ -5,6 +5,12 @@ the bank's precomputed actions, exactly what the server stores beside a particip
 The rows have the export CSV's columns, so the same analysis code scores them.
 Power at n = the share of `reps` studies of n participants (drawn with replacement from a
 simulated pool) where the one-sided paired t-test gives p < alpha in that world.
+
+The instrument check (`run_instrument`) asks whether the study can tell the two kinds of
+observer apart at all: n coarse and n precise simulated participants, per world the
+per-participant err_ours - err_vae of each population, and Welch's one-sided t-test that
+the coarse population's difference is lower (alpha 0.01), plus the same test for the
+relative lane reading (`coarse_relative`) as a sensitivity row.
 """
 
 import json
@@ -18,9 +24,12 @@ from tqdm import tqdm
 from analysis import predictors
 from analysis.load import EXPORT_COLUMNS, normalise
 from analysis.metrics import participant_means
+from analysis.observers_config import ObserversConfig, default_observers
 
 KINDS = predictors.KINDS
 SIMULATED_TRIAL_MS = 20000.0
+INSTRUMENT_POPULATIONS = ("coarse", "precise", "coarse_relative")
+INSTRUMENT_ROWS = (("absolute", "coarse"), ("relative", "coarse_relative"))  # reading, preset
 
 
 def load_bank(path: Path) -> dict:
@@ -29,10 +38,12 @@ def load_bank(path: Path) -> dict:
 
 
 def trial_payload(world_bank: dict, trial: dict, steps_to_predict: int) -> dict:
-    """What the browser (and a bot) receives for a trial: scene, clip, start states, limits."""
+    """What the browser (and a bot) receives for a trial: scene, clips, start states, limits."""
+    examples = [{"positions": c["positions"], "headings": c["headings"]}
+                for c in trial.get("examples", [])]  # hand-made test banks may have none
     return {
         "trial_id": trial["trial_id"], "world": world_bank["world"], "scene": world_bank["scene"],
-        "dt_s": world_bank["dt_s"], "segment": trial["segment"],
+        "dt_s": world_bank["dt_s"], "examples": examples, "segment": trial["segment"],
         "start_states": trial["start_states"], "steps_to_predict": steps_to_predict,
         "max_step_m": world_bank["max_step_m"], "min_step_m": world_bank["min_step_m"],
     }
@@ -73,8 +84,10 @@ def trial_rows(participant: str, world_position: int, trial_index: int, payload:
 
 
 def simulate_participants(bank: dict, kind: str, n: int, trials_per_world: int, seed: int = 0,
-                          show_progress: bool = True) -> pd.DataFrame:
+                          show_progress: bool = True,
+                          observers: ObserversConfig | None = None) -> pd.DataFrame:
     """Rows of `n` simulated participants of one bot kind, in the export CSV's columns."""
+    observers = observers or default_observers()
     rng = np.random.default_rng(seed)
     steps = bank["steps_to_predict"]
     worlds = sorted(bank["worlds"])
@@ -88,7 +101,7 @@ def simulate_participants(bank: dict, kind: str, n: int, trials_per_world: int, 
             for index, t in enumerate(chosen):
                 trial = main[int(t)]
                 payload = trial_payload(world_bank, trial, steps)
-                clicks = predictors.predict(kind, payload, rng, trial["policy_actions"])
+                clicks = predictors.predict(kind, payload, rng, trial["policy_actions"], observers)
                 parts.append(trial_rows(f"sim-{p:05d}", position, index, payload, trial, clicks))
     return export_frame(parts, bank["study_id"], kind)
 
@@ -130,13 +143,14 @@ def power_curve(means: pd.DataFrame, n_values: list[int], reps: int = 2000, alph
 
 
 def run_power(bank_path: Path, kind: str, trials_per_world: int, out_dir: Path, n_max: int = 60,
-              pool: int = 400, reps: int = 2000, alpha: float = 0.01, seed: int = 0) -> dict:
+              pool: int = 400, reps: int = 2000, alpha: float = 0.01, seed: int = 0,
+              observers: ObserversConfig | None = None) -> dict:
     """Simulate a pool of participants, estimate power vs n, write power.json/.csv and a plot."""
     from analysis.plots import plot_power
     from app.fileio import write_json
 
     bank = load_bank(bank_path)
-    frame = simulate_participants(bank, kind, pool, trials_per_world, seed)
+    frame = simulate_participants(bank, kind, pool, trials_per_world, seed, observers=observers)
     means = participant_means(frame)
     n_values = list(range(3, n_max + 1))
     curve = power_curve(means, n_values, reps, alpha, seed)
@@ -159,3 +173,68 @@ def run_power(bank_path: Path, kind: str, trials_per_world: int, out_dir: Path, 
 def _smallest_n(group: pd.DataFrame, target: float) -> int | None:
     reached = group[group["power"] >= target]
     return int(reached["n"].min()) if len(reached) else None
+
+
+def population_diffs(bank: dict, kind: str, n: int, trials_per_world: int, seed: int,
+                     observers: ObserversConfig, show_progress: bool = True) -> pd.DataFrame:
+    """Per participant and world: err_ours, err_vae and their difference, for one preset."""
+    frame = simulate_participants(bank, kind, n, trials_per_world, seed, show_progress, observers)
+    means = participant_means(frame)[["participant_id", "world", "err_ours", "err_vae"]]
+    return means.assign(diff=means["err_ours"] - means["err_vae"], kind=kind)
+
+
+def welch_row(world: str, reading: str, coarse: pd.DataFrame, precise: pd.DataFrame,
+              alpha: float) -> dict:
+    """One world's check: Welch's one-sided t-test that coarse's diff < precise's diff."""
+    test = stats.ttest_ind(coarse["diff"], precise["diff"], equal_var=False, alternative="less")
+    return {"world": world, "reading": reading, "n_coarse": len(coarse), "n_precise": len(precise),
+            "coarse_err_ours": float(coarse["err_ours"].mean()),
+            "coarse_err_vae": float(coarse["err_vae"].mean()),
+            "coarse_mean_diff": float(coarse["diff"].mean()),
+            "coarse_sd_diff": float(coarse["diff"].std(ddof=1)),
+            "precise_err_ours": float(precise["err_ours"].mean()),
+            "precise_err_vae": float(precise["err_vae"].mean()),
+            "precise_mean_diff": float(precise["diff"].mean()),
+            "precise_sd_diff": float(precise["diff"].std(ddof=1)),
+            "welch_t": float(test.statistic), "welch_df": float(test.df),
+            "p_one_sided": float(test.pvalue), "passed": bool(test.pvalue < alpha)}
+
+
+def instrument_check(bank: dict, trials_per_world: int, n: int = 22, seed: int = 0,
+                     alpha: float = 0.01, observers: ObserversConfig | None = None,
+                     show_progress: bool = True) -> pd.DataFrame:
+    """Per world and lane reading: can err_ours - err_vae tell coarse from precise observers?"""
+    observers = observers or default_observers()
+    diffs = {kind: population_diffs(bank, kind, n, trials_per_world, seed + offset, observers,
+                                    show_progress)
+             for offset, kind in enumerate(INSTRUMENT_POPULATIONS)}
+    rows = []
+    for world in sorted(bank["worlds"]):
+        precise = diffs["precise"][diffs["precise"]["world"] == world]
+        for reading, kind in INSTRUMENT_ROWS:
+            coarse = diffs[kind][diffs[kind]["world"] == world]
+            rows.append(welch_row(world, reading, coarse, precise, alpha))
+    return pd.DataFrame(rows)
+
+
+def run_instrument(bank_path: Path, trials_per_world: int, out_dir: Path, n: int = 22,
+                   seed: int = 0, alpha: float = 0.01,
+                   observers: ObserversConfig | None = None) -> dict:
+    """Run the instrument check on a bank; write instrument.json and instrument.csv."""
+    from app.fileio import sha256_bytes, write_json
+
+    observers = observers or default_observers()
+    bank_path = Path(bank_path)
+    table = instrument_check(load_bank(bank_path), trials_per_world, n, seed, alpha, observers)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    table.to_csv(out_dir / "instrument.csv", index=False)
+    main = table[table["reading"] == "absolute"]
+    summary = {"n_per_population": n, "seed": seed, "alpha": alpha,
+               "trials_per_world": trials_per_world, "bank": str(bank_path),
+               "bank_sha256": sha256_bytes(bank_path.read_bytes()),
+               "test": "Welch t, one-sided: coarse err_ours-err_vae < precise err_ours-err_vae",
+               "passed": {row["world"]: row["passed"] for _, row in main.iterrows()},
+               "rows": table.to_dict(orient="records"), "observers": observers.model_dump()}
+    write_json(out_dir / "instrument.json", summary)
+    return summary

@@ -159,7 +159,8 @@ def analyze(
 @cli.command()
 def power(
     study: Annotated[str, typer.Option(help="study id")] = "paper_study",
-    kind: Annotated[str, typer.Option(help="coarse, precise or random")] = "coarse",
+    kind: Annotated[str, typer.Option(help="coarse, precise, random or coarse_relative")
+                    ] = "coarse",
     n_max: Annotated[int, typer.Option("--n-max", min=3, help="largest n")] = 60,
     pool: Annotated[int, typer.Option(min=3, help="simulated participants")] = 400,
     reps: Annotated[int, typer.Option(min=10, help="resampled studies per n")] = 2000,
@@ -168,6 +169,7 @@ def power(
     seed: Annotated[int, typer.Option(min=0)] = 0,
 ) -> None:
     """Power to detect Ours < VAE vs n, from bots run in process on the trial bank."""
+    from analysis.observers_config import default_observers
     from analysis.power import KINDS, run_power
     from analysis.report import read_study_config
 
@@ -177,9 +179,13 @@ def power(
     bank = settings.data_dir / "trials" / study / "bank.json"
     if not bank.is_file():
         fail(f"bank: {bank} not found; run `tomstudy build-trials --study {study}`")
+    try:
+        observers = default_observers(settings.configs_dir)
+    except ConfigError as err:
+        fail(str(err))
     trials = int(read_study_config(settings.configs_dir, study).get("trials_per_world", 10))
     out = out or settings.data_dir / "reports" / f"power-{study}-{kind}"
-    summary = run_power(bank, kind, trials, out, n_max, pool, reps, alpha, seed)
+    summary = run_power(bank, kind, trials, out, n_max, pool, reps, alpha, seed, observers)
     for world, needed in summary["n_for_power_0.8"].items():
         typer.echo(f"{world}: d_z = {summary['d_z'][world]:.3f}, n for power 0.8 = {needed}")
     typer.echo(f"wrote {out}")
@@ -198,6 +204,52 @@ def check_display_cmd(
     except FileNotFoundError as err:
         fail(str(err))
     typer.echo(format_table(result))
+
+
+@cli.command()
+def instrument(
+    study: Annotated[str, typer.Option(help="study id")] = "paper_study",
+    n: Annotated[int, typer.Option("--n", min=2, help="participants per population")] = 22,
+    alpha: Annotated[float, typer.Option(min=0, max=1)] = 0.01,
+    seed: Annotated[int, typer.Option(min=0)] = 0,
+    observers: Annotated[Path | None, typer.Option(help="observers YAML (default: "
+                                                   "study_configs/observers.yaml)")] = None,
+    out: Annotated[Path | None, typer.Option(help="output folder")] = None,
+) -> None:
+    """Instrument check: can err_ours - err_vae tell coarse from precise simulated observers?
+
+    Simulates n coarse and n precise participants in process on the study's trial bank and,
+    per world, runs Welch's one-sided t-test that the coarse population's per-participant
+    err_ours - err_vae is lower than the precise one's (pass at p < alpha); the relative lane
+    reading (coarse_relative) is a sensitivity row. Writes instrument.json and
+    instrument.csv; exits 1 if a world fails.
+    """
+    from analysis.observers_config import default_observers, load_observers
+    from analysis.power import run_instrument
+    from analysis.report import read_study_config
+
+    settings = get_settings()
+    bank = settings.data_dir / "trials" / study / "bank.json"
+    if not bank.is_file():
+        fail(f"bank: {bank} not found; run `tomstudy build-trials --study {study}`")
+    try:
+        config = load_observers(observers) if observers else default_observers(settings.configs_dir)
+    except ConfigError as err:
+        fail(str(err))
+    trials = int(read_study_config(settings.configs_dir, study).get("trials_per_world", 10))
+    out = out or settings.data_dir / "reports" / f"instrument-{study}"
+    summary = run_instrument(bank, trials, out, n, seed, alpha, config)
+    typer.echo(f"{'world':<10}{'reading':<10}{'coarse':>9}{'precise':>9}{'t':>8}{'p':>10}  result")
+    for row in summary["rows"]:
+        verdict = "pass" if row["passed"] else "FAIL"
+        typer.echo(f"{row['world']:<10}{row['reading']:<10}{row['coarse_mean_diff']:>+9.3f}"
+                   f"{row['precise_mean_diff']:>+9.3f}{row['welch_t']:>8.2f}"
+                   f"{row['p_one_sided']:>10.2g}  {verdict}")
+    typer.echo("coarse/precise = mean err_ours - err_vae per population; "
+               f"pass = Welch one-sided p < {alpha}")
+    typer.echo(f"wrote {out}")
+    if not all(summary["passed"].values()):
+        raise typer.Exit(1)
 
 
 @cli.command("build-trials")

@@ -6,8 +6,10 @@ analysis.predictors, a uuid4 per write, telemetry events), fills in the survey a
 reaches the completion code. Loops are bounded and every request has a timeout; a
 failed request is retried with the same submission id (the server stores it once).
 
-Kinds: coarse (a high-level reader of the robot's behaviour), precise (the world's
-own next moves) and random; see analysis/predictors.py. The payload never holds the
+Kinds: the inverse-planning observer presets of analysis/predictors.py: coarse (infers
+the robot's target lane or goal and moves the way it moves), coarse_relative (the same,
+reading lanes as merge left/keep/right), precise (the world's own next moves) and
+random; their parameters come from study_configs/observers.yaml. The payload never holds the
 true next moves, so a precise bot, being a simulated participant, looks them up in the
 study's trial bank on disk (`policy_actions`, which build-trials computed with the
 world's `robot_policy_actions`); it must therefore run where var/trials/ is.

@@ -1,11 +1,25 @@
-"""Simulated participants click valid moves that follow the behaviour they read; power runs."""
+"""Simulated observers: inverse planning reads intents, clicks stay valid, noise matches the
+config, no model output is ever read; power and the instrument check run."""
+
+import copy
+import json
 
 import numpy as np
 import pytest
+import yaml
 
 from analysis import predictors
 from analysis.metrics import participant_means
-from analysis.power import power_curve, simulate_participants
+from analysis.observers_config import ObserversConfig, default_observers, load_observers
+from analysis.power import (
+    instrument_check,
+    power_curve,
+    run_instrument,
+    simulate_participants,
+    trial_payload,
+)
+from app.configio import ConfigError
+from app.settings import REPO_ROOT
 from tests.analysis.fixed_data import (
     HIGHWAY_SCENE,
     OBSTACLE_SCENE,
@@ -15,10 +29,60 @@ from tests.analysis.fixed_data import (
     small_bank,
 )
 
+CONFIG = default_observers(REPO_ROOT / "study_configs")
+GOALS = [[g["x_m"], g["y_m"]] for g in OBSTACLE_SCENE["goals"]]
+
+
+def config_with(**changes) -> ObserversConfig:
+    """The repo's config with keys replaced, e.g. inference__beta__value=1.0."""
+    data = CONFIG.model_dump()
+    for dotted, value in changes.items():
+        *path, last = dotted.split("__")
+        node = data
+        for key in path:
+            node = node[key]
+        node[last] = value
+    return ObserversConfig.model_validate(data)
+
+
+MAP = config_with(inference__intent_choice__value="map")
+QUIET = config_with(inference__intent_choice__value="map",
+                    coarse_noise__speed_weber_fraction__value=0.0,
+                    coarse_noise__direction_sd_deg__value=0.0)
+
+
+def lane_clip(lane_from: int, lane_to: int, steps: int = 12) -> dict:
+    """A full example clip: the robot drives from one lane centre to another."""
+    ys = np.linspace(4.0 * lane_from, 4.0 * lane_to, steps + 1)
+    return {"positions": [[[4.0 * t, float(y)], [4.0 * t - 10.0, 8.0]] for t, y in enumerate(ys)],
+            "headings": [[0.0, 0.0]] * (steps + 1)}
+
+
+def goal_clip(start, goal_index: int) -> dict:
+    """A full example clip: the robot drives straight into a goal."""
+    steps = int(np.ceil(np.linalg.norm(np.subtract(GOALS[goal_index], start)) / 0.4))
+    positions = obstacle_segment(start, GOALS[goal_index], steps)
+    return {"positions": positions, "headings": [[0.0, 0.0]] * len(positions)}
+
+
+def bank_with_examples(seed: int = 0) -> dict:
+    """small_bank with 4 example clips per trial, as the real bank has."""
+    bank = small_bank(seed=seed)
+    rng = np.random.default_rng(seed + 100)
+    for name, world in bank["worlds"].items():
+        for trial in world["trials"]:
+            if name == "highway":
+                trial["examples"] = [lane_clip(int(rng.integers(3)), int(rng.integers(3)))
+                                     for _ in range(4)]
+            else:
+                trial["examples"] = [goal_clip(rng.uniform(3, 7, 2), int(rng.integers(4)))
+                                     for _ in range(4)]
+    return bank
+
 
 def _assert_valid(p: dict, clicks: np.ndarray) -> None:
     b = p["scene"]["bounds"]
-    assert clicks.shape == (5, 3, 2)
+    assert clicks.shape == (len(p["start_states"]), p["steps_to_predict"], 2)
     assert np.all((clicks[..., 0] > b["x_min_m"]) & (clicks[..., 0] < b["x_max_m"]))
     assert np.all((clicks[..., 1] > b["y_min_m"]) & (clicks[..., 1] < b["y_max_m"]))
     starts = predictors.start_positions(p)[:, None, :]
@@ -26,36 +90,161 @@ def _assert_valid(p: dict, clicks: np.ndarray) -> None:
     assert np.all(steps >= p["min_step_m"]) and np.all(steps <= p["max_step_m"])
 
 
-@pytest.mark.parametrize(("lane_from", "lane_to"), [(1, 0), (1, 2), (1, 1), (0, 1)])
-def test_coarse_reads_the_target_lane(lane_from, lane_to):
-    p = payload(HIGHWAY_SCENE, highway_segment(lane_from, lane_to), [[20.0, 4.0]] * 5)
-    assert predictors.highway_target_lane_y(p) == 4.0 * lane_to
-    clicks = predictors.predict_coarse(p, np.random.default_rng(0), noise_deg=0.0)
-    _assert_valid(p, clicks)
-    assert np.sign(clicks[0, -1, 1] - 4.0) == np.sign(lane_to - 1)
+def merged_segment(lane_from: int, lane_to: int) -> list:
+    """The robot completes a lane change in 4 steps, then holds the new lane for 3."""
+    ys = np.concatenate([np.linspace(4.0 * lane_from, 4.0 * lane_to, 5), [4.0 * lane_to] * 3])
+    return [[[5.0 * t, float(y)], [5.0 * t - 10.0, 8.0]] for t, y in enumerate(ys)]
+
+
+@pytest.mark.parametrize(("lane_from", "lane_to", "complete"),
+                         [(1, 0, False), (1, 2, False), (1, 1, False), (0, 0, False),
+                          (2, 1, True), (0, 1, True)])
+def test_posterior_picks_the_lane_the_robot_merges_into(lane_from, lane_to, complete):
+    segment = (merged_segment if complete else highway_segment)(lane_from, lane_to)
+    p = payload(HIGHWAY_SCENE, segment, [[20.0, 4.0]] * 5)
+    absolute = predictors.infer_intent(p, CONFIG)
+    assert absolute.intents[np.argmax(absolute.posterior)] == lane_to
+    assert absolute.posterior.max() > 0.95
+    relative = predictors.infer_intent(p, CONFIG, relative=True)
+    assert relative.intents[np.argmax(relative.posterior)] == lane_to - lane_from
 
 
 @pytest.mark.parametrize("goal", range(4))
-def test_coarse_reads_the_goal(goal):
-    g = OBSTACLE_SCENE["goals"][goal]
-    p = payload(OBSTACLE_SCENE, obstacle_segment([5.0, 5.5], [g["x_m"], g["y_m"]]),
-                [[3.0, 4.0], [7.0, 6.0], [2.0, 8.0], [9.7, 0.3], [5.0, 2.0]])
-    np.testing.assert_array_equal(predictors.obstacle_target_goal(p), [g["x_m"], g["y_m"]])
-    _assert_valid(p, predictors.predict_coarse(p, np.random.default_rng(1)))
+def test_posterior_picks_the_goal_the_robot_heads_straight_for(goal):
+    p = payload(OBSTACLE_SCENE, obstacle_segment([5.0, 5.5], GOALS[goal]), [[3.0, 4.0]] * 5)
+    reading = predictors.infer_intent(p, CONFIG)
+    assert int(np.argmax(reading.posterior)) == goal
+    assert reading.posterior.max() > 0.95
 
 
-def test_random_and_precise_clicks_are_valid():
+def test_prior_from_the_examples_shifts_the_posterior():
+    # moving down from lane 0, still above lane 1: lanes 1 and 2 explain the moves equally
+    p = payload(HIGHWAY_SCENE, highway_segment(0, 1), [[20.0, 4.0]] * 5)
+    tie = predictors.infer_intent(p, CONFIG).posterior
+    assert tie[1] == pytest.approx(tie[2]) and tie[0] < 0.01
+    for lane in (1, 2):
+        shown = {**p, "examples": [lane_clip(0, lane)] * 4}
+        reading = predictors.infer_intent(shown, CONFIG)
+        np.testing.assert_allclose(reading.prior, np.where(np.arange(3) == lane, 5, 1) / 7)
+        assert int(np.argmax(reading.posterior)) == lane
+    segment = obstacle_segment([5.0, 5.0], [5.0, 0.0])  # straight up, between goals 0 and 1
+    p = payload(OBSTACLE_SCENE, segment, [[3.0, 4.0]] * 5)
+    shown = {**p, "examples": [goal_clip([5.0, 5.0], 1)] * 4}
+    before, after = (predictors.infer_intent(q, CONFIG).posterior for q in (p, shown))
+    assert before[0] == pytest.approx(before[1]) and after[1] > 0.8
+
+
+def test_relative_reading_moves_from_each_start_states_own_lane():
+    p = payload(HIGHWAY_SCENE, highway_segment(1, 0), [[0.0, 8.0], [0.0, 4.0], [0.0, 0.0]])
+    absolute = predictors.predict_coarse(p, np.random.default_rng(0), QUIET, relative=False)
+    relative = predictors.predict_coarse(p, np.random.default_rng(0), QUIET, relative=True)
+    assert np.all(np.diff(np.concatenate([[8.0], absolute[0, :, 1]])) < 0)  # all head for lane 0
+    assert relative[0, -1, 1] >= 4.0 - 1e-9 and relative[0, -1, 1] < 8.0  # lane 2 -> lane 1
+    assert relative[2, -1, 1] == pytest.approx(0.0)  # no lane left of lane 0: keeps it
+
+
+def test_coarse_moves_forward_and_into_the_lane_without_overshooting():
+    p = payload(HIGHWAY_SCENE, highway_segment(1, 0, steps=6), [[0.0, 0.6], [0.0, 5.0]])
+    clicks = predictors.predict_coarse(p, np.random.default_rng(0), QUIET)
+    path = np.concatenate([predictors.start_positions(p)[:, None], clicks], axis=1)
+    forward = predictors.forward_speed(p) * p["dt_s"]
+    np.testing.assert_allclose(np.diff(path[..., 0], axis=1), forward)
+    lateral = predictors.lateral_step_m(p, CONFIG)
+    assert lateral == pytest.approx(4.0 / 4.6 * 0.5)
+    np.testing.assert_allclose(path[0, :, 1], [0.6, 0.6 - lateral, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(np.diff(path[1, :, 1]), -lateral)
+    p = payload(OBSTACLE_SCENE, obstacle_segment([5.0, 5.5], GOALS[3]), [[2.0, 2.0]])
+    clicks = predictors.predict_coarse(p, np.random.default_rng(0), QUIET)
+    moves = np.diff(np.concatenate([[[2.0, 2.0]], clicks[0]]), axis=0)
+    np.testing.assert_allclose(moves / np.linalg.norm(moves, axis=1, keepdims=True),
+                               np.tile([[1, 1]], (3, 1)) / np.sqrt(2))
+    np.testing.assert_allclose(np.linalg.norm(moves, axis=1), 0.4)
+
+
+def _speed_and_angle_errors(p, predict, draws: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per draw, the first move's length ratio, and every move's angle error [deg]."""
+    ratios, angles = [], []
+    for seed in range(draws):
+        clicks = predict(np.random.default_rng(seed))
+        path = np.concatenate([predictors.start_positions(p)[:, None], clicks], axis=1)
+        moves = np.diff(path, axis=1).reshape(-1, 2)
+        ratios.append(np.linalg.norm(moves[0]) / 0.4)
+        angles.append(np.degrees(np.arctan2(moves[:, 1], moves[:, 0]) - np.pi / 4))
+    return np.array(ratios), np.concatenate(angles)
+
+
+@pytest.mark.parametrize("preset", ["coarse", "precise"])
+def test_noise_statistics_match_the_config(preset):
+    p = payload(OBSTACLE_SCENE, obstacle_segment([5.0, 5.5], GOALS[3]), [[1.5, 1.5]] * 2)
+    actions = np.tile(np.array([0.8, 0.8]) / np.sqrt(2), (2, 3, 1))
+    noise = getattr(MAP, f"{preset}_noise")
+    if preset == "coarse":
+        ratios, angles = _speed_and_angle_errors(
+            p, lambda rng: predictors.predict_coarse(p, rng, MAP), 1500)
+    else:
+        ratios, angles = _speed_and_angle_errors(
+            p, lambda rng: predictors.predict_from_actions(p, actions, rng, noise), 1500)
+    assert ratios.mean() == pytest.approx(1.0, abs=0.01)
+    assert ratios.std() == pytest.approx(noise.speed_weber_fraction.value, rel=0.1)
+    assert angles.std() == pytest.approx(noise.direction_sd_deg.value, rel=0.1)
+
+
+def test_observers_never_read_the_models_answers():
+    bank = bank_with_examples()
+    poisoned = copy.deepcopy(bank)
+    rng = np.random.default_rng(5)
+    for world in poisoned["worlds"].values():
+        for trial in world["trials"]:
+            for answer in trial["predictions"].values():
+                answer["actions"] = rng.normal(size=(5, 3, 2)).tolist()
+                answer["code"] = -1
+            trial["cv_actions"] = rng.normal(size=(5, 3, 2)).tolist()
+    for world in bank["worlds"].values():
+        p = trial_payload(world, world["trials"][0], 3)
+        assert not {"predictions", "cv_actions", "policy_actions"} & set(p)
+    clicks = ["participant_id", "trial_id", "click_x", "click_y"]
+    for kind in predictors.KINDS:
+        clean = simulate_participants(bank, kind, 4, 5, seed=3, show_progress=False)
+        dirty = simulate_participants(poisoned, kind, 4, 5, seed=3, show_progress=False)
+        assert clean[clicks].equals(dirty[clicks])
+        assert not clean["ours_vx"].equals(dirty["ours_vx"])
+
+
+@pytest.mark.parametrize("kind", predictors.KINDS)
+def test_clicks_are_always_valid(kind):
     rng = np.random.default_rng(2)
-    for scene, seg in ((HIGHWAY_SCENE, highway_segment(0, 1)),
-                       (OBSTACLE_SCENE, obstacle_segment([5, 5], [9, 9]))):
-        p = payload(scene, seg, [[seg[-1][0][0], seg[-1][0][1]]] * 5)
-        _assert_valid(p, predictors.predict_random(p, rng))
-        actions = np.tile(np.array([0.0, 30.0]), (5, 3, 1))  # too long, points off the scene
-        _assert_valid(p, predictors.predict_from_actions(p, actions, rng))
+    corners = {"highway": [[-9.5, -1.5], [59.5, 9.5], [20.0, 4.0], [59.0, -1.0], [0.0, 8.0]],
+               "obstacle": [[0.2, 0.2], [9.8, 9.8], [5.0, 5.0], [9.9, 0.1], [1.0, 1.0]]}
+    for _ in range(20):
+        for scene in (HIGHWAY_SCENE, OBSTACLE_SCENE):
+            if scene["lanes"]:
+                seg = highway_segment(*rng.integers(3, size=2))
+            else:
+                seg = obstacle_segment(rng.uniform(2, 8, 2), GOALS[int(rng.integers(4))])
+            p = payload(scene, seg, corners[scene["world"]])
+            p["examples"] = [lane_clip(0, 2)] if scene["lanes"] else [goal_clip([5, 5], 2)]
+            actions = rng.normal(scale=30.0, size=(5, 3, 2))  # too long, some off the scene
+            _assert_valid(p, predictors.predict(kind, p, rng, actions, CONFIG))
+
+
+def test_config_typos_and_missing_sources_are_rejected(tmp_path):
+    data = yaml.safe_load((REPO_ROOT / "study_configs" / "observers.yaml").read_text())
+    assert load_observers(REPO_ROOT / "study_configs" / "observers.yaml") == CONFIG
+    data["inference"]["betta"] = data["inference"].pop("beta")
+    path = tmp_path / "observers.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match=r"inference\.betta: Extra inputs"):
+        load_observers(path)
+    data["inference"]["beta"] = {"value": 2.0}
+    del data["inference"]["betta"]
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match=r"inference\.beta\.source: Field required"):
+        load_observers(path)
 
 
 def test_power_grows_with_n_for_coarse_bots():
-    frame = simulate_participants(small_bank(), "coarse", 40, 5, seed=0, show_progress=False)
+    frame = simulate_participants(bank_with_examples(), "coarse", 40, 5, seed=0,
+                                  show_progress=False, observers=MAP)
     assert len(frame) == 40 * 2 * 5 * 5 * 3
     means = participant_means(frame)
     assert (means["err_ours"] < means["err_vae"]).mean() > 0.9
@@ -63,3 +252,39 @@ def test_power_grows_with_n_for_coarse_bots():
     for _, group in curve.groupby("world"):
         assert group["power"].is_monotonic_increasing
         assert group["power"].iloc[-1] > 0.95
+
+
+def test_instrument_check_runs_and_writes_its_files(tmp_path):
+    table = instrument_check(bank_with_examples(), 5, n=6, seed=1, show_progress=False)
+    assert list(table[["world", "reading"]].itertuples(index=False, name=None)) == [
+        ("highway", "absolute"), ("highway", "relative"),
+        ("obstacle", "absolute"), ("obstacle", "relative")]
+    assert table["p_one_sided"].between(0, 1).all() and table["n_coarse"].eq(6).all()
+    bank_path = tmp_path / "bank.json"
+    bank_path.write_text(json.dumps(bank_with_examples()))
+    summary = run_instrument(bank_path, 5, tmp_path / "out", n=4, seed=0)
+    assert (tmp_path / "out" / "instrument.csv").is_file()
+    written = json.loads((tmp_path / "out" / "instrument.json").read_text())
+    assert written["passed"] == summary["passed"] and set(written["passed"]) == {
+        "highway", "obstacle"}
+    assert written["observers"]["inference"]["beta"]["source"].startswith("Baker")
+
+
+def test_instrument_command_prints_the_table(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from app.cli import cli
+    from app.settings import get_settings
+
+    bank_dir = tmp_path / "var" / "trials" / "paper_study"
+    bank_dir.mkdir(parents=True)
+    (bank_dir / "bank.json").write_text(json.dumps(bank_with_examples()))
+    monkeypatch.setenv("TOMSTUDY_DATA_DIR", str(tmp_path / "var"))
+    get_settings.cache_clear()
+    try:
+        result = CliRunner().invoke(cli, ["instrument", "--n", "4", "--out", str(tmp_path / "o")])
+    finally:
+        get_settings.cache_clear()
+    assert result.exit_code in (0, 1), result.output
+    assert "highway   absolute" in result.output and "obstacle  relative" in result.output
+    assert (tmp_path / "o" / "instrument.json").is_file()
