@@ -62,6 +62,7 @@ def trial_rows(participant: str, world_position: int, trial_index: int, payload:
         "world_position": np.full(k * n, world_position),
         "trial_id": np.full(k * n, trial["trial_id"]),
         "trial_index": np.full(k * n, trial_index), "start_index": np.repeat(np.arange(k), n),
+        "start_kind": np.repeat([s["start_kind"] for s in trial["start_states"]], n),
         "step": np.tile(np.arange(n), k), "start_x": np.repeat(starts[:, 0], n),
         "start_y": np.repeat(starts[:, 1], n), "human_x": np.repeat(humans[:, 0], n),
         "human_y": np.repeat(humans[:, 1], n), "click_x": clicks[..., 0].ravel(),

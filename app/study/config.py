@@ -93,7 +93,7 @@ class StudyConfig(StrictModel):
     trials_per_world: int = Field(ge=1)
     examples_per_trial: int = Field(ge=0)
     segment_steps: SegmentSteps
-    start_states: int = Field(ge=1)
+    start_states: int = Field(ge=1)  # per trial: the robot's own + data-covered (trial_builder)
     steps_to_predict: int = Field(ge=1)
     practice_trials: int = Field(default=1, ge=0)
     bank_trials_per_world: int = Field(ge=1)

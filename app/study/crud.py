@@ -509,7 +509,8 @@ def prediction_rows(ctx: StudyContext, participant: Participant, trial: TrialRec
         for j in range(points.shape[1]):
             rows.append({
                 "submission_id": str(body.submission_id), "participant_id": participant.id,
-                "trial_id": trial.trial_id, "start_index": i, "step": j,
+                "trial_id": trial.trial_id, "start_index": i, "start_kind": start.start_kind,
+                "step": j,
                 "start_x": start.robot[0], "start_y": start.robot[1],
                 "human_x": start.human[0], "human_y": start.human[1],
                 "click_x": float(points[i, j, 0]), "click_y": float(points[i, j, 1]),

@@ -101,6 +101,7 @@ class PredictionRow(SQLModel, table=True):
     participant_id: int = Field(foreign_key="participant.id", index=True)
     trial_id: str = Field(max_length=64)
     start_index: int
+    start_kind: str = Field(max_length=16)  # trials.StartState.start_kind
     step: int
     start_x: float
     start_y: float
@@ -196,7 +197,8 @@ Point = tuple[float, float]
 
 
 class PredictionCreate(SubmissionBody):
-    """POST .../predictions: 5 start states x 3 clicked robot positions (scene metres)."""
+    """POST .../predictions: per start state (the study's `start_states`), the clicked robot
+    positions of each step to predict (scene metres)."""
 
     trial_id: str = PydField(max_length=64)
     points: list[list[Point]]

@@ -2,9 +2,32 @@
 
 Per world: the test split both checkpoints held out; segments cut where the robot's
 behaviour is still visible (before a Highway lane change completes, well before an
-Obstacle goal is reached); five start states spread over free space; both models, a
-constant-velocity baseline and the world's own policy answered for every start state.
-Everything is computed from the rounded numbers the participant is shown.
+Obstacle goal is reached); `start_states` start states on the data near the robot; both
+models, a constant-velocity baseline and the world's own policy answered for every start
+state. Everything is computed from the rounded numbers the participant is shown.
+
+Start states (K = the config's `start_states`, n = `steps_to_predict`, r = the reachable
+radius `max_step_m`). The first is the robot's own segment-end state (`own`). The other
+K - 1 are robot positions that occur in the data the models learned from: every step of
+every trajectory outside both checkpoints' test splits (their train and validation
+trajectories, so no held-out future), kept if
+- the point is at least r from every start already chosen (the robot's own included);
+- Highway: |x - x_robot| <= n r, with n r of road ahead of it (the way the robot's last
+  segment move goes along x) inside the view; in the robot's lane (`same_lane`) or one
+  lane away (`adjacent_lane`), lanes by nearest centre; not within two car lengths along
+  and half a lane across of the human;
+- Obstacle: within n r of the robot (`near`) or between n r and 2 n r (`mid`); more than
+  one agent width clear of every obstacle and goal disc, two agent widths from the human
+  (the whole walled plane is in view, so there is always room for n steps).
+The two kinds take turns (same_lane first, or near first), each turn a uniform draw with
+the bank's rng among that kind's points, so each gets half of K - 1 (the first kind the
+odd one); a kind with no point left passes its turn to the other, and a segment where
+neither has one is skipped (meta.json counts it). Every start keeps the segment end's
+heading and speed: the question is what this robot, moving as the segment shows, does
+from there; a data state's own heading and speed belong to another trajectory's
+behaviour, would be drawn in the browser and would make the world's policy answer a
+situation the segment does not show. Attention checks instead place K - 1 starts a step
+beside or behind the robot (`offset`).
 """
 
 import platform
@@ -35,7 +58,6 @@ from app.worlds.simulate import output_paths
 POS_DECIMALS = 3
 HEADING_DECIMALS = 4
 STEP_PERCENTILE = 99.5
-CANDIDATE_SUBSET = 40
 EXTRA_CANDIDATES = 40  # segments tried as attention checks (the most obvious win)
 
 
@@ -48,6 +70,8 @@ class WorldInputs:
     models: dict
     held_out: np.ndarray
     trajectories_path: Path
+    covered: np.ndarray  # robot positions [M, 2] start states are drawn from
+    covered_trajectories: int
 
 
 def build_trials(config: StudyConfig, study_id: str, data_dir: Path) -> Path:
@@ -85,7 +109,7 @@ def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
         raise FileNotFoundError(f"{npz_path}: no trajectories; run `tomstudy simulate {name}`")
     trajs = TrajectorySet.load(npz_path)
     data_hash = trajectory_hash(trajs.positions, trajs.lengths, trajs.labels)
-    models, splits = {}, []
+    models, splits = {}, []  # test trajectory sets
     for kind in ("ours", "vae"):
         path = data_dir / getattr(config.models[name], kind)
         model = load_model(path, world=name)
@@ -96,7 +120,18 @@ def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
         models[kind] = model
         splits.append(set(model.data_meta["split_trajectories"]["test"]))
     held_out = np.array(sorted(set.intersection(*splits)), dtype=np.int64)
-    return WorldInputs(build_world(name), trajs, models, held_out, npz_path)
+    learned = np.setdiff1d(np.arange(len(trajs)), sorted(set.union(*splits)))
+    return WorldInputs(build_world(name), trajs, models, held_out, npz_path,
+                       covered_states(trajs, learned), len(learned))
+
+
+def covered_states(trajs: TrajectorySet, index: np.ndarray) -> np.ndarray:
+    """The robot's position at every valid step of trajectories `index` [M, 2] (m)."""
+    if not len(index):
+        raise ValueError(f"{trajs.world}: every trajectory is in a test split; no data "
+                         "to draw start states from")
+    return np.concatenate([trajs.positions[i, : trajs.lengths[i] + 1, ROBOT]
+                           for i in index]).astype(np.float64)
 
 
 def build_world_bank(config: StudyConfig, inputs: WorldInputs,
@@ -116,11 +151,9 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
                          f"usable segment, the bank needs {needed}; simulate more")
     scene = trajs.scene.model_dump()
     regular = config.bank_trials_per_world + config.practice_trials
-    built = [make_trial(config, inputs, src, start, end, max_step, scene, rng)
-             for src, start, end in tqdm(candidates[:regular], desc=f"build-trials {world.name}",
-                                         unit="trial")]
+    built, used = regular_trials(config, inputs, candidates, regular, max_step, scene, rng)
     kinds = ["practice"] * config.practice_trials + ["main"] * config.bank_trials_per_world
-    checks, straightness = attention_trials(config, inputs, candidates[regular:], max_step,
+    checks, straightness = attention_trials(config, inputs, candidates[used:], max_step,
                                             scene, rng)
     built += checks
     kinds += ["attention"] * len(checks)
@@ -132,12 +165,38 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
                      max_step_m=round(max_step, 4),
                      min_step_m=round(config.prediction_input.min_step_fraction * max_step, 4),
                      trials=trials)
-    return bank, world_meta(inputs, trials, straightness)
+    meta = world_meta(inputs, trials, straightness)
+    meta["segments_skipped_no_data_starts"] = used - regular
+    return bank, meta
+
+
+def regular_trials(config: StudyConfig, inputs: WorldInputs, candidates: list, count: int,
+                   max_step: float, scene: dict, rng: np.random.Generator
+                   ) -> tuple[list[TrialRecord], int]:
+    """The first `count` candidates that have data-covered start states; and how many were tried."""
+    built, tried = [], 0
+    progress = tqdm(total=count, desc=f"build-trials {inputs.world.name}", unit="trial")
+    for src, start, end in candidates:
+        if len(built) == count:
+            break
+        tried += 1
+        try:
+            built.append(make_trial(config, inputs, src, start, end, max_step, scene, rng))
+        except NoStartStates:
+            continue
+        progress.update(1)
+    progress.close()
+    if len(built) < count:
+        raise ValueError(f"{inputs.world.name}: only {len(built)} segments have "
+                         f"{config.start_states} start states on the data, the bank needs "
+                         f"{count}; simulate more")
+    return built, tried
 
 
 def world_meta(inputs: WorldInputs, trials: list[TrialRecord], straightness: dict) -> dict:
     """Input hashes and counts for meta.json."""
     labels = [t.robot_label for t in trials if t.kind == "main"]
+    starts = [s.start_kind for t in trials if t.kind == "main" for s in t.start_states]
     return {
         "trajectories": str(inputs.trajectories_path),
         "trajectories_sha256": sha256_file(inputs.trajectories_path),
@@ -149,6 +208,9 @@ def world_meta(inputs: WorldInputs, trials: list[TrialRecord], straightness: dic
                    for kind in ("main", "practice", "attention")},
         "main_robot_labels": {str(v): labels.count(v) for v in sorted(set(labels))},
         "attention_max_angle_deg": straightness,
+        "start_states_from": {"trajectories": inputs.covered_trajectories,
+                              "robot_states": len(inputs.covered)},
+        "main_start_kinds": {k: starts.count(k) for k in sorted(set(starts))},
     }
 
 
@@ -221,7 +283,7 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
     history = max(m.segment_len for m in inputs.models.values())
     model_input = clip_of(trajs, src, end - history, end, label_name)
     segment = np.asarray(shown.positions)
-    states = start_states(trajs, src, end, segment, max_step, rng, near)
+    states = start_states(config, trajs, src, end, segment, inputs.covered, max_step, rng, near)
     examples = [clip_of(trajs, e, 0, int(trajs.lengths[e]), label_name)
                 for e in pick_examples(trajs, inputs.held_out, src, label_name,
                                        config.examples_per_trial, rng)]
@@ -270,40 +332,113 @@ def pick_examples(trajs: TrajectorySet, held_out: np.ndarray, src: int, label_na
     return interleave({k: groups[key] for k, key in enumerate(order)})[:count]
 
 
-def start_states(trajs: TrajectorySet, src: int, end: int, segment: np.ndarray,
-                 max_step: float, rng: np.random.Generator, near: bool = False
-                 ) -> list[StartState]:
-    """The robot's segment-end state plus 4 others (spread over free space, or `near` it);
-    the human stays at its segment-end position."""
+class NoStartStates(ValueError):
+    """Too few points near the robot for the study's start states."""
+
+
+def start_states(config: StudyConfig, trajs: TrajectorySet, src: int, end: int,
+                 segment: np.ndarray, covered: np.ndarray, max_step: float,
+                 rng: np.random.Generator, near: bool = False) -> list[StartState]:
+    """The robot's segment-end state plus K - 1 others by the module docstring's rule (or a
+    step beside or behind it, `near`); the human stays at its segment-end position."""
     robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
-    k = 5
+    others = config.start_states - 1
     if near:
-        candidates = near_points(trajs.scene, segment, max_step)
+        points = farthest_points(robot, near_points(trajs.scene, segment, max_step,
+                                                    config.steps_to_predict), others)
+        kinds = ["offset"] * others
     else:
-        candidates = free_points(trajs.scene, robot, human, max_step)
-    if len(candidates) > CANDIDATE_SUBSET:
-        candidates = candidates[rng.choice(len(candidates), CANDIDATE_SUBSET, replace=False)]
-    chosen = farthest_points(robot, candidates, k - 1)
+        pools = data_candidates(trajs.scene, segment, covered, max_step,
+                                config.steps_to_predict)
+        points, kinds = take_turns(robot, pools, others, max_step, rng)
     heading = trajs.headings[src, end]
     speed = float(trajs.speeds[src, end, ROBOT])
-    points = [robot, *chosen]
     return [StartState(robot=np.round(p, POS_DECIMALS).tolist(),
                        human=np.round(human, POS_DECIMALS).tolist(),
                        robot_heading=round(float(heading[ROBOT]), HEADING_DECIMALS),
                        human_heading=round(float(heading[HUMAN]), HEADING_DECIMALS),
-                       robot_speed=round(speed, 4)) for p in points]
+                       robot_speed=round(speed, 4), start_kind=kind)
+            for p, kind in zip([robot, *points], ["own", *kinds], strict=True)]
 
 
-def near_points(scene, segment: np.ndarray, max_step: float) -> np.ndarray:
+def heading_unit(segment: np.ndarray) -> np.ndarray:
+    """Unit vector of the robot's last segment move."""
+    motion = segment[-1, ROBOT] - segment[-2, ROBOT]
+    return motion / (np.linalg.norm(motion) + 1e-12)
+
+
+def data_candidates(scene, segment: np.ndarray, covered: np.ndarray, max_step: float,
+                    n_steps: int) -> dict[str, np.ndarray]:
+    """Data-covered robot positions near the segment end, by start kind (first kind first)."""
+    robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
+    reach = n_steps * max_step
+    if scene.lanes:
+        travel = 1.0 if segment[-1, ROBOT, 0] >= segment[-2, ROBOT, 0] else -1.0
+        return lane_kinds(scene, robot, human, covered, reach, travel)
+    return ring_kinds(scene, robot, human, covered, reach)
+
+
+def lane_kinds(scene, robot: np.ndarray, human: np.ndarray, pts: np.ndarray, reach: float,
+               travel: float) -> dict[str, np.ndarray]:
+    """Highway: `same_lane` and `adjacent_lane` points within `reach` along the road, with
+    `reach` of road ahead (in the direction `travel`, +1 or -1) inside the view."""
+    centres = np.array([lane.y_center_m for lane in scene.lanes])
+    index = np.array([lane.index for lane in scene.lanes])
+    lane_of = index[np.argmin(np.abs(pts[:, 1, None] - centres), axis=1)]
+    robot_lane = index[np.argmin(np.abs(robot[1] - centres))]
+    half_lane = scene.lanes[0].width_m / 2
+    car = max(a.length_m for a in scene.agents)
+    clear = ~((np.abs(pts[:, 0] - human[0]) < 2 * car) & (np.abs(pts[:, 1] - human[1]) < half_lane))
+    ahead = pts[:, 0] + travel * reach
+    b = scene.bounds
+    keep = (clear & (np.abs(pts[:, 0] - robot[0]) <= reach)
+            & (ahead > b.x_min_m) & (ahead < b.x_max_m))
+    gap = np.abs(lane_of - robot_lane)
+    return {"same_lane": pts[keep & (gap == 0)], "adjacent_lane": pts[keep & (gap == 1)]}
+
+
+def ring_kinds(scene, robot: np.ndarray, human: np.ndarray, pts: np.ndarray,
+               reach: float) -> dict[str, np.ndarray]:
+    """Obstacle: `near` (within `reach` of the robot) and `mid` (reach to 2 reach) points."""
+    dist = np.linalg.norm(pts - robot, axis=1)
+    pts, dist = pts[dist <= 2 * reach], dist[dist <= 2 * reach]
+    agent = max(a.width_m for a in scene.agents)
+    clear = np.linalg.norm(pts - human, axis=1) > 2 * agent
+    for c in [*scene.obstacles, *scene.goals]:
+        clear &= np.hypot(pts[:, 0] - c.x_m, pts[:, 1] - c.y_m) > c.radius_m + agent
+    return {"near": pts[clear & (dist <= reach)], "mid": pts[clear & (dist > reach)]}
+
+
+def take_turns(robot: np.ndarray, pools: dict[str, np.ndarray], count: int, min_gap: float,
+               rng: np.random.Generator) -> tuple[list[np.ndarray], list[str]]:
+    """`count` points, the kinds taking turns; each a uniform draw among its kind's points at
+    least `min_gap` from every start chosen so far (a kind with none passes its turn)."""
+    chosen, kinds = [np.asarray(robot, dtype=np.float64)], []
+    order = list(pools)
+    for turn in range(count):
+        for kind in order[turn % len(order):] + order[: turn % len(order)]:
+            pts = pools[kind]
+            gaps = np.min([np.linalg.norm(pts - c, axis=1) for c in chosen], axis=0)
+            free = np.flatnonzero(gaps >= min_gap)
+            if len(free):
+                chosen.append(pts[int(rng.choice(free))])
+                kinds.append(kind)
+                break
+        else:
+            raise NoStartStates(f"only {turn} of {count} data-covered start states "
+                                "near the robot")
+    return chosen[1:], kinds
+
+
+def near_points(scene, segment: np.ndarray, max_step: float, n_steps: int) -> np.ndarray:
     """Points 0.5-1 step beside or behind the robot's segment end, inside free space."""
     robot = segment[-1, ROBOT]
-    motion = segment[-1, ROBOT] - segment[-2, ROBOT]
-    ahead = motion / (np.linalg.norm(motion) + 1e-12)
+    ahead = heading_unit(segment)
     side = np.array([-ahead[1], ahead[0]])
     offsets = [a * ahead + b * side for a in (-1.0, -0.5, 0.0) for b in (-1.0, -0.5, 0.5, 1.0)]
     pts = robot + max_step * np.array(offsets + [-ahead, -0.5 * ahead])
     b = scene.bounds
-    ends = pts + 3 * max_step * ahead  # the obvious continuation must stay in view
+    ends = pts + n_steps * max_step * ahead  # the obvious continuation must stay in view
     keep = np.ones(len(pts), dtype=bool)
     for p in (pts, ends):
         keep &= (p[:, 0] > b.x_min_m) & (p[:, 0] < b.x_max_m) \
@@ -319,30 +454,6 @@ def near_points(scene, segment: np.ndarray, max_step: float) -> np.ndarray:
     return pts[keep]
 
 
-def free_points(scene, robot: np.ndarray, human: np.ndarray, max_step: float) -> np.ndarray:
-    """Candidate robot starts: lane centres at x offsets (Highway), free grid points (Obstacle)."""
-    b = scene.bounds
-    reach = 3 * max_step  # room for three steps inside the view
-    if scene.lanes:
-        width = scene.lanes[0].width_m
-        xs = robot[0] + width * np.arange(-3, 4)
-        xs = xs[(xs > b.x_min_m + reach) & (xs < b.x_max_m - reach)]
-        pts = np.array([(x, lane.y_center_m) for lane in scene.lanes for x in xs])
-        car = max(a.length_m for a in scene.agents)
-        clear = ~((np.abs(pts[:, 0] - human[0]) < 2 * car)
-                  & (np.abs(pts[:, 1] - human[1]) < width / 2))
-    else:
-        margin = 0.5
-        gx = np.arange(b.x_min_m + margin, b.x_max_m - margin + 1e-9, 0.5)
-        gy = np.arange(b.y_min_m + margin, b.y_max_m - margin + 1e-9, 0.5)
-        pts = np.array([(x, y) for x in gx for y in gy])
-        clear = np.linalg.norm(pts - human, axis=1) > 1.0
-        for c in [*scene.obstacles, *scene.goals]:
-            clear &= np.hypot(pts[:, 0] - c.x_m, pts[:, 1] - c.y_m) > c.radius_m + 0.5
-    pts = pts[clear]
-    return pts[np.linalg.norm(pts - robot, axis=1) > 1e-6]
-
-
 def farthest_points(seed: np.ndarray, candidates: np.ndarray, k: int) -> list[np.ndarray]:
     """k candidates chosen greedily to be far from the seed and from each other."""
     chosen: list[np.ndarray] = []
@@ -352,7 +463,7 @@ def farthest_points(seed: np.ndarray, candidates: np.ndarray, k: int) -> list[np
         chosen.append(candidates[best])
         dist = np.minimum(dist, np.linalg.norm(candidates - candidates[best], axis=1))
     if len(chosen) < k:
-        raise ValueError("not enough free space for the start states")
+        raise NoStartStates("not enough free space for the start states")
     return chosen
 
 
@@ -381,7 +492,7 @@ def attention_trials(config: StudyConfig, inputs: WorldInputs, candidates: list,
         try:
             pool.append(make_trial(config, inputs, src, start, end, max_step, scene, rng,
                                    near=True))
-        except ValueError:  # too little free room around the robot for 4 start states
+        except ValueError:  # too little free room around the robot (NoStartStates)
             continue
     angles = [obviousness_deg(t) for t in pool]
     chosen = [int(i) for i in np.argsort(angles, kind="stable")[: rule.per_world]]

@@ -6,7 +6,8 @@ pool balanced assignment draws from), `practice` and `attention`.
 
 Shape legend per trial: E examples, L segment steps, K start states, n steps to predict.
 - examples[e].positions [len+1, 2, 2], segment.positions [L+1, 2, 2] (m; robot first)
-- start_states[k].robot / .human [2] (m); the human stays at its segment-end position
+- start_states[k].robot / .human [2] (m); the human stays at its segment-end position;
+  start_states[k].start_kind says where the robot start came from (`own` first)
 - predictions[model].actions, cv_actions, policy_actions [K, n, 2] (m/s)
 """
 
@@ -36,13 +37,19 @@ class Clip(_Bank):
 
 
 class StartState(_Bank):
-    """Where the robot starts one prediction; the human is fixed."""
+    """Where the robot starts one prediction; the human is fixed.
+
+    `start_kind`: `own` (the robot's segment end), or how a data-covered start relates to
+    it (Highway `same_lane` / `adjacent_lane`, Obstacle `near` / `mid`), or `offset` (a
+    step beside or behind the robot, attention checks). See trial_builder.start_states.
+    """
 
     robot: list[float]
     human: list[float]
     robot_heading: float
     human_heading: float
     robot_speed: float
+    start_kind: str
 
 
 class ModelAnswer(_Bank):
@@ -82,7 +89,8 @@ class TrialRecord(_Bank):
             "examples": [{"positions": c.positions, "headings": c.headings}
                          for c in self.examples],
             "segment": {"positions": self.segment.positions, "headings": self.segment.headings},
-            "start_states": [s.model_dump(exclude={"robot_speed"}) for s in self.start_states],
+            "start_states": [s.model_dump(exclude={"robot_speed", "start_kind"})
+                             for s in self.start_states],
         }
 
 

@@ -6,6 +6,8 @@ import pandas as pd
 from analysis.load import EXPORT_COLUMNS, normalise
 
 DT_S = 0.5
+START_KINDS = {"highway": ("own", "same_lane", "adjacent_lane", "same_lane", "adjacent_lane"),
+               "obstacle": ("own", "near", "mid", "near", "mid")}
 
 
 def fixed_predictions(n_participants: int = 4, trials: int = 2, starts: int = 2,
@@ -36,7 +38,8 @@ def _row(p, world, w, t, s, k, start, click, human, rng) -> list:
         "external_id": f"ext{p}", "completed": True, "attention_passed": True,
         "world": world, "world_position": w, "trial_id": f"{world}-{t}", "trial_index": t,
         "is_practice": False, "attention_check": False, "clip_sha256": "c" * 8,
-        "start_index": s, "step": k, "start_x": start[0], "start_y": start[1],
+        "start_index": s, "start_kind": START_KINDS[world][s], "step": k, "start_x": start[0],
+        "start_y": start[1],
         "human_x": 0.0, "human_y": 0.0, "click_x": click[0], "click_y": click[1],
         "human_vx": human[0], "human_vy": human[1], "ours_vx": ours[0], "ours_vy": ours[1],
         "vae_vx": vae[0], "vae_vy": vae[1], "cv_vx": cv[0], "cv_vy": cv[1],
@@ -133,7 +136,8 @@ def small_bank(trials: int = 6, seed: int = 0) -> dict:
                 "trial_id": f"{world}-{t}", "kind": "main", "clip_sha256": f"clip{t}",
                 "segment": {"positions": segment, "headings": [[0.0, 0.0]] * len(segment)},
                 "start_states": [{"robot": s, "human": segment[-1][1], "robot_heading": 0.0,
-                                  "human_heading": 0.0, "robot_speed": speed} for s in starts],
+                                  "human_heading": 0.0, "robot_speed": speed, "start_kind": kind}
+                                 for s, kind in zip(starts, START_KINDS[world], strict=True)],
                 "predictions": {"ours": {"code": code, "actions": ours, "content_hash": "o1"},
                                 "vae": {"code": t % 3, "actions": vae, "content_hash": "v1"}},
                 "cv_actions": [[[speed, 0.0]] * 3] * 5, "policy_actions": ours,

@@ -51,3 +51,4 @@ def test_database_and_csv_export_load_identically(tmp_path):
     assert len(from_db) == len(fixed_predictions()) == len(from_csv)
     pd.testing.assert_frame_equal(from_db, from_csv)
     assert from_db["completed"].sum() < len(from_db) and (~from_db["attention_passed"]).any()
+    assert set(from_db["start_kind"]) == {"own", "same_lane", "near"}

@@ -9,7 +9,9 @@ import pandas as pd
 import pytest
 from fastapi.testclient import TestClient
 
+from app.configio import load_yaml_model
 from app.settings import Settings
+from app.study.config import StudyConfig
 from app.study.main import create_app
 from app.study.trials import BANK_FILE, bank_dir
 from tests.conftest import fresh_database
@@ -41,6 +43,13 @@ def client(small_study, db_url):
 
 
 @pytest.fixture(scope="module")
+def per_trial(small_study) -> tuple[int, int]:
+    """(start states, steps to predict) per trial, as the small study's config sets them."""
+    cfg = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml", StudyConfig)
+    return cfg.start_states, cfg.steps_to_predict
+
+
+@pytest.fixture(scope="module")
 def bank(small_study) -> dict:
     """Bank trials by id (the test reads the true moves for attention checks)."""
     raw = json.loads((bank_dir(small_study.data_dir, small_study.study_id) / BANK_FILE).read_text())
@@ -55,7 +64,8 @@ def at_first_trial(client, study_id: str, **recruitment) -> Participant:
     return p
 
 
-def test_whole_session_stores_every_prediction_beside_the_models(client, small_study, bank):
+def test_whole_session_stores_every_prediction_beside_the_models(client, small_study, bank,
+                                                                  per_trial):
     p = Participant(client, small_study.study_id)
     body = p.start(PROLIFIC_PID="alice", STUDY_ID="s1", SESSION_ID="x1")
     assert p.status == 201 and body["resumed"] is False
@@ -63,7 +73,9 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
     state = p.pass_intro()
     assert state["phase"] == "practice"
     trial = state["step"]
-    assert len(trial["examples"]) == 4 and len(trial["start_states"]) == 5
+    k, n = per_trial
+    assert len(trial["examples"]) == 4 and len(trial["start_states"]) == k
+    assert all("start_kind" not in s for s in trial["start_states"])
     assert 5 <= len(trial["segment"]["positions"]) - 1 <= 7
     assert "predictions" not in trial and "policy_actions" not in trial
     done = p.finish(bank)
@@ -75,11 +87,13 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
     r = client.get(f"/api/researcher/export.csv?study_id={small_study.study_id}", headers=ADMIN)
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
     frame = pd.read_csv(io.StringIO(r.text))
-    assert len(frame) == total * 5 * 3
+    assert len(frame) == total * k * n
     assert frame["completed"].dtype == bool and frame["attention_passed"].all()
     assert frame["ours_code"].dtype.kind == "i" and frame["human_vx"].dtype.kind == "f"
-    assert frame.groupby("trial_id").size().eq(15).all()
-    assert frame["is_practice"].sum() == 15 and frame["attention_check"].sum() == 30
+    assert frame.groupby("trial_id").size().eq(k * n).all()
+    assert frame["is_practice"].sum() == k * n and frame["attention_check"].sum() == 2 * k * n
+    for (trial_id, start), kinds in frame.groupby(["trial_id", "start_index"])["start_kind"]:
+        assert set(kinds) == {bank[trial_id]["start_states"][start]["start_kind"]}
     row = frame.iloc[0]
     stored = bank[row["trial_id"]]
     assert row["ours_sha256"] == stored["predictions"]["ours"]["content_hash"]
@@ -129,7 +143,7 @@ def test_knowing_a_participant_id_alone_does_not_open_their_session(client, smal
     assert same.status == 200 and same.token == owner.token
 
 
-def test_retried_submission_is_stored_once_with_the_same_answer(client, small_study):
+def test_retried_submission_is_stored_once_with_the_same_answer(client, small_study, per_trial):
     p = at_first_trial(client, small_study.study_id, PROLIFIC_PID="retry")
     body = prediction_body(p.state()["step"])
     first = p.post("predictions", body)
@@ -138,7 +152,7 @@ def test_retried_submission_is_stored_once_with_the_same_answer(client, small_st
     assert first.json() == second.json()
     csv = client.get(f"/api/researcher/export.csv?study_id={small_study.study_id}",
                      headers=ADMIN).text
-    assert len(pd.read_csv(io.StringIO(csv))) == 15
+    assert len(pd.read_csv(io.StringIO(csv))) == per_trial[0] * per_trial[1]
     consent_again = p.post("consent", {"submission_id": new_id(), "agree": True})
     assert consent_again.status_code == 409
 
@@ -216,10 +230,12 @@ def bad_prediction_cases(trial: dict) -> dict:
         return body
 
     far = [b["x_max_m"] + 5.0, start[1]]
-    s3 = trial["start_states"][3]["robot"]
+    k = len(trial["start_states"])
+    last = trial["start_states"][k - 1]["robot"]
     mid_x = (b["x_min_m"] + b["x_max_m"]) / 2
     return {
-        "wrong count of start states": (with_points(lambda p: p.pop()), 422, "points: expected 5"),
+        "wrong count of start states": (with_points(lambda p: p.pop()), 422,
+                                        f"points: expected {k} start states"),
         "wrong count of steps": (with_points(lambda p: p[2].pop()), 422, "points.2: expected 3"),
         "outside the scene": (with_points(lambda p: p[0].__setitem__(2, far)), 422,
                               "points.0.2"),
@@ -227,8 +243,8 @@ def bad_prediction_cases(trial: dict) -> dict:
                                                                   ["robot"])), 422, "points.1.0"),
         "too-short move": (with_points(lambda p: p[1].__setitem__(1, [
             p[1][0][0] + trial["min_step_m"] / 3, p[1][0][1]])), 422, "shorter than"),
-        "too-long move": (with_points(lambda p: p[3].__setitem__(0, [
-            s3[0] + 1.5 * trial["max_step_m"] * (1 if s3[0] < mid_x else -1), s3[1]])), 422,
+        "too-long move": (with_points(lambda p: p[k - 1].__setitem__(0, [
+            last[0] + 1.5 * trial["max_step_m"] * (1 if last[0] < mid_x else -1), last[1]])), 422,
                           "longer than"),
     }
 
@@ -241,7 +257,8 @@ def test_bad_predictions_get_a_4xx_naming_the_field(client, small_study, bank):
         assert r.status_code == status, (name, r.text)
         assert needle in r.json()["detail"], (name, r.text)
     # NaN / Infinity: Python's json accepts these literals; the server must not
-    for literal, (i, j, k) in (("NaN", (0, 0, 0)), ("Infinity", (4, 2, 1))):
+    last = len(trial["start_states"]) - 1
+    for literal, (i, j, k) in (("NaN", (0, 0, 0)), ("Infinity", (last, 2, 1))):
         body = prediction_body(trial)
         body["points"][i][j][k] = 123456.789  # a marker, replaced by the bare literal
         raw = json.dumps(body).replace("123456.789", literal)

@@ -1,5 +1,7 @@
-"""The study config, the trial bank, the predictor's check, prepare, production refusal."""
+"""The study config, the trial bank (start states on the data, their count and kinds), the
+predictor's check, prepare, production refusal."""
 
+import io
 import json
 import shutil
 import subprocess
@@ -7,6 +9,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 from fastapi.testclient import TestClient
@@ -23,9 +26,10 @@ from app.study.main import UnsafeSettings, create_app
 from app.study.predictor import BankMismatch, Predictor
 from app.study.prepare import bank_is_current, prepare_study
 from app.study.tables import Participant
-from app.study.trial_builder import build_trials
+from app.study.trial_builder import NoStartStates, build_trials, take_turns
 from app.study.trials import BANK_FILE, TrialBank, bank_dir, clip_sha256
-from tests.study.flow import new_id
+from tests.study import flow
+from tests.study.flow import ADMIN, TOKEN, new_id, prediction_body
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -56,6 +60,15 @@ def test_config_errors_name_the_key(tmp_path, change, field):
         load_yaml_model(path, StudyConfig)
 
 
+def test_attention_passing_starts_cannot_exceed_the_start_states(tmp_path):
+    data = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
+    data.update(start_states=3, attention_checks={"min_passing_starts": 4})
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match="min_passing_starts must be <= start_states"):
+        load_yaml_model(path, StudyConfig)
+
+
 @pytest.fixture(scope="module")
 def bank(small_study) -> TrialBank:
     return TrialBank.load(small_study.data_dir, small_study.study_id)
@@ -76,20 +89,136 @@ def test_bank_trials_have_the_paper_shape(bank, small_study):
             assert t.source_index not in [e.source_index for e in t.examples]
             assert len({e.robot_label for e in t.examples}) >= min(
                 2, len(world.label_names))
+            k = cfg.start_states
             starts = np.array([[s.robot, s.human] for s in t.start_states])
-            assert starts.shape == (5, 2, 2)
+            assert starts.shape == (k, 2, 2)
             np.testing.assert_allclose(starts[0], seg[-1])  # robot's own segment end first
-            np.testing.assert_allclose(starts[:, 1], np.repeat(seg[-1:, 1], 5, 0))  # human fixed
-            assert len({tuple(p) for p in starts[:, 0]}) == 5
+            np.testing.assert_allclose(starts[:, 1], np.repeat(seg[-1:, 1], k, 0))  # human fixed
+            assert len({tuple(p) for p in starts[:, 0]}) == k
             assert (starts[..., 0] >= b["x_min_m"]).all() and (starts[..., 0] <= b["x_max_m"]).all()
             for kind in ("ours", "vae"):
-                assert np.asarray(t.predictions[kind].actions).shape == (5, 3, 2)
-            assert np.asarray(t.policy_actions).shape == (5, 3, 2)
+                assert np.asarray(t.predictions[kind].actions).shape == (k, 3, 2)
+            assert np.asarray(t.policy_actions).shape == (k, 3, 2)
             assert t.clip_sha256 == clip_sha256(world.scene, world.dt_s, t.browser_payload())
+            assert all("start_kind" not in s for s in t.browser_payload()["start_states"])
         hashes = {t.predictions["ours"].content_hash for t in world.trials}
         meta = json.loads((bank_dir(small_study.data_dir, small_study.study_id)
                            / "meta.json").read_text())
         assert hashes == {meta["worlds"][name]["checkpoints"]["ours"]["content_hash"]}
+
+
+DATA_KINDS = {"highway": ("same_lane", "adjacent_lane"), "obstacle": ("near", "mid")}
+
+
+def learned_robot_states(data_dir: Path, world: str, cfg: StudyConfig) -> np.ndarray:
+    """Robot positions of every trajectory outside both checkpoints' test splits."""
+    from app.data.trajectory import TrajectorySet
+    from app.learning.checkpoint import load_model
+
+    trajs = TrajectorySet.load(data_dir / "data" / world / "trajectories.npz")
+    test = set()
+    for kind in ("ours", "vae"):
+        model = load_model(data_dir / getattr(cfg.models[world], kind))
+        test |= set(model.data_meta["split_trajectories"]["test"])
+    return np.concatenate([trajs.positions[i, : trajs.lengths[i] + 1, 0]
+                           for i in range(len(trajs)) if i not in test])
+
+
+def test_start_states_lie_on_the_learned_data_near_the_robot(bank, small_study):
+    cfg = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml", StudyConfig)
+    reach = cfg.steps_to_predict
+    for name, world in bank.data.worlds.items():
+        covered = learned_robot_states(small_study.data_dir, name, cfg)
+        r, tol = world.max_step_m, 2e-3  # positions are stored to 1 mm
+        counts = dict.fromkeys(DATA_KINDS[name], 0)
+        for t in world.trials:
+            kinds = [s.start_kind for s in t.start_states]
+            robots = np.array([s.robot for s in t.start_states])
+            assert kinds[0] == "own"
+            if t.kind == "attention":
+                assert set(kinds[1:]) == {"offset"}
+                continue
+            assert set(kinds[1:]) <= set(DATA_KINDS[name])
+            for kind in kinds[1:]:
+                counts[kind] += 1
+            for p in robots[1:]:  # each one a state the models' data covers
+                assert np.linalg.norm(covered - p, axis=1).min() < tol
+            gaps = np.linalg.norm(robots[:, None] - robots[None], axis=-1)
+            assert (gaps[~np.eye(len(robots), dtype=bool)] >= r - tol).all()
+            offset = robots[1:] - robots[0]
+            if name == "highway":
+                lanes = np.array([lane["y_center_m"] for lane in world.scene["lanes"]])
+                lane = np.abs(robots[:, 1, None] - lanes).argmin(axis=1)
+                assert (np.abs(offset[:, 0]) <= reach * r + tol).all()
+                assert [abs(a - lane[0]) for a in lane[1:]] == [
+                    0 if k == "same_lane" else 1 for k in kinds[1:]]
+            else:
+                dist = np.linalg.norm(offset, axis=1)
+                assert all(d <= reach * r + tol if k == "near" else reach * r - tol < d
+                           <= 2 * reach * r + tol for d, k in zip(dist, kinds[1:], strict=True))
+        # both kinds drawn, in turns: the first kind at most one more per trial when both exist
+        assert min(counts.values()) >= 0.25 * sum(counts.values()), (name, counts)
+
+
+def test_start_kinds_take_turns_and_fall_back():
+    rng = np.random.default_rng(0)
+    line = np.array([[x, 0.0] for x in range(1, 30)])
+    points, kinds = take_turns(np.zeros(2), {"a": line, "b": line + [0, 5]}, 4, 2.0, rng)
+    assert kinds == ["a", "b", "a", "b"]
+    every = np.array([np.zeros(2), *points])
+    gaps = np.linalg.norm(every[:, None] - every[None], axis=-1)
+    assert gaps[~np.eye(5, dtype=bool)].min() >= 2.0
+    _, kinds = take_turns(np.zeros(2), {"a": line, "b": np.zeros((0, 2))}, 3, 2.0, rng)
+    assert kinds == ["a", "a", "a"]
+    with pytest.raises(NoStartStates):
+        take_turns(np.zeros(2), {"a": line[:1], "b": line[:1]}, 2, 2.0, rng)
+
+
+@pytest.fixture(scope="module")
+def three_starts(small_study, tmp_path_factory):
+    """The small study with `start_states: 3`, its bank built next to the shared data."""
+    root = tmp_path_factory.mktemp("three")
+    data, configs = root / "var", root / "configs"
+    data.mkdir()
+    for sub in ("data", "models"):
+        (data / sub).symlink_to(small_study.data_dir / sub)
+    shutil.copytree(small_study.configs_dir, configs)
+    study = yaml.safe_load((configs / f"{small_study.study_id}.yaml").read_text())
+    study["start_states"] = 3
+    study["attention_checks"]["min_passing_starts"] = 2
+    (configs / "three_starts.yaml").write_text(yaml.safe_dump(study))
+    build_trials(load_yaml_model(configs / "three_starts.yaml", StudyConfig), "three_starts",
+                 data)
+    return data, configs
+
+
+def test_start_states_config_sets_the_count_and_the_api_follows(three_starts, tmp_path):
+    data, configs = three_starts
+    bank = TrialBank.load(data, "three_starts")
+    for name, world in bank.data.worlds.items():
+        for t in world.trials:
+            assert len(t.start_states) == 3
+            assert np.asarray(t.policy_actions).shape[0] == 3
+            if t.kind != "attention":
+                assert [s.start_kind for s in t.start_states] == ["own", *DATA_KINDS[name]]
+    settings = Settings(data_dir=data, configs_dir=configs, admin_token=TOKEN,
+                        database_url=f"sqlite:///{tmp_path / 'study.db'}")
+    with TestClient(create_app(settings, ["three_starts"])) as client:
+        p = flow.Participant(client, "three_starts")
+        p.start()
+        trial = p.pass_intro()["step"]
+        assert len(trial["start_states"]) == 3
+        good = prediction_body(trial)
+        four = dict(prediction_body(dict(trial, start_states=trial["start_states"] * 2)),
+                    points=good["points"] + good["points"][:1])
+        r = p.post("predictions", four)
+        assert r.status_code == 422 and "points: expected 3 start states" in r.json()["detail"]
+        assert p.post("predictions", good).status_code == 201
+        r = client.get("/api/researcher/export.csv?study_id=three_starts", headers=ADMIN)
+    frame = pd.read_csv(io.StringIO(r.text))
+    assert len(frame) == 3 * 3
+    stored = bank.by_id[trial["trial_id"]].start_states
+    assert list(frame["start_kind"].iloc[::3]) == [s.start_kind for s in stored]
 
 
 def test_build_trials_is_reproducible(small_study, tmp_path):
