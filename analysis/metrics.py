@@ -53,12 +53,14 @@ def zero_vector_counts(frame: pd.DataFrame, models: tuple[str, ...] = MODELS) ->
     return counts
 
 
-def participant_means(frame: pd.DataFrame, models: tuple[str, ...] = MODELS) -> pd.DataFrame:
-    """Mean alignment error per participant x world x model (one row per participant and world)."""
+def participant_means(frame: pd.DataFrame, models: tuple[str, ...] = MODELS,
+                      by: tuple[str, ...] = ()) -> pd.DataFrame:
+    """Mean alignment error per participant x world (x each `by` column, e.g. start_kind)
+    x model: one row per participant and world (and `by` value)."""
     if not any(c.startswith("err_") for c in frame.columns):
         frame = add_alignment_errors(frame, models)
     cols = [f"err_{m}" for m in models]
-    grouped = frame.groupby(UNIT_KEYS, sort=True)
+    grouped = frame.groupby([*UNIT_KEYS, *by], sort=True)
     means = grouped[cols].mean()
     means["n_rows"] = grouped.size()
     means["n_trials"] = grouped["trial_id"].nunique()

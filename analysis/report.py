@@ -1,8 +1,9 @@
 """`tomstudy analyze`: one command from exported predictions to a self-contained report.
 
 Writes into the output folder: report.html (figures embedded as base64 PNG),
-summary.json and per_participant.csv (every number the report shows), the figures as
-PNG and SVG, and meta.json (data hash, checkpoint hashes, study config, exclusions).
+summary.json, per_participant.csv and by_start_kind.csv (every number the report shows),
+the figures as PNG and SVG, and meta.json (data hash, checkpoint hashes, study config,
+exclusions).
 """
 
 import base64
@@ -25,7 +26,7 @@ from analysis.metrics import (
     zero_vector_counts,
 )
 from analysis.plots import plot_errors, plot_fields
-from analysis.stats import compare_per_world, displacement_errors, mean_ci95
+from analysis.stats import breakdown, compare_per_world, displacement_errors, mean_ci95
 
 ALPHA = 0.01
 
@@ -123,6 +124,24 @@ def per_code(kept: pd.DataFrame) -> dict:
     return out
 
 
+def start_kind_table(kept: pd.DataFrame) -> pd.DataFrame:
+    """Per world x start_kind: n participants, mean error per model, Ours vs VAE paired test.
+
+    Kinds are listed in the order the bank uses them (by mean start index: `own` first)."""
+    table = breakdown(participant_means(kept, by=("start_kind",)), ["world", "start_kind"])
+    rank = table["start_kind"].map(kept.groupby("start_kind")["start_index"].mean())
+    return (table.assign(_rank=rank).sort_values(["world", "_rank", "start_kind"], kind="stable")
+            .drop(columns="_rank").reset_index(drop=True))
+
+
+def nested_by_kind(table: pd.DataFrame) -> dict:
+    """The start-kind table as {world: {start_kind: {column: value}}}, NaN as null."""
+    out: dict = {}
+    for row in table.astype(object).where(table.notna(), None).to_dict("records"):
+        out.setdefault(row.pop("world"), {})[row.pop("start_kind")] = row
+    return out
+
+
 def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, configs_dir: Path,
             data_dir: Path, source: str, waive: tuple[str, ...] = ()) -> dict:
     """Run the whole analysis on the export rows and write the report folder."""
@@ -158,6 +177,8 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, configs_dir: Path
     steps.update(1)
     per_participant = means.merge(ade, on=["participant_id", "world"], how="left")
     per_participant.to_csv(out_dir / "per_participant.csv", index=False, float_format="%.10g")
+    by_kind = start_kind_table(kept)
+    by_kind.to_csv(out_dir / "by_start_kind.csv", index=False, float_format="%.10g")
     summary = {
         "study_id": study_id, "source": source, "alpha": ALPHA,
         "exclusion_rules": rules.model_dump(), "waived_rules": list(waive),
@@ -168,6 +189,7 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, configs_dir: Path
         "ours_vs_vae": {w: r.as_dict() for w, r in results.items()},
         "ours_vs_cv": {w: r.as_dict() for w, r in versus_cv.items()},
         "per_ours_code": per_code(kept),
+        "by_start_kind": nested_by_kind(by_kind),
         "hypothesis_supported": {w: bool(r.p_one_sided_less < ALPHA)
                                  for w, r in results.items()},
         "figures": sorted(p.name for p in figures),
@@ -214,6 +236,25 @@ def _fmt(value, digits: int = 3) -> str:
     return html.escape(str(value))
 
 
+KIND_HEAD = "".join(f"<th>{h}</th>" for h in (
+    "world", "start kind", "n", "Ours", "VAE", "const. vel.", "policy",
+    "Ours - VAE [95% CI]", "t", "p (Ours &lt; VAE)", "Wilcoxon p", "d_z"))
+
+
+def kind_rows(by_kind: dict) -> str:
+    """HTML rows of the start-kind table: mean errors and the paired Ours vs VAE test."""
+    rows = []
+    for world, kinds in by_kind.items():
+        for kind, r in kinds.items():
+            rows.append(
+                f"<tr><td>{html.escape(world)}</td><td>{html.escape(kind)}</td><td>{r['n']}</td>"
+                + "".join(f"<td>{_fmt(r[f'err_{m}'])}</td>" for m in MODELS)
+                + f"<td>{_fmt(r['mean_diff'])} [{_fmt(r['ci95_low'])}, {_fmt(r['ci95_high'])}]"
+                f"</td><td>{_fmt(r['t'])}</td><td>{_fmt(r['p_one_sided_less'])}</td>"
+                f"<td>{_fmt(r['wilcoxon_p'])}</td><td>{_fmt(r['d_z'])}</td></tr>")
+    return "".join(rows)
+
+
 def render_html(summary: dict, pngs: list[Path]) -> str:
     """The report page: tables of every test and mean, exclusions, embedded figures."""
     rows = []
@@ -233,6 +274,7 @@ def render_html(summary: dict, pngs: list[Path]) -> str:
         disp.append(f"<tr><td>{html.escape(world)}</td>" + "".join(
             f"<td>{_fmt(w.get(f'{k}_{m}'))}</td>" for m in ("ours", "vae", "cv")
             for k in ("ade", "fde")) + "</tr>")
+    kinds = kind_rows(summary["by_start_kind"])
     excl = "".join(f"<tr><td>{html.escape(k)}</td><td>{v}</td></tr>"
                    for k, v in summary["exclusions"].items())
     waived = html.escape(", ".join(summary["waived_rules"]) or "none")
@@ -258,6 +300,8 @@ direction, 2 = opposite), averaged per participant and world; paired tests acros
 participants.</p>
 <h2>Mean alignment error per world (mean [95% CI]) and Ours vs VAE</h2>
 <table><tr>{head}</tr>{''.join(rows)}</table>
+<h2>By start kind (own = the robot's segment end; others drawn from the data near it)</h2>
+<table><tr>{KIND_HEAD}</tr>{kinds}</table>
 <h2>Displacement from the clicked positions [m]</h2><table><tr><th>world</th>{dhead}</tr>
 {''.join(disp)}</table>
 <h2>Exclusions</h2><p>Waived rules (sensitivity analysis): {waived}.</p><table>{excl}</table>

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from analysis.metrics import UNIT_KEYS
+from analysis.metrics import MODELS, UNIT_KEYS
 
 POSITION_MODELS = ("ours", "vae", "cv")
 PREDICTION_KEYS = ["participant_id", "trial_id", "start_index"]
@@ -44,7 +44,7 @@ def paired_comparison(a: np.ndarray, b: np.ndarray) -> PairedResult:
     nan = float("nan")
     if n < 2:
         return PairedResult(n, *(float(np.mean(x)) if n else nan for x in (a, b, diff)),
-                            *(nan,) * 10)
+                            *(nan,) * 9)
     sd = float(np.std(diff, ddof=1))
     mean = float(np.mean(diff))
     half = stats.t.ppf(0.975, n - 1) * sd / np.sqrt(n)
@@ -68,6 +68,22 @@ def compare_per_world(means: pd.DataFrame, a: str = "ours",
     """Per world, the paired comparison of per-participant mean errors of models a and b."""
     return {world: paired_comparison(group[f"err_{a}"], group[f"err_{b}"])
             for world, group in means.groupby("world", sort=True)}
+
+
+def breakdown(means: pd.DataFrame, keys: list[str], a: str = "ours", b: str = "vae",
+              models: tuple[str, ...] = MODELS) -> pd.DataFrame:
+    """Per group of `keys` (e.g. world and start_kind) of per-participant means: n
+    participants, mean error per model, and the paired a-vs-b comparison (NaN below n = 2)."""
+    rows = []
+    for key, group in means.groupby(keys, sort=True):
+        res = paired_comparison(group[f"err_{a}"], group[f"err_{b}"])
+        rows.append({**dict(zip(keys, key, strict=True)), "n": res.n,
+                     **{f"err_{m}": float(group[f"err_{m}"].mean()) for m in models},
+                     "mean_diff": res.mean_diff, "ci95_low": res.ci95_low,
+                     "ci95_high": res.ci95_high, "t": res.t, "p_two_sided": res.p_two_sided,
+                     "p_one_sided_less": res.p_one_sided_less, "wilcoxon_p": res.wilcoxon_p,
+                     "d_z": res.d_z})
+    return pd.DataFrame(rows)
 
 
 def mean_ci95(values: np.ndarray) -> tuple[float, float, float]:

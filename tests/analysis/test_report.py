@@ -2,12 +2,14 @@
 
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 
+from analysis.metrics import add_alignment_errors
 from analysis.power import simulate_participants
-from analysis.report import run_analyze
-from tests.analysis.fixed_data import small_bank
+from analysis.report import run_analyze, start_kind_table
+from tests.analysis.fixed_data import fixed_predictions, small_bank
 
 STUDY_YAML = """
 exclusions: {failed_attention_check: true, incomplete: true, too_fast_trial_ms: 4000,
@@ -51,6 +53,33 @@ def test_report_from_csv(tmp_path, study_dirs):
     assert "data:image/png;base64," in html and "src='http" not in html
     meta = json.loads((out / "meta.json").read_text())
     assert len(meta["data_sha256"]) == 64 and meta["trial_bank_sha256"]
+
+    assert "start_kind" in pd.read_csv(tmp_path / "export.csv").columns
+    kinds = pd.read_csv(out / "by_start_kind.csv")
+    assert list(kinds.columns[:3]) == ["world", "start_kind", "n"]
+    assert list(kinds[kinds["world"] == "highway"]["start_kind"]) == [
+        "own", "same_lane", "adjacent_lane"]
+    assert list(kinds[kinds["world"] == "obstacle"]["start_kind"]) == ["own", "near", "mid"]
+    assert (kinds["n"] == 11).all()
+    kept = add_alignment_errors(frame[frame["participant_id"] != "sim-00001"])
+    for row in kinds.itertuples():
+        rows = kept[(kept["world"] == row.world) & (kept["start_kind"] == row.start_kind)]
+        per_person = rows.groupby("participant_id")[["err_ours", "err_vae"]].mean()
+        assert row.err_ours == pytest.approx(per_person["err_ours"].mean())
+        assert row.mean_diff == pytest.approx((per_person["err_ours"]
+                                               - per_person["err_vae"]).mean())
+        assert summary["by_start_kind"][row.world][row.start_kind]["n"] == 11
+    assert "adjacent_lane" in html and "By start kind" in html
+
+
+def test_start_kind_table_with_one_participant_has_no_test():
+    rows = add_alignment_errors(fixed_predictions(n_participants=3, starts=2))
+    rows = rows[(rows["start_kind"] == "own") | (rows["participant_id"] == "p00")]
+    table = start_kind_table(rows).set_index(["world", "start_kind"])
+    assert table.loc[("highway", "own"), "n"] == 3
+    assert np.isfinite(table.loc[("highway", "own"), "t"])
+    one = table.loc[("highway", "same_lane")]
+    assert one["n"] == 1 and np.isnan(one["t"]) and np.isfinite(one["mean_diff"])
 
 
 def test_all_excluded_is_a_clear_error_and_waive_is_reported(tmp_path, study_dirs):
