@@ -65,7 +65,7 @@ async def submit_instructions(body: SubmissionBody, participant: ParticipantDep,
              responses={200: {"description": "this submission_id was already stored"}})
 async def submit_predictions(body: PredictionCreate, participant: ParticipantDep,
                              ctx: ContextDep, db: SessionDep) -> Response:
-    """Store one trial's clicked positions (5 start states x 3 steps); answers the next state."""
+    """Store one trial's clicked positions (start states x steps); answers the next state."""
     stored = crud.record_predictions(db, ctx, participant, body)
     return state_response(ctx, participant, 201 if stored else 200)
 
