@@ -492,7 +492,7 @@ def attention_trials(config: StudyConfig, inputs: WorldInputs, candidates: list,
         try:
             pool.append(make_trial(config, inputs, src, start, end, max_step, scene, rng,
                                    near=True))
-        except ValueError:  # too little free room around the robot (NoStartStates)
+        except NoStartStates:  # too little free room around the robot
             continue
     angles = [obviousness_deg(t) for t in pool]
     chosen = [int(i) for i in np.argsort(angles, kind="stable")[: rule.per_world]]
