@@ -10,6 +10,8 @@ from analysis.metrics import MODELS, UNIT_KEYS
 
 POSITION_MODELS = ("ours", "vae", "cv")
 PREDICTION_KEYS = ["participant_id", "trial_id", "start_index"]
+BREAKDOWN_STATS = ("mean_diff", "ci95_low", "ci95_high", "t", "p_two_sided", "p_one_sided_less",
+                   "wilcoxon_p", "d_z")
 
 
 @dataclass
@@ -79,10 +81,7 @@ def breakdown(means: pd.DataFrame, keys: list[str], a: str = "ours", b: str = "v
         res = paired_comparison(group[f"err_{a}"], group[f"err_{b}"])
         rows.append({**dict(zip(keys, key, strict=True)), "n": res.n,
                      **{f"err_{m}": float(group[f"err_{m}"].mean()) for m in models},
-                     "mean_diff": res.mean_diff, "ci95_low": res.ci95_low,
-                     "ci95_high": res.ci95_high, "t": res.t, "p_two_sided": res.p_two_sided,
-                     "p_one_sided_less": res.p_one_sided_less, "wilcoxon_p": res.wilcoxon_p,
-                     "d_z": res.d_z})
+                     **{name: getattr(res, name) for name in BREAKDOWN_STATS}})
     return pd.DataFrame(rows)
 
 
