@@ -188,16 +188,15 @@ def welch_row(world: str, reading: str, coarse: pd.DataFrame, precise: pd.DataFr
               alpha: float) -> dict:
     """One world's check: Welch's one-sided t-test that coarse's diff < precise's diff."""
     test = stats.ttest_ind(coarse["diff"], precise["diff"], equal_var=False, alternative="less")
-    return {"world": world, "reading": reading, "n_coarse": len(coarse), "n_precise": len(precise),
-            "coarse_err_ours": float(coarse["err_ours"].mean()),
-            "coarse_err_vae": float(coarse["err_vae"].mean()),
-            "coarse_mean_diff": float(coarse["diff"].mean()),
-            "coarse_sd_diff": float(coarse["diff"].std(ddof=1)),
-            "precise_err_ours": float(precise["err_ours"].mean()),
-            "precise_err_vae": float(precise["err_vae"].mean()),
-            "precise_mean_diff": float(precise["diff"].mean()),
-            "precise_sd_diff": float(precise["diff"].std(ddof=1)),
-            "welch_t": float(test.statistic), "welch_df": float(test.df),
+    populations = {"coarse": coarse, "precise": precise}
+    row = {"world": world, "reading": reading,
+           **{f"n_{name}": len(pop) for name, pop in populations.items()}}
+    for name, pop in populations.items():
+        row.update({f"{name}_err_ours": float(pop["err_ours"].mean()),
+                    f"{name}_err_vae": float(pop["err_vae"].mean()),
+                    f"{name}_mean_diff": float(pop["diff"].mean()),
+                    f"{name}_sd_diff": float(pop["diff"].std(ddof=1))})
+    return {**row, "welch_t": float(test.statistic), "welch_df": float(test.df),
             "p_one_sided": float(test.pvalue), "passed": bool(test.pvalue < alpha)}
 
 
