@@ -51,6 +51,7 @@ from app.learning.train import (
     prepare,
 )
 from app.settings import get_settings
+from app.worlds.simulate import output_paths
 
 VAE_RULE = "lowest validation task loss (prediction + reconstruction MSE, no KL term)"
 
@@ -147,10 +148,14 @@ def lowest_loss(rows: list[dict]) -> int:
     return int(np.argmin([row["val_task_loss"] for row in rows]))
 
 
+def is_eligible(row: dict, grid: OursGrid) -> bool:
+    """Whether an Ours cell uses enough of its codebook to be chosen."""
+    return row["codes_used"] >= grid.min_used_fraction * row["codebook_size"]
+
+
 def choose_ours(rows: list[dict], grid: OursGrid) -> tuple[int, bool]:
     """(index chosen by the rule in `ours_rule`, whether any cell was eligible)."""
-    eligible = [i for i, row in enumerate(rows)
-                if row["codes_used"] >= grid.min_used_fraction * row["codebook_size"]]
+    eligible = [i for i, row in enumerate(rows) if is_eligible(row, grid)]
     if not eligible:
         return lowest_loss(rows), False
     best = min(rows[i]["val_task_loss"] for i in eligible)
@@ -159,7 +164,7 @@ def choose_ours(rows: list[dict], grid: OursGrid) -> tuple[int, bool]:
 
 
 def held_out_information(trajs: TrajectorySet, seed: int, cfg: TrainConfig,
-                     model: LatentActionModel, data: Prepared) -> dict:
+                         model: LatentActionModel, data: Prepared) -> dict:
     """Ours' held-out test purity (robot labels) and MSE: reported, never used to choose."""
     payload = build_payload(trajs, "ours", seed, cfg, model, model_args(cfg, "ours"), data)
     scores = evaluate(model_from_payload(payload), data.windows["test"], trajs.label_names,
@@ -197,10 +202,10 @@ def run_selection(trajs: TrajectorySet, base: TrainConfig, sel: SelectionConfig,
         sensitivity["paper_quantiser"] = True
         bar.update()
         information = {
-            "default": held_out_information(trajs, sel.seed, cell_config(base, chosen), default,
-                                        data),
+            "default": held_out_information(trajs, sel.seed, cell_config(base, chosen),
+                                            default, data),
             "paper_quantiser": held_out_information(trajs, sel.seed, cell_config(base, paper),
-                                                paper_model, data),
+                                                    paper_model, data),
         }
     return {**result, "world": trajs.world, "seed": sel.seed, "sensitivity": sensitivity,
             "test_information_only": information, "selection_config": sel.model_dump(),
@@ -217,7 +222,7 @@ def _choose(rows: list[dict], sel: SelectionConfig) -> dict:
     vae_i = lowest_loss(vae)
     ours_i, any_eligible = choose_ours(ours, sel.ours)
     for i, row in enumerate(ours):
-        row["eligible"] = row["codes_used"] >= sel.ours.min_used_fraction * row["codebook_size"]
+        row["eligible"] = is_eligible(row, sel.ours)
         row["chosen"] = i == ours_i
     for i, row in enumerate(vae):
         row["chosen"] = i == vae_i
@@ -286,7 +291,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=None, help="default var/models/selection")
     args = parser.parse_args()
     data_dir = get_settings().data_dir
-    npz = data_dir / "data" / args.world / "trajectories.npz"
+    npz, _ = output_paths(data_dir, args.world)
     if not npz.is_file():
         _fail(f"{npz} not found; run `tomstudy simulate {args.world}` first")
     try:
