@@ -15,11 +15,16 @@ from app.configio import StrictModel, load_yaml_model
 OBSERVERS_FILE = "observers.yaml"
 
 
-class Sourced(StrictModel):
+class _WithSource(StrictModel):
+    """A config value (declared by the subclass) and where it comes from."""
+
+    source: str = Field(min_length=8)
+
+
+class Sourced(_WithSource):
     """A non-negative number and where it comes from."""
 
     value: float = Field(ge=0)
-    source: str = Field(min_length=8)
 
 
 class PositiveSourced(Sourced):
@@ -28,18 +33,16 @@ class PositiveSourced(Sourced):
     value: float = Field(gt=0)
 
 
-class IntentChoice(StrictModel):
+class IntentChoice(_WithSource):
     """How an observer turns its posterior into one intent: sample it, or take its mode."""
 
     value: Literal["sample", "map"]
-    source: str = Field(min_length=8)
 
 
-class LaneReading(StrictModel):
+class LaneReading(_WithSource):
     """What a Highway intent is: an absolute lane, or a lane change relative to the robot's lane."""
 
     value: Literal["absolute", "relative"]
-    source: str = Field(min_length=8)
 
 
 class InferenceConfig(StrictModel):
