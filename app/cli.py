@@ -2,12 +2,15 @@
 
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from app.configio import ConfigError
 from app.settings import get_settings
+
+if TYPE_CHECKING:
+    from analysis.observers_config import ObserversConfig
 
 cli = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Worlds, models and the online study of how people predict a robot.")
@@ -169,26 +172,36 @@ def power(
     seed: Annotated[int, typer.Option(min=0)] = 0,
 ) -> None:
     """Power to detect Ours < VAE vs n, from bots run in process on the trial bank."""
-    from analysis.observers_config import default_observers
     from analysis.power import KINDS, run_power
-    from analysis.report import read_study_config
 
     if kind not in KINDS:
         fail(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
     settings = get_settings()
-    bank = settings.data_dir / "trials" / study / "bank.json"
-    if not bank.is_file():
-        fail(f"bank: {bank} not found; run `tomstudy build-trials --study {study}`")
-    try:
-        observers = default_observers(settings.configs_dir)
-    except ConfigError as err:
-        fail(str(err))
-    trials = int(read_study_config(settings.configs_dir, study).get("trials_per_world", 10))
+    bank, observers, trials = simulation_inputs(study, None)
     out = out or settings.data_dir / "reports" / f"power-{study}-{kind}"
     summary = run_power(bank, kind, trials, out, n_max, pool, reps, alpha, seed, observers)
     for world, needed in summary["n_for_power_0.8"].items():
         typer.echo(f"{world}: d_z = {summary['d_z'][world]:.3f}, n for power 0.8 = {needed}")
     typer.echo(f"wrote {out}")
+
+
+def simulation_inputs(study: str, observers: Path | None
+                      ) -> tuple[Path, "ObserversConfig", int]:
+    """(bank path, observers config, trials per world) for simulated participants of `study`."""
+    from analysis.observers_config import default_observers, load_observers
+    from analysis.report import read_study_config
+    from app.study.trials import BANK_FILE, bank_dir
+
+    settings = get_settings()
+    bank = bank_dir(settings.data_dir, study) / BANK_FILE
+    if not bank.is_file():
+        fail(f"bank: {bank} not found; run `tomstudy build-trials --study {study}`")
+    try:
+        config = load_observers(observers) if observers else default_observers(settings.configs_dir)
+    except ConfigError as err:
+        fail(str(err))
+    trials = int(read_study_config(settings.configs_dir, study).get("trials_per_world", 10))
+    return bank, config, trials
 
 
 @cli.command("check-display")
@@ -224,20 +237,10 @@ def instrument(
     reading (coarse_relative) is a sensitivity row. Writes instrument.json and
     instrument.csv; exits 1 if a world fails.
     """
-    from analysis.observers_config import default_observers, load_observers
     from analysis.power import run_instrument
-    from analysis.report import read_study_config
 
-    settings = get_settings()
-    bank = settings.data_dir / "trials" / study / "bank.json"
-    if not bank.is_file():
-        fail(f"bank: {bank} not found; run `tomstudy build-trials --study {study}`")
-    try:
-        config = load_observers(observers) if observers else default_observers(settings.configs_dir)
-    except ConfigError as err:
-        fail(str(err))
-    trials = int(read_study_config(settings.configs_dir, study).get("trials_per_world", 10))
-    out = out or settings.data_dir / "reports" / f"instrument-{study}"
+    bank, config, trials = simulation_inputs(study, observers)
+    out = out or get_settings().data_dir / "reports" / f"instrument-{study}"
     summary = run_instrument(bank, trials, out, n, seed, alpha, config)
     typer.echo(f"{'world':<10}{'reading':<10}{'coarse':>9}{'precise':>9}{'t':>8}{'p':>10}  result")
     for row in summary["rows"]:
