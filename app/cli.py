@@ -11,6 +11,7 @@ from app.settings import get_settings
 
 if TYPE_CHECKING:
     from analysis.observers_config import ObserversConfig
+    from app.settings import Settings
 
 cli = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Worlds, models and the online study of how people predict a robot.")
@@ -287,13 +288,9 @@ def serve(
     import uvicorn
 
     from app.study.db import create_tables, make_engine
-    from app.study.main import STUDY_ENV, UnsafeSettings, check_production
+    from app.study.main import STUDY_ENV
 
-    settings = get_settings()
-    try:
-        check_production(settings)
-    except UnsafeSettings as err:
-        fail(str(err))
+    settings = server_settings(host)
     if prepare:
         from app.study.prepare import prepare_study
 
@@ -314,6 +311,23 @@ def serve(
                f"(researcher dashboard: /researcher, API docs: /docs)")
     uvicorn.run("app.study.main:app_from_env", factory=True, host=host, port=port,
                 workers=workers, log_level="warning")
+
+
+def server_settings(host: str) -> "Settings":
+    """Settings for `serve --host`: production off loopback, refused (exit 2) if unsafe."""
+    import os
+
+    from app.study.main import UnsafeSettings, check_production
+
+    settings = get_settings().for_host(host)
+    try:
+        check_production(settings)
+    except UnsafeSettings as err:
+        fail(str(err))
+    if settings.production:  # the app factory (in each worker) reads the environment
+        os.environ["TOMSTUDY_PRODUCTION"] = "1"
+        get_settings.cache_clear()
+    return settings
 
 
 @cli.command()

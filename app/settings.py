@@ -1,5 +1,6 @@
 """Process-wide settings, read once from the environment (prefix TOMSTUDY_)."""
 
+import ipaddress
 from functools import lru_cache
 from pathlib import Path
 
@@ -19,11 +20,28 @@ class Settings(BaseSettings):
     configs_dir: Path = Field(default=REPO_ROOT / "study_configs")
     database_url: str = Field(default="", validation_alias="DATABASE_URL")
     admin_token: str = DEFAULT_ADMIN_TOKEN
+    # production: researcher token must be strong, API docs off (app/study/main.py)
     production: bool = False
 
     def resolved_database_url(self) -> str:
         """The configured URL, or SQLite under the data dir."""
         return self.database_url or f"sqlite:///{self.data_dir / 'study.db'}"
+
+    def for_host(self, host: str) -> "Settings":
+        """These settings for a server bound to `host`: production unless `host` is loopback."""
+        if self.production or is_loopback(host):
+            return self
+        return self.model_copy(update={"production": True})
+
+
+def is_loopback(host: str) -> bool:
+    """True for localhost, 127.0.0.0/8 and ::1: addresses only this machine can reach."""
+    if host.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:  # any other name may resolve to a public address
+        return False
 
 
 @lru_cache

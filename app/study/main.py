@@ -26,6 +26,9 @@ from app.study.trials import TrialBank
 MAX_BODY_BYTES = 64 * 1024
 FRONTEND_DIR = REPO_ROOT / "frontend"
 STUDY_ENV = "TOMSTUDY_STUDY"
+MIN_ADMIN_TOKEN_CHARS = 32
+NEW_TOKEN_HINT = ("set one with TOMSTUDY_ADMIN_TOKEN=$(python -c 'import secrets;"
+                  "print(secrets.token_urlsafe(32))')")
 
 
 class UnsafeSettings(RuntimeError):
@@ -33,10 +36,19 @@ class UnsafeSettings(RuntimeError):
 
 
 def check_production(settings: Settings) -> None:
-    """Refuse production mode with the default researcher token."""
-    if settings.production and settings.admin_token == DEFAULT_ADMIN_TOKEN:
-        raise UnsafeSettings("TOMSTUDY_PRODUCTION=1 needs a TOMSTUDY_ADMIN_TOKEN other than "
-                             "the default; refusing to start")
+    """Refuse production mode with the default or a short researcher token (it guards export)."""
+    if not settings.production:
+        return
+    token = settings.admin_token.strip()
+    if token == DEFAULT_ADMIN_TOKEN:
+        problem = "is the default, printed in the source"
+    elif len(token) < MIN_ADMIN_TOKEN_CHARS:
+        problem = f"has {len(token)} characters, fewer than {MIN_ADMIN_TOKEN_CHARS}"
+    else:
+        return
+    raise UnsafeSettings(f"refusing to start in production mode (TOMSTUDY_PRODUCTION=1 or a "
+                         f"--host other than loopback): TOMSTUDY_ADMIN_TOKEN {problem}; "
+                         f"{NEW_TOKEN_HINT}")
 
 
 def load_study(settings: Settings, study_id: str) -> StudyContext:
