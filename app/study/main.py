@@ -19,6 +19,7 @@ from app.settings import DEFAULT_ADMIN_TOKEN, REPO_ROOT, Settings, get_settings
 from app.study.config import load_study_config
 from app.study.crud import Refused, StudyContext
 from app.study.db import create_tables, make_engine
+from app.study.headers import SecurityHeaders
 from app.study.predictor import Predictor
 from app.study.routes import pages, participant, researcher
 from app.study.trials import TrialBank
@@ -82,7 +83,14 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
         app.include_router(router)
     add_error_handlers(app)
     app.add_middleware(BodyLimit, max_bytes=MAX_BODY_BYTES)
+    app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app))  # outermost: 413s too
     return app
+
+
+def docs_paths(app: FastAPI) -> tuple[str, ...]:
+    """The paths of the interactive API docs pages this app serves."""
+    paths = (app.docs_url, app.redoc_url, app.swagger_ui_oauth2_redirect_url)
+    return tuple(p for p in paths if p)
 
 
 def add_error_handlers(app: FastAPI) -> None:

@@ -1,14 +1,24 @@
 """Hosting on the internet: fail-closed researcher auth, headers, docs, health, database limits."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from fastapi.testclient import TestClient
 
 from app.settings import DEFAULT_ADMIN_TOKEN, Settings, get_settings, is_loopback
-from app.study.main import UnsafeSettings, app_from_env, check_production, create_app
+from app.study.main import (
+    FRONTEND_DIR,
+    MAX_BODY_BYTES,
+    UnsafeSettings,
+    app_from_env,
+    check_production,
+    create_app,
+)
 from tests.conftest import REPO, free_port
+from tests.study.flow import Participant
 
 STRONG_TOKEN = "x" * 40
 TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")
@@ -76,3 +86,70 @@ def test_serve_off_loopback_refuses_a_weak_token(small_study, tmp_path, token):
     assert run.stderr.startswith("error: refusing to start in production mode")
     assert "TOMSTUDY_ADMIN_TOKEN=$(python -c 'import secrets" in run.stderr
     assert "Traceback" not in run.stderr
+
+
+# ---------------------------------------------------------------- security headers
+
+@pytest.fixture(scope="module")
+def client(small_study, tmp_path_factory):
+    """The small study's app (not production) on a fresh SQLite file."""
+    settings = study_settings(small_study, tmp_path_factory.mktemp("hosting"))
+    with TestClient(create_app(settings, [small_study.study_id])) as c:
+        yield c
+
+
+def assert_security_headers(response) -> None:
+    """The strict policy and the fixed headers, once each."""
+    csp = response.headers["content-security-policy"]
+    directives = dict(d.strip().split(" ", 1) for d in csp.split(";"))
+    assert directives["default-src"] == "'none'"
+    assert directives["script-src"] == "'self'" and directives["style-src"] == "'self'"
+    assert directives["connect-src"] == "'self'" and directives["img-src"] == "'self' data:"
+    assert directives["frame-ancestors"] == "'none'"
+    assert directives["form-action"].split() == [
+        "'self'", "https://app.prolific.com", "https://www.mturk.com",
+        "https://workersandbox.mturk.com"]
+    assert response.headers["x-content-type-options"] == "nosniff"
+    assert response.headers["referrer-policy"] == "no-referrer"
+    assert response.headers["x-frame-options"] == "DENY"
+    assert response.headers["cross-origin-opener-policy"] == "same-origin"
+    assert len(response.headers.get_list("content-security-policy")) == 1
+
+
+def test_security_headers_on_pages_api_static_files_and_errors(client, small_study):
+    p = Participant(client, small_study.study_id)
+    p.start()
+    answers = {
+        "page": client.get(f"/s/{small_study.study_id}"),
+        "landing": client.get("/"),
+        "api": client.get(p.url("state")),
+        "static js": client.get("/static/js/app.js"),
+        "static css": client.get("/static/css/style.css"),
+        "unknown session": client.get("/api/sessions/nope/state"),
+        "unknown path": client.get("/no/such/page"),
+        "too large": client.post(p.url("events"), content=b"[" * (MAX_BODY_BYTES + 1),
+                                 headers={"content-type": "application/json"}),
+        "invalid": client.post(p.url("consent"), json={"agree": "maybe"}),
+    }
+    statuses = {what: r.status_code for what, r in answers.items()}
+    assert statuses == {"page": 200, "landing": 200, "api": 200, "static js": 200,
+                        "static css": 200, "unknown session": 404, "unknown path": 404,
+                        "too large": 413, "invalid": 422}
+    for response in answers.values():
+        assert_security_headers(response)
+
+
+def test_templates_need_no_inline_script_or_style():
+    """What lets the policy say script-src 'self' and style-src 'self' and nothing more."""
+    for template in (FRONTEND_DIR / "templates").glob("*.html"):
+        html = template.read_text()
+        assert not re.search(r"<script(?![^>]*\bsrc=)[^>]*>", html), template.name
+        assert not re.search(r"<style|\sstyle=|\son[a-z]+=|javascript:", html, re.I), template.name
+
+
+def test_docs_pages_get_the_docs_policy_only(client):
+    docs = client.get("/docs")
+    assert docs.status_code == 200
+    assert "https://cdn.jsdelivr.net" in docs.headers["content-security-policy"]
+    assert docs.headers["x-frame-options"] == "DENY"
+    assert "cdn.jsdelivr.net" not in client.get("/").headers["content-security-policy"]
