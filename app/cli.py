@@ -307,8 +307,9 @@ def serve(
     create_tables(engine)  # once, before workers race to create them
     engine.dispose()
     os.environ[STUDY_ENV] = study
+    docs = "off in production" if settings.production else "/docs"
     typer.echo(f"serving http://{host}:{port}/s/{study.split(',')[0]}  "
-               f"(researcher dashboard: /researcher, API docs: /docs)")
+               f"(researcher dashboard: /researcher, API docs: {docs})")
     uvicorn.run("app.study.main:app_from_env", factory=True, host=host, port=port,
                 workers=workers, log_level="warning")
 

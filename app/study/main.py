@@ -73,7 +73,7 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
         yield
         app.state.engine.dispose()
 
-    app = FastAPI(title="tomstudy", lifespan=lifespan,
+    app = FastAPI(title="tomstudy", lifespan=lifespan, **docs_urls(settings),
                   description="Online study of how people predict a robot (app/study/API.md).")
     app.state.settings = settings
     app.state.default_study = studies[0]
@@ -85,6 +85,13 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     app.add_middleware(BodyLimit, max_bytes=MAX_BODY_BYTES)
     app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app))  # outermost: 413s too
     return app
+
+
+def docs_urls(settings: Settings) -> dict:
+    """FastAPI's defaults (/docs, /redoc, /openapi.json), or none of them in production."""
+    if settings.production:  # a public map of every route helps nobody but a scanner
+        return {"docs_url": None, "redoc_url": None, "openapi_url": None}
+    return {}
 
 
 def docs_paths(app: FastAPI) -> tuple[str, ...]:

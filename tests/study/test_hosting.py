@@ -153,3 +153,19 @@ def test_docs_pages_get_the_docs_policy_only(client):
     assert "https://cdn.jsdelivr.net" in docs.headers["content-security-policy"]
     assert docs.headers["x-frame-options"] == "DENY"
     assert "cdn.jsdelivr.net" not in client.get("/").headers["content-security-policy"]
+
+
+# ---------------------------------------------------------------- API docs
+
+DOCS = ("/docs", "/redoc", "/openapi.json")
+
+
+def test_api_docs_are_off_in_production(small_study, tmp_path):
+    settings = study_settings(small_study, tmp_path, admin_token=STRONG_TOKEN, production=True)
+    with TestClient(create_app(settings, [small_study.study_id])) as production:
+        assert {path: production.get(path).status_code for path in DOCS} == dict.fromkeys(DOCS, 404)
+        assert production.get(f"/s/{small_study.study_id}").status_code == 200
+
+
+def test_api_docs_are_served_outside_production(client):
+    assert {path: client.get(path).status_code for path in DOCS} == dict.fromkeys(DOCS, 200)
