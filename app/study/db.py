@@ -4,10 +4,12 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from sqlalchemy import event
-from sqlalchemy.engine import Engine, make_url
+from sqlalchemy.engine import URL, Engine, make_url
 from sqlmodel import Session, SQLModel, create_engine
 
 from app.study import tables  # noqa: F401  (registers the tables on SQLModel.metadata)
+
+CONNECT_TIMEOUT_S = 10
 
 
 def normalise_url(url: str) -> str:
@@ -17,18 +19,32 @@ def normalise_url(url: str) -> str:
     return url
 
 
-def make_engine(url: str) -> Engine:
+def is_sqlite(url: str) -> bool:
+    """True if `url` is a SQLite database (one process at a time may write to it)."""
+    return make_url(normalise_url(url)).get_backend_name() == "sqlite"
+
+
+def make_engine(url: str, connect_timeout_s: int = CONNECT_TIMEOUT_S) -> Engine:
     """An engine for `url`; SQLite files get WAL, a busy timeout and their folder created."""
     url = normalise_url(url)
     parsed = make_url(url)
     if parsed.get_backend_name() != "sqlite":
-        return create_engine(url, pool_pre_ping=True, pool_size=10, max_overflow=20)
+        return create_engine(url, pool_pre_ping=True, pool_size=10, max_overflow=20,
+                             connect_args=server_connect_args(parsed, connect_timeout_s))
     if parsed.database and parsed.database != ":memory:":
         Path(parsed.database).parent.mkdir(parents=True, exist_ok=True)
     engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": 30},
                            pool_size=20, max_overflow=20)
     event.listen(engine, "connect", _sqlite_pragmas)
     return engine
+
+
+def server_connect_args(url: URL, connect_timeout_s: int) -> dict:
+    """A connect timeout for PostgreSQL, unless the URL sets its own."""
+    # without one a dead database holds a worker for the operating system's TCP timeout
+    if url.get_backend_name() == "postgresql" and "connect_timeout" not in url.query:
+        return {"connect_timeout": connect_timeout_s}
+    return {}
 
 
 def _sqlite_pragmas(dbapi_connection, _record) -> None:

@@ -16,6 +16,7 @@ from fastapi.templating import Jinja2Templates
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from app.settings import DEFAULT_ADMIN_TOKEN, REPO_ROOT, Settings, get_settings
+from app.study import health
 from app.study.config import load_study_config
 from app.study.crud import Refused, StudyContext
 from app.study.db import create_tables, make_engine
@@ -79,7 +80,7 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     app.state.default_study = studies[0]
     app.state.templates = Jinja2Templates(directory=FRONTEND_DIR / "templates")
     app.mount("/static", StaticFiles(directory=FRONTEND_DIR / "static"), name="static")
-    for router in (pages.router, participant.router, researcher.router):
+    for router in (pages.router, participant.router, researcher.router, health.router):
         app.include_router(router)
     add_error_handlers(app)
     app.add_middleware(BodyLimit, max_bytes=MAX_BODY_BYTES)

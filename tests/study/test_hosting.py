@@ -1,14 +1,19 @@
 """Hosting on the internet: fail-closed researcher auth, headers, docs, health, database limits."""
 
 import re
+import socket
 import subprocess
 import sys
+import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
+from sqlalchemy.engine import make_url
 
 from app.settings import DEFAULT_ADMIN_TOKEN, Settings, get_settings, is_loopback
+from app.study.db import CONNECT_TIMEOUT_S, make_engine, server_connect_args
 from app.study.main import (
     FRONTEND_DIR,
     MAX_BODY_BYTES,
@@ -169,3 +174,51 @@ def test_api_docs_are_off_in_production(small_study, tmp_path):
 
 def test_api_docs_are_served_outside_production(client):
     assert {path: client.get(path).status_code for path in DOCS} == dict.fromkeys(DOCS, 200)
+
+
+# ---------------------------------------------------------------- health and database
+
+@contextmanager
+def silent_port():
+    """A port that accepts TCP connections and never answers (a hung database server)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        sock.listen(8)
+        yield sock.getsockname()[1]
+
+
+def test_healthz_is_200_when_the_database_answers(client):
+    r = client.get("/healthz")
+    assert r.status_code == 200 and r.json() == {"status": "ok", "database": "ok"}
+    assert r.headers["cache-control"] == "no-store"
+    assert_security_headers(r)
+
+
+def test_healthz_is_503_with_a_short_reason_when_the_database_is_down(small_study, tmp_path):
+    with TestClient(create_app(study_settings(small_study, tmp_path),
+                               [small_study.study_id])) as c:
+        c.app.state.engine = make_engine(f"postgresql://nobody@127.0.0.1:{free_port()}/gone")
+        r = c.get("/healthz")
+    assert r.status_code == 503
+    assert r.json() == {"status": "error", "database": "unavailable (OperationalError)"}
+    assert "127.0.0.1" not in r.text and "nobody" not in r.text
+
+
+def test_postgres_engines_get_a_connect_timeout():
+    assert CONNECT_TIMEOUT_S == 10
+    assert server_connect_args(make_url("postgresql+psycopg://u@db/x"), 10) == {
+        "connect_timeout": 10}
+    assert server_connect_args(make_url("postgresql+psycopg://u@db/x?connect_timeout=3"),
+                               10) == {}  # the URL's own wins
+    assert server_connect_args(make_url("sqlite:///study.db"), 10) == {}
+
+
+def test_a_hung_postgres_fails_within_the_connect_timeout_not_forever(small_study, tmp_path):
+    with silent_port() as port, TestClient(create_app(study_settings(small_study, tmp_path),
+                                                      [small_study.study_id])) as c:
+        c.app.state.engine = make_engine(f"postgresql://u@127.0.0.1:{port}/x",
+                                         connect_timeout_s=2)  # psycopg's minimum
+        started = time.monotonic()
+        r = c.get("/healthz")
+        assert time.monotonic() - started < 10
+    assert r.status_code == 503 and r.json()["database"] == "unavailable (ConnectionTimeout)"
