@@ -290,7 +290,7 @@ def serve(
     from app.study.db import create_tables, make_engine
     from app.study.main import STUDY_ENV
 
-    settings = server_settings(host)
+    settings = server_settings(host, workers)
     if prepare:
         from app.study.prepare import prepare_study
 
@@ -314,10 +314,11 @@ def serve(
                 workers=workers, log_level="warning")
 
 
-def server_settings(host: str) -> "Settings":
-    """Settings for `serve --host`: production off loopback, refused (exit 2) if unsafe."""
+def server_settings(host: str, workers: int) -> "Settings":
+    """Settings for `serve`: production off loopback; exit 2 if unsafe or unservable."""
     import os
 
+    from app.study.db import is_sqlite
     from app.study.main import UnsafeSettings, check_production
 
     settings = get_settings().for_host(host)
@@ -325,6 +326,10 @@ def server_settings(host: str) -> "Settings":
         check_production(settings)
     except UnsafeSettings as err:
         fail(str(err))
+    if workers > 1 and is_sqlite(settings.resolved_database_url()):
+        fail(f"--workers {workers} needs a database several processes can share: set "
+             f"DATABASE_URL to PostgreSQL (postgresql+psycopg://user:password@host:5432/db), "
+             f"or serve SQLite with --workers 1")
     if settings.production:  # the app factory (in each worker) reads the environment
         os.environ["TOMSTUDY_PRODUCTION"] = "1"
         get_settings.cache_clear()

@@ -93,6 +93,14 @@ def test_serve_off_loopback_refuses_a_weak_token(small_study, tmp_path, token):
     assert "Traceback" not in run.stderr
 
 
+
+def test_serve_refuses_several_workers_on_sqlite(small_study, tmp_path):
+    run = run_serve(small_study, tmp_path, "--workers", "2")
+    assert run.returncode == 2, run.stderr
+    assert "--workers 2" in run.stderr and "DATABASE_URL" in run.stderr
+    assert "Traceback" not in run.stderr
+
+
 # ---------------------------------------------------------------- security headers
 
 @pytest.fixture(scope="module")
