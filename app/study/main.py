@@ -21,6 +21,7 @@ from app.study.config import load_study_config
 from app.study.crud import Refused, StudyContext
 from app.study.db import create_tables, make_engine
 from app.study.headers import SecurityHeaders
+from app.study.openapi import declare_error_responses
 from app.study.predictor import Predictor
 from app.study.routes import pages, participant, researcher
 from app.study.trials import TrialBank
@@ -83,6 +84,7 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     for router in (pages.router, participant.router, researcher.router, health.router):
         app.include_router(router)
     add_error_handlers(app)
+    declare_error_responses(app)
     app.add_middleware(BodyLimit, max_bytes=MAX_BODY_BYTES)
     app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app))  # outermost: 413s too
     return app

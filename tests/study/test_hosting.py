@@ -230,3 +230,23 @@ def test_a_hung_postgres_fails_within_the_connect_timeout_not_forever(small_stud
         r = c.get("/healthz")
         assert time.monotonic() - started < 10
     assert r.status_code == 503 and r.json()["database"] == "unavailable (ConnectionTimeout)"
+
+
+# ---------------------------------------------------------------- OpenAPI
+
+def test_schema_declares_the_error_statuses_and_bodies():
+    spec = create_app(Settings(production=False, admin_token="test-token")).openapi()
+    declared = {f"{method.upper()} {path}": sorted(int(s) for s in op["responses"])
+                for path, ops in spec["paths"].items() for method, op in ops.items()}
+    assert declared["POST /api/sessions"] == [200, 201, 400, 403, 404, 409, 413, 422]
+    assert declared["GET /api/sessions/{token}/state"] == [200, 404, 422]
+    assert declared["POST /api/sessions/{token}/predictions"] == [
+        200, 201, 400, 403, 404, 409, 413, 422]
+    assert declared["GET /api/researcher/export.csv"] == [200, 401, 403, 404, 422]
+    assert declared["GET /healthz"] == [200, 503]
+    responses = spec["paths"]["/api/sessions/{token}/events"]["post"]["responses"]
+    body = {s: r["content"]["application/json"]["schema"]["$ref"].rsplit("/", 1)[1]
+            for s, r in responses.items() if s != "202"}
+    assert body == {"400": "ErrorDetail", "403": "ErrorDetail", "404": "ErrorDetail",
+                    "409": "ErrorDetail", "413": "ErrorDetail", "422": "ValidationProblem"}
+    assert "HTTPValidationError" not in spec["components"]["schemas"]

@@ -1,0 +1,126 @@
+"""The OpenAPI schema declares every error status each route can answer, in one place.
+
+Routes raise `Refused(status, "field: message")` deep in crud and deps, so their
+decorators cannot see what they may answer; `error_statuses` names it by route instead,
+and `declare_error_responses` adds it to the generated schema with the error bodies the
+handlers in main.py write.
+"""
+
+from fastapi import FastAPI
+from pydantic import BaseModel
+from pydantic.json_schema import models_json_schema
+
+REF = "#/components/schemas/{model}"
+
+
+class ErrorDetail(BaseModel):
+    """A refused request: `detail` is `field: message`."""
+
+    detail: str
+
+
+class ValidationItem(BaseModel):
+    """One field that failed validation (the input itself is never echoed)."""
+
+    loc: list[str | int]
+    msg: str
+    type: str
+
+
+class ValidationProblem(BaseModel):
+    """422: a list of failed fields plus `message`, or one `field: message` (a study rule)."""
+
+    detail: str | list[ValidationItem]
+    message: str | None = None
+
+
+UNREADABLE = "body: not readable as JSON (e.g. not UTF-8); JSON that fails to parse is a 422"
+TOO_LARGE = "body: larger than 64 KiB"
+INVALID = "a body or parameter fails validation; `detail` names the field"
+SESSION_STATUSES = {404: "token: unknown session"}
+SESSION_WRITE_STATUSES = {
+    400: UNREADABLE,
+    403: "a trial not assigned to this session, or a request the study refuses",
+    404: "token: unknown session; trial_id: unknown trial",
+    409: "phase: the session is at another step or trial, already done, or moved on in "
+         "another request; submission_id: used by another session",
+    413: TOO_LARGE,
+    422: INVALID,
+}
+START_STATUSES = {
+    400: UNREADABLE,
+    403: "recruitment: missing or invalid platform parameters for this study",
+    404: "study_id: unknown study",
+    409: "recruitment: this participant already completed the study, or the attempt key "
+         "(SESSION_ID / assignmentId) differs from the session in progress",
+    413: TOO_LARGE,
+    422: INVALID,
+}
+RESEARCHER_STATUSES = {
+    401: "authorization: missing bearer token",
+    403: "authorization: wrong researcher token",
+    404: "study_id: unknown study",
+    422: INVALID,
+}
+
+
+def error_statuses(method: str, path: str) -> dict[int, str]:
+    """The error statuses the route `method path` can answer, each with why."""
+    if path.startswith("/api/researcher/"):
+        return RESEARCHER_STATUSES
+    if path == "/api/sessions" and method == "POST":
+        return START_STATUSES
+    if path.startswith("/api/sessions/{token}/"):
+        return SESSION_WRITE_STATUSES if method == "POST" else SESSION_STATUSES
+    return {}
+
+
+def declare_error_responses(app: FastAPI) -> None:
+    """Make `app.openapi()` declare each route's `error_statuses` with its error body."""
+    generate = app.openapi
+
+    def openapi() -> dict:
+        if app.openapi_schema is None:
+            add_error_responses(generate())  # FastAPI caches this dict in app.openapi_schema
+        return app.openapi_schema
+
+    app.openapi = openapi
+
+
+def add_error_responses(schema: dict) -> None:
+    """Add the error responses and their body schemas to a generated OpenAPI dict, in place."""
+    for path, operations in schema.get("paths", {}).items():
+        for method, operation in operations.items():
+            responses = operation.setdefault("responses", {})
+            statuses = error_statuses(method.upper(), path)
+            if "422" in responses:  # FastAPI's, in a shape our handler does not write
+                statuses = {422: INVALID} | statuses
+            for status, why in statuses.items():
+                declared = responses.get(str(status), {})
+                if status == 422 or "content" not in declared:  # else a route's own body wins
+                    responses[str(status)] = error_response(status, why)
+    components = schema.setdefault("components", {}).setdefault("schemas", {})
+    components.update(error_schemas())
+    drop_unreferenced(schema, components, ("HTTPValidationError", "ValidationError"))
+
+
+def error_response(status: int, why: str) -> dict:
+    """One OpenAPI response: `why` and the JSON body the error handlers write."""
+    model = ValidationProblem if status == 422 else ErrorDetail
+    return {"description": why,
+            "content": {"application/json": {"schema": {"$ref": REF.format(model=model.__name__)}}}}
+
+
+def error_schemas() -> dict:
+    """JSON schemas of the error bodies, named as `error_response` refers to them."""
+    _, top = models_json_schema([(ErrorDetail, "serialization"),
+                                 (ValidationProblem, "serialization")], ref_template=REF)
+    return top["$defs"]
+
+
+def drop_unreferenced(schema: dict, components: dict, names: tuple[str, ...]) -> None:
+    """Remove the named component schemas that nothing refers to any more."""
+    for name in names:
+        definition = components.pop(name, None)
+        if definition is not None and REF.format(model=name) in repr(schema):
+            components[name] = definition
