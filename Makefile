@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install serve test lint data bench pilot clean
+.PHONY: install serve test lint data bench pilot fuzz clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -45,6 +45,11 @@ pilot: $(STAMP)
 	status=$$?; kill $$pid; wait $$pid; test $$status -eq 0
 	$(BIN)/tomstudy analyze --study paper_study --database-url sqlite:///$(CURDIR)/var/pilot_$(KIND).db \
 	  --out var/reports/pilot_$(KIND) $(PILOT_WAIVE)
+
+# Schemathesis with every check on the study API: at least 5,000 cases, 0 failures (issue 10)
+fuzz: $(STAMP)
+	SCHEMATHESIS_MAX_EXAMPLES=600 SCHEMATHESIS_MIN_CASES=5000 \
+	  $(BIN)/pytest tests/study/test_schemathesis.py -q -s -p no:cacheprovider
 
 bench: $(STAMP)
 	for f in benchmarks/*.py; do $(BIN)/python $$f || exit 1; done
