@@ -12,6 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy.engine import make_url
 
+from app.cli import server_settings
 from app.settings import DEFAULT_ADMIN_TOKEN, Settings, get_settings, is_loopback
 from app.study.db import CONNECT_TIMEOUT_S, make_engine, server_connect_args
 from app.study.main import (
@@ -80,6 +81,19 @@ def test_production_env_refuses_the_uvicorn_factory_too(monkeypatch):
     try:
         with pytest.raises(UnsafeSettings, match="TOMSTUDY_ADMIN_TOKEN has 10 characters"):
             app_from_env()
+    finally:
+        get_settings.cache_clear()
+
+
+def test_serve_off_loopback_hands_production_mode_to_the_app(small_study, monkeypatch):
+    monkeypatch.setenv("TOMSTUDY_ADMIN_TOKEN", STRONG_TOKEN)
+    monkeypatch.setenv("TOMSTUDY_DATA_DIR", str(small_study.data_dir))
+    monkeypatch.setenv("TOMSTUDY_PRODUCTION", "0")  # so monkeypatch undoes serve's "1"
+    get_settings.cache_clear()
+    try:
+        assert server_settings("0.0.0.0", workers=1).production
+        app = app_from_env()  # what uvicorn calls, in this process or in each worker
+        assert app.state.settings.production and app.docs_url is None
     finally:
         get_settings.cache_clear()
 
