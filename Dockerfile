@@ -2,21 +2,31 @@
 # unpinned resolve pulls gigabytes of CUDA wheels), then the project.
 #
 #   docker build -t tomstudy .
-#   docker run -p 8000:8000 -v "$PWD/var:/app/var" \
-#     -e TOMSTUDY_PRODUCTION=1 -e TOMSTUDY_ADMIN_TOKEN=<long random token> \
-#     -e DATABASE_URL=postgresql+psycopg://tomstudy:<password>@db-host:5432/tomstudy \
-#     tomstudy
+#   umask 077   # tomstudy.env holds the key to every participant's data: keep it out of git
+#   echo "TOMSTUDY_ADMIN_TOKEN=$(python3 -c 'import secrets;print(secrets.token_urlsafe(32))')" \
+#     > tomstudy.env
+#   docker run --env-file tomstudy.env -p 127.0.0.1:8000:8000 -v "$PWD/var:/app/var" tomstudy
 #
-# Without DATABASE_URL the server uses SQLite in the mounted var/ (one worker). With a
-# PostgreSQL DATABASE_URL (psycopg 3) it can run several workers: add `--workers 4` to the
-# command. The trial bank and checkpoints are read from var/; build them once with
-# `docker run ... tomstudy tomstudy serve --prepare` or copy an existing var/ in.
+# The image runs in production mode (TOMSTUDY_PRODUCTION=1 below): it refuses to start
+# without a TOMSTUDY_ADMIN_TOKEN of at least 32 characters, and /docs, /redoc and
+# /openapi.json answer 404. It speaks plain HTTP: publish the port on 127.0.0.1 (as above)
+# and put a reverse proxy that terminates HTTPS in front of it (README, "Hosting on the
+# internet"); never publish it on a public address as is.
+#
+# Without DATABASE_URL the server uses SQLite in the mounted var/ (one worker only). With a
+# PostgreSQL DATABASE_URL (psycopg 3), e.g. a line
+# DATABASE_URL=postgresql+psycopg://tomstudy:<password>@db-host:5432/tomstudy in the env
+# file, it can run several workers: append `tomstudy serve --host 0.0.0.0 --workers 4` to
+# the run command. The trial bank and checkpoints are read from var/; build them once with
+# `docker run ... tomstudy tomstudy serve --prepare --host 0.0.0.0` or copy an existing
+# var/ in. HEALTHCHECK asks /healthz, which checks the database.
 FROM python:3.11-slim
 
 ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
     PIP_NO_CACHE_DIR=1 \
-    TOMSTUDY_DATA_DIR=/app/var
+    TOMSTUDY_DATA_DIR=/app/var \
+    TOMSTUDY_PRODUCTION=1
 
 WORKDIR /app
 
@@ -36,4 +46,7 @@ USER tomstudy
 
 EXPOSE 8000
 VOLUME ["/app/var"]
+# urlopen raises (exit 1) on the 503 /healthz answers when the database is down
+HEALTHCHECK --interval=30s --timeout=15s --start-period=120s \
+  CMD python -c "import urllib.request as u; u.urlopen('http://127.0.0.1:8000/healthz', timeout=12)"
 CMD ["tomstudy", "serve", "--host", "0.0.0.0", "--port", "8000", "--study", "paper_study"]
