@@ -20,6 +20,8 @@ class Settings(BaseSettings):
     database_url: str = Field(default="", validation_alias="DATABASE_URL")
     admin_token: str = DEFAULT_ADMIN_TOKEN
     production: bool = False
+    # bots answer faster than people and report a simulated clock; only `make pilot` sets this
+    trust_client_clock: bool = False
 
     def resolved_database_url(self) -> str:
         """The configured URL, or SQLite under the data dir."""

@@ -16,10 +16,13 @@ from fastapi.templating import Jinja2Templates
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from app.settings import DEFAULT_ADMIN_TOKEN, REPO_ROOT, Settings, get_settings
+from app.study.balance import ensure_rows
 from app.study.config import load_study_config
-from app.study.crud import Refused, StudyContext
+from app.study.context import StudyContext
 from app.study.db import create_tables, make_engine
+from app.study.errors import Refused
 from app.study.predictor import Predictor
+from app.study.recruitment import preview_key
 from app.study.routes import pages, participant, researcher
 from app.study.trials import TrialBank
 
@@ -37,13 +40,18 @@ def check_production(settings: Settings) -> None:
     if settings.production and settings.admin_token == DEFAULT_ADMIN_TOKEN:
         raise UnsafeSettings("TOMSTUDY_PRODUCTION=1 needs a TOMSTUDY_ADMIN_TOKEN other than "
                              "the default; refusing to start")
+    if settings.production and settings.trust_client_clock:
+        raise UnsafeSettings("TOMSTUDY_TRUST_CLIENT_CLOCK is for pilots with bots; a "
+                             "production server times trials itself; refusing to start")
 
 
 def load_study(settings: Settings, study_id: str) -> StudyContext:
     """Config, bank and both models of one study (the models verified against the bank)."""
     config = load_study_config(settings, study_id)
     bank = TrialBank.load(settings.data_dir, study_id)
-    return StudyContext(study_id, config, bank, Predictor(config, bank, settings.data_dir))
+    return StudyContext(study_id, config, bank, Predictor(config, bank, settings.data_dir),
+                        preview_key=preview_key(settings.admin_token, study_id),
+                        trust_client_clock=settings.trust_client_clock)
 
 
 def create_app(settings: Settings | None = None, studies: list[str] | None = None) -> FastAPI:
@@ -57,6 +65,8 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
         app.state.engine = make_engine(settings.resolved_database_url())
         create_tables(app.state.engine)
         app.state.studies = {sid: load_study(settings, sid) for sid in studies}
+        for ctx in app.state.studies.values():
+            ensure_rows(app.state.engine, ctx)
         yield
         app.state.engine.dispose()
 

@@ -12,7 +12,7 @@ from datetime import UTC, datetime
 
 from pydantic import ConfigDict, field_validator
 from pydantic import Field as PydField
-from sqlalchemy import JSON, Column, UniqueConstraint
+from sqlalchemy import JSON, Column, Index, text
 from sqlmodel import Field, SQLModel
 
 
@@ -27,17 +27,34 @@ class ParticipantBase(SQLModel):
     """Who a participant is and how they arrived."""
 
     study_id: str = Field(index=True, max_length=64)
-    recruitment: str = Field(max_length=16)  # prolific, mturk or anonymous
+    recruitment: str = Field(max_length=16)  # prolific, mturk, open or pilot
     external_id: str | None = Field(default=None, max_length=128)
 
 
-class Participant(ParticipantBase, table=True):
-    """A participant's session: plan, position, outcome."""
+_LIVE = "replaced_at IS NULL"
 
-    __table_args__ = (UniqueConstraint("study_id", "external_id", name="uq_participant_ext"),)
+
+class Participant(ParticipantBase, table=True):
+    """A participant's session: plan, position, outcome.
+
+    `counted` says whether its plan is in the study's balance counts (BalanceCount);
+    a replaced session (a new attempt took over a stale one) keeps its rows, but its
+    external id is free again.
+    """
+
+    __table_args__ = (
+        Index("uq_participant_live_ext", "study_id", "external_id", unique=True,
+              sqlite_where=text(_LIVE), postgresql_where=text(_LIVE)),
+        Index("ix_participant_stale", "study_id", "counted", "completed", "updated_at"),
+    )
 
     id: int | None = Field(default=None, primary_key=True)
+    public_id: str = Field(unique=True, max_length=32)  # what the browser sees, not `id`
     session_token: str = Field(unique=True, index=True, max_length=64)
+    attempt_key: str | None = Field(default=None, max_length=128)
+    pilot: bool = False
+    counted: bool = False
+    replaced_at: datetime | None = None
     recruitment_params: dict = Field(default_factory=dict, sa_column=Column(JSON))
     client: dict = Field(default_factory=dict, sa_column=Column(JSON))
     world_order: str = Field(max_length=64)
@@ -51,11 +68,19 @@ class Participant(ParticipantBase, table=True):
 
 
 class ParticipantPublic(SQLModel):
-    """What a session start answers."""
+    """What a session start answers (`participant_id` is the random public id)."""
 
     session_token: str
-    participant_id: int
+    participant_id: str
     resumed: bool
+
+
+class BalanceCount(SQLModel, table=True):
+    """How many counted sessions hold a world order or a trial (key `order:..`/`trial:..`)."""
+
+    study_id: str = Field(primary_key=True, max_length=64)
+    key: str = Field(primary_key=True, max_length=96)
+    count: int = 0
 
 
 # ---------------------------------------------------------------- writes
@@ -67,6 +92,7 @@ class Submission(SQLModel, table=True):
     submission_id: str = Field(unique=True, max_length=36)
     participant_id: int = Field(foreign_key="participant.id", index=True)
     kind: str = Field(max_length=16)
+    body_sha256: str = Field(max_length=64)  # a reused submission_id must carry the same body
     step_index: int
     payload: dict = Field(default_factory=dict, sa_column=Column(JSON))
     received_at: datetime = Field(default_factory=utcnow)
@@ -87,7 +113,9 @@ class TrialResponse(SQLModel, table=True):
     attention_ok: bool | None = None
     shown_at_ms: float
     submitted_at_ms: float
-    duration_ms: float
+    duration_ms: float  # what the too-fast rule reads: min(client, server) unless trusted
+    client_duration_ms: float
+    server_duration_ms: float  # from the server's receipt of the previous step
     replays: int
     clip_sha256: str = Field(max_length=64)
     received_at: datetime = Field(default_factory=utcnow)
@@ -146,8 +174,8 @@ class _Body(SQLModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
-class Recruitment(_Body):
-    """URL parameters from Prolific or MTurk (all optional: none = anonymous)."""
+class UrlParams(_Body):
+    """URL parameters from Prolific or MTurk; which are required is the study's `platform`."""
 
     PROLIFIC_PID: str | None = PydField(default=None, max_length=128)
     STUDY_ID: str | None = PydField(default=None, max_length=128)
@@ -170,8 +198,9 @@ class SessionCreate(_Body):
     """POST /api/sessions."""
 
     study_id: str = PydField(max_length=64)
-    recruitment: Recruitment = Recruitment()
+    recruitment: UrlParams = UrlParams()
     client: ClientInfo = ClientInfo()
+    preview: str | None = PydField(default=None, max_length=128)  # researcher preview key
 
 
 class SubmissionBody(_Body):

@@ -21,7 +21,7 @@ def _store(engine, frame: pd.DataFrame) -> None:
             first = rows.iloc[0]
             ident = conn.execute(insert(Participant.__table__).values(
                 study_id="paper_study", recruitment=first["recruitment"],
-                external_id=first["external_id"], session_token=f"tok{n}",
+                external_id=first["external_id"], session_token=f"tok{n}", public_id=f"pub{n}",
                 recruitment_params={}, client={}, world_order="highway,obstacle", plan=[],
                 position=0, completed=bool(n != 1), attention_failed=int(n == 2),
             )).inserted_primary_key[0]
@@ -32,7 +32,8 @@ def _store(engine, frame: pd.DataFrame) -> None:
                     trial_id=t["trial_id"], world=t["world"],
                     world_position=int(t["world_position"]),
                     trial_index=int(t["trial_index"]), is_practice=False, attention_check=False,
-                    shown_at_ms=0.0, submitted_at_ms=9000.0, duration_ms=9000.0, replays=1,
+                    shown_at_ms=0.0, submitted_at_ms=9000.0, duration_ms=9000.0,
+                    client_duration_ms=9000.0, server_duration_ms=9500.0, replays=1,
                     clip_sha256=t["clip_sha256"]))
                 values = trial.assign(participant_id=ident)[pred_cols].to_dict("records")
                 conn.execute(insert(PredictionRow.__table__), values)
