@@ -9,6 +9,7 @@ from sqlmodel import Session
 from analysis.load import EXPORT_COLUMNS  # one column contract for writer and reader
 from app.study.balance import in_progress_cutoff
 from app.study.context import StudyContext
+from app.study.recruitment import preview_path
 from app.study.sessions import as_utc, is_in_progress
 from app.study.tables import Participant, PredictionRow, TrialResponse
 
@@ -108,5 +109,6 @@ def summary(db: Session, ctx: StudyContext) -> dict:
     """The dashboard's JSON: progress, exclusions and running alignment error."""
     frame = export_frame(db, ctx.study_id)
     return {"study_id": ctx.study_id, "title": ctx.config.title,
+            "preview_link": preview_path(ctx.study_id, ctx.preview_key),
             "progress": progress(db, ctx), "alignment_error": alignment_summary(frame, ctx),
             "rows": int(len(frame))}

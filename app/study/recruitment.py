@@ -44,6 +44,11 @@ def preview_key(admin_token: str, study_id: str) -> str:
     return hmac.new(admin_token.encode(), message, hashlib.sha256).hexdigest()[:32]
 
 
+def preview_path(study_id: str, key: str) -> str:
+    """The path of a study's preview link (for lab members trying the live study)."""
+    return f"/s/{study_id}?preview={key}"
+
+
 def identify(config: StudyConfig, body: SessionCreate, key: str) -> Identity:
     """The identity a session start claims, checked against the study's platform (403)."""
     if body.preview is not None:

@@ -5,8 +5,11 @@ import uuid
 from dataclasses import dataclass
 
 import numpy as np
+from fastapi.testclient import TestClient
 
+from app.settings import Settings
 from app.study.bots import segment_key
+from app.study.main import create_app
 
 TOKEN = "test-token"
 ADMIN = {"Authorization": f"Bearer {TOKEN}"}
@@ -143,3 +146,15 @@ class Participant:
 
 def _one(trial: dict, i: int) -> dict:
     return dict(trial, start_states=[trial["start_states"][i]])
+
+
+def make_client(small_study, db_url: str, trust_client_clock: bool = True) -> TestClient:
+    """A TestClient of a fresh app on `db_url` (lifespan runs on enter).
+
+    It trusts the client's clock by default: these tests answer in milliseconds while
+    claiming human durations (test_public_server checks the server's own clock).
+    """
+    settings = Settings(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir,
+                        database_url=db_url, admin_token=TOKEN,
+                        trust_client_clock=trust_client_clock)
+    return TestClient(create_app(settings, [small_study.study_id]))

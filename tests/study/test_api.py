@@ -1,45 +1,15 @@
 """The participant and researcher API, on SQLite and on PostgreSQL (same tests, both backends)."""
 
 import io
-import itertools
 import json
 import math
 
 import pandas as pd
 import pytest
-from fastapi.testclient import TestClient
 
 from app.configio import load_yaml_model
-from app.settings import Settings
 from app.study.config import StudyConfig
-from app.study.main import create_app
-from app.study.trials import BANK_FILE, bank_dir
-from tests.conftest import fresh_database
-from tests.study.flow import ADMIN, TOKEN, Participant, hex24, new_id, prediction_body, prolific
-
-_db_counter = itertools.count()
-
-
-@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
-def db_url(request, tmp_path):
-    """A fresh empty database of each backend."""
-    if request.param == "sqlite":
-        return f"sqlite:///{tmp_path / 'study.db'}"
-    return fresh_database(request.getfixturevalue("postgres_url"), f"api{next(_db_counter)}")
-
-
-def make_client(small_study, db_url: str) -> TestClient:
-    """A TestClient of a fresh app on `db_url` (lifespan runs on enter)."""
-    settings = Settings(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir,
-                        database_url=db_url, admin_token=TOKEN, trust_client_clock=True)
-    return TestClient(create_app(settings, [small_study.study_id]))
-
-
-@pytest.fixture
-def client(small_study, db_url):
-    """The app on a fresh database."""
-    with make_client(small_study, db_url) as c:
-        yield c
+from tests.study.flow import ADMIN, Participant, hex24, new_id, prediction_body, prolific
 
 
 @pytest.fixture(scope="module")
@@ -47,13 +17,6 @@ def per_trial(small_study) -> tuple[int, int]:
     """(start states, steps to predict) per trial, as the small study's config sets them."""
     cfg = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml", StudyConfig)
     return cfg.start_states, cfg.steps_to_predict
-
-
-@pytest.fixture(scope="module")
-def bank(small_study) -> dict:
-    """Bank trials by id (the test reads the true moves for attention checks)."""
-    raw = json.loads((bank_dir(small_study.data_dir, small_study.study_id) / BANK_FILE).read_text())
-    return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}
 
 
 def at_first_trial(client, study_id: str, **recruitment) -> Participant:
