@@ -177,8 +177,8 @@ class Bot:
         clip_s = len(payload["examples"]) * 4.0 + 3.0
         self.clock_ms += clip_s * 1000
         await self.request("POST", f"{base}/events", {"events": [
-            self.event("clip_finished", {"trial_id": payload["trial_id"], "replay": False}),
-            self.event("window_size", {"w": 1600, "h": 900}),
+            self.event("clip_finished", {"trial_id": payload["trial_id"], "replays": 0}),
+            self.event("resize", {"w": 1600, "h": 900}),
         ]})
         clicks = choose_clicks(self.kind, payload, self.rng, self.policy)
         think = self.rng.lognormal(np.log(THINK_MEDIAN_S), 0.4, size=clicks.shape[:2]) * 1000
