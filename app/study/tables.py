@@ -48,6 +48,7 @@ class Participant(ParticipantBase, table=True):
     created_at: datetime = Field(default_factory=utcnow)
     updated_at: datetime = Field(default_factory=utcnow)
     completed_at: datetime | None = None
+    events_stored: int = 0  # telemetry rows; app/study/telemetry.py keeps it under its cap
 
 
 class ParticipantPublic(SQLModel):

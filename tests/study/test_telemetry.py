@@ -1,17 +1,22 @@
-"""Telemetry is bounded: only the kinds the browser sends, each with its own small data."""
+"""Telemetry is bounded: known kinds with small data, a cap per session, nothing after done."""
 
 import itertools
 import re
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 from sqlalchemy import func, select
+from sqlmodel import Session
 
-from app.study.tables import EVENT_DATA, Event
+from app.study import telemetry
+from app.study.crud import Refused, participant_by_token
+from app.study.tables import EVENT_DATA, Event, EventsCreate
 from app.study.tables import Participant as ParticipantRow
 from tests.conftest import REPO, fresh_database
 from tests.study.flow import Participant, new_id
 from tests.study.test_api import at_first_trial, make_client
 
+CAP = telemetry.MAX_EVENTS_PER_SESSION
 _db_counter = itertools.count()
 
 
@@ -37,13 +42,15 @@ def batch(n: int) -> dict:
     return {"events": [event() for _ in range(n)]}
 
 
-def stored_counts(client, p: Participant) -> int:
-    """Event rows of this participant in the database."""
+def stored_counts(client, p: Participant) -> tuple[int, int]:
+    """(event rows in the database, the participant's events_stored counter)."""
     row = ParticipantRow.__table__
     with client.app.state.engine.connect() as conn:
-        pid = conn.execute(select(row.c.id).where(row.c.session_token == p.token)).scalar_one()
-        return conn.execute(select(func.count()).select_from(Event.__table__)
+        pid, counter = conn.execute(select(row.c.id, row.c.events_stored).where(
+            row.c.session_token == p.token)).one()
+        rows = conn.execute(select(func.count()).select_from(Event.__table__)
                             .where(Event.__table__.c.participant_id == pid)).scalar_one()
+    return rows, counter
 
 
 def browser_event_kinds() -> set[str]:
@@ -67,7 +74,7 @@ def test_every_kind_the_browser_sends_is_stored(client, small_study):
               event("clip_finished", clip), event("replay", clip)]
     r = p.post("events", {"events": events})
     assert (r.status_code, r.json()) == (202, {"stored": 5})
-    assert stored_counts(client, p) == 5
+    assert stored_counts(client, p) == (5, 5)
 
 
 def test_an_unknown_kind_is_refused_naming_the_field(client, small_study):
@@ -75,7 +82,7 @@ def test_an_unknown_kind_is_refused_naming_the_field(client, small_study):
     r = p.post("events", {"events": [event(), event("keystrokes", {"key": "a"})]})
     assert r.status_code == 422
     assert r.json()["message"].startswith("events.1.kind: Input should be 'visibility_hidden'")
-    assert stored_counts(client, p) == 0
+    assert stored_counts(client, p) == (0, 0)
 
 
 @pytest.mark.parametrize(("kind", "data", "needle"), [
@@ -93,4 +100,64 @@ def test_data_that_does_not_fit_its_kind_is_refused(client, small_study, kind, d
     p = at_first_trial(client, small_study.study_id)
     r = p.post("events", {"events": [event(kind, data)]})
     assert r.status_code == 422 and needle in r.json()["message"], r.text
-    assert stored_counts(client, p) == 0
+    assert stored_counts(client, p) == (0, 0)
+
+
+def test_retries_are_stored_once_and_stored_counts_the_new_rows(client, small_study):
+    p = at_first_trial(client, small_study.study_id)
+    first = [event() for _ in range(3)]
+    assert p.post("events", {"events": first}).json() == {"stored": 3}
+    assert p.post("events", {"events": first}).json() == {"stored": 0}
+    again_plus_two = [*first, event(), event()]
+    assert p.post("events", {"events": again_plus_two}).json() == {"stored": 2}
+    twice_in_one = event()
+    assert p.post("events", {"events": [twice_in_one, twice_in_one]}).json() == {"stored": 1}
+    assert stored_counts(client, p) == (6, 6)
+
+
+def test_the_cap_refuses_a_batch_that_would_pass_it_whole(client, small_study):
+    p = at_first_trial(client, small_study.study_id)
+    for _ in range((CAP - 50) // 100):
+        assert p.post("events", batch(100)).status_code == 202
+    assert p.post("events", batch((CAP - 50) % 100)).status_code == 202
+    assert stored_counts(client, p) == (CAP - 50, CAP - 50)
+    r = p.post("events", batch(51))
+    assert r.status_code == 422
+    assert r.json()["detail"] == f"events: at most {CAP} events per session"
+    assert stored_counts(client, p) == (CAP - 50, CAP - 50)  # nothing of that batch
+    last = batch(50)
+    assert p.post("events", last).json() == {"stored": 50}
+    assert p.post("events", batch(1)).status_code == 422
+    assert p.post("events", last).json() == {"stored": 0}  # a retry still answers
+    assert stored_counts(client, p) == (CAP, CAP)
+
+
+def test_concurrent_batches_cannot_pass_the_cap_together(client, small_study):
+    p = at_first_trial(client, small_study.study_id)
+    engine = client.app.state.engine
+
+    def post(body: dict) -> int:
+        with Session(engine, expire_on_commit=False) as db:
+            participant = participant_by_token(db, p.token)
+            db.commit()
+            try:
+                return telemetry.record_events(db, participant, EventsCreate(**body))
+            except Refused as refused:
+                assert refused.status == 422
+                return 0
+
+    batches = [batch(100) for _ in range(CAP // 100 + 6)]
+    with ThreadPoolExecutor(8) as pool:
+        stored = list(pool.map(post, batches))
+    assert sorted(stored) == [0] * 6 + [100] * (CAP // 100)
+    assert stored_counts(client, p) == (CAP, CAP)
+
+
+def test_events_after_the_session_is_done_are_refused(client, small_study):
+    p = at_first_trial(client, small_study.study_id)
+    assert p.post("events", batch(2)).status_code == 202
+    assert p.finish()["phase"] == "done"
+    r = p.post("events", batch(1))
+    assert (r.status_code, r.json()["detail"]) == (
+        409, "phase: the session is complete; no more events")
+    assert stored_counts(client, p) == (2, 2)
