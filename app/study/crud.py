@@ -12,8 +12,7 @@ from collections.abc import Callable
 from contextlib import contextmanager
 
 import numpy as np
-from sqlalchemy import func, select, update
-from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 from sqlmodel import Session
 
@@ -24,8 +23,6 @@ from app.study.errors import Refused
 from app.study.sessions import as_utc
 from app.study.tables import (
     ConsentCreate,
-    Event,
-    EventsCreate,
     Participant,
     PredictionCreate,
     PredictionRow,
@@ -372,38 +369,3 @@ def prediction_rows(ctx: StudyContext, participant: Participant, trial: TrialRec
                 "click_time_ms": float(body.click_times_ms[i][j]),
             })
     return rows
-
-
-# ---------------------------------------------------------------- telemetry
-
-def record_events(db: Session, participant: Participant, body: EventsCreate) -> int:
-    """Insert telemetry events, skipping UUIDs already stored; returns how many were new."""
-    now = utcnow()
-    rows = [{"submission_id": str(e.submission_id), "participant_id": participant.id,
-             "kind": e.kind, "t_client_ms": e.t_client_ms, "data": e.data, "received_at": now}
-            for e in body.events]
-    rows = list({r["submission_id"]: r for r in rows}.values())
-    conn = db.connection()
-    before = _count_events(conn, participant.id)
-    if conn.dialect.name in ("postgresql", "sqlite"):
-        conn.execute(_insert_ignore(conn.dialect.name, Event.__table__), rows)
-    else:  # portable fallback: skip UUIDs already stored, then insert
-        known = set(conn.execute(select(Event.submission_id).where(
-            Event.submission_id.in_([r["submission_id"] for r in rows]))).scalars())
-        fresh = [r for r in rows if r["submission_id"] not in known]
-        if fresh:
-            conn.execute(Event.__table__.insert(), fresh)
-    stored = _count_events(conn, participant.id) - before
-    db.commit()
-    return stored
-
-
-def _count_events(conn, participant_id: int) -> int:
-    return conn.execute(select(func.count()).select_from(Event.__table__)
-                        .where(Event.participant_id == participant_id)).scalar_one()
-
-
-def _insert_ignore(dialect: str, table):
-    """INSERT that skips rows whose unique key exists (SQLite and PostgreSQL)."""
-    module = postgresql if dialect == "postgresql" else sqlite
-    return module.insert(table).on_conflict_do_nothing()

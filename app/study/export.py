@@ -6,6 +6,7 @@ import pandas as pd
 from sqlalchemy import select
 from sqlmodel import Session
 
+from analysis.csvsafe import write_csv
 from analysis.load import EXPORT_COLUMNS  # one column contract for writer and reader
 from app.study.balance import in_progress_cutoff
 from app.study.context import StudyContext
@@ -40,9 +41,10 @@ def export_frame(db: Session, study_id: str) -> pd.DataFrame:
 
 
 def export_csv(db: Session, study_id: str) -> str:
-    """The export table as CSV text (pandas/R read it with no post-processing)."""
+    """The export table as CSV text (pandas/R read it with no post-processing); text cells
+    that a spreadsheet would run as a formula start with a quote (analysis/csvsafe.py)."""
     buffer = io.StringIO()
-    export_frame(db, study_id).to_csv(buffer, index=False)
+    write_csv(export_frame(db, study_id), buffer)
     return buffer.getvalue()
 
 

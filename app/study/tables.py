@@ -6,11 +6,11 @@ unique), so a retried request is stored once. Prediction rows are long: one per
 (start state, step), with each model's action and the baselines beside the human's.
 """
 
-import math
 import uuid
 from datetime import UTC, datetime
+from typing import Literal
 
-from pydantic import ConfigDict, field_validator
+from pydantic import ConfigDict, ValidationInfo, field_validator
 from pydantic import Field as PydField
 from sqlalchemy import JSON, Column, Index, text
 from sqlmodel import Field, SQLModel
@@ -65,6 +65,7 @@ class Participant(ParticipantBase, table=True):
     created_at: datetime = Field(default_factory=utcnow)
     updated_at: datetime = Field(default_factory=utcnow)
     completed_at: datetime | None = None
+    events_stored: int = 0  # telemetry rows; app/study/telemetry.py keeps it under its cap
 
 
 class ParticipantPublic(SQLModel):
@@ -244,33 +245,49 @@ class SurveyCreate(SubmissionBody):
 
 
 class EventIn(_Body):
-    """One telemetry event."""
+    """One telemetry event: a kind the browser sends, with that kind's `data` (EVENT_DATA)."""
 
     submission_id: uuid.UUID
-    kind: str = PydField(min_length=1, max_length=32)
-    t_client_ms: float
+    kind: Literal["visibility_hidden", "visibility_shown", "resize", "clip_finished", "replay"]
+    t_client_ms: float = PydField(ge=0)
     data: dict = {}
 
     @field_validator("data")
     @classmethod
-    def _finite(cls, value: dict) -> dict:
-        if not _all_finite(value):
-            raise ValueError("numbers must be finite (no NaN or Infinity)")
-        return value
-
-
-def _all_finite(value: object) -> bool:
-    """True if no float nested in `value` is NaN or infinite."""
-    if isinstance(value, float):
-        return math.isfinite(value)
-    if isinstance(value, dict):
-        return all(_all_finite(v) for v in value.values())
-    if isinstance(value, list):
-        return all(_all_finite(v) for v in value)
-    return True
+    def _fits_kind(cls, value: dict, info: ValidationInfo) -> dict:
+        kind = info.data.get("kind")
+        if kind is None:  # the kind was refused; that error names `kind`
+            return value
+        # a ValidationError raised here keeps its field names under `data`
+        return EVENT_DATA[kind].model_validate(value).model_dump()
 
 
 class EventsCreate(_Body):
     """POST .../events (at most 100 per request)."""
 
     events: list[EventIn] = PydField(min_length=1, max_length=100)
+
+
+class NoEventData(_Body):
+    """visibility_hidden / visibility_shown: the kind says it all."""
+
+
+class ResizeData(_Body):
+    """resize: the window's new inner size (CSS pixels)."""
+
+    w: int = PydField(ge=0, le=100_000)
+    h: int = PydField(ge=0, le=100_000)
+
+
+class ClipData(_Body):
+    """clip_finished / replay: the trial on screen and how often its clip was replayed."""
+
+    trial_id: str = PydField(max_length=64)
+    replays: int = PydField(ge=0, le=10_000)
+
+
+# Every kind's `data`: small and flat by construction (no other keys, bounded values).
+EVENT_DATA: dict[str, type[_Body]] = {
+    "visibility_hidden": NoEventData, "visibility_shown": NoEventData,
+    "resize": ResizeData, "clip_finished": ClipData, "replay": ClipData,
+}

@@ -53,3 +53,26 @@ def test_database_and_csv_export_load_identically(tmp_path):
     pd.testing.assert_frame_equal(from_db, from_csv)
     assert from_db["completed"].sum() < len(from_db) and (~from_db["attention_passed"]).any()
     assert set(from_db["start_kind"]) == {"own", "same_lane", "near"}
+
+
+def test_formula_ids_export_as_text_and_load_as_stored(tmp_path):
+    url = f"sqlite:///{tmp_path / 'study.db'}"
+    engine = make_engine(url)
+    create_tables(engine)
+    frame = fixed_predictions()
+    ids = {"p00": '=HYPERLINK("http://x","y")', "p01": "@SUM(1+1)", "p02": "-2+3",
+           "p03": "'quoted"}
+    frame["external_id"] = frame["participant_id"].map(ids)
+    frame["cv_vx"] = -1.5
+    _store(engine, frame)
+    with Session(engine) as db:
+        text = export_csv(db, "paper_study")
+    engine.dispose()
+    raw = pd.read_csv(io.StringIO(text))
+    assert sorted(set(raw["external_id"])) == [
+        "''quoted", "'-2+3", "'=HYPERLINK(\"http://x\",\"y\")", "'@SUM(1+1)"]
+    assert raw["cv_vx"].dtype == float and (raw["cv_vx"] == -1.5).all()
+    assert ",-1.5," in text and "\"-1.5\"" not in text
+    from_csv = load_csv(io.StringIO(text))
+    pd.testing.assert_frame_equal(from_csv, load_database(url, "paper_study"))
+    assert set(from_csv["external_id"]) == set(ids.values())

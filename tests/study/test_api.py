@@ -126,7 +126,7 @@ def test_retried_submission_is_stored_once_with_the_same_answer(client, small_st
 def test_events_are_stored_once(client, small_study):
     p = at_first_trial(client, small_study.study_id)
     events = [{"submission_id": new_id(), "kind": "clip_finished", "t_client_ms": 10.0 * i,
-               "data": {"example": i}} for i in range(3)]
+               "data": {"trial_id": "t", "replays": i}} for i in range(3)]
     assert p.post("events", {"events": events}).json() == {"stored": 3}
     assert p.post("events", {"events": events}).json() == {"stored": 0}
     assert p.post("events", {"events": events[:1] * 101}).status_code == 422

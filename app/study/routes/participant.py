@@ -2,7 +2,7 @@
 
 from fastapi import APIRouter, Request, Response, status
 
-from app.study import crud, sessions
+from app.study import crud, sessions, telemetry
 from app.study.deps import ContextDep, ParticipantDep, SessionDep, study_context
 from app.study.state import state_json
 from app.study.tables import (
@@ -82,8 +82,10 @@ async def submit_survey(body: SurveyCreate, participant: ParticipantDep, ctx: Co
     return state_response(ctx, participant)
 
 
-@router.post("/{token}/events", status_code=status.HTTP_202_ACCEPTED)
+@router.post("/{token}/events", status_code=status.HTTP_202_ACCEPTED,
+             responses={409: {"description": "the session is complete; no more events"}})
 async def submit_events(body: EventsCreate, participant: ParticipantDep,
                         db: SessionDep) -> dict:
-    """Store telemetry events (at most 100); retried events are stored once."""
-    return {"stored": crud.record_events(db, participant, body)}
+    """Store telemetry events (at most 100 a request, MAX_EVENTS_PER_SESSION a session);
+    retried events are stored once."""
+    return {"stored": telemetry.record_events(db, participant, body)}

@@ -243,7 +243,8 @@ class ParticipantApp {
         }
         $("survey-message").textContent = "";
         form.querySelector("button[type=submit]").disabled = true;
-        this.api.survey(answers).then(resolve, (error) => {
+        // the server refuses events once the session is done: send what is queued first
+        this.telemetry.flush().then(() => this.api.survey(answers)).then(resolve, (error) => {
           form.querySelector("button[type=submit]").disabled = false;
           if (error instanceof ApiError && error.status < 500) $("survey-message").textContent = error.detail;
           else reject(error);
