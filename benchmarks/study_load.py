@@ -224,7 +224,8 @@ def main() -> None:
     parser.add_argument("--database-url", default="",
                         help="an empty database (default: a fresh SQLite file)")
     parser.add_argument("--workers", type=int, default=1)
-    parser.add_argument("--study-param", default="bench-study", help="Prolific's STUDY_ID")
+    parser.add_argument("--study-param", default="b" * 24,
+                        help="Prolific's STUDY_ID (24 hex characters)")
     parser.add_argument("--bare-path", default="/no-such-route",
                         help="the baseline: answered 200 or 404 (e.g. /static/css/style.css)")
     parser.add_argument("--timeout-s", type=float, default=600.0)
