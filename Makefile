@@ -38,7 +38,8 @@ PILOT_PORT ?= 8765
 PILOT_WAIVE = $(if $(filter random,$(KIND)),--waive failed_attention_check)
 pilot: $(STAMP)
 	rm -f var/pilot_$(KIND).db*
-	DATABASE_URL=sqlite:///$(CURDIR)/var/pilot_$(KIND).db $(BIN)/tomstudy serve --prepare \
+	DATABASE_URL=sqlite:///$(CURDIR)/var/pilot_$(KIND).db TOMSTUDY_TRUST_CLIENT_CLOCK=1 \
+	  $(BIN)/tomstudy serve --prepare \
 	  --study paper_study --port $(PILOT_PORT) & pid=$$!; \
 	for i in $$(seq 600); do curl -sf http://127.0.0.1:$(PILOT_PORT)/s/paper_study >/dev/null && break; sleep 1; done; \
 	$(BIN)/tomstudy pilot --url http://127.0.0.1:$(PILOT_PORT) --n 22 --kind $(KIND) --concurrency 8; \

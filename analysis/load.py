@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analysis.csvsafe import restore_text
+
 # Export contract, in order. Types: the reader casts to these, so CSV and DB agree.
 STRING_COLUMNS = ("study_id", "participant_id", "recruitment", "external_id", "world",
                   "trial_id", "clip_sha256", "start_kind", "ours_sha256", "vae_sha256",
@@ -72,7 +74,8 @@ def normalise(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 def load_csv(path: Path) -> pd.DataFrame:
-    """The export CSV as a normalised DataFrame (typed while parsing, which is fast)."""
+    """The export CSV as a normalised DataFrame (typed while parsing, which is fast), its
+    text as the server stored it (the quote that kept it from spreadsheets removed)."""
     dtypes = {c: str for c in STRING_COLUMNS}
     dtypes |= {c: np.float64 for c in (*FLOAT_COLUMNS, *INT_COLUMNS)}
     try:
@@ -81,7 +84,7 @@ def load_csv(path: Path) -> pd.DataFrame:
                           true_values=["True", "true"], false_values=["False", "false"])
     except ValueError as err:
         raise DataError(f"{path}: {err}") from err
-    return normalise(raw)
+    return normalise(restore_text(raw, STRING_COLUMNS))  # as the database holds them
 
 
 def data_hash(frame: pd.DataFrame) -> str:

@@ -67,6 +67,9 @@ def participant_means(frame: pd.DataFrame, models: tuple[str, ...] = MODELS,
     return means.reset_index()
 
 
+PILOT = "pilot"  # the recruitment of a researcher's preview session
+
+
 class ExclusionRules(BaseModel):
     """Named exclusion rules, the study config's `exclusions` section (same keys).
 
@@ -110,9 +113,12 @@ class Exclusions:
 
 
 def apply_exclusions(frame: pd.DataFrame, rules: ExclusionRules) -> Exclusions:
-    """Apply each named rule explicitly; practice and attention-check trials never count."""
+    """Apply each named rule explicitly; pilot sessions, practice and attention-check trials
+    never count."""
     participants = frame.groupby("participant_id", sort=True)
     excluded: dict[str, list[str]] = {}
+    pilot = participants["recruitment"].first() == PILOT  # researcher previews: never data
+    excluded["pilot"] = sorted(pilot[pilot].index)
     if rules.failed_attention_check:
         failed = ~participants["attention_passed"].all()
         excluded["failed_attention_check"] = sorted(failed[failed].index)

@@ -16,6 +16,7 @@ import pandas as pd
 import yaml
 from tqdm import tqdm
 
+from analysis.csvsafe import write_csv
 from analysis.load import data_hash, load_csv
 from analysis.metrics import (
     MODELS,
@@ -176,9 +177,9 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, configs_dir: Path
     figures += plot_fields(kept, scenes, out_dir / "fields")
     steps.update(1)
     per_participant = means.merge(ade, on=["participant_id", "world"], how="left")
-    per_participant.to_csv(out_dir / "per_participant.csv", index=False, float_format="%.10g")
+    write_csv(per_participant, out_dir / "per_participant.csv", float_format="%.10g")
     by_kind = start_kind_table(kept)
-    by_kind.to_csv(out_dir / "by_start_kind.csv", index=False, float_format="%.10g")
+    write_csv(by_kind, out_dir / "by_start_kind.csv", float_format="%.10g")
     summary = {
         "study_id": study_id, "source": source, "alpha": ALPHA,
         "exclusion_rules": rules.model_dump(), "waived_rules": list(waive),

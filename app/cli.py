@@ -336,6 +336,18 @@ def server_settings(host: str, workers: int) -> "Settings":
     return settings
 
 
+@cli.command("preview-link")
+def preview_link_cmd(
+    study: Annotated[str, typer.Option(help="study_configs/<study>.yaml")] = "paper_study",
+    base_url: Annotated[str, typer.Option(help="where the study is served")] = "",
+) -> None:
+    """Print the study's researcher preview link: its sessions are pilots that never count."""
+    from app.study.recruitment import preview_key, preview_path
+
+    key = preview_key(get_settings().admin_token, study)
+    typer.echo(base_url.rstrip("/") + preview_path(study, key))
+
+
 @cli.command()
 def interaction(
     data: Annotated[Path, typer.Option(help="folder with the INTERACTION files (v1.0 or v1.2)")],

@@ -22,6 +22,8 @@ class Settings(BaseSettings):
     admin_token: str = DEFAULT_ADMIN_TOKEN
     # production: researcher token must be strong, API docs off (app/study/main.py)
     production: bool = False
+    # bots answer faster than people and report a simulated clock; only `make pilot` sets this
+    trust_client_clock: bool = False
 
     def resolved_database_url(self) -> str:
         """The configured URL, or SQLite under the data dir."""

@@ -21,7 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from tests.conftest import cached_small_study, free_port, start_server  # noqa: E402
-from tests.study.flow import prediction_body  # noqa: E402
+from tests.study.flow import prediction_body, prolific  # noqa: E402
 
 
 class RawClient:
@@ -78,7 +78,7 @@ async def run(port: int, study_id: str, participants: int, concurrency: int) -> 
     tokens = []
     for i in range(participants):
         _, body = await clients[0].request("POST", "/api/sessions", {
-            "study_id": study_id, "recruitment": {"PROLIFIC_PID": f"bench{i}"}})
+            "study_id": study_id, "recruitment": prolific(f"bench{i}")})
         tokens.append(body["session_token"])
         for step in ("consent", "instructions"):
             await clients[0].request("POST", f"/api/sessions/{body['session_token']}/{step}",

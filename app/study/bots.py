@@ -10,9 +10,10 @@ Kinds: the inverse-planning observer presets of analysis/predictors.py: coarse (
 the robot's target lane or goal and moves the way it moves), coarse_relative (the same,
 reading lanes as merge left/keep/right), precise (the world's own next moves) and
 random; their parameters come from study_configs/observers.yaml. The payload never holds the
-true next moves, so a precise bot, being a simulated participant, looks them up in the
-study's trial bank on disk (`policy_actions`, which build-trials computed with the
-world's `robot_policy_actions`); it must therefore run where var/trials/ is.
+true next moves, nor the bank's trial id (the browser sees a random per-session id), so a
+precise bot, being a simulated participant, finds its trial in the study's trial bank on
+disk by the segment it was shown and reads `policy_actions` (which build-trials computed
+with the world's `robot_policy_actions`); it must therefore run where var/trials/ is.
 
 Timing: bots run faster than people. They report a simulated participant's clock in
 `click_times_ms`, `shown_at_ms` and `submitted_at_ms` (per-click think times drawn from
@@ -21,6 +22,7 @@ to the too-fast exclusion rule instead of all being excluded.
 """
 
 import asyncio
+import hashlib
 import json
 import time
 import uuid
@@ -47,7 +49,7 @@ class BotResult:
     """What one bot did."""
 
     index: int
-    participant_id: int | None = None
+    participant_id: str | None = None
     completion_code: str | None = None
     trials: int = 0
     requests: int = 0
@@ -57,10 +59,16 @@ class BotResult:
     phases: list[str] = field(default_factory=list)
 
 
+def segment_key(segment_positions: list) -> str:
+    """A trial's fingerprint from what the browser is shown: its segment's positions."""
+    return hashlib.sha256(json.dumps(segment_positions).encode()).hexdigest()
+
+
 def load_policy_actions(bank_path: Path) -> dict[str, np.ndarray]:
-    """trial_id -> the world's own next actions [K, n, 2] from each start state."""
+    """segment_key -> the world's own next actions [K, n, 2] from each start state."""
     bank = json.loads(Path(bank_path).read_text())
-    return {t["trial_id"]: np.asarray(t["policy_actions"], dtype=np.float64)
+    return {segment_key(t["segment"]["positions"]): np.asarray(t["policy_actions"],
+                                                               dtype=np.float64)
             for w in bank["worlds"].values() for t in w["trials"]}
 
 
@@ -69,7 +77,7 @@ def choose_clicks(kind: str, payload: dict, rng: np.random.Generator,
     """The bot's clicked positions [K, n, 2] for one trial payload."""
     if kind not in KINDS:
         raise BotError(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
-    actions = (policy or {}).get(payload["trial_id"])
+    actions = (policy or {}).get(segment_key(payload["segment"]["positions"]))
     if kind == "precise" and actions is None:
         raise BotError(f"precise bot: no policy actions for trial {payload['trial_id']}")
     return predictors.predict(kind, payload, rng, actions)
@@ -101,6 +109,8 @@ class Bot:
         self.policy = policy
         self.result = BotResult(index=index)
         self.clock_ms = 0.0  # the simulated participant's clock
+        # a Prolific-shaped study id; a study config that pins its real one refuses bots
+        self.prolific_study_id = hashlib.sha256(f"pilot:{study_id}".encode()).hexdigest()[:24]
         self.token = ""
 
     async def request(self, method: str, path: str, body: dict | None = None) -> dict:
@@ -141,9 +151,9 @@ class Bot:
 
     async def start(self) -> dict:
         """POST /api/sessions with Prolific-style parameters, then read the state."""
-        pid = f"bot-{self.kind}-{uuid.uuid4().hex[:16]}"
         body = {"study_id": self.study_id,
-                "recruitment": {"PROLIFIC_PID": pid, "STUDY_ID": f"pilot-{self.study_id}",
+                "recruitment": {"PROLIFIC_PID": uuid.uuid4().hex[:24],
+                                "STUDY_ID": self.prolific_study_id,
                                 "SESSION_ID": uuid.uuid4().hex},
                 "client": {"screen_w": 1600, "screen_h": 900, "touch_only": False,
                            "user_agent": f"tomstudy-bot/{self.kind}"}}
@@ -177,13 +187,13 @@ class Bot:
         clip_s = len(payload["examples"]) * 4.0 + 3.0
         self.clock_ms += clip_s * 1000
         await self.request("POST", f"{base}/events", {"events": [
-            self.event("clip_finished", {"trial_id": payload["trial_id"], "replay": False}),
-            self.event("window_size", {"w": 1600, "h": 900}),
+            self.event("clip_finished", {"trial_id": payload["trial_id"], "replays": 0}),
+            self.event("resize", {"w": 1600, "h": 900}),
         ]})
         clicks = choose_clicks(self.kind, payload, self.rng, self.policy)
         think = self.rng.lognormal(np.log(THINK_MEDIAN_S), 0.4, size=clicks.shape[:2]) * 1000
-        click_times = self.clock_ms + np.cumsum(think.ravel()).reshape(think.shape)
-        self.clock_ms = float(click_times[-1, -1]) + 800.0
+        click_times = self.clock_ms - shown_at + np.cumsum(think.ravel()).reshape(think.shape)
+        self.clock_ms = shown_at + float(click_times[-1, -1]) + 800.0
         body = self.write(trial_id=payload["trial_id"], points=np.round(clicks, 4).tolist(),
                           click_times_ms=np.round(click_times, 1).tolist(),
                           shown_at_ms=round(shown_at, 1), submitted_at_ms=round(self.clock_ms, 1),

@@ -57,15 +57,44 @@ class SurveyQuestion(StrictModel):
     max_chars: int = Field(default=2000, ge=1)
 
 
-class Recruitment(StrictModel):
-    """URL parameters of the recruitment platforms and where a finished participant goes."""
+Platform = Literal["prolific", "mturk", "open"]
+_REDIRECT_FIELDS = ("prolific_redirect_url", "mturk_redirect_url", "open_redirect_url")
 
-    prolific_params: list[str] = ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID"]
-    mturk_params: list[str] = ["workerId", "assignmentId", "hitId"]
-    completion_code: str = Field(min_length=1)
+
+class Recruitment(StrictModel):
+    """Where participants come from, what the server demands of them, and where they go.
+
+    `platform` is enforced at session start: `prolific` needs PROLIFIC_PID (24 hex),
+    STUDY_ID (equal to `prolific_study_id` when that is set) and SESSION_ID; `mturk`
+    needs workerId, assignmentId and hitId; `open` takes anonymous visitors (lab
+    studies). Lab members use the researcher preview link instead; those sessions are
+    marked pilot and never count.
+    """
+
+    platform: Platform = "prolific"
+    prolific_study_id: str = Field(default="", pattern=r"^[0-9a-fA-F]{0,24}$")
+    completion_code: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")
     prolific_redirect_url: str = "https://app.prolific.com/submissions/complete?cc={completion_code}"
     mturk_redirect_url: str = ""
-    anonymous_redirect_url: str = ""
+    open_redirect_url: str = ""
+
+    @model_validator(mode="after")
+    def _redirects_render(self) -> "Recruitment":
+        for name in _REDIRECT_FIELDS:
+            check_redirect_template(name, getattr(self, name), self.completion_code)
+        return self
+
+
+def check_redirect_template(name: str, template: str, completion_code: str) -> str:
+    """The template rendered with the code; ValueError naming `name` unless it is '' or https."""
+    try:
+        url = template.format(completion_code=completion_code)
+    except (KeyError, IndexError, ValueError) as err:
+        raise ValueError(f"{name}: only the placeholder {{completion_code}} is allowed "
+                         f"({type(err).__name__}: {err})") from None
+    if url and not url.startswith("https://"):
+        raise ValueError(f"{name}: must be empty or an https:// URL, got {url[:60]!r}")
+    return url
 
 
 class PredictionInput(StrictModel):

@@ -1,249 +1,41 @@
-"""Every write to the study database, and the reads the writes depend on.
+"""Every step write of a participant's session, and the reads the writes depend on.
 
-A participant's plan is fixed at session start; `position` indexes into it. A step is
-advanced by a conditional UPDATE (`WHERE position = expected`), so two workers racing on
-one participant cannot both advance it, and a client UUID (`submission_id`, unique) makes
-a retried request a no-op that answers the current state.
+A participant's plan is fixed at session start (sessions.py); `position` indexes into
+it. A step is advanced by a conditional UPDATE (`WHERE position = expected`), so two
+workers racing on one participant cannot both advance it, and a client UUID
+(`submission_id`, unique, bound to its request kind and body hash) makes a retried
+request a no-op that answers the current state.
 """
 
-import secrets
-import uuid
+import hashlib
+from collections.abc import Callable
 from contextlib import contextmanager
-from dataclasses import dataclass, field
-from datetime import datetime, timedelta
-from itertools import permutations
 
 import numpy as np
-from sqlalchemy import case, func, select, update
-from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 from sqlmodel import Session
 
+from app.study import balance
 from app.study.config import StudyConfig
-from app.study.predictor import Predictor
+from app.study.context import StudyContext
+from app.study.errors import Refused
+from app.study.sessions import as_utc
 from app.study.tables import (
     ConsentCreate,
-    Event,
-    EventsCreate,
     Participant,
     PredictionCreate,
     PredictionRow,
-    SessionCreate,
     Submission,
     SubmissionBody,
     SurveyCreate,
     TrialResponse,
     utcnow,
 )
-from app.study.trials import TrialBank, TrialRecord
+from app.study.trials import TrialRecord
 
 TRIAL_PHASES = ("practice", "trial")
-
-
-class Refused(Exception):
-    """A request the study cannot accept: HTTP status and `field: message`."""
-
-    def __init__(self, status: int, detail: str) -> None:
-        super().__init__(detail)
-        self.status = status
-        self.detail = detail
-
-
-@dataclass(frozen=True)
-class StudyContext:
-    """What every participant write needs besides the database."""
-
-    study_id: str
-    config: StudyConfig
-    bank: TrialBank
-    predictor: Predictor
-    # trial id -> the trial's static browser JSON, encoded once (see app/study/state.py)
-    trial_json: dict[str, str] = field(default_factory=dict, compare=False, repr=False)
-
-
-# ---------------------------------------------------------------- sessions
-
-def external_identity(body: SessionCreate) -> tuple[str, str | None]:
-    """(recruitment platform, external id) from the URL parameters."""
-    rec = body.recruitment
-    if rec.PROLIFIC_PID:
-        return "prolific", rec.PROLIFIC_PID
-    if rec.workerId:
-        return "mturk", rec.workerId
-    return "anonymous", None
-
-
-def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
-                  rng: np.random.Generator | None = None) -> tuple[Participant, bool]:
-    """A new participant with a balanced plan, or the unfinished one with this external id."""
-    recruitment, external_id = external_identity(body)
-    existing = find_participant(db, ctx.study_id, external_id)
-    if existing is not None:
-        db.commit()  # end the read transaction
-        return _resume(existing, body), True
-    rng = rng or np.random.default_rng()
-    order, plan = assign_plan(db, ctx, rng)
-    participant = Participant(
-        study_id=ctx.study_id, recruitment=recruitment, external_id=external_id,
-        session_token=secrets.token_urlsafe(24),
-        recruitment_params=body.recruitment.model_dump(exclude_none=True),
-        client=body.client.model_dump(), world_order=",".join(order), plan=plan,
-    )
-    db.add(participant)
-    try:
-        db.commit()
-    except IntegrityError:  # the same external id started concurrently
-        db.rollback()
-        existing = find_participant(db, ctx.study_id, external_id)
-        if existing is None:
-            raise
-        return _resume(existing, body), True
-    db.refresh(participant)
-    return participant, False
-
-
-# The platform's per-attempt id: knowing a worker's public id alone must not open their session.
-_ATTEMPT_KEYS = {"prolific": "SESSION_ID", "mturk": "assignmentId"}
-
-
-def _resume(participant: Participant, body: SessionCreate) -> Participant:
-    if participant.completed:
-        raise Refused(409, "recruitment: this participant has already completed the study")
-    key = _ATTEMPT_KEYS.get(participant.recruitment)
-    stored = participant.recruitment_params.get(key) if key else None
-    if stored is not None and getattr(body.recruitment, key) != stored:
-        raise Refused(409, f"recruitment.{key}: does not match the session in progress for "
-                           "this participant id; reopen the study from the original link")
-    return participant
-
-
-def find_participant(db: Session, study_id: str, external_id: str | None) -> Participant | None:
-    """The participant of this study with this external id (None for anonymous)."""
-    if external_id is None:
-        return None
-    query = select(Participant).where(Participant.study_id == study_id,
-                                      Participant.external_id == external_id)
-    return db.execute(query).scalars().first()
-
-
-def participant_by_token(db: Session, token: str) -> Participant:
-    """The participant holding this session token, or 404."""
-    found = db.execute(select(Participant).where(Participant.session_token == token))
-    participant = found.scalars().first()
-    if participant is None:
-        raise Refused(404, "token: unknown session")
-    return participant
-
-
-# ---------------------------------------------------------------- balanced assignment
-
-def counted_participants(db: Session, ctx: StudyContext) -> list[Participant]:
-    """Participants that count for balance: valid completions and recent unfinished sessions.
-
-    A completion is valid unless an enabled exclusion rule (failed attention check, too
-    many too-fast trials) removes it; an unfinished session counts while it is younger
-    than `in_progress_timeout_min`, so abandoned ones stop holding their trials.
-    """
-    cutoff = in_progress_cutoff(ctx.config)
-    rows = db.execute(select(Participant).where(Participant.study_id == ctx.study_id))
-    people = rows.scalars().all()
-    too_fast = too_fast_participants(db, ctx, [p.id for p in people if p.completed])
-    counted = []
-    for p in people:
-        if p.completed:
-            failed = p.attention_failed > 0 and ctx.config.exclusions.failed_attention_check
-            if not failed and p.id not in too_fast:
-                counted.append(p)
-        elif is_in_progress(p, cutoff):
-            counted.append(p)
-    return counted
-
-
-def in_progress_cutoff(config: StudyConfig) -> datetime:
-    """Unfinished sessions last updated before this are abandoned (stale)."""
-    return utcnow() - timedelta(minutes=config.in_progress_timeout_min)
-
-
-def is_in_progress(participant: Participant, cutoff: datetime) -> bool:
-    """Unfinished and updated since `cutoff`."""
-    return not participant.completed and as_utc(participant.updated_at) >= cutoff
-
-
-def too_fast_participants(db: Session, ctx: StudyContext, ids: list[int]) -> set[int]:
-    """Of `ids`, those whose share of too-fast scored trials exceeds the exclusion rule."""
-    rule = ctx.config.exclusions
-    if not ids:
-        return set()
-    fast = func.sum(case((TrialResponse.duration_ms < rule.too_fast_trial_ms, 1), else_=0))
-    query = (select(TrialResponse.participant_id, fast, func.count())
-             .where(TrialResponse.participant_id.in_(ids), TrialResponse.is_practice.is_(False),
-                    TrialResponse.attention_check.is_(False))
-             .group_by(TrialResponse.participant_id))
-    return {pid for pid, n_fast, n in db.execute(query) if n and n_fast / n
-            > rule.too_fast_max_fraction}
-
-
-def as_utc(moment):
-    """SQLite returns naive datetimes; they were written in UTC."""
-    return moment if moment.tzinfo else moment.replace(tzinfo=utcnow().tzinfo)
-
-
-def world_orders(config: StudyConfig) -> list[tuple[str, ...]]:
-    """All orders when counterbalanced, else the configured one."""
-    if config.counterbalance_world_order:
-        return list(permutations(config.worlds))
-    return [tuple(config.worlds)]
-
-
-def least_used(candidates: list, counts: dict, k: int, rng: np.random.Generator) -> list:
-    """The k candidates with the lowest counts, ties broken at random."""
-    noise = rng.random(len(candidates))
-    keys = np.lexsort((noise, [counts.get(c, 0) for c in candidates]))
-    return [candidates[i] for i in keys[:k]]
-
-
-def assign_plan(db: Session, ctx: StudyContext,
-                rng: np.random.Generator) -> tuple[tuple[str, ...], list[dict]]:
-    """Pick the least-used world order and least-exposed trials; lay out the steps."""
-    counted = counted_participants(db, ctx)
-    order_counts: dict = {}
-    exposure: dict = {}
-    for p in counted:
-        key = tuple(p.world_order.split(","))
-        order_counts[key] = order_counts.get(key, 0) + 1
-        for step in p.plan:
-            if "trial_id" in step:
-                exposure[step["trial_id"]] = exposure.get(step["trial_id"], 0) + 1
-    order = least_used(world_orders(ctx.config), order_counts, 1, rng)[0]
-    return order, layout_plan(ctx, order, exposure, rng)
-
-
-def layout_plan(ctx: StudyContext, order: tuple[str, ...], exposure: dict,
-                rng: np.random.Generator) -> list[dict]:
-    """consent, instructions, practice, per world its trials with attention checks, survey, done."""
-    cfg = ctx.config
-    plan: list[dict] = [{"phase": "consent"}, {"phase": "instructions"}]
-    practice_pool = [t.trial_id for t in ctx.bank.trials_of(order[0], "practice")]
-    for i, tid in enumerate(least_used(practice_pool, exposure, cfg.practice_trials, rng)):
-        plan.append(_trial_step("practice", tid, order[0], 0, i, False))
-    for position, world in enumerate(order):
-        main = [t.trial_id for t in ctx.bank.trials_of(world, "main")]
-        chosen = least_used(main, exposure, cfg.trials_per_world, rng)
-        rng.shuffle(chosen)
-        checks = [t.trial_id for t in ctx.bank.trials_of(world, "attention")]
-        block = [(tid, False) for tid in chosen]
-        for tid in least_used(checks, exposure, cfg.attention_checks.per_world, rng):
-            block.insert(int(rng.integers(1, len(block) + 1)), (tid, True))
-        plan += [_trial_step("trial", tid, world, position, index, check)
-                 for index, (tid, check) in enumerate(block)]
-    return plan + [{"phase": "survey"}, {"phase": "done"}]
-
-
-def _trial_step(phase: str, trial_id: str, world: str, world_position: int, index: int,
-                attention_check: bool) -> dict:
-    return {"phase": phase, "trial_id": trial_id, "world": world,
-            "world_position": world_position, "trial_index": index,
-            "attention_check": attention_check}
+MAX_TRIAL_MS = 6 * 3600 * 1000  # a trial "shown" longer than this is a broken clock
 
 
 # ---------------------------------------------------------------- step writes
@@ -253,14 +45,25 @@ def current_step(participant: Participant) -> dict:
     return participant.plan[min(participant.position, len(participant.plan) - 1)]
 
 
-def already_stored(db: Session, participant: Participant, submission_id: uuid.UUID) -> bool:
-    """True if this UUID was stored for this participant (a retry); 409 if for someone else."""
-    owner = db.execute(select(Submission.participant_id).where(
-        Submission.submission_id == str(submission_id))).scalar()
-    if owner is None:
+def body_hash(body: SubmissionBody) -> str:
+    """SHA-256 of the body as the server parsed it: a retry must send the same one."""
+    return hashlib.sha256(body.model_dump_json().encode()).hexdigest()
+
+
+def already_stored(db: Session, participant: Participant, body: SubmissionBody,
+                   kind: str) -> bool:
+    """True if this UUID was stored for this same request (a retry); else 409 or 422."""
+    stored = db.execute(select(Submission.participant_id, Submission.kind,
+                               Submission.body_sha256)
+                        .where(Submission.submission_id == str(body.submission_id))).first()
+    if stored is None:
         return False
-    if owner != participant.id:
+    if stored.participant_id != participant.id:
         raise Refused(409, "submission_id: already used by another session")
+    if stored.kind != kind or stored.body_sha256 != body_hash(body):
+        raise Refused(422, f"submission_id: already used for a different {stored.kind} "
+                           "request; a retry must resend the same body, a new answer needs "
+                           "a new submission_id")
     return True
 
 
@@ -275,7 +78,8 @@ def expect_phase(participant: Participant, *phases: str) -> dict:
 
 def advance(db: Session, participant: Participant, body: SubmissionBody, kind: str,
             payload: dict, extra_inserts: list[tuple[object, list[dict]]] = (),
-            completes: bool = False) -> bool:
+            completes: bool = False,
+            before_commit: Callable[[], None] | None = None) -> bool:
     """Store the submission and its rows and move one step on, in one transaction.
 
     Returns False when a concurrent retry of the same UUID won the race (nothing stored).
@@ -291,7 +95,8 @@ def advance(db: Session, participant: Participant, body: SubmissionBody, kind: s
     try:
         conn.execute(Submission.__table__.insert(), [{
             "submission_id": str(body.submission_id), "participant_id": participant.id,
-            "kind": kind, "step_index": expected, "payload": payload, "received_at": now}])
+            "kind": kind, "body_sha256": body_hash(body), "step_index": expected,
+            "payload": payload, "received_at": now}])
         for table, rows in extra_inserts:
             conn.execute(table.__table__.insert(), rows)
         moved = conn.execute(update(Participant.__table__)
@@ -299,45 +104,53 @@ def advance(db: Session, participant: Participant, body: SubmissionBody, kind: s
                                     Participant.position == expected).values(**values))
         if moved.rowcount != 1:
             raise Refused(409, "position: the session moved on in another request; reload")
+        _mirror(participant, values)
+        if before_commit is not None:
+            before_commit()
         db.commit()
     except IntegrityError:
         db.rollback()
-        if already_stored(db, participant, body.submission_id):
+        if already_stored(db, participant, body, kind):
             return False
         raise
-    except Refused:
+    except BaseException:
         db.rollback()
         raise
-    for key, value in values.items():  # mirror the UPDATE instead of reading the row back
+    return True
+
+
+def _mirror(participant: Participant, values: dict) -> None:
+    """Keep the loaded row in step with the UPDATE instead of reading it back."""
+    for key, value in values.items():
         if key != "attention_failed":
             setattr(participant, key, value)
     if "attention_failed" in values:
         participant.attention_failed += 1
-    return True
 
 
 def record_consent(db: Session, participant: Participant, body: ConsentCreate) -> None:
     """The participant agreed to take part."""
-    with replay_if_stored(db, participant, body) as fresh:
+    with replay_if_stored(db, participant, body, "consent") as fresh:
         expect_phase(participant, "consent")
         fresh.stored = advance(db, participant, body, "consent", {"agree": True})
 
 
 def record_instructions(db: Session, participant: Participant, body: SubmissionBody) -> None:
     """The participant has read the instructions."""
-    with replay_if_stored(db, participant, body) as fresh:
+    with replay_if_stored(db, participant, body, "instructions") as fresh:
         expect_phase(participant, "instructions")
         fresh.stored = advance(db, participant, body, "instructions", {})
 
 
 def record_survey(db: Session, ctx: StudyContext, participant: Participant,
                   body: SurveyCreate) -> None:
-    """Closing answers; the session is then complete."""
-    with replay_if_stored(db, participant, body) as fresh:
+    """Closing answers; the session is then complete and settles its balance counts."""
+    with replay_if_stored(db, participant, body, "survey") as fresh:
         expect_phase(participant, "survey")
         answers = validate_survey(ctx.config, body.answers)
-        fresh.stored = advance(db, participant, body, "survey", {"answers": answers},
-                               completes=True)
+        fresh.stored = advance(
+            db, participant, body, "survey", {"answers": answers}, completes=True,
+            before_commit=lambda: balance.settle_completion(db, ctx, participant))
 
 
 class _Outcome:
@@ -345,7 +158,7 @@ class _Outcome:
 
 
 @contextmanager
-def replay_if_stored(db: Session, participant: Participant, body: SubmissionBody):
+def replay_if_stored(db: Session, participant: Participant, body: SubmissionBody, kind: str):
     """Run a write; if it is refused, a retry of a stored UUID is not an error.
 
     The common first-time path costs no lookup: a retry is recognised only when the
@@ -356,7 +169,7 @@ def replay_if_stored(db: Session, participant: Participant, body: SubmissionBody
     try:
         yield outcome
     except Refused:
-        if already_stored(db, participant, body.submission_id):
+        if already_stored(db, participant, body, kind):
             outcome.stored = False
             return
         raise
@@ -399,22 +212,25 @@ def _survey_value(q, key: str, value):
 def record_predictions(db: Session, ctx: StudyContext, participant: Participant,
                        body: PredictionCreate) -> bool:
     """Validate and store one trial's clicks with every predictor's actions. True if new."""
-    with replay_if_stored(db, participant, body) as fresh:
+    with replay_if_stored(db, participant, body, "predictions") as fresh:
         fresh.stored = _store_predictions(db, ctx, participant, body)
     return fresh.stored
 
 
+def current_trial_step(participant: Participant, ref: str) -> dict:
+    """The current trial step if the browser's opaque `ref` names it; 409/404 otherwise."""
+    step = expect_phase(participant, *TRIAL_PHASES)
+    if step["ref"] == ref:
+        return step
+    if any(s.get("ref") == ref for s in participant.plan):
+        raise Refused(409, f"trial_id: {ref!r} is not the current trial of this session")
+    raise Refused(404, f"trial_id: {ref!r} is not a trial of this session")
+
+
 def _store_predictions(db: Session, ctx: StudyContext, participant: Participant,
                        body: PredictionCreate) -> bool:
-    trial = ctx.bank.by_id.get(body.trial_id)
-    if trial is None:
-        raise Refused(404, f"trial_id: unknown trial {body.trial_id!r}")
-    if not any(s.get("trial_id") == body.trial_id for s in participant.plan):
-        raise Refused(403, f"trial_id: trial {body.trial_id!r} is not assigned to this session")
-    step = expect_phase(participant, *TRIAL_PHASES)
-    if step["trial_id"] != body.trial_id:
-        raise Refused(409, f"trial_id: the current trial is {step['trial_id']!r}, "
-                           f"not {body.trial_id!r}")
+    step = current_trial_step(participant, body.trial_id)
+    trial = ctx.bank.by_id[step["trial_id"]]
     points = validate_points(ctx, trial, body)
     rows = prediction_rows(ctx, participant, trial, body, points)
     attention_ok = attention_verdict(ctx.config, trial, points) if step["attention_check"] else None
@@ -424,13 +240,27 @@ def _store_predictions(db: Session, ctx: StudyContext, participant: Participant,
         "world_position": step["world_position"], "trial_index": step["trial_index"],
         "is_practice": step["phase"] == "practice", "attention_check": step["attention_check"],
         "attention_ok": attention_ok, "shown_at_ms": body.shown_at_ms,
-        "submitted_at_ms": body.submitted_at_ms,
-        "duration_ms": body.submitted_at_ms - body.shown_at_ms, "replays": body.replays,
+        "submitted_at_ms": body.submitted_at_ms, "replays": body.replays,
         "clip_sha256": trial.clip_sha256, "received_at": utcnow(),
+        **trial_durations(ctx, participant, body),
     }
     payload = {"trial_id": trial.trial_id, "attention_ok": attention_ok}
     return advance(db, participant, body, "predictions", payload,
                    [(TrialResponse, [response]), (PredictionRow, rows)])
+
+
+def trial_durations(ctx: StudyContext, participant: Participant, body: PredictionCreate) -> dict:
+    """Client and server durations of a trial, and the one the too-fast rule reads.
+
+    The server's clock runs from its acknowledgement of the previous step, so it can only
+    overstate the time a person had; taking the smaller of the two catches a client
+    that claims to have taken longer than it did.
+    """
+    client_ms = body.submitted_at_ms - body.shown_at_ms
+    server_ms = (utcnow() - as_utc(participant.updated_at)).total_seconds() * 1000
+    used = client_ms if ctx.trust_client_clock else min(client_ms, server_ms)
+    return {"client_duration_ms": client_ms, "server_duration_ms": server_ms,
+            "duration_ms": used}
 
 
 def validate_points(ctx: StudyContext, trial: TrialRecord, body: PredictionCreate) -> np.ndarray:
@@ -439,8 +269,7 @@ def validate_points(ctx: StudyContext, trial: TrialRecord, body: PredictionCreat
     k, n = len(trial.start_states), ctx.bank.data.steps_to_predict
     _check_counts("points", body.points, k, n)
     _check_counts("click_times_ms", body.click_times_ms, k, n)
-    if body.submitted_at_ms < body.shown_at_ms:
-        raise Refused(422, "submitted_at_ms: earlier than shown_at_ms")
+    check_times(body)
     points = np.asarray(body.points, dtype=np.float64)
     bounds = world.scene["bounds"]
     for i, j in np.argwhere(~_inside(points, bounds)):
@@ -457,6 +286,22 @@ def validate_points(ctx: StudyContext, trial: TrialRecord, body: PredictionCreat
         raise Refused(422, f"points.{i}.{j}: move of {lengths[i, j]:.3g} m is longer than "
                            f"the reachable {world.max_step_m:.3g} m")
     return points
+
+
+def check_times(body: PredictionCreate) -> None:
+    """Client times: submitted after shown, within MAX_TRIAL_MS; every click time (ms since
+    the trial was shown, as the browser measures it) inside that span."""
+    if body.submitted_at_ms < body.shown_at_ms:
+        raise Refused(422, "submitted_at_ms: earlier than shown_at_ms")
+    if body.submitted_at_ms - body.shown_at_ms > MAX_TRIAL_MS:
+        raise Refused(422, f"submitted_at_ms: more than {MAX_TRIAL_MS // 3_600_000} h after "
+                           "shown_at_ms")
+    span = body.submitted_at_ms - body.shown_at_ms
+    for i, row in enumerate(body.click_times_ms):
+        for j, t in enumerate(row):
+            if not 0 <= t <= span:
+                raise Refused(422, f"click_times_ms.{i}.{j}: {t:g} ms is outside the trial "
+                                   f"(0 to submitted_at_ms - shown_at_ms = {span:g} ms)")
 
 
 def _check_counts(field: str, values: list, k: int, n: int) -> None:
@@ -524,38 +369,3 @@ def prediction_rows(ctx: StudyContext, participant: Participant, trial: TrialRec
                 "click_time_ms": float(body.click_times_ms[i][j]),
             })
     return rows
-
-
-# ---------------------------------------------------------------- telemetry
-
-def record_events(db: Session, participant: Participant, body: EventsCreate) -> int:
-    """Insert telemetry events, skipping UUIDs already stored; returns how many were new."""
-    now = utcnow()
-    rows = [{"submission_id": str(e.submission_id), "participant_id": participant.id,
-             "kind": e.kind, "t_client_ms": e.t_client_ms, "data": e.data, "received_at": now}
-            for e in body.events]
-    rows = list({r["submission_id"]: r for r in rows}.values())
-    conn = db.connection()
-    before = _count_events(conn, participant.id)
-    if conn.dialect.name in ("postgresql", "sqlite"):
-        conn.execute(_insert_ignore(conn.dialect.name, Event.__table__), rows)
-    else:  # portable fallback: skip UUIDs already stored, then insert
-        known = set(conn.execute(select(Event.submission_id).where(
-            Event.submission_id.in_([r["submission_id"] for r in rows]))).scalars())
-        fresh = [r for r in rows if r["submission_id"] not in known]
-        if fresh:
-            conn.execute(Event.__table__.insert(), fresh)
-    stored = _count_events(conn, participant.id) - before
-    db.commit()
-    return stored
-
-
-def _count_events(conn, participant_id: int) -> int:
-    return conn.execute(select(func.count()).select_from(Event.__table__)
-                        .where(Event.participant_id == participant_id)).scalar_one()
-
-
-def _insert_ignore(dialect: str, table):
-    """INSERT that skips rows whose unique key exists (SQLite and PostgreSQL)."""
-    module = postgresql if dialect == "postgresql" else sqlite
-    return module.insert(table).on_conflict_do_nothing()

@@ -15,7 +15,9 @@ from fastapi import Depends, Header, Request
 from sqlmodel import Session
 
 from app.settings import Settings
-from app.study.crud import Refused, StudyContext, participant_by_token
+from app.study.context import StudyContext
+from app.study.errors import Refused
+from app.study.sessions import participant_by_token
 from app.study.tables import Participant
 
 

@@ -6,8 +6,12 @@ import pandas as pd
 from sqlalchemy import select
 from sqlmodel import Session
 
+from analysis.csvsafe import write_csv
 from analysis.load import EXPORT_COLUMNS  # one column contract for writer and reader
-from app.study.crud import StudyContext, as_utc, in_progress_cutoff, is_in_progress
+from app.study.balance import in_progress_cutoff
+from app.study.context import StudyContext
+from app.study.recruitment import preview_path
+from app.study.sessions import as_utc, is_in_progress
 from app.study.tables import Participant, PredictionRow, TrialResponse
 
 _FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields]
@@ -37,17 +41,23 @@ def export_frame(db: Session, study_id: str) -> pd.DataFrame:
 
 
 def export_csv(db: Session, study_id: str) -> str:
-    """The export table as CSV text (pandas/R read it with no post-processing)."""
+    """The export table as CSV text (pandas/R read it with no post-processing); text cells
+    that a spreadsheet would run as a formula start with a quote (analysis/csvsafe.py)."""
     buffer = io.StringIO()
-    export_frame(db, study_id).to_csv(buffer, index=False)
+    write_csv(export_frame(db, study_id), buffer)
     return buffer.getvalue()
 
 
 def progress(db: Session, ctx: StudyContext) -> dict:
-    """Session counts: started, completed, in progress, stale, per world order."""
+    """Session counts: started, completed, in progress, stale, per world order.
+
+    Pilot (preview) sessions and sessions replaced by a new attempt are counted apart
+    and never in the study's progress.
+    """
     cutoff = in_progress_cutoff(ctx.config)
-    people = db.execute(select(Participant).where(
+    everyone = db.execute(select(Participant).where(
         Participant.study_id == ctx.study_id)).scalars().all()
+    people = [p for p in everyone if not p.pilot and p.replaced_at is None]
     completed = [p for p in people if p.completed]
     active = [p for p in people if is_in_progress(p, cutoff)]
     orders: dict[str, dict[str, int]] = {}
@@ -61,6 +71,8 @@ def progress(db: Session, ctx: StudyContext) -> dict:
             "completed": len(completed), "in_progress": len(active),
             "stale": len(people) - len(completed) - len(active),
             "failed_attention_check": sum(p.attention_failed > 0 for p in completed),
+            "pilot_sessions": sum(p.pilot for p in everyone),
+            "replaced_sessions": sum(p.replaced_at is not None for p in everyone),
             "world_orders": orders}
 
 
@@ -99,5 +111,6 @@ def summary(db: Session, ctx: StudyContext) -> dict:
     """The dashboard's JSON: progress, exclusions and running alignment error."""
     frame = export_frame(db, ctx.study_id)
     return {"study_id": ctx.study_id, "title": ctx.config.title,
+            "preview_link": preview_path(ctx.study_id, ctx.preview_key),
             "progress": progress(db, ctx), "alignment_error": alignment_summary(frame, ctx),
             "rows": int(len(frame))}

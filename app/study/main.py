@@ -17,12 +17,15 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from app.settings import DEFAULT_ADMIN_TOKEN, REPO_ROOT, Settings, get_settings
 from app.study import health
+from app.study.balance import ensure_rows
 from app.study.config import load_study_config
-from app.study.crud import Refused, StudyContext
+from app.study.context import StudyContext
 from app.study.db import create_tables, make_engine
+from app.study.errors import Refused
 from app.study.headers import SecurityHeaders
 from app.study.openapi import declare_error_responses
 from app.study.predictor import Predictor
+from app.study.recruitment import preview_key
 from app.study.routes import pages, participant, researcher
 from app.study.trials import TrialBank
 
@@ -39,26 +42,36 @@ class UnsafeSettings(RuntimeError):
 
 
 def check_production(settings: Settings) -> None:
-    """Refuse production mode with the default or a short researcher token (it guards export)."""
+    """Refuse production mode with a weak researcher token or with client clocks trusted."""
     if not settings.production:
         return
-    token = settings.admin_token.strip()
+    problem = weak_token_problem(settings.admin_token)
+    if problem:
+        raise UnsafeSettings(f"refusing to start in production mode (TOMSTUDY_PRODUCTION=1 or "
+                             f"a --host other than loopback): TOMSTUDY_ADMIN_TOKEN {problem}; "
+                             f"{NEW_TOKEN_HINT}")
+    if settings.trust_client_clock:
+        raise UnsafeSettings("TOMSTUDY_TRUST_CLIENT_CLOCK is for pilots with bots; a "
+                             "production server times trials itself; refusing to start")
+
+
+def weak_token_problem(token: str) -> str | None:
+    """What makes `token` unfit to guard a public server, or None."""
+    token = token.strip()
     if token == DEFAULT_ADMIN_TOKEN:
-        problem = "is the default, printed in the source"
-    elif len(token) < MIN_ADMIN_TOKEN_CHARS:
-        problem = f"has {len(token)} characters, fewer than {MIN_ADMIN_TOKEN_CHARS}"
-    else:
-        return
-    raise UnsafeSettings(f"refusing to start in production mode (TOMSTUDY_PRODUCTION=1 or a "
-                         f"--host other than loopback): TOMSTUDY_ADMIN_TOKEN {problem}; "
-                         f"{NEW_TOKEN_HINT}")
+        return "is the default, printed in the source"
+    if len(token) < MIN_ADMIN_TOKEN_CHARS:
+        return f"has {len(token)} characters, fewer than {MIN_ADMIN_TOKEN_CHARS}"
+    return None
 
 
 def load_study(settings: Settings, study_id: str) -> StudyContext:
     """Config, bank and both models of one study (the models verified against the bank)."""
     config = load_study_config(settings, study_id)
     bank = TrialBank.load(settings.data_dir, study_id)
-    return StudyContext(study_id, config, bank, Predictor(config, bank, settings.data_dir))
+    return StudyContext(study_id, config, bank, Predictor(config, bank, settings.data_dir),
+                        preview_key=preview_key(settings.admin_token, study_id),
+                        trust_client_clock=settings.trust_client_clock)
 
 
 def create_app(settings: Settings | None = None, studies: list[str] | None = None) -> FastAPI:
@@ -72,6 +85,8 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
         app.state.engine = make_engine(settings.resolved_database_url())
         create_tables(app.state.engine)
         app.state.studies = {sid: load_study(settings, sid) for sid in studies}
+        for ctx in app.state.studies.values():
+            ensure_rows(app.state.engine, ctx)
         yield
         app.state.engine.dispose()
 

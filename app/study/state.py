@@ -8,7 +8,8 @@ once per process and spliced into each answer: encoding it per request through F
 import json
 
 from app.study.config import StudyConfig
-from app.study.crud import TRIAL_PHASES, StudyContext, current_step
+from app.study.context import StudyContext
+from app.study.crud import TRIAL_PHASES, current_step
 from app.study.tables import Participant
 
 
@@ -35,19 +36,21 @@ def step_payload(ctx: StudyContext, participant: Participant, step: dict) -> dic
 
 
 def step_fields(ctx: StudyContext, step: dict) -> dict:
-    """The parts of a trial payload that depend on the participant's plan."""
-    trial = ctx.bank.by_id[step["trial_id"]]
-    return {"trial_id": trial.trial_id, "world": trial.world,
+    """The parts of a trial payload that depend on the participant's plan.
+
+    The browser gets the step's random `ref` as `trial_id` and no attention-check flag:
+    nothing in the payload tells a script which trial is the check.
+    """
+    return {"trial_id": step["ref"], "world": step["world"],
             "index_in_world": step["trial_index"], "world_position": step["world_position"],
-            "is_practice": step["phase"] == "practice",
-            "attention_check": step["attention_check"]}
+            "is_practice": step["phase"] == "practice"}
 
 
 def static_trial(ctx: StudyContext, trial_id: str) -> dict:
     """The parts of a trial payload that are the same for everyone."""
     trial = ctx.bank.by_id[trial_id]
     world = ctx.bank.world(trial.world)
-    return {"clip_sha256": trial.clip_sha256, "scene": world.scene, "dt_s": world.dt_s,
+    return {"scene": world.scene, "dt_s": world.dt_s,
             **trial.browser_payload(), "steps_to_predict": ctx.bank.data.steps_to_predict,
             "max_step_m": world.max_step_m, "min_step_m": world.min_step_m}
 
@@ -70,5 +73,5 @@ def redirect_url(cfg: StudyConfig, participant: Participant) -> str:
     """Where the done page sends the participant ('' = show the code only)."""
     template = {"prolific": cfg.recruitment.prolific_redirect_url,
                 "mturk": cfg.recruitment.mturk_redirect_url}.get(
-        participant.recruitment, cfg.recruitment.anonymous_redirect_url)
+        participant.recruitment, cfg.recruitment.open_redirect_url)
     return template.format(completion_code=cfg.recruitment.completion_code)

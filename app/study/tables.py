@@ -6,13 +6,13 @@ unique), so a retried request is stored once. Prediction rows are long: one per
 (start state, step), with each model's action and the baselines beside the human's.
 """
 
-import math
 import uuid
 from datetime import UTC, datetime
+from typing import Literal
 
-from pydantic import ConfigDict, field_validator
+from pydantic import ConfigDict, ValidationInfo, field_validator
 from pydantic import Field as PydField
-from sqlalchemy import JSON, Column, UniqueConstraint
+from sqlalchemy import JSON, Column, Index, text
 from sqlmodel import Field, SQLModel
 
 
@@ -27,17 +27,34 @@ class ParticipantBase(SQLModel):
     """Who a participant is and how they arrived."""
 
     study_id: str = Field(index=True, max_length=64)
-    recruitment: str = Field(max_length=16)  # prolific, mturk or anonymous
+    recruitment: str = Field(max_length=16)  # prolific, mturk, open or pilot
     external_id: str | None = Field(default=None, max_length=128)
 
 
-class Participant(ParticipantBase, table=True):
-    """A participant's session: plan, position, outcome."""
+_LIVE = "replaced_at IS NULL"
 
-    __table_args__ = (UniqueConstraint("study_id", "external_id", name="uq_participant_ext"),)
+
+class Participant(ParticipantBase, table=True):
+    """A participant's session: plan, position, outcome.
+
+    `counted` says whether its plan is in the study's balance counts (BalanceCount);
+    a replaced session (a new attempt took over a stale one) keeps its rows, but its
+    external id is free again.
+    """
+
+    __table_args__ = (
+        Index("uq_participant_live_ext", "study_id", "external_id", unique=True,
+              sqlite_where=text(_LIVE), postgresql_where=text(_LIVE)),
+        Index("ix_participant_stale", "study_id", "counted", "completed", "updated_at"),
+    )
 
     id: int | None = Field(default=None, primary_key=True)
+    public_id: str = Field(unique=True, max_length=32)  # what the browser sees, not `id`
     session_token: str = Field(unique=True, index=True, max_length=64)
+    attempt_key: str | None = Field(default=None, max_length=128)
+    pilot: bool = False
+    counted: bool = False
+    replaced_at: datetime | None = None
     recruitment_params: dict = Field(default_factory=dict, sa_column=Column(JSON))
     client: dict = Field(default_factory=dict, sa_column=Column(JSON))
     world_order: str = Field(max_length=64)
@@ -48,14 +65,23 @@ class Participant(ParticipantBase, table=True):
     created_at: datetime = Field(default_factory=utcnow)
     updated_at: datetime = Field(default_factory=utcnow)
     completed_at: datetime | None = None
+    events_stored: int = 0  # telemetry rows; app/study/telemetry.py keeps it under its cap
 
 
 class ParticipantPublic(SQLModel):
-    """What a session start answers."""
+    """What a session start answers (`participant_id` is the random public id)."""
 
     session_token: str
-    participant_id: int
+    participant_id: str
     resumed: bool
+
+
+class BalanceCount(SQLModel, table=True):
+    """How many counted sessions hold a world order or a trial (key `order:..`/`trial:..`)."""
+
+    study_id: str = Field(primary_key=True, max_length=64)
+    key: str = Field(primary_key=True, max_length=96)
+    count: int = 0
 
 
 # ---------------------------------------------------------------- writes
@@ -67,6 +93,7 @@ class Submission(SQLModel, table=True):
     submission_id: str = Field(unique=True, max_length=36)
     participant_id: int = Field(foreign_key="participant.id", index=True)
     kind: str = Field(max_length=16)
+    body_sha256: str = Field(max_length=64)  # a reused submission_id must carry the same body
     step_index: int
     payload: dict = Field(default_factory=dict, sa_column=Column(JSON))
     received_at: datetime = Field(default_factory=utcnow)
@@ -87,7 +114,9 @@ class TrialResponse(SQLModel, table=True):
     attention_ok: bool | None = None
     shown_at_ms: float
     submitted_at_ms: float
-    duration_ms: float
+    duration_ms: float  # what the too-fast rule reads: min(client, server) unless trusted
+    client_duration_ms: float
+    server_duration_ms: float  # from the server's receipt of the previous step
     replays: int
     clip_sha256: str = Field(max_length=64)
     received_at: datetime = Field(default_factory=utcnow)
@@ -146,8 +175,8 @@ class _Body(SQLModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
-class Recruitment(_Body):
-    """URL parameters from Prolific or MTurk (all optional: none = anonymous)."""
+class UrlParams(_Body):
+    """URL parameters from Prolific or MTurk; which are required is the study's `platform`."""
 
     PROLIFIC_PID: str | None = PydField(default=None, max_length=128)
     STUDY_ID: str | None = PydField(default=None, max_length=128)
@@ -170,8 +199,9 @@ class SessionCreate(_Body):
     """POST /api/sessions."""
 
     study_id: str = PydField(max_length=64)
-    recruitment: Recruitment = Recruitment()
+    recruitment: UrlParams = UrlParams()
     client: ClientInfo = ClientInfo()
+    preview: str | None = PydField(default=None, max_length=128)  # researcher preview key
 
 
 class SubmissionBody(_Body):
@@ -215,33 +245,49 @@ class SurveyCreate(SubmissionBody):
 
 
 class EventIn(_Body):
-    """One telemetry event."""
+    """One telemetry event: a kind the browser sends, with that kind's `data` (EVENT_DATA)."""
 
     submission_id: uuid.UUID
-    kind: str = PydField(min_length=1, max_length=32)
-    t_client_ms: float
+    kind: Literal["visibility_hidden", "visibility_shown", "resize", "clip_finished", "replay"]
+    t_client_ms: float = PydField(ge=0)
     data: dict = {}
 
     @field_validator("data")
     @classmethod
-    def _finite(cls, value: dict) -> dict:
-        if not _all_finite(value):
-            raise ValueError("numbers must be finite (no NaN or Infinity)")
-        return value
-
-
-def _all_finite(value: object) -> bool:
-    """True if no float nested in `value` is NaN or infinite."""
-    if isinstance(value, float):
-        return math.isfinite(value)
-    if isinstance(value, dict):
-        return all(_all_finite(v) for v in value.values())
-    if isinstance(value, list):
-        return all(_all_finite(v) for v in value)
-    return True
+    def _fits_kind(cls, value: dict, info: ValidationInfo) -> dict:
+        kind = info.data.get("kind")
+        if kind is None:  # the kind was refused; that error names `kind`
+            return value
+        # a ValidationError raised here keeps its field names under `data`
+        return EVENT_DATA[kind].model_validate(value).model_dump()
 
 
 class EventsCreate(_Body):
     """POST .../events (at most 100 per request)."""
 
     events: list[EventIn] = PydField(min_length=1, max_length=100)
+
+
+class NoEventData(_Body):
+    """visibility_hidden / visibility_shown: the kind says it all."""
+
+
+class ResizeData(_Body):
+    """resize: the window's new inner size (CSS pixels)."""
+
+    w: int = PydField(ge=0, le=100_000)
+    h: int = PydField(ge=0, le=100_000)
+
+
+class ClipData(_Body):
+    """clip_finished / replay: the trial on screen and how often its clip was replayed."""
+
+    trial_id: str = PydField(max_length=64)
+    replays: int = PydField(ge=0, le=10_000)
+
+
+# Every kind's `data`: small and flat by construction (no other keys, bounded values).
+EVENT_DATA: dict[str, type[_Body]] = {
+    "visibility_hidden": NoEventData, "visibility_shown": NoEventData,
+    "resize": ResizeData, "clip_finished": ClipData, "replay": ClipData,
+}

@@ -21,7 +21,7 @@ def _store(engine, frame: pd.DataFrame) -> None:
             first = rows.iloc[0]
             ident = conn.execute(insert(Participant.__table__).values(
                 study_id="paper_study", recruitment=first["recruitment"],
-                external_id=first["external_id"], session_token=f"tok{n}",
+                external_id=first["external_id"], session_token=f"tok{n}", public_id=f"pub{n}",
                 recruitment_params={}, client={}, world_order="highway,obstacle", plan=[],
                 position=0, completed=bool(n != 1), attention_failed=int(n == 2),
             )).inserted_primary_key[0]
@@ -32,7 +32,8 @@ def _store(engine, frame: pd.DataFrame) -> None:
                     trial_id=t["trial_id"], world=t["world"],
                     world_position=int(t["world_position"]),
                     trial_index=int(t["trial_index"]), is_practice=False, attention_check=False,
-                    shown_at_ms=0.0, submitted_at_ms=9000.0, duration_ms=9000.0, replays=1,
+                    shown_at_ms=0.0, submitted_at_ms=9000.0, duration_ms=9000.0,
+                    client_duration_ms=9000.0, server_duration_ms=9500.0, replays=1,
                     clip_sha256=t["clip_sha256"]))
                 values = trial.assign(participant_id=ident)[pred_cols].to_dict("records")
                 conn.execute(insert(PredictionRow.__table__), values)
@@ -52,3 +53,26 @@ def test_database_and_csv_export_load_identically(tmp_path):
     pd.testing.assert_frame_equal(from_db, from_csv)
     assert from_db["completed"].sum() < len(from_db) and (~from_db["attention_passed"]).any()
     assert set(from_db["start_kind"]) == {"own", "same_lane", "near"}
+
+
+def test_formula_ids_export_as_text_and_load_as_stored(tmp_path):
+    url = f"sqlite:///{tmp_path / 'study.db'}"
+    engine = make_engine(url)
+    create_tables(engine)
+    frame = fixed_predictions()
+    ids = {"p00": '=HYPERLINK("http://x","y")', "p01": "@SUM(1+1)", "p02": "-2+3",
+           "p03": "'quoted"}
+    frame["external_id"] = frame["participant_id"].map(ids)
+    frame["cv_vx"] = -1.5
+    _store(engine, frame)
+    with Session(engine) as db:
+        text = export_csv(db, "paper_study")
+    engine.dispose()
+    raw = pd.read_csv(io.StringIO(text))
+    assert sorted(set(raw["external_id"])) == [
+        "''quoted", "'-2+3", "'=HYPERLINK(\"http://x\",\"y\")", "'@SUM(1+1)"]
+    assert raw["cv_vx"].dtype == float and (raw["cv_vx"] == -1.5).all()
+    assert ",-1.5," in text and "\"-1.5\"" not in text
+    from_csv = load_csv(io.StringIO(text))
+    pd.testing.assert_frame_equal(from_csv, load_database(url, "paper_study"))
+    assert set(from_csv["external_id"]) == set(ids.values())

@@ -2,6 +2,7 @@
 
 import asyncio
 import subprocess
+from collections import Counter
 
 import httpx
 import pytest
@@ -10,10 +11,10 @@ from sqlalchemy import create_engine, func, select, text
 from analysis.load import load_csv, load_database
 from app.study.bots import run_bots
 from app.study.tables import Participant, PredictionRow, Submission, TrialResponse
-from tests.conftest import free_port, start_server
+from tests.conftest import free_port, fresh_database, start_server
 
 pytestmark = pytest.mark.slow
-BOUND_S = 240  # the whole 50-bot run must finish within this
+BOUND_S = 300  # a whole bot run must finish within this
 
 
 @pytest.fixture
@@ -23,12 +24,7 @@ def fresh_server(small_study, tmp_path):
     port = free_port()
     proc = start_server(small_study, db_url, port, log=tmp_path / "server.log")
     yield f"http://127.0.0.1:{port}", db_url
-    proc.terminate()
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:  # a stuck server must not outlive the test
-        proc.kill()
-        proc.wait(timeout=10)
+    stop(proc)
 
 
 def _count(engine, table) -> int:
@@ -45,32 +41,85 @@ def _export(url: str, study_id: str, tmp_path):
     return load_csv(path)
 
 
-def test_fifty_concurrent_bots_complete_and_counts_match(small_study, fresh_server, tmp_path):
-    url, db_url = fresh_server
+CROWD = 200
+
+
+@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
+def crowd_server(request, small_study, tmp_path):
+    """The small study on SQLite with 1 worker or PostgreSQL with 2: (url, db_url).
+
+    It trusts the bots' simulated clocks, so every bot completes as a valid (counted)
+    participant and the balance over all of them can be checked exactly.
+    """
+    if request.param == "sqlite":
+        db_url, workers = f"sqlite:///{tmp_path / 'study.db'}", 1
+    else:
+        db_url, workers = fresh_database(request.getfixturevalue("postgres_url"), "crowd"), 2
+    port = free_port()
+    proc = start_server(small_study, db_url, port, workers=workers, log=tmp_path / "server.log",
+                        TOMSTUDY_TRUST_CLIENT_CLOCK="1")
+    yield f"http://127.0.0.1:{port}", db_url
+    stop(proc)
+
+
+def stop(proc: subprocess.Popen) -> None:
+    """Terminate a server; kill it if it does not stop (it must not outlive the test)."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout=10)
+
+
+def test_two_hundred_concurrent_participants_complete_in_exact_balance(small_study,
+                                                                       crowd_server, tmp_path):
+    url, db_url = crowd_server
     study = small_study.study_id
+    bank = small_study.data_dir / "trials" / study / "bank.json"
     results = asyncio.run(asyncio.wait_for(
-        run_bots(url, study, "coarse", 50, concurrency=50, seed=1), BOUND_S))
+        run_bots(url, study, "precise", CROWD, concurrency=CROWD, seed=1, bank_path=bank),
+        BOUND_S))
     assert [r.error for r in results if r.error] == []
     assert all(r.completion_code for r in results)
     answered = sum(r.trials for r in results)
     engine = create_engine(db_url)
     try:
-        assert _count(engine, Participant) == 50
+        assert _count(engine, Participant) == CROWD
         with engine.connect() as conn:
-            done = conn.execute(text("select count(*) from participant where completed")).scalar()
-        assert done == 50
+            done = conn.execute(text("select count(*) from participant where completed "
+                                     "and counted")).scalar()
+            plans = conn.execute(select(Participant.world_order, Participant.plan)).all()
+        assert done == CROWD
         assert _count(engine, TrialResponse) == answered
         rows_in_db = _count(engine, PredictionRow)
         assert rows_in_db == answered * 5 * 3
-        assert _count(engine, Submission) >= answered + 50 * 3  # + consent, instructions, survey
+        assert _count(engine, Submission) >= answered + CROWD * 3  # + consent, instr., survey
     finally:
         engine.dispose()
+    orders = Counter(order for order, _ in plans)
+    assert sorted(orders.values()) == [CROWD // 2, CROWD // 2]
+    for kind, counts in exposure(plans, bank).items():
+        assert max(counts) - min(counts) <= 1, (kind, counts)
     exported = _export(url, study, tmp_path)
     assert len(exported) == rows_in_db
-    assert exported["participant_id"].nunique() == 50
+    assert exported["participant_id"].nunique() == CROWD
     assert exported["submission_id"].nunique() == answered
     from_db = load_database(db_url, study)
     assert from_db.equals(exported)
+
+
+def exposure(plans: list, bank_path) -> dict[tuple[str, str], list[int]]:
+    """(world, trial kind) -> how many sessions were given each bank trial of that kind."""
+    import json
+
+    bank = json.loads(bank_path.read_text())
+    given = Counter(s["trial_id"] for _, plan in plans for s in plan if "trial_id" in s)
+    out: dict[tuple[str, str], list[int]] = {}
+    for world, trials in ((w, b["trials"]) for w, b in bank["worlds"].items()):
+        for t in trials:
+            out.setdefault((world, t["kind"]), []).append(given[t["trial_id"]])
+    return out
 
 
 def test_precise_and_random_bots_complete(small_study, fresh_server):

@@ -9,6 +9,7 @@ import io
 import json
 import math
 import sqlite3
+import uuid
 from contextlib import closing
 from pathlib import Path
 
@@ -25,7 +26,13 @@ VIEWPORT = {"width": 1280, "height": 900}
 CLIP_JUMP_MS = 2000  # fake-clock jump per poll while clips play
 THINK_MS = 1500  # fake-clock time between two clicks
 RESIZED = {"width": 1300, "height": 880}
-RECRUITMENT = "PROLIFIC_PID=e2e-pid-1&STUDY_ID=e2e-study&SESSION_ID=e2e-session"
+PID = "e2e0000000000000000000a1"  # 24 hex characters, as Prolific sends
+RECRUITMENT = f"PROLIFIC_PID={PID}&STUDY_ID={'5' * 24}&SESSION_ID=e2e-session"
+
+
+def fresh_recruitment() -> str:
+    """URL parameters of a new Prolific participant (each visit a new session)."""
+    return f"PROLIFIC_PID={uuid.uuid4().hex[:24]}&STUDY_ID={'5' * 24}&SESSION_ID=s1"
 
 
 def visible(page, screen: str) -> None:
@@ -230,7 +237,9 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
     assert errors == []
     context.close()
 
-    mine = [r for r in rows if r["external_id"] == "e2e-pid-1"]
+    mine = [r for r in rows if r["external_id"] == PID]
+    bank_ids = bank_ids_of_refs(browser_server.db_path, PID)  # the browser saw opaque ids
+    done["clicks"] = {bank_ids[ref]: clicks for ref, clicks in done["clicks"].items()}
     main = [r for r in mine if not truthy(r["is_practice"]) and not truthy(r["attention_check"])]
     practice = [r for r in mine if truthy(r["is_practice"])]
     checks = [r for r in mine if truthy(r["attention_check"])]
@@ -248,16 +257,36 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
                                                            int(row["step"]))]
         error_px = math.dist(point, (float(row["click_x"]), float(row["click_y"]))) * px_per_m
         assert error_px <= math.sqrt(2) + 1e-3, (row["trial_id"], error_px)
-        assert float(row["trial_duration_ms"]) >= per_trial * THINK_MS
+    for client_ms, server_ms, used_ms in trial_durations(browser_server.db_path, PID):
+        assert client_ms >= per_trial * THINK_MS  # the page's (fake) clock, like a person's
+        assert used_ms == min(client_ms, server_ms)  # the too-fast rule trusts neither alone
     trial_ids = list(done["clicks"])
     replays = {r["trial_id"]: int(r["replays"]) for r in mine}
     assert replays[trial_ids[2]] == 1 and sum(replays.values()) == 1
     assert sum(r["trial_id"] == trial_ids[3] for r in mine) == per_trial  # retried, stored once
     events = stored_events(browser_server.db_path)
     assert sum(kind == "clip_finished" for kind, _ in events) >= len(trial_ids)
-    assert [data["trial_id"] for kind, data in events if kind == "replay"] == [trial_ids[2]]
+    assert [bank_ids[data["trial_id"]] for kind, data in events
+            if kind == "replay"] == [trial_ids[2]]
     resized = {"w": RESIZED["width"], "h": RESIZED["height"]}
     assert resized in [data for kind, data in events if kind == "resize"]
+
+
+def bank_ids_of_refs(db_path: Path, external_id: str) -> dict[str, str]:
+    """The opaque per-session trial ids the browser saw -> the bank's trial ids."""
+    with closing(sqlite3.connect(db_path)) as db:
+        (plan,) = db.execute("SELECT plan FROM participant WHERE external_id = ?",
+                             (external_id,)).fetchone()
+    return {s["ref"]: s["trial_id"] for s in json.loads(plan) if "ref" in s}
+
+
+def trial_durations(db_path: Path, external_id: str) -> list[tuple[float, float, float]]:
+    """(client, server, used) duration of every answered trial of one participant."""
+    with closing(sqlite3.connect(db_path)) as db:
+        return db.execute(
+            "SELECT client_duration_ms, server_duration_ms, duration_ms FROM trialresponse "
+            "JOIN participant ON participant.id = trialresponse.participant_id "
+            "WHERE external_id = ?", (external_id,)).fetchall()
 
 
 def stored_events(db_path: Path) -> list[tuple[str, dict]]:
@@ -270,7 +299,7 @@ def stored_events(db_path: Path) -> list[tuple[str, dict]]:
 def test_small_window_and_touch_only_devices_get_a_message(chromium, browser_server):
     context = chromium.new_context(viewport={"width": 800, "height": 600})
     page = context.new_page()
-    page.goto(f"{browser_server.url}/s/{BROWSER_STUDY}")
+    page.goto(f"{browser_server.url}/s/{BROWSER_STUDY}?{fresh_recruitment()}")
     visible(page, "unsupported")
     assert "800 × 600" in page.inner_text("#unsupported-reason")
     page.set_viewport_size({"width": 1000, "height": 700})  # enlarging the window starts it
@@ -278,7 +307,7 @@ def test_small_window_and_touch_only_devices_get_a_message(chromium, browser_ser
     context.close()
     context = chromium.new_context(viewport=VIEWPORT, has_touch=True, is_mobile=True)
     page = context.new_page()
-    page.goto(f"{browser_server.url}/s/{BROWSER_STUDY}")
+    page.goto(f"{browser_server.url}/s/{BROWSER_STUDY}?{fresh_recruitment()}")
     visible(page, "unsupported")
     assert "touch" in page.inner_text("#unsupported-reason")
     context.close()
@@ -341,7 +370,7 @@ def first_clip_frames(chromium, base_url: str, reduced_motion: str) -> tuple[str
     context = chromium.new_context(viewport=VIEWPORT, reduced_motion=reduced_motion)
     page = context.new_page()
     page.clock.install()
-    page.goto(f"{base_url}/s/{BROWSER_STUDY}")  # anonymous: a new participant each time
+    page.goto(f"{base_url}/s/{BROWSER_STUDY}?{fresh_recruitment()}")  # a new participant
     visible(page, "consent")
     page.check("#consent-check")
     page.click("#consent-agree")
@@ -364,3 +393,12 @@ def test_reduced_motion_shows_still_frames(chromium, browser_server):
     assert first == second and finished  # the clip's final frame, held still
     first, second, finished = first_clip_frames(chromium, browser_server.url, "no-preference")
     assert first != second and finished  # the same clip animates
+
+
+def test_a_link_without_platform_parameters_gets_a_clear_page(chromium, browser_server):
+    page = chromium.new_page(viewport=VIEWPORT)
+    page.goto(f"{browser_server.url}/s/{BROWSER_STUDY}?PROLIFIC_PID=not-an-id")
+    visible(page, "error")
+    text = page.inner_text("#error-text")
+    assert "PROLIFIC_PID" in text and "Prolific" in text and page.is_hidden("#error-reload")
+    page.close()

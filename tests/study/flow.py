@@ -1,9 +1,15 @@
 """A participant driven through the real HTTP API (any httpx-like client)."""
 
+import hashlib
 import uuid
 from dataclasses import dataclass
 
 import numpy as np
+from fastapi.testclient import TestClient
+
+from app.settings import Settings
+from app.study.bots import segment_key
+from app.study.main import create_app
 
 TOKEN = "test-token"
 ADMIN = {"Authorization": f"Bearer {TOKEN}"}
@@ -38,12 +44,34 @@ def straight_clicks(trial: dict, direction_rad: float | None = None) -> list:
 
 
 def prediction_body(trial: dict, points: list | None = None, duration_ms: float = 8000) -> dict:
-    """A valid prediction submission for `trial`."""
+    """A valid prediction submission for `trial`: clicks spread over the client's duration."""
     points = points if points is not None else straight_clicks(trial)
     k, n = len(trial["start_states"]), trial["steps_to_predict"]
+    gap = duration_ms / (k * n + 1)
     return {"submission_id": new_id(), "trial_id": trial["trial_id"], "points": points,
-            "click_times_ms": [[1000.0 + 300 * (i * n + j) for j in range(n)] for i in range(k)],
+            "click_times_ms": [[gap * (i * n + j + 1) for j in range(n)] for i in range(k)],
             "shown_at_ms": 1000.0, "submitted_at_ms": 1000.0 + duration_ms, "replays": 1}
+
+
+def prolific(name: str) -> dict:
+    """Valid Prolific URL parameters for a participant called `name` (one attempt)."""
+    return {"PROLIFIC_PID": hex24(name), "STUDY_ID": hex24("study"),
+            "SESSION_ID": f"s-{hex24(name)[:8]}"}
+
+
+def hex24(name: str) -> str:
+    """A Prolific-shaped id (24 hex characters) derived from `name`."""
+    return hashlib.sha256(name.encode()).hexdigest()[:24]
+
+
+def bank_trial(bank: dict, payload: dict) -> dict:
+    """The bank record of the trial a browser payload shows (the payload's id is opaque)."""
+    return bank[segment_index(bank)[segment_key(payload["segment"]["positions"])]]
+
+
+def segment_index(bank: dict) -> dict:
+    """segment_key -> bank trial id."""
+    return {segment_key(t["segment"]["positions"]): tid for tid, t in bank.items()}
 
 
 @dataclass
@@ -55,12 +83,16 @@ class Participant:
     token: str = ""
     status: int = 0
 
-    def start(self, **recruitment) -> dict:
-        """POST /api/sessions."""
-        r = self.client.post("/api/sessions", json={
-            "study_id": self.study_id, "recruitment": recruitment,
-            "client": {"screen_w": 1600, "screen_h": 900, "touch_only": False,
-                       "user_agent": "pytest"}})
+    def start(self, preview: str | None = None, **recruitment) -> dict:
+        """POST /api/sessions (no parameters: a fresh valid Prolific participant)."""
+        if not recruitment and preview is None:
+            recruitment = prolific(new_id())
+        body = {"study_id": self.study_id, "recruitment": recruitment,
+                "client": {"screen_w": 1600, "screen_h": 900, "touch_only": False,
+                           "user_agent": "pytest"}}
+        if preview is not None:
+            body["preview"] = preview
+        r = self.client.post("/api/sessions", json=body)
         self.status = r.status_code
         body = r.json()
         self.token = body.get("session_token", "")
@@ -91,8 +123,9 @@ class Participant:
         """Answer the current trial (attention checks along the robot's true first move)."""
         trial = self.state()["step"]
         points = straight_clicks(trial)
-        if bank is not None and trial["attention_check"]:
-            truth = bank[trial["trial_id"]]["policy_actions"]
+        record = bank_trial(bank, trial) if bank is not None else None
+        if record is not None and record["kind"] == "attention":
+            truth = record["policy_actions"]
             points = [straight_clicks(_one(trial, i), float(np.arctan2(t[0][1], t[0][0])))[0]
                       for i, t in enumerate(truth)]
         body = prediction_body(trial, points, duration_ms)
@@ -113,3 +146,15 @@ class Participant:
 
 def _one(trial: dict, i: int) -> dict:
     return dict(trial, start_states=[trial["start_states"][i]])
+
+
+def make_client(small_study, db_url: str, trust_client_clock: bool = True) -> TestClient:
+    """A TestClient of a fresh app on `db_url` (lifespan runs on enter).
+
+    It trusts the client's clock by default: these tests answer in milliseconds while
+    claiming human durations (test_public_server checks the server's own clock).
+    """
+    settings = Settings(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir,
+                        database_url=db_url, admin_token=TOKEN,
+                        trust_client_clock=trust_client_clock)
+    return TestClient(create_app(settings, [small_study.study_id]))

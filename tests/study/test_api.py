@@ -1,45 +1,15 @@
 """The participant and researcher API, on SQLite and on PostgreSQL (same tests, both backends)."""
 
 import io
-import itertools
 import json
 import math
 
 import pandas as pd
 import pytest
-from fastapi.testclient import TestClient
 
 from app.configio import load_yaml_model
-from app.settings import Settings
 from app.study.config import StudyConfig
-from app.study.main import create_app
-from app.study.trials import BANK_FILE, bank_dir
-from tests.conftest import fresh_database
-from tests.study.flow import ADMIN, TOKEN, Participant, new_id, prediction_body
-
-_db_counter = itertools.count()
-
-
-@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
-def db_url(request, tmp_path):
-    """A fresh empty database of each backend."""
-    if request.param == "sqlite":
-        return f"sqlite:///{tmp_path / 'study.db'}"
-    return fresh_database(request.getfixturevalue("postgres_url"), f"api{next(_db_counter)}")
-
-
-def make_client(small_study, db_url: str) -> TestClient:
-    """A TestClient of a fresh app on `db_url` (lifespan runs on enter)."""
-    settings = Settings(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir,
-                        database_url=db_url, admin_token=TOKEN)
-    return TestClient(create_app(settings, [small_study.study_id]))
-
-
-@pytest.fixture
-def client(small_study, db_url):
-    """The app on a fresh database."""
-    with make_client(small_study, db_url) as c:
-        yield c
+from tests.study.flow import ADMIN, Participant, hex24, new_id, prediction_body, prolific
 
 
 @pytest.fixture(scope="module")
@@ -47,13 +17,6 @@ def per_trial(small_study) -> tuple[int, int]:
     """(start states, steps to predict) per trial, as the small study's config sets them."""
     cfg = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml", StudyConfig)
     return cfg.start_states, cfg.steps_to_predict
-
-
-@pytest.fixture(scope="module")
-def bank(small_study) -> dict:
-    """Bank trials by id (the test reads the true moves for attention checks)."""
-    raw = json.loads((bank_dir(small_study.data_dir, small_study.study_id) / BANK_FILE).read_text())
-    return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}
 
 
 def at_first_trial(client, study_id: str, **recruitment) -> Participant:
@@ -67,8 +30,9 @@ def at_first_trial(client, study_id: str, **recruitment) -> Participant:
 def test_whole_session_stores_every_prediction_beside_the_models(client, small_study, bank,
                                                                   per_trial):
     p = Participant(client, small_study.study_id)
-    body = p.start(PROLIFIC_PID="alice", STUDY_ID="s1", SESSION_ID="x1")
+    body = p.start(**prolific("alice"))
     assert p.status == 201 and body["resumed"] is False
+    assert isinstance(body["participant_id"], str) and len(body["participant_id"]) == 16
     assert p.state()["phase"] == "consent"
     state = p.pass_intro()
     assert state["phase"] == "practice"
@@ -76,6 +40,8 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
     k, n = per_trial
     assert len(trial["examples"]) == 4 and len(trial["start_states"]) == k
     assert all("start_kind" not in s for s in trial["start_states"])
+    assert "attention_check" not in trial and "clip_sha256" not in trial
+    assert trial["trial_id"] not in bank  # an opaque per-session id, not the bank's
     assert 5 <= len(trial["segment"]["positions"]) - 1 <= 7
     assert "predictions" not in trial and "policy_actions" not in trial
     done = p.finish(bank)
@@ -118,33 +84,33 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
 
 
 def test_refresh_resumes_and_an_external_id_takes_part_once(client, small_study):
-    p = at_first_trial(client, small_study.study_id, workerId="w1", assignmentId="a", hitId="h")
+    p = at_first_trial(client, small_study.study_id, **prolific("w1"))
     p.answer_trial()
     before = p.state()
     again = Participant(client, small_study.study_id)
-    body = again.start(workerId="w1", assignmentId="a", hitId="h")
+    body = again.start(**prolific("w1"))
     assert again.status == 200 and body["resumed"] and again.token == p.token
     assert again.state() == before
     p.finish()
     late = Participant(client, small_study.study_id)
-    late.start(workerId="w1")
+    late.start(**dict(prolific("w1"), SESSION_ID="another-attempt"))
     assert late.status == 409
 
 
 def test_knowing_a_participant_id_alone_does_not_open_their_session(client, small_study):
-    owner = at_first_trial(client, small_study.study_id, PROLIFIC_PID="pid-9",
-                           STUDY_ID="s", SESSION_ID="attempt-1")
+    params = prolific("pid-9")
+    owner = at_first_trial(client, small_study.study_id, **params)
     intruder = Participant(client, small_study.study_id)
-    body = intruder.start(PROLIFIC_PID="pid-9", STUDY_ID="s", SESSION_ID="guess")
+    body = intruder.start(**dict(params, SESSION_ID="guess"))
     assert intruder.status == 409 and "SESSION_ID" in body["detail"]
     assert intruder.token != owner.token
     same = Participant(client, small_study.study_id)
-    same.start(PROLIFIC_PID="pid-9", STUDY_ID="s", SESSION_ID="attempt-1")
+    same.start(**params)
     assert same.status == 200 and same.token == owner.token
 
 
 def test_retried_submission_is_stored_once_with_the_same_answer(client, small_study, per_trial):
-    p = at_first_trial(client, small_study.study_id, PROLIFIC_PID="retry")
+    p = at_first_trial(client, small_study.study_id, **prolific("retry"))
     body = prediction_body(p.state()["step"])
     first = p.post("predictions", body)
     second = p.post("predictions", body)
@@ -160,7 +126,7 @@ def test_retried_submission_is_stored_once_with_the_same_answer(client, small_st
 def test_events_are_stored_once(client, small_study):
     p = at_first_trial(client, small_study.study_id)
     events = [{"submission_id": new_id(), "kind": "clip_finished", "t_client_ms": 10.0 * i,
-               "data": {"example": i}} for i in range(3)]
+               "data": {"trial_id": "t", "replays": i}} for i in range(3)]
     assert p.post("events", {"events": events}).json() == {"stored": 3}
     assert p.post("events", {"events": events}).json() == {"stored": 0}
     assert p.post("events", {"events": events[:1] * 101}).status_code == 422
@@ -168,7 +134,7 @@ def test_events_are_stored_once(client, small_study):
 
 def test_world_orders_and_trials_are_assigned_in_balance(client, small_study, bank):
     for i in range(4):  # two completions, two sessions still running
-        p = at_first_trial(client, small_study.study_id, PROLIFIC_PID=f"bal{i}")
+        p = at_first_trial(client, small_study.study_id, **prolific(f"bal{i}"))
         if i < 2:
             p.finish(bank)
     csv = client.get(f"/api/researcher/export.csv?study_id={small_study.study_id}",
@@ -191,21 +157,25 @@ def test_world_orders_and_trials_are_assigned_in_balance(client, small_study, ba
 
 
 def test_excluded_completions_do_not_count_for_balance(client, small_study, bank):
-    from sqlmodel import Session
+    from sqlmodel import Session, select
 
-    from app.study.crud import counted_participants
+    from app.study import balance
+    from app.study.tables import Participant as Row
 
-    valid = at_first_trial(client, small_study.study_id, PROLIFIC_PID="valid")
+    valid = at_first_trial(client, small_study.study_id, **prolific("valid"))
     valid.finish(bank)
-    hasty = at_first_trial(client, small_study.study_id, PROLIFIC_PID="hasty")
+    hasty = at_first_trial(client, small_study.study_id, **prolific("hasty"))
     hasty.finish(bank, duration_ms=1000)
-    careless = at_first_trial(client, small_study.study_id, PROLIFIC_PID="careless")
+    careless = at_first_trial(client, small_study.study_id, **prolific("careless"))
     careless.finish(None)  # straight clicks ignore the attention checks' obvious answer
-    running = at_first_trial(client, small_study.study_id, PROLIFIC_PID="running")
+    running = at_first_trial(client, small_study.study_id, **prolific("running"))
     running.answer_trial()
     ctx = client.app.state.studies[small_study.study_id]
+    names = {hex24(n): n for n in ("valid", "hasty", "careless", "running")}
     with Session(client.app.state.engine) as db:
-        counted = {p.external_id for p in counted_participants(db, ctx)}
+        counted = {names[p.external_id] for p in db.exec(select(Row).where(Row.counted))}
+        assert balance.recount(db, ctx) == {k: v for k, v in balance.read_counts(
+            db, ctx.study_id).items() if v}
     assert "valid" in counted and "running" in counted and "hasty" not in counted
     summary = client.get(f"/api/researcher/summary?study_id={small_study.study_id}",
                          headers=ADMIN).json()
@@ -266,26 +236,24 @@ def test_bad_predictions_get_a_4xx_naming_the_field(client, small_study, bank):
                         headers={"content-type": "application/json"})
         assert r.status_code == 422, r.text
         assert f"points.{i}.{j}.{k}: Input should be a finite number" in r.json()["message"]
-    unknown = dict(prediction_body(trial), trial_id="highway-main-999")
-    r = p.post("predictions", unknown)
-    assert r.status_code == 404 and r.json()["detail"].startswith("trial_id:")
-    plan_ids = {s["trial_id"] for s in [trial]}
-    other = next(t for t in bank if t not in plan_ids and not _assigned(client, p, t))
-    r = p.post("predictions", dict(prediction_body(trial), trial_id=other))
-    assert r.status_code == 403 and r.json()["detail"].startswith("trial_id:")
+    for unknown in (next(iter(bank)), "0123456789abcdef"):  # a bank id, someone's ref
+        r = p.post("predictions", dict(prediction_body(trial), trial_id=unknown))
+        assert r.status_code == 404 and r.json()["detail"].startswith("trial_id:"), r.text
+    later = next(s["ref"] for s in _plan(client, p)[::-1] if "ref" in s)
+    r = p.post("predictions", dict(prediction_body(trial), trial_id=later))
+    assert r.status_code == 409 and "not the current trial" in r.json()["detail"]
     r = client.post(p.url("predictions"), content=b"{" + b" " * (70 * 1024) + b"}",
                     headers={"content-type": "application/json"})
     assert r.status_code == 413 and r.json()["detail"].startswith("body:")
     assert p.state()["step"]["trial_id"] == trial["trial_id"]  # nothing moved
 
 
-def _assigned(client, participant: Participant, trial_id: str) -> bool:
+def _plan(client, participant: Participant) -> list[dict]:
     from app.study.tables import Participant as Row
 
     with client.app.state.engine.connect() as conn:
-        plan = conn.execute(Row.__table__.select().where(
+        return conn.execute(Row.__table__.select().where(
             Row.__table__.c.session_token == participant.token)).mappings().one()["plan"]
-    return any(s.get("trial_id") == trial_id for s in plan)
 
 
 def test_other_bad_inputs(client, small_study):

@@ -29,7 +29,7 @@ from app.study.tables import Participant
 from app.study.trial_builder import NoStartStates, build_trials, take_turns
 from app.study.trials import BANK_FILE, TrialBank, bank_dir, clip_sha256
 from tests.study import flow
-from tests.study.flow import ADMIN, TOKEN, new_id, prediction_body
+from tests.study.flow import ADMIN, TOKEN, new_id, prediction_body, prolific
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -40,8 +40,7 @@ def test_paper_study_config_matches_the_paper():
     assert (cfg.trials_per_world, cfg.examples_per_trial, cfg.start_states,
             cfg.steps_to_predict, cfg.target_sample_size) == (10, 4, 5, 3, 22)
     assert (cfg.segment_steps.min, cfg.segment_steps.max) == (5, 7)
-    assert cfg.recruitment.prolific_params == ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID"]
-    assert cfg.recruitment.mturk_params == ["workerId", "assignmentId", "hitId"]
+    assert cfg.recruitment.platform == "prolific"
 
 
 @pytest.mark.parametrize("change, field", [
@@ -50,6 +49,11 @@ def test_paper_study_config_matches_the_paper():
     ({"segment_steps": {"min": 7, "max": 5}}, "segment_steps"),
     ({"worlds": ["highway", "mars"]}, "worlds.1"),
     ({"recruitment": {"completion_code": "X", "prolific_url": "u"}}, "recruitment.prolific_url"),
+    ({"recruitment": {"completion_code": "X", "platform": "email"}}, "recruitment.platform"),
+    ({"recruitment": {"completion_code": "X", "prolific_redirect_url": "https://p/?cc={code}"}},
+     "recruitment: .*prolific_redirect_url: only the placeholder"),
+    ({"recruitment": {"completion_code": "X", "mturk_redirect_url": "http://x/{completion_code}"}},
+     "recruitment: .*mturk_redirect_url: must be empty or an https"),
 ])
 def test_config_errors_name_the_key(tmp_path, change, field):
     data = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
@@ -217,7 +221,7 @@ def test_start_states_config_sets_the_count_and_the_api_follows(three_starts, tm
         r = client.get("/api/researcher/export.csv?study_id=three_starts", headers=ADMIN)
     frame = pd.read_csv(io.StringIO(r.text))
     assert len(frame) == 3 * 3
-    stored = bank.by_id[trial["trial_id"]].start_states
+    stored = bank.by_id[frame["trial_id"].iloc[0]].start_states
     assert list(frame["start_kind"].iloc[::3]) == [s.start_kind for s in stored]
 
 
@@ -281,14 +285,15 @@ def test_in_memory_database_through_dependency_override(small_study, tmp_path):
     app = create_app(settings, [small_study.study_id])
     app.dependency_overrides[get_db] = memory_db
     with TestClient(app) as client:
-        r = client.post("/api/sessions", json={"study_id": small_study.study_id})
+        r = client.post("/api/sessions", json={"study_id": small_study.study_id,
+                                               "recruitment": prolific("memory")})
         token = r.json()["session_token"]
         r = client.post(f"/api/sessions/{token}/consent",
                         json={"submission_id": new_id(), "agree": True})
         assert r.status_code == 200 and r.json()["phase"] == "instructions"
     with Session(engine) as session:
         stored = session.execute(select(Participant)).scalars().one()
-    assert stored.position == 1 and stored.recruitment == "anonymous"
+    assert stored.position == 1 and stored.recruitment == "prolific"
     shutil.rmtree(tmp_path, ignore_errors=True)
 
 

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from tests.conftest import free_port, fresh_database, start_server
-from tests.study.flow import ADMIN, Participant, new_id, prediction_body
+from tests.study.flow import ADMIN, Participant, new_id, prediction_body, prolific
 
 pytestmark = pytest.mark.slow
 
@@ -32,7 +32,7 @@ def test_sigkill_mid_session_loses_no_acknowledged_submission(small_study, tmp_p
     try:
         with httpx.Client(base_url=base, timeout=10) as client:
             p = Participant(client, small_study.study_id)
-            p.start(PROLIFIC_PID="killed", STUDY_ID="s", SESSION_ID="x")
+            p.start(**prolific("killed"))
             p.pass_intro()
             acknowledged = [p.answer_trial()["phase"] for _ in range(3)]
             current = p.state()["step"]["trial_id"]
@@ -47,7 +47,7 @@ def test_sigkill_mid_session_loses_no_acknowledged_submission(small_study, tmp_p
     try:
         with httpx.Client(base_url=base, timeout=10) as client:
             again = Participant(client, small_study.study_id)
-            body = again.start(PROLIFIC_PID="killed", STUDY_ID="s", SESSION_ID="x")
+            body = again.start(**prolific("killed"))
             assert again.status == 200 and body["resumed"] and again.token == p.token
             state = again.state()
             assert state["step"]["trial_id"] == current
@@ -74,7 +74,7 @@ def test_sigkill_under_load_keeps_every_acknowledged_submission(small_study, tmp
     def keep_submitting(i: int) -> None:
         with httpx.Client(base_url=base, timeout=5) as client:
             p = Participant(client, small_study.study_id)
-            p.start(PROLIFIC_PID=f"load{i}")
+            p.start(**prolific(f"load{i}"))
             p.pass_intro()
             acknowledged[p.token] = []
             while not stop.is_set():
@@ -130,7 +130,7 @@ def test_two_workers_on_postgres_serve_concurrent_participants(small_study, post
     def one(i: int) -> int:
         with httpx.Client(base_url=base, timeout=30) as client:
             p = Participant(client, small_study.study_id)
-            p.start(PROLIFIC_PID=f"w2-{i}")
+            p.start(**prolific(f"w2-{i}"))
             p.pass_intro()
             p.answer_trial()
             body = prediction_body(p.state()["step"])
@@ -159,7 +159,7 @@ def test_many_concurrent_participants_on_one_sqlite_worker(small_study, live_ser
 
     async def one(client: httpx.AsyncClient, i: int) -> int:
         r = await client.post("/api/sessions", json={
-            "study_id": small_study.study_id, "recruitment": {"PROLIFIC_PID": f"crowd-{i}"}})
+            "study_id": small_study.study_id, "recruitment": prolific(f"crowd-{i}")})
         token = r.json()["session_token"]
         await client.post(f"/api/sessions/{token}/consent",
                           json={"submission_id": new_id(), "agree": True})
@@ -178,5 +178,6 @@ def test_many_concurrent_participants_on_one_sqlite_worker(small_study, live_ser
 
     assert asyncio.run(run()) == [2] * crowd
     frame = export(live_server, small_study.study_id)
-    mine = frame[frame["external_id"].astype(str).str.startswith("crowd-")]
+    crowd_ids = {prolific(f"crowd-{i}")["PROLIFIC_PID"] for i in range(crowd)}
+    mine = frame[frame["external_id"].astype(str).isin(crowd_ids)]
     assert len(mine) == crowd * 2 * 15

@@ -2,7 +2,7 @@
 
 from fastapi import APIRouter, Request, Response, status
 
-from app.study import crud
+from app.study import crud, sessions, telemetry
 from app.study.deps import ContextDep, ParticipantDep, SessionDep, study_context
 from app.study.state import state_json
 from app.study.tables import (
@@ -27,16 +27,20 @@ def state_response(ctx, participant, status_code: int = 200) -> Response:
 
 @router.post("", response_model=ParticipantPublic, status_code=status.HTTP_201_CREATED,
              responses={200: {"description": "resumed an unfinished session"},
-                        409: {"description": "this external id already completed the study"}})
+                        403: {"description": "missing or malformed platform parameters, or "
+                                             "a wrong preview key"},
+                        409: {"description": "this external id already completed the study, "
+                                             "or its session in progress has another attempt "
+                                             "key"}})
 async def create_session(body: SessionCreate, request: Request, response: Response,
                          db: SessionDep) -> ParticipantPublic:
     """Start a session from the recruitment URL parameters, or resume the unfinished one."""
     ctx = study_context(request, body.study_id)
-    participant, resumed = crud.start_session(db, ctx, body)
+    participant, resumed = sessions.start_session(db, ctx, body)
     if resumed:
         response.status_code = status.HTTP_200_OK
     return ParticipantPublic(session_token=participant.session_token,
-                             participant_id=participant.id, resumed=resumed)
+                             participant_id=participant.public_id, resumed=resumed)
 
 
 @router.get("/{token}/state", response_description=STATE_DOC)
@@ -78,8 +82,10 @@ async def submit_survey(body: SurveyCreate, participant: ParticipantDep, ctx: Co
     return state_response(ctx, participant)
 
 
-@router.post("/{token}/events", status_code=status.HTTP_202_ACCEPTED)
+@router.post("/{token}/events", status_code=status.HTTP_202_ACCEPTED,
+             responses={409: {"description": "the session is complete; no more events"}})
 async def submit_events(body: EventsCreate, participant: ParticipantDep,
                         db: SessionDep) -> dict:
-    """Store telemetry events (at most 100); retried events are stored once."""
-    return {"stored": crud.record_events(db, participant, body)}
+    """Store telemetry events (at most 100 a request, MAX_EVENTS_PER_SESSION a session);
+    retried events are stored once."""
+    return {"stored": telemetry.record_events(db, participant, body)}

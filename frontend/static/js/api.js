@@ -75,10 +75,10 @@ export class StudyApi {
     this.token = null;
   }
 
-  startSession(recruitment, client) {
-    return sendUntilAcknowledged("POST", "/api/sessions", {
-      study_id: this.studyId, recruitment, client,
-    });
+  startSession(recruitment, client, preview = null) {
+    const body = { study_id: this.studyId, recruitment, client };
+    if (preview) body.preview = preview;
+    return sendUntilAcknowledged("POST", "/api/sessions", body);
   }
 
   base() {

@@ -77,6 +77,11 @@ function recruitmentFromUrl() {
   return recruitment;
 }
 
+/** The researcher preview key of a lab member's test link, or null. */
+function previewFromUrl() {
+  return new URLSearchParams(location.search).get("preview");
+}
+
 function clientInfo() {
   return {
     screen_w: innerWidth,
@@ -107,7 +112,8 @@ class ParticipantApp {
   /** Resume the token kept in sessionStorage (same recruitment), else start or resume on the server. */
   async ensureSession() {
     const recruitment = recruitmentFromUrl();
-    const recruitmentKey = JSON.stringify(recruitment);
+    const preview = previewFromUrl();
+    const recruitmentKey = JSON.stringify({ recruitment, preview });
     const stored = JSON.parse(sessionStorage.getItem(this.storageKey) || "null");
     if (stored && stored.recruitmentKey === recruitmentKey) {
       this.api.token = stored.token;
@@ -120,13 +126,17 @@ class ParticipantApp {
       }
     }
     try {
-      const session = await this.api.startSession(recruitment, clientInfo());
+      const session = await this.api.startSession(recruitment, clientInfo(), preview);
       this.api.token = session.session_token;
       sessionStorage.setItem(this.storageKey, JSON.stringify({ token: session.session_token, recruitmentKey }));
       return true;
     } catch (error) {
       if (error instanceof ApiError && error.status === 409) {
         this.fail("Our records show that you have already completed this study. Thank you for taking part!");
+        return false;
+      }
+      if (error instanceof ApiError && error.status === 403) {
+        this.fail(`This link cannot start the study: ${error.detail}. Please open the study again from the page where you found it.`, { reload: false });
         return false;
       }
       throw error;
@@ -233,7 +243,8 @@ class ParticipantApp {
         }
         $("survey-message").textContent = "";
         form.querySelector("button[type=submit]").disabled = true;
-        this.api.survey(answers).then(resolve, (error) => {
+        // the server refuses events once the session is done: send what is queued first
+        this.telemetry.flush().then(() => this.api.survey(answers)).then(resolve, (error) => {
           form.querySelector("button[type=submit]").disabled = false;
           if (error instanceof ApiError && error.status < 500) $("survey-message").textContent = error.detail;
           else reject(error);
@@ -255,8 +266,9 @@ class ParticipantApp {
     }
   }
 
-  fail(text) {
+  fail(text, { reload = true } = {}) {
     $("error-text").textContent = text;
+    $("error-reload").hidden = !reload;
     $("error-reload").onclick = () => location.reload();
     show("error");
   }

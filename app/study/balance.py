@@ -1,0 +1,162 @@
+"""Balanced assignment kept in the database, so a session start costs the same at any size.
+
+BalanceCount holds, per study, how many counted sessions use each world order
+(`order:a,b`) and each trial (`trial:<id>`). A session is counted from its start while
+it runs; it stops counting when it goes stale (unfinished past `in_progress_timeout_min`,
+released lazily by the next start) or completes excluded (failed attention check, too
+many too-fast trials); a stale session that comes back and completes validly counts
+again. Pilot sessions never count. On PostgreSQL a transaction-scoped advisory lock
+makes read-choose-increment atomic across workers; SQLite serialises writers itself
+and the server refuses several workers on it.
+"""
+
+import hashlib
+from collections import Counter
+from datetime import datetime, timedelta
+from itertools import permutations
+
+import numpy as np
+from sqlalchemy import case, func, select, text, update
+from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy.engine import Engine
+from sqlmodel import Session
+
+from app.study.config import StudyConfig
+from app.study.context import StudyContext
+from app.study.tables import BalanceCount, Participant, TrialResponse, utcnow
+
+ORDER = "order:"
+TRIAL = "trial:"
+
+
+def world_orders(config: StudyConfig) -> list[tuple[str, ...]]:
+    """All orders when counterbalanced, else the configured one."""
+    if config.counterbalance_world_order:
+        return list(permutations(config.worlds))
+    return [tuple(config.worlds)]
+
+
+def order_key(order: tuple[str, ...]) -> str:
+    """The BalanceCount key of a world order."""
+    return ORDER + ",".join(order)
+
+
+def plan_keys(world_order: str, plan: list[dict]) -> list[str]:
+    """The keys a session holds: its world order and every trial of its plan."""
+    return [ORDER + world_order] + [TRIAL + s["trial_id"] for s in plan if "trial_id" in s]
+
+
+def ensure_rows(engine: Engine, ctx: StudyContext) -> None:
+    """Create a zero count for every order and trial of the study (existing ones kept)."""
+    keys = [order_key(o) for o in world_orders(ctx.config)]
+    keys += [TRIAL + t.trial_id for w in ctx.bank.data.worlds.values() for t in w.trials]
+    rows = [{"study_id": ctx.study_id, "key": k, "count": 0} for k in keys]
+    with engine.begin() as conn:
+        module = postgresql if conn.dialect.name == "postgresql" else sqlite
+        conn.execute(module.insert(BalanceCount.__table__).on_conflict_do_nothing(), rows)
+
+
+def lock_study(db: Session, study_id: str) -> None:
+    """Serialise session starts of one study until the transaction ends (PostgreSQL)."""
+    if db.get_bind().dialect.name == "postgresql":
+        key = int.from_bytes(hashlib.sha256(f"tomstudy:{study_id}".encode()).digest()[:8],
+                             "big", signed=True)
+        db.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": key})
+
+
+def read_counts(db: Session, study_id: str) -> dict[str, int]:
+    """key -> count for one study."""
+    rows = db.execute(select(BalanceCount.key, BalanceCount.count)
+                      .where(BalanceCount.study_id == study_id))
+    return dict(rows.all())
+
+
+def least_used(candidates: list, counts: dict, k: int, rng: np.random.Generator) -> list:
+    """The k candidates with the lowest counts, ties broken at random."""
+    noise = rng.random(len(candidates))
+    keys = np.lexsort((noise, [counts.get(c, 0) for c in candidates]))
+    return [candidates[i] for i in keys[:k]]
+
+
+def _add(db: Session, study_id: str, keys: list[str], delta: int) -> None:
+    for times, group in _by_multiplicity(keys).items():
+        db.execute(update(BalanceCount.__table__)
+                   .where(BalanceCount.study_id == study_id, BalanceCount.key.in_(group))
+                   .values(count=BalanceCount.count + delta * times))
+
+
+def _by_multiplicity(keys: list[str]) -> dict[int, list[str]]:
+    groups: dict[int, list[str]] = {}
+    for key, times in Counter(keys).items():
+        groups.setdefault(times, []).append(key)
+    return groups
+
+
+def _set_counted(db: Session, participant: Participant, counted: bool) -> bool:
+    """Flip `counted` if it is not already so; True if this call flipped it."""
+    moved = db.execute(update(Participant.__table__)
+                       .where(Participant.id == participant.id,
+                              Participant.counted.is_(not counted))
+                       .values(counted=counted))
+    participant.counted = counted if moved.rowcount == 1 else participant.counted
+    return moved.rowcount == 1
+
+
+def hold(db: Session, participant: Participant) -> None:
+    """Add the session's order and trials to the counts (inside the caller's transaction)."""
+    if _set_counted(db, participant, True):
+        _add(db, participant.study_id, plan_keys(participant.world_order, participant.plan), 1)
+
+
+def release(db: Session, participant: Participant) -> None:
+    """Take the session's order and trials out of the counts, once."""
+    if _set_counted(db, participant, False):
+        _add(db, participant.study_id, plan_keys(participant.world_order, participant.plan), -1)
+
+
+def in_progress_cutoff(config: StudyConfig) -> datetime:
+    """Unfinished sessions last updated before this are abandoned (stale)."""
+    return utcnow() - timedelta(minutes=config.in_progress_timeout_min)
+
+
+def release_stale(db: Session, ctx: StudyContext) -> int:
+    """Release counted unfinished sessions that went stale; returns how many."""
+    stale = db.execute(select(Participant).where(
+        Participant.study_id == ctx.study_id, Participant.counted.is_(True),
+        Participant.completed.is_(False),
+        Participant.updated_at < in_progress_cutoff(ctx.config))).scalars().all()
+    for participant in stale:
+        release(db, participant)
+    return len(stale)
+
+
+def settle_completion(db: Session, ctx: StudyContext, participant: Participant) -> None:
+    """At completion: an excluded session stops counting, a valid one counts (once)."""
+    if participant.pilot:
+        return
+    if is_excluded(db, ctx.config, participant):
+        release(db, participant)
+    else:
+        hold(db, participant)
+
+
+def is_excluded(db: Session, config: StudyConfig, participant: Participant) -> bool:
+    """The enabled exclusion rules remove this session (attention check, too fast)."""
+    rules = config.exclusions
+    if rules.failed_attention_check and participant.attention_failed > 0:
+        return True
+    fast = func.sum(case((TrialResponse.duration_ms < rules.too_fast_trial_ms, 1), else_=0))
+    n_fast, n = db.execute(select(fast, func.count()).where(
+        TrialResponse.participant_id == participant.id, TrialResponse.is_practice.is_(False),
+        TrialResponse.attention_check.is_(False))).one()
+    return bool(n) and (n_fast or 0) / n > rules.too_fast_max_fraction
+
+
+def recount(db: Session, ctx: StudyContext) -> dict[str, int]:
+    """The counts rebuilt from the counted sessions (an audit of BalanceCount; O(sessions))."""
+    counts = Counter()
+    rows = db.execute(select(Participant.world_order, Participant.plan).where(
+        Participant.study_id == ctx.study_id, Participant.counted.is_(True)))
+    for world_order, plan in rows:
+        counts.update(plan_keys(world_order, plan))
+    return dict(counts)

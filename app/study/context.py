@@ -1,0 +1,21 @@
+"""What every participant request needs besides the database: one loaded study."""
+
+from dataclasses import dataclass, field
+
+from app.study.config import StudyConfig
+from app.study.predictor import Predictor
+from app.study.trials import TrialBank
+
+
+@dataclass(frozen=True)
+class StudyContext:
+    """A study's config, bank and models, and the server's per-study secrets and rules."""
+
+    study_id: str
+    config: StudyConfig
+    bank: TrialBank
+    predictor: Predictor
+    preview_key: str = field(default="", repr=False)  # opens pilot sessions (recruitment.py)
+    trust_client_clock: bool = False  # pilots with bots only; never in production
+    # trial id -> the trial's static browser JSON, encoded once (see app/study/state.py)
+    trial_json: dict[str, str] = field(default_factory=dict, compare=False, repr=False)

@@ -1,0 +1,10 @@
+"""The one error type of the study's write path: an HTTP status and a `field: message`."""
+
+
+class Refused(Exception):
+    """A request the study cannot accept: HTTP status and `field: message`."""
+
+    def __init__(self, status: int, detail: str) -> None:
+        super().__init__(detail)
+        self.status = status
+        self.detail = detail

@@ -1,0 +1,165 @@
+"""Starting, resuming and replacing a participant's session, with a balanced plan.
+
+A session start is checked against the study's platform (recruitment.py), then, under
+the study's lock, either resumes the live session of that external id (same attempt
+key), replaces it (a new attempt after it went stale), or creates a new one whose plan
+takes the least-used world order and the least-exposed trials (balance.py). Its cost
+does not grow with the number of stored participants.
+"""
+
+import secrets
+from datetime import datetime
+
+import numpy as np
+from sqlalchemy import select, update
+from sqlalchemy.exc import IntegrityError
+from sqlmodel import Session
+
+from app.study import balance
+from app.study.context import StudyContext
+from app.study.errors import Refused
+from app.study.recruitment import ATTEMPT_KEYS, Identity, identify
+from app.study.tables import Participant, SessionCreate, utcnow
+
+
+def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
+                  rng: np.random.Generator | None = None) -> tuple[Participant, bool]:
+    """A new participant with a balanced plan, or (resumed=True) their live session."""
+    who = identify(ctx.config, body, ctx.preview_key)
+    try:
+        resumed = _start_locked(db, ctx, body, who, rng or np.random.default_rng())
+    except IntegrityError:  # the same external id started in another process at once
+        db.rollback()
+        existing = live_participant(db, ctx.study_id, who.external_id)
+        db.commit()
+        if existing is None or not _resumable(existing, who, ctx):
+            raise Refused(409, "recruitment: a session for this participant id was started "
+                               "at the same moment; reload the page") from None
+        return existing, True
+    except BaseException:
+        db.rollback()
+        raise
+    return resumed
+
+
+def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Identity,
+                  rng: np.random.Generator) -> tuple[Participant, bool]:
+    balance.lock_study(db, ctx.study_id)
+    existing = live_participant(db, ctx.study_id, who.external_id)
+    if existing is not None:
+        if _resumable(existing, who, ctx):
+            db.commit()
+            return existing, True
+        _replace(db, existing)
+    balance.release_stale(db, ctx)
+    order, plan = assign_plan(db, ctx, rng)
+    participant = Participant(
+        study_id=ctx.study_id, recruitment=who.recruitment, external_id=who.external_id,
+        attempt_key=who.attempt_key, pilot=who.pilot, public_id=secrets.token_hex(8),
+        session_token=secrets.token_urlsafe(24), recruitment_params=who.params,
+        client=body.client.model_dump(), world_order=",".join(order), plan=plan)
+    db.add(participant)
+    db.flush()
+    if not who.pilot:
+        balance.hold(db, participant)
+    db.commit()
+    return participant, False
+
+
+def live_participant(db: Session, study_id: str, external_id: str | None) -> Participant | None:
+    """The not-replaced session of this external id in this study (None for anonymous)."""
+    if external_id is None:
+        return None
+    query = select(Participant).where(Participant.study_id == study_id,
+                                      Participant.external_id == external_id,
+                                      Participant.replaced_at.is_(None))
+    return db.execute(query).scalars().first()
+
+
+def _resumable(existing: Participant, who: Identity, ctx: StudyContext) -> bool:
+    """True to resume; False to replace a stale session; 409 otherwise."""
+    if existing.completed:
+        raise Refused(409, "recruitment: this participant has already completed the study")
+    if existing.attempt_key == who.attempt_key:
+        return True
+    if _is_stale(existing, ctx):
+        return False
+    key = ATTEMPT_KEYS[who.recruitment]
+    raise Refused(409, f"recruitment.{key}: does not match the session in progress for this "
+                       "participant id; reopen the study from the original link")
+
+
+def _is_stale(participant: Participant, ctx: StudyContext) -> bool:
+    return as_utc(participant.updated_at) < balance.in_progress_cutoff(ctx.config)
+
+
+def _replace(db: Session, old: Participant) -> None:
+    """Retire a stale session (its rows stay) so a new attempt can take the external id."""
+    db.execute(update(Participant.__table__).where(Participant.id == old.id)
+               .values(replaced_at=utcnow()))
+    balance.release(db, old)
+    db.flush()
+
+
+def as_utc(moment: datetime) -> datetime:
+    """SQLite returns naive datetimes; they were written in UTC."""
+    return moment if moment.tzinfo else moment.replace(tzinfo=utcnow().tzinfo)
+
+
+def participant_by_token(db: Session, token: str) -> Participant:
+    """The participant holding this session token, or 404."""
+    found = db.execute(select(Participant).where(Participant.session_token == token))
+    participant = found.scalars().first()
+    if participant is None:
+        raise Refused(404, "token: unknown session")
+    return participant
+
+
+def is_in_progress(participant: Participant, cutoff: datetime) -> bool:
+    """Unfinished and updated since `cutoff`."""
+    return not participant.completed and as_utc(participant.updated_at) >= cutoff
+
+
+# ---------------------------------------------------------------- the plan
+
+def assign_plan(db: Session, ctx: StudyContext,
+                rng: np.random.Generator) -> tuple[tuple[str, ...], list[dict]]:
+    """Pick the least-used world order and least-exposed trials; lay out the steps."""
+    counts = balance.read_counts(db, ctx.study_id)
+    orders = balance.world_orders(ctx.config)
+    order_counts = {o: counts.get(balance.order_key(o), 0) for o in orders}
+    exposure = {k[len(balance.TRIAL):]: v for k, v in counts.items()
+                if k.startswith(balance.TRIAL)}
+    order = balance.least_used(orders, order_counts, 1, rng)[0]
+    return order, layout_plan(ctx, order, exposure, rng)
+
+
+def layout_plan(ctx: StudyContext, order: tuple[str, ...], exposure: dict,
+                rng: np.random.Generator) -> list[dict]:
+    """consent, instructions, practice, per world its trials with attention checks, survey, done."""
+    cfg = ctx.config
+    least_used = balance.least_used
+    plan: list[dict] = [{"phase": "consent"}, {"phase": "instructions"}]
+    practice_pool = [t.trial_id for t in ctx.bank.trials_of(order[0], "practice")]
+    for i, tid in enumerate(least_used(practice_pool, exposure, cfg.practice_trials, rng)):
+        plan.append(_trial_step("practice", tid, order[0], 0, i, False))
+    for position, world in enumerate(order):
+        main = [t.trial_id for t in ctx.bank.trials_of(world, "main")]
+        chosen = least_used(main, exposure, cfg.trials_per_world, rng)
+        rng.shuffle(chosen)
+        checks = [t.trial_id for t in ctx.bank.trials_of(world, "attention")]
+        block = [(tid, False) for tid in chosen]
+        for tid in least_used(checks, exposure, cfg.attention_checks.per_world, rng):
+            block.insert(int(rng.integers(1, len(block) + 1)), (tid, True))
+        plan += [_trial_step("trial", tid, world, position, index, check)
+                 for index, (tid, check) in enumerate(block)]
+    return plan + [{"phase": "survey"}, {"phase": "done"}]
+
+
+def _trial_step(phase: str, trial_id: str, world: str, world_position: int, index: int,
+                attention_check: bool) -> dict:
+    # `ref` is the only id the browser sees: random per session, so neither the bank's
+    # trial id nor whether this is an attention check can be read from the payload
+    return {"phase": phase, "trial_id": trial_id, "ref": secrets.token_hex(8), "world": world,
+            "world_position": world_position, "trial_index": index,
+            "attention_check": attention_check}

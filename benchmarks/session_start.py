@@ -1,0 +1,82 @@
+"""Session start cost against the number of stored participants: 100 vs 20,000, same run.
+
+Seeds a fresh SQLite study database with N completed participants (each with a real
+plan), then times POST /api/sessions in-process (FastAPI TestClient, no network) for new
+Prolific participants. Prints the median and p99 start latency for both sizes and their
+ratio: a start that reads only the balance counts stays flat (ratio near 1).
+
+    .venv/bin/python benchmarks/session_start.py [--small 100] [--large 20000] [--starts 200]
+"""
+
+import argparse
+import secrets
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from sqlalchemy import insert
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from app.study.tables import Participant  # noqa: E402
+from tests.conftest import cached_small_study  # noqa: E402
+from tests.study.flow import make_client, prolific  # noqa: E402
+
+
+def seed(client, study_id: str, n: int) -> None:
+    """Store n completed participants that copy one real session's plan."""
+    first = client.post("/api/sessions", json={"study_id": study_id,
+                                               "recruitment": prolific("seed")}).json()
+    with client.app.state.engine.begin() as conn:
+        plan = conn.execute(Participant.__table__.select().where(
+            Participant.session_token == first["session_token"])).mappings().one()["plan"]
+        rows = [{"study_id": study_id, "recruitment": "prolific", "public_id": secrets.token_hex(8),
+                 "external_id": f"{i:024x}", "session_token": secrets.token_urlsafe(24),
+                 "attempt_key": "s", "pilot": False, "counted": True, "recruitment_params": {},
+                 "client": {}, "world_order": "highway,obstacle", "plan": plan,
+                 "position": len(plan) - 1, "completed": True, "attention_failed": 0}
+                for i in range(n - 1)]
+        for chunk in range(0, len(rows), 5000):
+            conn.execute(insert(Participant.__table__), rows[chunk:chunk + 5000])
+
+
+def start_latencies(client, study_id: str, starts: int, name: str) -> np.ndarray:
+    """Seconds per session start of `starts` new participants called name0, name1..."""
+    out = []
+    for i in range(starts):
+        t0 = time.perf_counter()
+        r = client.post("/api/sessions", json={"study_id": study_id,
+                                               "recruitment": prolific(f"{name}{i}")})
+        out.append(time.perf_counter() - t0)
+        assert r.status_code == 201, r.text
+    return np.asarray(out)
+
+
+def measure(study, stored: int, starts: int) -> np.ndarray:
+    """Start latencies on a fresh database holding `stored` participants."""
+    with (tempfile.TemporaryDirectory() as tmp,
+          make_client(study, f"sqlite:///{tmp}/bench.db") as client):
+        seed(client, study.study_id, stored)
+        start_latencies(client, study.study_id, 20, "warm-up")
+        return start_latencies(client, study.study_id, starts, "new")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--small", type=int, default=100)
+    parser.add_argument("--large", type=int, default=20_000)
+    parser.add_argument("--starts", type=int, default=200)
+    args = parser.parse_args()
+    study = cached_small_study()
+    results = {n: measure(study, n, args.starts) for n in (args.small, args.large)}
+    for n, lat in results.items():
+        print(f"{n:6d} stored participants: session start median "
+              f"{np.median(lat) * 1000:6.2f} ms  p99 {np.percentile(lat, 99) * 1000:6.2f} ms")
+    small, large = (np.median(results[n]) for n in (args.small, args.large))
+    print(f"ratio {args.large}/{args.small}: {large / small:.2f} (flat = about 1)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,34 @@
+"""Fixtures of the study API tests: each backend's fresh database, the app, the bank."""
+
+import itertools
+import json
+
+import pytest
+
+from app.study.trials import BANK_FILE, bank_dir
+from tests.conftest import fresh_database
+from tests.study.flow import make_client
+
+_db_counter = itertools.count()
+
+
+@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
+def db_url(request, tmp_path):
+    """A fresh empty database of each backend."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'study.db'}"
+    return fresh_database(request.getfixturevalue("postgres_url"), f"api{next(_db_counter)}")
+
+
+@pytest.fixture
+def client(small_study, db_url):
+    """The app on a fresh database."""
+    with make_client(small_study, db_url) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def bank(small_study) -> dict:
+    """Bank trials by id (the test reads the true moves for attention checks)."""
+    raw = json.loads((bank_dir(small_study.data_dir, small_study.study_id) / BANK_FILE).read_text())
+    return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}
