@@ -1,7 +1,8 @@
 """Schemathesis against the study app, with every check: each answer is one the schema declares.
 
-Valid cases sometimes carry a real session token (at each phase), the study id and the
-researcher's token instead of drawn ones, so requests also get past 404 and 401. The
+Valid cases sometimes carry a real session token (at each phase), the study id, Prolific
+parameters, the preview key and the researcher's token instead of drawn ones, so requests
+also get past 404, 403 and 401. The
 in-suite run is small; the issue's must-show run is the same test with more examples per
 operation and a floor on the total: `make fuzz` (SCHEMATHESIS_MAX_EXAMPLES=600,
 SCHEMATHESIS_MIN_CASES=5000).
@@ -19,7 +20,8 @@ from schemathesis.config import SchemathesisConfig
 
 from app.settings import Settings
 from app.study.main import create_app
-from tests.study.flow import ADMIN, TOKEN, Participant, new_id
+from app.study.recruitment import preview_key
+from tests.study.flow import ADMIN, TOKEN, Participant, new_id, prolific
 
 MAX_EXAMPLES = int(os.environ.get("SCHEMATHESIS_MAX_EXAMPLES", "15"))
 MIN_CASES = int(os.environ.get("SCHEMATHESIS_MIN_CASES", "100"))
@@ -59,8 +61,10 @@ def real_values(study_app, small_study) -> dict[str, list]:
     with TestClient(study_app) as client:
         for phase in ("consent", "instructions", "practice", "survey", "done"):
             tokens.append(session_at(client, small_study.study_id, phase))
+    people = [prolific(f"fuzz-{i}") for i in range(20)]  # a new session, then resumes
     return {"token": [None, *tokens], "study_id": [None, small_study.study_id],
-            "authorization": [None, ADMIN["Authorization"]]}
+            "authorization": [None, ADMIN["Authorization"]], "recruitment": [None, *people],
+            "preview": [None, preview_key(TOKEN, small_study.study_id)]}
 
 
 def session_at(client, study_id: str, phase: str) -> str:
@@ -86,7 +90,7 @@ def pick(seed, choices: list):
 
 
 def aim_at_real_values(case, real: dict[str, list]) -> None:
-    """In a valid case, swap some drawn values for real ones to get past 404 and 401 too.
+    """In a valid case, swap some drawn values for real ones to get past 404, 403 and 401.
 
     Invalid cases keep their values: a swap could make them valid and the request accepted.
     """
@@ -98,9 +102,10 @@ def aim_at_real_values(case, real: dict[str, list]) -> None:
             case.headers = case.headers or {}
             case.headers["authorization"] = bearer
     for values, key in ((case.path_parameters, "token"), (case.query, "study_id"),
-                        (case.body, "study_id")):
-        if isinstance(values, dict) and isinstance(values.get(key), str):
-            values[key] = pick(values[key], real[key]) or values[key]
+                        (case.body, "study_id"), (case.body, "recruitment"),
+                        (case.body, "preview")):
+        if isinstance(values, dict) and key in values:
+            values[key] = pick((key, values[key]), real[key]) or values[key]
 
 
 @schema.parametrize()
