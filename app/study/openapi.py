@@ -40,19 +40,20 @@ INVALID = "a body or parameter fails validation; `detail` names the field"
 SESSION_STATUSES = {404: "token: unknown session"}
 SESSION_WRITE_STATUSES = {
     400: UNREADABLE,
-    403: "a trial not assigned to this session, or a request the study refuses",
-    404: "token: unknown session; trial_id: unknown trial",
-    409: "phase: the session is at another step or trial, already done, or moved on in "
-         "another request; submission_id: used by another session",
+    404: "token: unknown session; trial_id: not a trial of this session",
+    409: "phase: the session is at another step or trial, moved on in another request, or "
+         "done (telemetry); submission_id: used by another session",
     413: TOO_LARGE,
-    422: INVALID,
+    422: f"{INVALID}, or breaks a study rule: clicks outside the scene or reach, survey "
+         "answers, telemetry past its cap, a submission_id reused for a different request",
 }
 START_STATUSES = {
     400: UNREADABLE,
-    403: "recruitment: missing or invalid platform parameters for this study",
+    403: "recruitment: missing or malformed parameters of the study's platform, or another "
+         "Prolific study; preview: a wrong preview key",
     404: "study_id: unknown study",
-    409: "recruitment: this participant already completed the study, or the attempt key "
-         "(SESSION_ID / assignmentId) differs from the session in progress",
+    409: "recruitment: this participant already completed the study, started at the same "
+         "moment, or has another attempt (SESSION_ID / assignmentId) in progress",
     413: TOO_LARGE,
     422: INVALID,
 }

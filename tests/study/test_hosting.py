@@ -255,12 +255,12 @@ def test_schema_declares_the_error_statuses_and_bodies():
     assert declared["POST /api/sessions"] == [200, 201, 400, 403, 404, 409, 413, 422]
     assert declared["GET /api/sessions/{token}/state"] == [200, 404, 422]
     assert declared["POST /api/sessions/{token}/predictions"] == [
-        200, 201, 400, 403, 404, 409, 413, 422]
+        200, 201, 400, 404, 409, 413, 422]
     assert declared["GET /api/researcher/export.csv"] == [200, 401, 403, 404, 422]
     assert declared["GET /healthz"] == [200, 503]
     responses = spec["paths"]["/api/sessions/{token}/events"]["post"]["responses"]
     body = {s: r["content"]["application/json"]["schema"]["$ref"].rsplit("/", 1)[1]
             for s, r in responses.items() if s != "202"}
-    assert body == {"400": "ErrorDetail", "403": "ErrorDetail", "404": "ErrorDetail",
-                    "409": "ErrorDetail", "413": "ErrorDetail", "422": "ValidationProblem"}
+    assert body == {"400": "ErrorDetail", "404": "ErrorDetail", "409": "ErrorDetail",
+                    "413": "ErrorDetail", "422": "ValidationProblem"}
     assert "HTTPValidationError" not in spec["components"]["schemas"]
