@@ -9,6 +9,9 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 # Where the participant's browser may post a form: the completion redirects of the platforms.
 RECRUITMENT_FORM_TARGETS = ("https://app.prolific.com", "https://www.mturk.com",
                             "https://workersandbox.mturk.com")
+# MTurk shows an ExternalQuestion inside an iframe of its worker site
+MTURK_FRAMERS = ("https://worker.mturk.com", "https://workersandbox.mturk.com",
+                 "https://www.mturk.com")
 
 APP_POLICY = {
     "default-src": "'none'",
@@ -42,22 +45,30 @@ def policy_header(policy: dict[str, str]) -> str:
     return "; ".join(f"{directive} {sources}" for directive, sources in policy.items())
 
 
-def encoded_headers(policy: dict[str, str]) -> list[tuple[bytes, bytes]]:
-    """The raw ASGI headers for one policy plus the fixed ones."""
+def encoded_headers(policy: dict[str, str],
+                    framed_by: tuple[str, ...] = ()) -> list[tuple[bytes, bytes]]:
+    """The raw ASGI headers for one policy plus the fixed ones; `framed_by` origins may
+    show the pages in a frame (X-Frame-Options cannot name them, so it is left out)."""
     headers = OTHER_HEADERS | {"content-security-policy": policy_header(policy)}
+    if framed_by:
+        framed = policy | {"frame-ancestors": " ".join(("'self'", *framed_by))}
+        headers = {k: v for k, v in headers.items() if k != "x-frame-options"}
+        headers["content-security-policy"] = policy_header(framed)
     return [(name.encode(), value.encode()) for name, value in headers.items()]
 
 
 class SecurityHeaders:
     """Add CSP, nosniff, Referrer-Policy, frame and opener headers to every HTTP response.
 
-    A header the app already set is kept; `docs_paths` get DOCS_POLICY.
+    A header the app already set is kept; `docs_paths` get DOCS_POLICY; `framed_by`
+    origins (MTurk's, when an MTurk study is served) may frame the pages.
     """
 
-    def __init__(self, app: ASGIApp, docs_paths: tuple[str, ...] = ()) -> None:
+    def __init__(self, app: ASGIApp, docs_paths: tuple[str, ...] = (),
+                 framed_by: tuple[str, ...] = ()) -> None:
         self.app = app
         self.docs_paths = frozenset(docs_paths)
-        self.app_headers = encoded_headers(APP_POLICY)
+        self.app_headers = encoded_headers(APP_POLICY, framed_by)
         self.docs_headers = encoded_headers(DOCS_POLICY)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:

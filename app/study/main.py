@@ -22,7 +22,7 @@ from app.study.config import load_study_config
 from app.study.context import StudyContext
 from app.study.db import create_tables, make_engine
 from app.study.errors import Refused
-from app.study.headers import SecurityHeaders
+from app.study.headers import MTURK_FRAMERS, SecurityHeaders
 from app.study.openapi import declare_error_responses
 from app.study.predictor import Predictor
 from app.study.recruitment import preview_key
@@ -101,8 +101,15 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     add_error_handlers(app)
     declare_error_responses(app)
     app.add_middleware(BodyLimit, max_bytes=MAX_BODY_BYTES)
-    app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app))  # outermost: 413s too
+    app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app),  # outermost: 413s too
+                       framed_by=framing_origins(settings, studies))
     return app
+
+
+def framing_origins(settings: Settings, studies: list[str]) -> tuple[str, ...]:
+    """Origins that may frame the pages: MTurk's when any served study recruits there."""
+    platforms = {load_study_config(settings, sid).recruitment.platform for sid in studies}
+    return MTURK_FRAMERS if "mturk" in platforms else ()
 
 
 def docs_urls(settings: Settings) -> dict:

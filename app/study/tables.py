@@ -213,14 +213,7 @@ class SubmissionBody(_Body):
 class ConsentCreate(SubmissionBody):
     """POST .../consent."""
 
-    agree: bool
-
-    @field_validator("agree")
-    @classmethod
-    def _must_agree(cls, value: bool) -> bool:
-        if not value:
-            raise ValueError("consent is required to take part")
-        return value
+    agree: Literal[True]  # consent is required to take part
 
 
 Point = tuple[float, float]

@@ -264,3 +264,15 @@ def test_schema_declares_the_error_statuses_and_bodies():
     assert body == {"400": "ErrorDetail", "404": "ErrorDetail", "409": "ErrorDetail",
                     "413": "ErrorDetail", "422": "ValidationProblem"}
     assert "HTTPValidationError" not in spec["components"]["schemas"]
+
+
+def test_an_mturk_study_may_be_framed_by_mturk_only():
+    from app.study.headers import MTURK_FRAMERS, SecurityHeaders
+
+    framed = dict(SecurityHeaders(None, framed_by=MTURK_FRAMERS).app_headers)
+    policy = framed[b"content-security-policy"].decode()
+    assert "frame-ancestors 'self' https://worker.mturk.com" in policy
+    assert b"x-frame-options" not in framed  # it cannot name MTurk; the CSP directive does
+    closed = dict(SecurityHeaders(None).app_headers)
+    assert "frame-ancestors 'none'" in closed[b"content-security-policy"].decode()
+    assert closed[b"x-frame-options"] == b"DENY"

@@ -27,8 +27,7 @@ MAX_EXAMPLES = int(os.environ.get("SCHEMATHESIS_MAX_EXAMPLES", "15"))
 MIN_CASES = int(os.environ.get("SCHEMATHESIS_MIN_CASES", "100"))
 # A session write valid per the schema may still break a study rule the schema does not
 # state (422): clicks outside the scene or out of reach, answers to other questions,
-# telemetry past its cap, a submission_id reused for another request, and consent with
-# agree: false (tables.ConsentCreate.agree is a bool, not const true); or exceed 64 KiB.
+# telemetry past its cap, a submission_id reused for another request; or exceed 64 KiB.
 STUDY_RULES = ["2xx", "3xx", "401", "403", "404", "409", "413", "422"]
 # schemathesis' list of statuses that reject invalid data, plus 413: a body over 64 KiB
 REJECTIONS = ["400", "401", "403", "404", "405", "406", "409", "413", "415", "422", "428",
