@@ -287,7 +287,7 @@ def serve(
 
     import uvicorn
 
-    from app.study.db import create_tables, make_engine
+    from app.study.db import SchemaOutdated, create_tables, make_engine
     from app.study.main import STUDY_ENV
 
     settings = server_settings(host, workers)
@@ -304,8 +304,12 @@ def serve(
             fail(f"{study_id}: missing {', '.join(map(str, missing))}; run "
                  f"`tomstudy serve --prepare` (or simulate, train and build-trials)")
     engine = make_engine(settings.resolved_database_url())
-    create_tables(engine)  # once, before workers race to create them
-    engine.dispose()
+    try:
+        create_tables(engine)  # once, before workers race to create them
+    except SchemaOutdated as err:
+        fail(str(err))
+    finally:
+        engine.dispose()
     os.environ[STUDY_ENV] = study
     docs = "off in production" if settings.production else "/docs"
     typer.echo(f"serving http://{host}:{port}/s/{study.split(',')[0]}  "

@@ -3,7 +3,7 @@
 from collections.abc import Iterator
 from pathlib import Path
 
-from sqlalchemy import event
+from sqlalchemy import event, inspect
 from sqlalchemy.engine import URL, Engine, make_url
 from sqlmodel import Session, SQLModel, create_engine
 
@@ -58,9 +58,31 @@ def _sqlite_pragmas(dbapi_connection, _record) -> None:
     cursor.close()
 
 
+class SchemaOutdated(RuntimeError):
+    """The database was made by an older tomstudy: its tables lack columns this one writes."""
+
+
 def create_tables(engine: Engine) -> None:
-    """Create missing tables (idempotent; safe when several workers start together)."""
+    """Create missing tables (idempotent; safe when several workers start together), then
+    refuse a database whose existing tables lack columns (SchemaOutdated)."""
     SQLModel.metadata.create_all(engine, checkfirst=True)
+    missing = missing_columns(engine)
+    if missing:
+        where = engine.url.render_as_string(hide_password=True)
+        raise SchemaOutdated(
+            f"DATABASE_URL: the database at {where} was made by an older tomstudy "
+            f"(missing: {', '.join(missing)}); export its data with the version that made "
+            "it, then serve this version on a new database")
+
+
+def missing_columns(engine: Engine) -> list[str]:
+    """`table.column` of every column the models declare but the database lacks."""
+    inspector = inspect(engine)
+    missing = []
+    for table in SQLModel.metadata.sorted_tables:
+        present = {c["name"] for c in inspector.get_columns(table.name)}
+        missing += [f"{table.name}.{c.name}" for c in table.columns if c.name not in present]
+    return missing
 
 
 def session_scope(engine: Engine) -> Iterator[Session]:

@@ -276,3 +276,17 @@ def test_an_mturk_study_may_be_framed_by_mturk_only():
     closed = dict(SecurityHeaders(None).app_headers)
     assert "frame-ancestors 'none'" in closed[b"content-security-policy"].decode()
     assert closed[b"x-frame-options"] == b"DENY"
+
+
+def test_a_database_of_an_older_schema_is_refused_with_what_to_do(small_study, tmp_path):
+    import sqlite3
+
+    db = tmp_path / "old.db"
+    with sqlite3.connect(db) as conn:  # the participant table before issue 10
+        conn.execute("CREATE TABLE participant (id INTEGER PRIMARY KEY, study_id VARCHAR)")
+    run = subprocess.run([str(Path(sys.executable).parent / "tomstudy"), "serve", "--port", "1",
+                          "--study", small_study.study_id],
+                         env=small_study.env(f"sqlite:///{db}"), capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert "older tomstudy" in run.stderr and "participant.public_id" in run.stderr
