@@ -17,12 +17,12 @@ from itertools import permutations
 
 import numpy as np
 from sqlalchemy import case, func, select, text, update
-from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.engine import Engine
 from sqlmodel import Session
 
 from app.study.config import StudyConfig
 from app.study.context import StudyContext
+from app.study.db import insert_skipping_duplicates
 from app.study.tables import BalanceCount, Participant, TrialResponse, utcnow
 
 ORDER = "order:"
@@ -52,8 +52,7 @@ def ensure_rows(engine: Engine, ctx: StudyContext) -> None:
     keys += [TRIAL + t.trial_id for w in ctx.bank.data.worlds.values() for t in w.trials]
     rows = [{"study_id": ctx.study_id, "key": k, "count": 0} for k in keys]
     with engine.begin() as conn:
-        module = postgresql if conn.dialect.name == "postgresql" else sqlite
-        conn.execute(module.insert(BalanceCount.__table__).on_conflict_do_nothing(), rows)
+        conn.execute(insert_skipping_duplicates(conn, BalanceCount.__table__), rows)
 
 
 def lock_study(db: Session, study_id: str) -> None:
@@ -98,8 +97,10 @@ def _set_counted(db: Session, participant: Participant, counted: bool) -> bool:
                        .where(Participant.id == participant.id,
                               Participant.counted.is_(not counted))
                        .values(counted=counted))
-    participant.counted = counted if moved.rowcount == 1 else participant.counted
-    return moved.rowcount == 1
+    flipped = moved.rowcount == 1
+    if flipped:
+        participant.counted = counted
+    return flipped
 
 
 def hold(db: Session, participant: Participant) -> None:

@@ -3,8 +3,9 @@
 from collections.abc import Iterator
 from pathlib import Path
 
-from sqlalchemy import event, inspect
-from sqlalchemy.engine import URL, Engine, make_url
+from sqlalchemy import Table, event, inspect
+from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy.engine import URL, Connection, Engine, make_url
 from sqlmodel import Session, SQLModel, create_engine
 
 from app.study import tables  # noqa: F401  (registers the tables on SQLModel.metadata)
@@ -56,6 +57,12 @@ def _sqlite_pragmas(dbapi_connection, _record) -> None:
     cursor.execute("PRAGMA foreign_keys=ON")
     cursor.execute("PRAGMA busy_timeout=30000")
     cursor.close()
+
+
+def insert_skipping_duplicates(conn: Connection, table: Table):
+    """An INSERT that skips rows whose unique key is already stored (SQLite, PostgreSQL)."""
+    dialect = postgresql if conn.dialect.name == "postgresql" else sqlite
+    return dialect.insert(table).on_conflict_do_nothing()
 
 
 class SchemaOutdated(RuntimeError):

@@ -27,7 +27,7 @@ def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
     """A new participant with a balanced plan, or (resumed=True) their live session."""
     who = identify(ctx.config, body, ctx.preview_key)
     try:
-        resumed = _start_locked(db, ctx, body, who, rng or np.random.default_rng())
+        return _start_locked(db, ctx, body, who, rng or np.random.default_rng())
     except IntegrityError:  # the same external id started in another process at once
         db.rollback()
         existing = live_participant(db, ctx.study_id, who.external_id)
@@ -39,7 +39,6 @@ def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
     except BaseException:
         db.rollback()
         raise
-    return resumed
 
 
 def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Identity,

@@ -35,7 +35,7 @@ def step_payload(ctx: StudyContext, participant: Participant, step: dict) -> dic
             "redirect_url": redirect_url(cfg, participant)}
 
 
-def step_fields(ctx: StudyContext, step: dict) -> dict:
+def step_fields(step: dict) -> dict:
     """The parts of a trial payload that depend on the participant's plan.
 
     The browser gets the step's random `ref` as `trial_id` and no attention-check flag:
@@ -65,7 +65,7 @@ def state_json(ctx: StudyContext, participant: Participant) -> str:
     if static is None:
         static = json.dumps(static_trial(ctx, step["trial_id"]))
         ctx.trial_json[step["trial_id"]] = static
-    head = json.dumps({**state, "step": step_fields(ctx, step)})
+    head = json.dumps({**state, "step": step_fields(step)})
     return f"{head[:-2]}, {static[1:]}}}"
 
 

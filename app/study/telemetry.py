@@ -8,15 +8,14 @@ counts rows with COUNT(*).
 """
 
 from sqlalchemy import update
-from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.engine import Connection
 from sqlmodel import Session
 
+from app.study.db import insert_skipping_duplicates
 from app.study.errors import Refused
 from app.study.tables import Event, EventsCreate, Participant, utcnow
 
 MAX_EVENTS_PER_SESSION = 1000  # the browser sends about 3 per trial; 1000 is far above that
-_INSERT_IGNORING_DUPLICATES = {"sqlite": sqlite.insert, "postgresql": postgresql.insert}
 SESSION_COMPLETE = "phase: the session is complete; no more events"
 
 
@@ -45,9 +44,8 @@ def _insert_new_events(conn: Connection, participant: Participant, body: EventsC
                                    "t_client_ms": e.t_client_ms, "data": e.data,
                                    "received_at": now}
             for e in body.events}  # a UUID twice in one batch counts once
-    insert = _INSERT_IGNORING_DUPLICATES[conn.dialect.name]
     # SQLAlchemy drops an INSERT's rowcount when it closes the cursor unless asked to keep it
-    return (insert(Event.__table__).values(list(rows.values())).on_conflict_do_nothing()
+    return (insert_skipping_duplicates(conn, Event.__table__).values(list(rows.values()))
             .execution_options(preserve_rowcount=True))
 
 
