@@ -36,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from app.study.bots import survey_answers  # noqa: E402
 from app.study.trials import BANK_FILE, bank_dir  # noqa: E402
+from benchmarks._rawhttp import RawClient  # noqa: E402
 from tests.conftest import (  # noqa: E402
     REPO,
     SmallStudy,
@@ -57,36 +58,6 @@ def recruitment_params(study_param: str) -> dict:
     """Prolific's URL parameters for one participant (change here for MTurk or a preview)."""
     return {"PROLIFIC_PID": secrets.token_hex(12), "STUDY_ID": study_param,
             "SESSION_ID": secrets.token_hex(16)}
-
-
-class RawClient:
-    """One keep-alive HTTP/1.1 connection; (status, body bytes) out."""
-
-    def __init__(self, port: int) -> None:
-        self.port = port
-        self.reader = self.writer = None
-
-    async def request(self, method: str, path: str, body: dict | None = None):
-        """Send one request and read its whole answer (Content-Length framed)."""
-        if self.writer is None:
-            self.reader, self.writer = await asyncio.open_connection("127.0.0.1", self.port)
-        data = json.dumps(body).encode() if body is not None else b""
-        head = (f"{method} {path} HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
-                f"Content-Length: {len(data)}\r\n\r\n").encode()
-        self.writer.write(head + data)
-        await self.writer.drain()
-        status_line = await self.reader.readline()
-        length = 0
-        while (line := await self.reader.readline()) not in (b"\r\n", b""):
-            name, _, value = line.decode().partition(":")
-            if name.lower() == "content-length":
-                length = int(value)
-        return int(status_line.split()[1]), await self.reader.readexactly(length)
-
-    def close(self) -> None:
-        """Close the connection."""
-        if self.writer is not None:
-            self.writer.close()
 
 
 class SimulatedParticipant:

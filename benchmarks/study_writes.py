@@ -20,37 +20,18 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from benchmarks._rawhttp import RawClient  # noqa: E402
 from tests.conftest import cached_small_study, free_port, start_server  # noqa: E402
 from tests.study.flow import prediction_body, prolific  # noqa: E402
 
 
-class RawClient:
-    """One keep-alive HTTP/1.1 connection; JSON in, (status, JSON) out."""
-
-    def __init__(self, port: int) -> None:
-        self.port = port
-        self.reader = self.writer = None
-
-    async def request(self, method: str, path: str, body: dict | None = None):
-        if self.writer is None:
-            self.reader, self.writer = await asyncio.open_connection("127.0.0.1", self.port)
-        data = json.dumps(body).encode() if body is not None else b""
-        head = (f"{method} {path} HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
-                f"Content-Length: {len(data)}\r\n\r\n").encode()
-        self.writer.write(head + data)
-        await self.writer.drain()
-        status_line = await self.reader.readline()
-        length = 0
-        while (line := await self.reader.readline()) not in (b"\r\n", b""):
-            name, _, value = line.decode().partition(":")
-            if name.lower() == "content-length":
-                length = int(value)
-        payload = await self.reader.readexactly(length)
-        try:
-            return int(status_line.split()[1]), json.loads(payload)
-        except (ValueError, IndexError) as err:
-            raise RuntimeError(f"{method} {path}: bad answer {status_line!r} {payload[:200]!r}"
-                               ) from err
+async def request_json(client: RawClient, method: str, path: str, body: dict | None = None):
+    """One request through `client`; (status, parsed JSON answer)."""
+    status, payload = await client.request(method, path, body)
+    try:
+        return status, json.loads(payload)
+    except ValueError as err:
+        raise RuntimeError(f"{method} {path}: bad answer {status} {payload[:200]!r}") from err
 
 
 async def timed_batch(clients, jobs) -> tuple[float, list[float]]:
@@ -77,11 +58,11 @@ async def run(port: int, study_id: str, participants: int, concurrency: int) -> 
     clients = [RawClient(port) for _ in range(concurrency)]
     tokens = []
     for i in range(participants):
-        _, body = await clients[0].request("POST", "/api/sessions", {
+        _, body = await request_json(clients[0], "POST", "/api/sessions", {
             "study_id": study_id, "recruitment": prolific(f"bench{i}")})
         tokens.append(body["session_token"])
         for step in ("consent", "instructions"):
-            await clients[0].request("POST", f"/api/sessions/{body['session_token']}/{step}",
+            await request_json(clients[0], "POST", f"/api/sessions/{body['session_token']}/{step}",
                                      {"submission_id": _uuid(), "agree": True}
                                      if step == "consent" else {"submission_id": _uuid()})
     gets, posts, states = [], [], {}
@@ -96,7 +77,7 @@ async def run(port: int, study_id: str, participants: int, concurrency: int) -> 
 def get_job(token: str, states: dict):
     """GET the state; remember it for the following POST."""
     async def job(client):
-        status, body = await client.request("GET", f"/api/sessions/{token}/state")
+        status, body = await request_json(client, "GET", f"/api/sessions/{token}/state")
         states[token] = body
         return status, body
     return job
@@ -105,7 +86,8 @@ def get_job(token: str, states: dict):
 def post_job(token: str, states: dict):
     """POST a valid answer to the trial of the last GET."""
     body = prediction_body(states[token]["step"])
-    return lambda client: client.request("POST", f"/api/sessions/{token}/predictions", body)
+    return lambda client: request_json(client, "POST", f"/api/sessions/{token}/predictions",
+                                       body)
 
 
 def _uuid() -> str:
