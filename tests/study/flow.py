@@ -144,6 +144,14 @@ class Participant:
         return r.json()
 
 
+def at_first_trial(client, study_id: str, **recruitment) -> Participant:
+    """A participant past consent and instructions, at the practice trial."""
+    p = Participant(client, study_id)
+    p.start(**recruitment)
+    p.pass_intro()
+    return p
+
+
 def _one(trial: dict, i: int) -> dict:
     return dict(trial, start_states=[trial["start_states"][i]])
 

@@ -9,7 +9,15 @@ import pytest
 
 from app.configio import load_yaml_model
 from app.study.config import StudyConfig
-from tests.study.flow import ADMIN, Participant, hex24, new_id, prediction_body, prolific
+from tests.study.flow import (
+    ADMIN,
+    Participant,
+    at_first_trial,
+    hex24,
+    new_id,
+    prediction_body,
+    prolific,
+)
 
 
 @pytest.fixture(scope="module")
@@ -17,14 +25,6 @@ def per_trial(small_study) -> tuple[int, int]:
     """(start states, steps to predict) per trial, as the small study's config sets them."""
     cfg = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml", StudyConfig)
     return cfg.start_states, cfg.steps_to_predict
-
-
-def at_first_trial(client, study_id: str, **recruitment) -> Participant:
-    """A participant past consent and instructions, at the practice trial."""
-    p = Participant(client, study_id)
-    p.start(**recruitment)
-    p.pass_intro()
-    return p
 
 
 def test_whole_session_stores_every_prediction_beside_the_models(client, small_study, bank,

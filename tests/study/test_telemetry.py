@@ -13,8 +13,7 @@ from app.study.sessions import participant_by_token
 from app.study.tables import EVENT_DATA, Event, EventsCreate
 from app.study.tables import Participant as ParticipantRow
 from tests.conftest import REPO
-from tests.study.flow import Participant, new_id
-from tests.study.test_api import at_first_trial
+from tests.study.flow import Participant, at_first_trial, new_id
 
 CAP = telemetry.MAX_EVENTS_PER_SESSION
 
