@@ -1,5 +1,7 @@
 """The typed study definition (study_configs/<study>.yaml): text, design, recruitment, models."""
 
+import hashlib
+import json
 from functools import lru_cache
 from pathlib import Path
 from typing import Literal
@@ -57,6 +59,40 @@ class SurveyQuestion(StrictModel):
     max_chars: int = Field(default=2000, ge=1)
 
 
+class Ending(StrictModel):
+    """One way a session ends: the code the participant is given and what the page says.
+
+    On Prolific each code is a completion code of the study with its own action (approve
+    and pay, manual review, request a return, screen-out payment); '' means no code and no
+    redirect, only the message.
+    """
+
+    completion_code: str = Field(default="", max_length=64, pattern=r"^[A-Za-z0-9_-]*$")
+    message: str = ""
+
+
+class Endings(StrictModel):
+    """The endings besides `completed` (whose code is `recruitment.completion_code`).
+
+    `failed_checks` is the completed study with at least `min_failed` failed attention
+    checks: Prolific lets a researcher reject only after two failed checks (in a study of
+    five minutes or more), so these sessions are marked for manual review, not rejected;
+    its code '' means the completed code. Declined consent and device screen-outs end
+    before any trial.
+    """
+
+    failed_checks: Ending = Ending(message="Thank you. Your submission will be reviewed "
+                                           "by the researchers.")
+    min_failed: int = Field(default=2, ge=1)
+    declined_consent: Ending = Ending(message="You chose not to take part. Please return "
+                                              "the study on the recruiting platform so "
+                                              "that your place goes to someone else.")
+    screened_out: Ending = Ending(message="This study needs a laptop or desktop computer "
+                                          "with a mouse or touchpad. Please return the "
+                                          "study on the recruiting platform.")
+
+
+MTURK_SUBMIT_HOSTS = ("https://www.mturk.com", "https://workersandbox.mturk.com")
 Platform = Literal["prolific", "mturk", "open"]
 _REDIRECT_FIELDS = ("prolific_redirect_url", "mturk_redirect_url", "open_redirect_url")
 
@@ -77,12 +113,28 @@ class Recruitment(StrictModel):
     prolific_redirect_url: str = "https://app.prolific.com/submissions/complete?cc={completion_code}"
     mturk_redirect_url: str = ""
     open_redirect_url: str = ""
+    # where an MTurk completion may post its form (turkSubmitTo must be one of these)
+    mturk_submit_hosts: list[str] = list(MTURK_SUBMIT_HOSTS)
+    endings: Endings = Endings()
 
     @model_validator(mode="after")
     def _redirects_render(self) -> "Recruitment":
         for name in _REDIRECT_FIELDS:
             check_redirect_template(name, getattr(self, name), self.completion_code)
+        for host in self.mturk_submit_hosts:
+            if not host.startswith(("https://", "http://127.0.0.1:")) or host.count("/") != 2:
+                raise ValueError("mturk_submit_hosts: each must be an origin such as "
+                                 f"https://www.mturk.com (http only on 127.0.0.1), got {host!r}")
         return self
+
+    def ending(self, outcome: str) -> Ending:
+        """The code and message of `outcome` (one of tables.OUTCOMES)."""
+        if outcome == "completed":
+            return Ending(completion_code=self.completion_code)
+        chosen = getattr(self.endings, outcome)
+        if outcome == "failed_checks" and not chosen.completion_code:
+            return chosen.model_copy(update={"completion_code": self.completion_code})
+        return chosen
 
 
 def check_redirect_template(name: str, template: str, completion_code: str) -> str:
@@ -115,6 +167,7 @@ class StudyConfig(StrictModel):
     """Everything that defines one online study."""
 
     title: str
+    description: str = ""  # what the MTurk HIT preview shows (default: the title only)
     consent_text: str
     instructions_text: str
     worlds: list[WorldName] = Field(min_length=1)
@@ -151,6 +204,12 @@ class StudyConfig(StrictModel):
         if len(set(keys)) != len(keys):
             raise ValueError("survey: question keys must be unique")
         return self
+
+
+def config_sha256(config: StudyConfig) -> str:
+    """SHA-256 of the validated config as canonical JSON: comments and key order do not count."""
+    text = json.dumps(config.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def study_config_path(settings: Settings, study_id: str) -> Path:

@@ -15,6 +15,7 @@ class StudyContext:
     config: StudyConfig
     bank: TrialBank
     predictor: Predictor
+    config_sha256: str = ""  # of the validated config (config.config_sha256)
     preview_key: str = field(default="", repr=False)  # opens pilot sessions (recruitment.py)
     trust_client_clock: bool = False  # pilots with bots only; never in production
     # trial id -> the trial's static browser JSON, encoded once (see app/study/state.py)

@@ -18,7 +18,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from app.settings import DEFAULT_ADMIN_TOKEN, REPO_ROOT, Settings, get_settings
 from app.study import health
 from app.study.balance import ensure_rows
-from app.study.config import load_study_config
+from app.study.config import config_sha256, load_study_config
 from app.study.context import StudyContext
 from app.study.db import create_tables, make_engine
 from app.study.errors import Refused
@@ -70,7 +70,7 @@ def load_study(settings: Settings, study_id: str) -> StudyContext:
     config = load_study_config(settings, study_id)
     bank = TrialBank.load(settings.data_dir, study_id)
     return StudyContext(study_id, config, bank, Predictor(config, bank, settings.data_dir),
-                        preview_key=preview_key(settings.admin_token, study_id),
+                        config_sha256=config_sha256(config), preview_key=preview_key(settings.admin_token, study_id),
                         trust_client_clock=settings.trust_client_clock)
 
 

@@ -15,6 +15,7 @@ from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 from sqlmodel import Session
 
+from app import __version__
 from app.study import balance
 from app.study.context import StudyContext
 from app.study.errors import Refused
@@ -56,7 +57,8 @@ def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Iden
         study_id=ctx.study_id, recruitment=who.recruitment, external_id=who.external_id,
         attempt_key=who.attempt_key, pilot=who.pilot, public_id=secrets.token_hex(8),
         session_token=secrets.token_urlsafe(24), recruitment_params=who.params,
-        client=body.client.model_dump(), world_order=",".join(order), plan=plan)
+        client=body.client.model_dump(), world_order=",".join(order), plan=plan,
+        config_sha256=ctx.config_sha256, bank_sha256=ctx.bank.sha256, app_version=__version__)
     db.add(participant)
     db.flush()
     if not who.pilot:

@@ -66,6 +66,19 @@ class Participant(ParticipantBase, table=True):
     updated_at: datetime = Field(default_factory=utcnow)
     completed_at: datetime | None = None
     events_stored: int = 0  # telemetry rows; app/study/telemetry.py keeps it under its cap
+    # the ending's receipt, stored before the browser is told where to go (OUTCOMES)
+    outcome: str | None = Field(default=None, max_length=20)
+    completion_code: str | None = Field(default=None, max_length=64)
+    ended_at: datetime | None = None
+    # what this session ran: the study config, the trial bank (which pins both models'
+    # answers) and the tomstudy version, so a changed study is visible per session
+    config_sha256: str = Field(default="", max_length=64)
+    bank_sha256: str = Field(default="", max_length=64)
+    app_version: str = Field(default="", max_length=32)
+
+
+# How a session ends; each has its own completion code (config.Endings).
+OUTCOMES = ("completed", "failed_checks", "declined_consent", "screened_out")
 
 
 class ParticipantPublic(SQLModel):
@@ -119,6 +132,8 @@ class TrialResponse(SQLModel, table=True):
     server_duration_ms: float  # from the server's receipt of the previous step
     replays: int
     clip_sha256: str = Field(max_length=64)
+    # the participant's undo and reset presses on this trial, in order (HistoryEntry)
+    history: list = Field(default_factory=list, sa_column=Column(JSON))
     received_at: datetime = Field(default_factory=utcnow)
 
 
@@ -167,6 +182,18 @@ class Event(SQLModel, table=True):
     received_at: datetime = Field(default_factory=utcnow)
 
 
+class WithdrawalAudit(SQLModel, table=True):
+    """What a withdrawal deleted: a salted hash of the external id, never the id itself."""
+
+    id: int | None = Field(default=None, primary_key=True)
+    study_id: str = Field(index=True, max_length=64)
+    salt: str = Field(max_length=32)
+    id_sha256: str = Field(max_length=64)  # sha256(salt + ":" + external id)
+    withdrawn_at: datetime = Field(default_factory=utcnow)
+    via: str = Field(max_length=16)  # cli or api
+    row_counts: dict = Field(default_factory=dict, sa_column=Column(JSON))
+
+
 # ---------------------------------------------------------------- request bodies
 
 class _Body(SQLModel):
@@ -184,6 +211,7 @@ class UrlParams(_Body):
     workerId: str | None = PydField(default=None, max_length=128)
     assignmentId: str | None = PydField(default=None, max_length=128)
     hitId: str | None = PydField(default=None, max_length=128)
+    turkSubmitTo: str | None = PydField(default=None, max_length=256)
 
 
 class ClientInfo(_Body):
@@ -219,6 +247,14 @@ class ConsentCreate(SubmissionBody):
 Point = tuple[float, float]
 
 
+class HistoryEntry(_Body):
+    """One undo or reset press: which start state, and when (ms after the trial was shown)."""
+
+    action: Literal["undo", "reset"]
+    start_index: int = PydField(ge=0, le=100)
+    t_ms: float = PydField(ge=0, le=6 * 3600 * 1000)
+
+
 class PredictionCreate(SubmissionBody):
     """POST .../predictions: per start state (the study's `start_states`), the clicked robot
     positions of each step to predict (scene metres)."""
@@ -229,6 +265,17 @@ class PredictionCreate(SubmissionBody):
     shown_at_ms: float = PydField(ge=0)
     submitted_at_ms: float = PydField(ge=0)
     replays: int = PydField(default=0, ge=0, le=10_000)
+    history: list[HistoryEntry] = PydField(default=[], max_length=500)
+
+
+class DeclineCreate(SubmissionBody):
+    """POST .../decline: the participant does not agree to take part."""
+
+
+class ScreenOutCreate(SubmissionBody):
+    """POST .../screen-out: the device check failed and the participant cannot switch."""
+
+    reason: Literal["touch_only", "window_too_small"]
 
 
 class SurveyCreate(SubmissionBody):
