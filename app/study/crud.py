@@ -12,7 +12,7 @@ from collections.abc import Callable
 from contextlib import contextmanager
 
 import numpy as np
-from sqlalchemy import select, update
+from sqlalchemy import delete, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlmodel import Session
 
@@ -23,9 +23,12 @@ from app.study.errors import Refused
 from app.study.sessions import as_utc
 from app.study.tables import (
     ConsentCreate,
+    DeclineCreate,
+    Event,
     Participant,
     PredictionCreate,
     PredictionRow,
+    ScreenOutCreate,
     Submission,
     SubmissionBody,
     SurveyCreate,
@@ -35,6 +38,8 @@ from app.study.tables import (
 from app.study.trials import TrialRecord
 
 TRIAL_PHASES = ("practice", "trial")
+BEFORE_TRIALS = ("consent", "instructions")
+FINISHED = ("completed", "failed_checks")  # outcomes of a session that did every trial
 MAX_TRIAL_MS = 6 * 3600 * 1000  # a trial "shown" longer than this is a broken clock
 
 
@@ -78,17 +83,21 @@ def expect_phase(participant: Participant, *phases: str) -> dict:
 
 def advance(db: Session, participant: Participant, body: SubmissionBody, kind: str,
             payload: dict, extra_inserts: list[tuple[object, list[dict]]] = (),
-            completes: bool = False,
+            ending: dict | None = None,
             before_commit: Callable[[], None] | None = None) -> bool:
     """Store the submission and its rows and move one step on, in one transaction.
 
+    With `ending` (ending_values) the session jumps to its done step and the ending's
+    receipt is stored in the same commit, before the browser is told where to go.
     Returns False when a concurrent retry of the same UUID won the race (nothing stored).
     """
     expected = participant.position
     now = utcnow()
     values = {"position": expected + 1, "updated_at": now}
-    if completes:
-        values.update(completed=True, completed_at=now)
+    if ending is not None:
+        values.update(ending, position=len(participant.plan) - 1, ended_at=now)
+        if ending["completed"]:
+            values["completed_at"] = now
     if payload.get("attention_ok") is False:
         values["attention_failed"] = Participant.attention_failed + 1
     conn = db.connection()
@@ -117,6 +126,19 @@ def advance(db: Session, participant: Participant, body: SubmissionBody, kind: s
         db.rollback()
         raise
     return True
+
+
+def ending_values(config: StudyConfig, outcome: str) -> dict:
+    """The Participant columns an ending sets: outcome, its completion code, completed."""
+    return {"outcome": outcome, "completion_code": config.recruitment.ending(outcome)
+            .completion_code, "completed": outcome in FINISHED}
+
+
+def finished_outcome(config: StudyConfig, participant: Participant) -> str:
+    """completed, or failed_checks once `endings.min_failed` attention checks failed."""
+    if participant.attention_failed >= config.recruitment.endings.min_failed:
+        return "failed_checks"
+    return "completed"
 
 
 def _mirror(participant: Participant, values: dict) -> None:
@@ -148,9 +170,39 @@ def record_survey(db: Session, ctx: StudyContext, participant: Participant,
     with replay_if_stored(db, participant, body, "survey") as fresh:
         expect_phase(participant, "survey")
         answers = validate_survey(ctx.config, body.answers)
+        ending = ending_values(ctx.config, finished_outcome(ctx.config, participant))
         fresh.stored = advance(
-            db, participant, body, "survey", {"answers": answers}, completes=True,
+            db, participant, body, "survey", {"answers": answers}, ending=ending,
             before_commit=lambda: balance.settle_completion(db, ctx, participant))
+
+
+def record_decline(db: Session, ctx: StudyContext, participant: Participant,
+                   body: DeclineCreate) -> None:
+    """The participant does not consent: the session ends and keeps only its receipt."""
+    with replay_if_stored(db, participant, body, "decline") as fresh:
+        expect_phase(participant, "consent")
+        fresh.stored = advance(db, participant, body, "decline", {},
+                               ending=ending_values(ctx.config, "declined_consent"),
+                               before_commit=lambda: _forget(db, participant))
+
+
+def record_screen_out(db: Session, ctx: StudyContext, participant: Participant,
+                      body: ScreenOutCreate) -> None:
+    """The device check failed before any trial: the session ends with that outcome."""
+    with replay_if_stored(db, participant, body, "screen_out") as fresh:
+        expect_phase(participant, *BEFORE_TRIALS)
+        fresh.stored = advance(db, participant, body, "screen_out", {"reason": body.reason},
+                               ending=ending_values(ctx.config, "screened_out"),
+                               before_commit=lambda: _forget(db, participant))
+
+
+def _forget(db: Session, participant: Participant) -> None:
+    """Keep nothing of a session that ends before taking part but its receipt."""
+    db.execute(delete(Event.__table__).where(Event.participant_id == participant.id))
+    db.execute(update(Participant.__table__).where(Participant.id == participant.id)
+               .values(client={}, events_stored=0))
+    participant.client, participant.events_stored = {}, 0
+    balance.release(db, participant)
 
 
 class _Outcome:
@@ -242,6 +294,7 @@ def _store_predictions(db: Session, ctx: StudyContext, participant: Participant,
         "attention_ok": attention_ok, "shown_at_ms": body.shown_at_ms,
         "submitted_at_ms": body.submitted_at_ms, "replays": body.replays,
         "clip_sha256": trial.clip_sha256, "received_at": utcnow(),
+        "history": [entry.model_dump() for entry in body.history],
         **trial_durations(ctx, participant, body),
     }
     payload = {"trial_id": trial.trial_id, "attention_ok": attention_ok}
@@ -270,6 +323,7 @@ def validate_points(ctx: StudyContext, trial: TrialRecord, body: PredictionCreat
     _check_counts("points", body.points, k, n)
     _check_counts("click_times_ms", body.click_times_ms, k, n)
     check_times(body)
+    check_history(body, k)
     points = np.asarray(body.points, dtype=np.float64)
     bounds = world.scene["bounds"]
     for i, j in np.argwhere(~_inside(points, bounds)):
@@ -302,6 +356,20 @@ def check_times(body: PredictionCreate) -> None:
             if not 0 <= t <= span:
                 raise Refused(422, f"click_times_ms.{i}.{j}: {t:g} ms is outside the trial "
                                    f"(0 to submitted_at_ms - shown_at_ms = {span:g} ms)")
+
+
+def check_history(body: PredictionCreate, k: int) -> None:
+    """Undo/reset presses name one of the `k` start states, in time order, inside the trial."""
+    span = body.submitted_at_ms - body.shown_at_ms
+    last = 0.0
+    for i, entry in enumerate(body.history):
+        if entry.start_index >= k:
+            raise Refused(422, f"history.{i}.start_index: {entry.start_index} is not one of "
+                               f"the {k} start states")
+        if not last <= entry.t_ms <= span:
+            raise Refused(422, f"history.{i}.t_ms: {entry.t_ms:g} ms is out of order or "
+                               f"outside the trial (0 to {span:g} ms)")
+        last = entry.t_ms
 
 
 def _check_counts(field: str, values: list, k: int, n: int) -> None:

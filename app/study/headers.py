@@ -45,10 +45,14 @@ def policy_header(policy: dict[str, str]) -> str:
     return "; ".join(f"{directive} {sources}" for directive, sources in policy.items())
 
 
-def encoded_headers(policy: dict[str, str],
-                    framed_by: tuple[str, ...] = ()) -> list[tuple[bytes, bytes]]:
+def encoded_headers(policy: dict[str, str], framed_by: tuple[str, ...] = (),
+                    form_targets: tuple[str, ...] = ()) -> list[tuple[bytes, bytes]]:
     """The raw ASGI headers for one policy plus the fixed ones; `framed_by` origins may
-    show the pages in a frame (X-Frame-Options cannot name them, so it is left out)."""
+    show the pages in a frame (X-Frame-Options cannot name them, so it is left out), and
+    forms may also post to `form_targets` (a study's configured MTurk submit hosts)."""
+    extra_targets = [t for t in form_targets if t not in RECRUITMENT_FORM_TARGETS]
+    if extra_targets:
+        policy = policy | {"form-action": " ".join((policy["form-action"], *extra_targets))}
     headers = OTHER_HEADERS | {"content-security-policy": policy_header(policy)}
     if framed_by:
         framed = policy | {"frame-ancestors": " ".join(("'self'", *framed_by))}
@@ -61,14 +65,15 @@ class SecurityHeaders:
     """Add CSP, nosniff, Referrer-Policy, frame and opener headers to every HTTP response.
 
     A header the app already set is kept; `docs_paths` get DOCS_POLICY; `framed_by`
-    origins (MTurk's, when an MTurk study is served) may frame the pages.
+    origins (MTurk's, when an MTurk study is served) may frame the pages, and forms may
+    post to `form_targets`.
     """
 
     def __init__(self, app: ASGIApp, docs_paths: tuple[str, ...] = (),
-                 framed_by: tuple[str, ...] = ()) -> None:
+                 framed_by: tuple[str, ...] = (), form_targets: tuple[str, ...] = ()) -> None:
         self.app = app
         self.docs_paths = frozenset(docs_paths)
-        self.app_headers = encoded_headers(APP_POLICY, framed_by)
+        self.app_headers = encoded_headers(APP_POLICY, framed_by, form_targets)
         self.docs_headers = encoded_headers(DOCS_POLICY)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:

@@ -18,7 +18,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from app.settings import DEFAULT_ADMIN_TOKEN, REPO_ROOT, Settings, get_settings
 from app.study import health
 from app.study.balance import ensure_rows
-from app.study.config import config_sha256, load_study_config
+from app.study.config import StudyConfig, config_sha256, load_study_config
 from app.study.context import StudyContext
 from app.study.db import create_tables, make_engine
 from app.study.errors import Refused
@@ -70,7 +70,8 @@ def load_study(settings: Settings, study_id: str) -> StudyContext:
     config = load_study_config(settings, study_id)
     bank = TrialBank.load(settings.data_dir, study_id)
     return StudyContext(study_id, config, bank, Predictor(config, bank, settings.data_dir),
-                        config_sha256=config_sha256(config), preview_key=preview_key(settings.admin_token, study_id),
+                        config_sha256=config_sha256(config),
+                        preview_key=preview_key(settings.admin_token, study_id),
                         trust_client_clock=settings.trust_client_clock)
 
 
@@ -101,15 +102,23 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     add_error_handlers(app)
     declare_error_responses(app)
     app.add_middleware(BodyLimit, max_bytes=MAX_BODY_BYTES)
+    configs = [load_study_config(settings, sid) for sid in studies]
     app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app),  # outermost: 413s too
-                       framed_by=framing_origins(settings, studies))
+                       framed_by=framing_origins(configs), form_targets=form_targets(configs))
     return app
 
 
-def framing_origins(settings: Settings, studies: list[str]) -> tuple[str, ...]:
+def framing_origins(configs: list[StudyConfig]) -> tuple[str, ...]:
     """Origins that may frame the pages: MTurk's when any served study recruits there."""
-    platforms = {load_study_config(settings, sid).recruitment.platform for sid in studies}
+    platforms = {config.recruitment.platform for config in configs}
     return MTURK_FRAMERS if "mturk" in platforms else ()
+
+
+def form_targets(configs: list[StudyConfig]) -> tuple[str, ...]:
+    """Where a page may post a form: the MTurk submit hosts of the served MTurk studies."""
+    hosts = {host for config in configs if config.recruitment.platform == "mturk"
+             for host in config.recruitment.mturk_submit_hosts}
+    return tuple(sorted(hosts))
 
 
 def docs_urls(settings: Settings) -> dict:

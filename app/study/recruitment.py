@@ -18,6 +18,7 @@ from app.study.tables import SessionCreate, UrlParams
 PROLIFIC_ID = re.compile(r"[0-9a-fA-F]{24}")  # Prolific participant and study ids
 PLATFORM_ID = re.compile(r"[A-Za-z0-9_-]{1,64}")
 MTURK_PREVIEW = "ASSIGNMENT_ID_NOT_AVAILABLE"
+MTURK_SUBMIT_PATH = "/mturk/externalSubmit"
 ATTEMPT_KEYS = {"prolific": "SESSION_ID", "mturk": "assignmentId"}
 _HOW = {"prolific": "open the study from your Prolific study page",
         "mturk": "open the study from the HIT on MTurk"}
@@ -62,7 +63,7 @@ def identify(config: StudyConfig, body: SessionCreate, key: str) -> Identity:
     params = body.recruitment
     if platform == "prolific":
         return _prolific(config, params)
-    return _mturk(params)
+    return _mturk(config, params)
 
 
 def _prolific(config: StudyConfig, params: UrlParams) -> Identity:
@@ -77,14 +78,25 @@ def _prolific(config: StudyConfig, params: UrlParams) -> Identity:
                     params.model_dump(include={"PROLIFIC_PID", "STUDY_ID", "SESSION_ID"}))
 
 
-def _mturk(params: UrlParams) -> Identity:
+def _mturk(config: StudyConfig, params: UrlParams) -> Identity:
     if params.assignmentId == MTURK_PREVIEW:
         raise Refused(403, "recruitment.assignmentId: this is the HIT preview; accept the HIT "
                            "to start the study")
     for name in ("workerId", "assignmentId", "hitId"):
         _require("mturk", params, name, PLATFORM_ID, "1-64 letters, digits, - or _")
-    return Identity("mturk", params.workerId, params.assignmentId,
-                    params.model_dump(include={"workerId", "assignmentId", "hitId"}))
+    kept = params.model_dump(include={"workerId", "assignmentId", "hitId"})
+    if params.turkSubmitTo is not None:
+        kept["turkSubmitTo"] = _submit_host(config, params.turkSubmitTo)
+    return Identity("mturk", params.workerId, params.assignmentId, kept)
+
+
+def _submit_host(config: StudyConfig, submit_to: str) -> str:
+    """turkSubmitTo if it is one of the study's MTurk hosts (the hand-in form posts there)."""
+    host = submit_to.rstrip("/")
+    if host not in config.recruitment.mturk_submit_hosts:
+        raise Refused(403, "recruitment.turkSubmitTo: not an MTurk submit host of this study; "
+                           f"{_HOW['mturk']}")
+    return host
 
 
 def _require(platform: str, params: UrlParams, name: str, pattern: re.Pattern,

@@ -83,6 +83,8 @@ def _resumable(existing: Participant, who: Identity, ctx: StudyContext) -> bool:
         raise Refused(409, "recruitment: this participant has already completed the study")
     if existing.attempt_key == who.attempt_key:
         return True
+    if has_ended(existing):  # declined or screened out: the same link shows that ending
+        raise Refused(409, "recruitment: this participant has already ended the study")
     if _is_stale(existing, ctx):
         return False
     key = ATTEMPT_KEYS[who.recruitment]
@@ -116,9 +118,14 @@ def participant_by_token(db: Session, token: str) -> Participant:
     return participant
 
 
+def has_ended(participant: Participant) -> bool:
+    """Completed, or ended another way (declined consent, screened out)."""
+    return participant.completed or participant.ended_at is not None
+
+
 def is_in_progress(participant: Participant, cutoff: datetime) -> bool:
-    """Unfinished and updated since `cutoff`."""
-    return not participant.completed and as_utc(participant.updated_at) >= cutoff
+    """Not ended and updated since `cutoff`."""
+    return not has_ended(participant) and as_utc(participant.updated_at) >= cutoff
 
 
 # ---------------------------------------------------------------- the plan

@@ -10,6 +10,7 @@ import json
 from app.study.config import StudyConfig
 from app.study.context import StudyContext
 from app.study.crud import TRIAL_PHASES, current_step
+from app.study.recruitment import MTURK_SUBMIT_PATH
 from app.study.tables import Participant
 
 
@@ -31,8 +32,33 @@ def step_payload(ctx: StudyContext, participant: Participant, step: dict) -> dic
                 "world_order": participant.world_order.split(",")}
     if phase == "survey":
         return {"questions": [q.model_dump() for q in cfg.survey]}
-    return {"completion_code": cfg.recruitment.completion_code,
-            "redirect_url": redirect_url(cfg, participant)}
+    return done_payload(cfg, participant)
+
+
+def done_payload(cfg: StudyConfig, participant: Participant) -> dict:
+    """The stored ending: its outcome, code, message, and where the page sends the person.
+
+    An MTurk assignment is handed in by a form posted to MTurk (`mturk_submit`) instead
+    of a redirect.
+    """
+    outcome = participant.outcome or "completed"  # sessions done before endings existed
+    code = participant.completion_code
+    if code is None:
+        code = cfg.recruitment.ending(outcome).completion_code
+    return {"outcome": outcome, "completion_code": code,
+            "message": cfg.recruitment.ending(outcome).message,
+            "redirect_url": redirect_url(cfg, participant.recruitment, code),
+            "mturk_submit": mturk_submit(participant, outcome, code)}
+
+
+def mturk_submit(participant: Participant, outcome: str, code: str) -> dict | None:
+    """The ExternalQuestion hand-in form: action `turkSubmitTo`/mturk/externalSubmit."""
+    params = participant.recruitment_params or {}
+    if participant.recruitment != "mturk" or not params.get("turkSubmitTo"):
+        return None
+    return {"action": f"{params['turkSubmitTo']}{MTURK_SUBMIT_PATH}",
+            "fields": {"assignmentId": params["assignmentId"], "outcome": outcome,
+                       "completion_code": code}}
 
 
 def step_fields(step: dict) -> dict:
@@ -69,9 +95,11 @@ def state_json(ctx: StudyContext, participant: Participant) -> str:
     return f"{head[:-2]}, {static[1:]}}}"
 
 
-def redirect_url(cfg: StudyConfig, participant: Participant) -> str:
+def redirect_url(cfg: StudyConfig, recruitment: str, code: str) -> str:
     """Where the done page sends the participant ('' = show the code only)."""
+    if not code:
+        return ""
     template = {"prolific": cfg.recruitment.prolific_redirect_url,
                 "mturk": cfg.recruitment.mturk_redirect_url}.get(
-        participant.recruitment, cfg.recruitment.open_redirect_url)
-    return template.format(completion_code=cfg.recruitment.completion_code)
+        recruitment, cfg.recruitment.open_redirect_url)
+    return template.format(completion_code=code)

@@ -13,6 +13,7 @@ from sqlmodel import Session
 
 from app.study.db import insert_skipping_duplicates
 from app.study.errors import Refused
+from app.study.sessions import has_ended
 from app.study.tables import Event, EventsCreate, Participant, utcnow
 
 MAX_EVENTS_PER_SESSION = 1000  # the browser sends about 3 per trial; 1000 is far above that
@@ -25,7 +26,7 @@ def record_events(db: Session, participant: Participant, body: EventsCreate) -> 
     Refused with 409 once the session is complete, and whole (422, nothing stored) when it
     would take the session past MAX_EVENTS_PER_SESSION.
     """
-    if participant.completed:
+    if has_ended(participant):
         raise Refused(409, SESSION_COMPLETE)
     conn = db.connection()
     stored = conn.execute(_insert_new_events(conn, participant, body)).rowcount
@@ -56,6 +57,7 @@ def _count_stored(conn: Connection, participant_id: int, n: int) -> bool:
     claimed = conn.execute(
         update(table)
         .where(table.c.id == participant_id, table.c.completed.is_(False),
+               table.c.ended_at.is_(None),
                table.c.events_stored + n <= MAX_EVENTS_PER_SESSION)
         .values(events_stored=table.c.events_stored + n))
     return claimed.rowcount == 1
@@ -65,6 +67,6 @@ def _refusal(db: Session, participant: Participant) -> Refused:
     """Why a batch could not be counted: the session completed meanwhile, or the cap."""
     db.refresh(participant)
     db.commit()
-    if participant.completed:
+    if has_ended(participant):
         return Refused(409, SESSION_COMPLETE)
     return Refused(422, f"events: at most {MAX_EVENTS_PER_SESSION} events per session")

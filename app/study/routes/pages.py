@@ -4,6 +4,7 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 
 from app.study.deps import study_context
+from app.study.recruitment import MTURK_PREVIEW
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
 
@@ -12,6 +13,7 @@ def _render(request: Request, name: str, study_id: str) -> HTMLResponse:
     ctx = study_context(request, study_id)
     return request.app.state.templates.TemplateResponse(
         request, name, {"study_id": study_id, "title": ctx.config.title,
+                        "description": ctx.config.description,
                         "static_url": "/static", "studies": sorted(request.app.state.studies)})
 
 
@@ -23,7 +25,13 @@ def show_index(request: Request) -> HTMLResponse:
 
 @router.get("/s/{study_id}", response_class=HTMLResponse)
 def show_study(study_id: str, request: Request) -> HTMLResponse:
-    """The participant app (one page; recruitment parameters stay in the URL)."""
+    """The participant app (one page; recruitment parameters stay in the URL).
+
+    MTurk's HIT preview (assignmentId=ASSIGNMENT_ID_NOT_AVAILABLE) gets a page that
+    describes the study and loads no script, so no session can start from it.
+    """
+    if request.query_params.get("assignmentId") == MTURK_PREVIEW:
+        return _render(request, "mturk_preview.html", study_id)
     return _render(request, "study.html", study_id)
 
 

@@ -7,9 +7,11 @@ from app.study.deps import ContextDep, ParticipantDep, SessionDep, study_context
 from app.study.state import state_json
 from app.study.tables import (
     ConsentCreate,
+    DeclineCreate,
     EventsCreate,
     ParticipantPublic,
     PredictionCreate,
+    ScreenOutCreate,
     SessionCreate,
     SubmissionBody,
     SurveyCreate,
@@ -54,6 +56,22 @@ async def submit_consent(body: ConsentCreate, participant: ParticipantDep, ctx: 
                          db: SessionDep) -> Response:
     """Record consent; answers the next state."""
     crud.record_consent(db, participant, body)
+    return state_response(ctx, participant)
+
+
+@router.post("/{token}/decline")
+async def submit_decline(body: DeclineCreate, participant: ParticipantDep, ctx: ContextDep,
+                         db: SessionDep) -> Response:
+    """The participant does not agree: the session ends (declined_consent); answers done."""
+    crud.record_decline(db, ctx, participant, body)
+    return state_response(ctx, participant)
+
+
+@router.post("/{token}/screen-out")
+async def submit_screen_out(body: ScreenOutCreate, participant: ParticipantDep,
+                            ctx: ContextDep, db: SessionDep) -> Response:
+    """The device cannot run the study (before any trial): the session ends (screened_out)."""
+    crud.record_screen_out(db, ctx, participant, body)
     return state_response(ctx, participant)
 
 

@@ -93,6 +93,14 @@ export class StudyApi {
     return sendUntilAcknowledged("POST", `${this.base()}/consent`, { submission_id: newUuid(), agree: true }, options);
   }
 
+  decline(options) {
+    return sendUntilAcknowledged("POST", `${this.base()}/decline`, { submission_id: newUuid() }, options);
+  }
+
+  screenOut(reason, options) {
+    return sendUntilAcknowledged("POST", `${this.base()}/screen-out`, { submission_id: newUuid(), reason }, options);
+  }
+
   instructionsDone(options) {
     return sendUntilAcknowledged("POST", `${this.base()}/instructions`, { submission_id: newUuid() }, options);
   }

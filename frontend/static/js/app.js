@@ -6,7 +6,7 @@ import { PredictionInput } from "./predict.js";
 
 const MIN_WIDTH_PX = 900;
 const MIN_HEIGHT_PX = 600;
-const RECRUITMENT_PARAMS = ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID", "workerId", "assignmentId", "hitId"];
+const RECRUITMENT_PARAMS = ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID", "workerId", "assignmentId", "hitId", "turkSubmitTo"];
 const REDIRECT_DELAY_MS = 5000;
 const SCREENS = ["loading", "unsupported", "consent", "instructions", "trial", "survey", "done", "error"];
 
@@ -16,32 +16,19 @@ function show(screen) {
   for (const name of SCREENS) $(`screen-${name}`).hidden = name !== screen;
 }
 
-/** Why this device cannot run the study, or null. */
+/** Why this device cannot run the study ({code, text}: code as POST /screen-out takes it), or null. */
 function unsupportedReason() {
   const touchOnly = matchMedia("(any-pointer: coarse)").matches && !matchMedia("(any-pointer: fine)").matches;
-  if (touchOnly) return "This study needs a mouse or touchpad: touch-only devices are not supported.";
+  if (touchOnly) {
+    return { code: "touch_only", text: "This study needs a mouse or touchpad: touch-only devices are not supported." };
+  }
   if (innerWidth < MIN_WIDTH_PX || innerHeight < MIN_HEIGHT_PX) {
-    return `Your browser window is ${innerWidth} × ${innerHeight} pixels; the study needs at least ${MIN_WIDTH_PX} × ${MIN_HEIGHT_PX}.`;
+    return {
+      code: "window_too_small",
+      text: `Your browser window is ${innerWidth} × ${innerHeight} pixels; the study needs at least ${MIN_WIDTH_PX} × ${MIN_HEIGHT_PX}.`,
+    };
   }
   return null;
-}
-
-/** Resolves once the window is large enough and has a fine pointer. */
-function whenSupported() {
-  return new Promise((resolve) => {
-    const check = () => {
-      const reason = unsupportedReason();
-      if (!reason) {
-        removeEventListener("resize", check);
-        resolve();
-        return;
-      }
-      $("unsupported-reason").textContent = reason;
-      show("unsupported");
-    };
-    addEventListener("resize", check);
-    check();
-  });
 }
 
 /** Batches telemetry events and posts them; kept in memory until the server takes them. */
@@ -99,14 +86,43 @@ class ParticipantApp {
   }
 
   async run() {
-    await whenSupported();
     show("loading");
     const started = await this.ensureSession();
     if (!started) return;
     this.watchPage();
     let state = await this.api.state();
+    if (state.phase !== "done") state = await this.checkDevice(state);
     while (state.phase !== "done") state = await this.showPhase(state);
     this.showDone(state);
+  }
+
+  /**
+   * Resolves with `state` once the window is large enough and has a fine pointer. Before
+   * any trial the participant may instead end the study here: the server stores the
+   * screened-out ending and the promise resolves with the done state.
+   */
+  checkDevice(state) {
+    const canEnd = state.phase === "consent" || state.phase === "instructions";
+    return new Promise((resolve, reject) => {
+      const check = () => {
+        const reason = unsupportedReason();
+        if (!reason) {
+          removeEventListener("resize", check);
+          resolve(state);
+          return;
+        }
+        $("unsupported-reason").textContent = reason.text;
+        $("screen-out-block").hidden = !canEnd;
+        $("screen-out").onclick = () => {
+          removeEventListener("resize", check);
+          $("screen-out").disabled = true;
+          this.api.screenOut(reason.code).then(resolve, reject);
+        };
+        show("unsupported");
+      };
+      addEventListener("resize", check);
+      check();
+    });
   }
 
   /** Resume the token kept in sessionStorage (same recruitment), else start or resume on the server. */
@@ -132,7 +148,8 @@ class ParticipantApp {
       return true;
     } catch (error) {
       if (error instanceof ApiError && error.status === 409) {
-        this.fail("Our records show that you have already completed this study. Thank you for taking part!");
+        // already completed or ended, or open with another attempt: the server says which
+        this.fail(`This link cannot start the study again: ${error.detail}.`, { reload: false });
         return false;
       }
       if (error instanceof ApiError && error.status === 403) {
@@ -194,10 +211,18 @@ class ParticipantApp {
     check.checked = false;
     button.disabled = true;
     check.onchange = () => { button.disabled = !check.checked; };
+    const decline = $("consent-decline");
+    decline.disabled = false;
     return new Promise((resolve, reject) => {
       button.onclick = () => {
         button.disabled = true;
+        decline.disabled = true;
         this.api.consent().then(resolve, reject);
+      };
+      decline.onclick = () => {
+        button.disabled = true;
+        decline.disabled = true;
+        this.api.decline().then(resolve, reject);
       };
     });
   }
@@ -253,17 +278,38 @@ class ParticipantApp {
     });
   }
 
+  /** The stored ending: its message and code, then the platform's redirect or MTurk hand-in form. */
   showDone(state) {
     if (state.progress) this.updateProgress(state.progress);
     const step = state.step || {};
+    const finished = step.outcome === "completed" || step.outcome === "failed_checks";
+    $("done-heading").textContent = finished ? "Thank you!" : "The study has ended";
+    $("done-message").textContent = step.message || (finished ? "You have finished the study." : "");
     $("completion-code").textContent = step.completion_code ?? "";
+    $("code-block").hidden = !step.completion_code;
     show("done");
     this.telemetry.flush();
-    if (step.redirect_url) {
+    if (step.mturk_submit) {
+      this.showMturkForm(step.mturk_submit);
+    } else if (step.redirect_url) {
       $("redirect-link").href = step.redirect_url;
       $("redirect-block").hidden = false;
       setTimeout(() => location.assign(step.redirect_url), REDIRECT_DELAY_MS);
     }
+  }
+
+  /** MTurk's ExternalQuestion hand-in: POST assignmentId (and the ending) to turkSubmitTo. */
+  showMturkForm({ action, fields }) {
+    const form = $("mturk-form");
+    form.action = action;
+    for (const [name, value] of Object.entries(fields)) {
+      const input = document.createElement("input");
+      input.type = "hidden";
+      input.name = name;
+      input.value = value;
+      form.append(input);
+    }
+    form.hidden = false;
   }
 
   fail(text, { reload = true } = {}) {

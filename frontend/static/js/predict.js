@@ -35,6 +35,7 @@ export class PredictionInput {
     this.steps = trial.steps_to_predict;
     this.points = trial.start_states.map(() => []);
     this.clickTimes = trial.start_states.map(() => []);
+    this.history = []; // undo and reset presses, stored with the trial
     this.index = 0;
     this.hover = null;
     this.cursor = null;
@@ -137,7 +138,7 @@ export class PredictionInput {
       return false;
     }
     this.current.push(point);
-    this.clickTimes[this.index].push(Math.round(performance.now() - this.shownAtPerf));
+    this.clickTimes[this.index].push(this.elapsedMs());
     const left = this.steps - this.current.length;
     this.onMessage(left ? `Position ${this.current.length} placed. ${left} to go.` : "All positions placed for this start state.", "ok");
     this.resetCursor();
@@ -146,8 +147,14 @@ export class PredictionInput {
     return true;
   }
 
+  /** Milliseconds since the input was first shown (what click times are measured in). */
+  elapsedMs() {
+    return Math.round(performance.now() - this.shownAtPerf);
+  }
+
   undo() {
     if (!this.current.length) return;
+    this.history.push({ action: "undo", start_index: this.index, t_ms: this.elapsedMs() });
     this.current.pop();
     this.clickTimes[this.index].pop();
     this.onMessage("Last position removed.", "ok");
@@ -157,6 +164,7 @@ export class PredictionInput {
   }
 
   reset() {
+    this.history.push({ action: "reset", start_index: this.index, t_ms: this.elapsedMs() });
     this.points[this.index] = [];
     this.clickTimes[this.index] = [];
     this.onMessage("Positions for this start state cleared.", "ok");
@@ -228,6 +236,7 @@ export class PredictionInput {
       shown_at_ms: this.shownAtEpoch,
       submitted_at_ms: Date.now(),
       replays,
+      history: this.history.slice(-500),
     };
   }
 
