@@ -1,6 +1,7 @@
 """Read side for researchers: the tidy export table and the dashboard summary."""
 
 import io
+from collections import Counter
 
 import pandas as pd
 from sqlalchemy import select
@@ -11,7 +12,7 @@ from analysis.load import EXPORT_COLUMNS  # one column contract for writer and r
 from app.study.balance import in_progress_cutoff
 from app.study.context import StudyContext
 from app.study.recruitment import preview_path
-from app.study.sessions import as_utc, is_in_progress
+from app.study.sessions import as_utc, has_ended, is_in_progress
 from app.study.tables import Participant, PredictionRow, TrialResponse
 
 _FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields]
@@ -49,7 +50,8 @@ def export_csv(db: Session, study_id: str) -> str:
 
 
 def progress(db: Session, ctx: StudyContext) -> dict:
-    """Session counts: started, completed, in progress, stale, per world order.
+    """Session counts: started, completed, in progress, ended early (declined, screened
+    out), stale, by outcome and per world order.
 
     Pilot (preview) sessions and sessions replaced by a new attempt are counted apart
     and never in the study's progress.
@@ -60,6 +62,7 @@ def progress(db: Session, ctx: StudyContext) -> dict:
     people = [p for p in everyone if not p.pilot and p.replaced_at is None]
     completed = [p for p in people if p.completed]
     active = [p for p in people if is_in_progress(p, cutoff)]
+    ended_early = [p for p in people if has_ended(p) and not p.completed]
     orders: dict[str, dict[str, int]] = {}
     for p in people:
         entry = orders.setdefault(p.world_order, {"completed": 0, "in_progress": 0})
@@ -69,7 +72,9 @@ def progress(db: Session, ctx: StudyContext) -> dict:
             entry["in_progress"] += 1
     return {"target_sample_size": ctx.config.target_sample_size, "started": len(people),
             "completed": len(completed), "in_progress": len(active),
-            "stale": len(people) - len(completed) - len(active),
+            "ended_early": len(ended_early),
+            "stale": len(people) - len(completed) - len(active) - len(ended_early),
+            "outcomes": dict(Counter(p.outcome for p in people if p.outcome)),
             "failed_attention_check": sum(p.attention_failed > 0 for p in completed),
             "pilot_sessions": sum(p.pilot for p in everyone),
             "replaced_sessions": sum(p.replaced_at is not None for p in everyone),
