@@ -106,8 +106,11 @@ def drop_first_answer(page) -> dict:
 
 
 def predict_trial(page, screenshot: Path | None = None, replay: bool = False,
-                  lose_answer: bool = False) -> tuple[dict, dict]:
-    """Watch one trial, click every point on the canvas, submit; return (trial, clicks)."""
+                  lose_answer: bool = False, undo_once: bool = False) -> tuple[dict, dict]:
+    """Watch one trial, click every point on the canvas, submit; return (trial, clicks).
+
+    With `undo_once`, the first click of the second start state is undone and placed again.
+    """
     trial = current_state(page)["step"]
     watch_clips(page)
     if replay:
@@ -119,6 +122,10 @@ def predict_trial(page, screenshot: Path | None = None, replay: bool = False,
         for j, point in enumerate(planned_path(trial, start_state)):
             page.clock.fast_forward(THINK_MS)
             page.click("#trial-canvas", position=canvas_px(page, point))
+            if undo_once and (k, j) == (1, 0):
+                page.clock.fast_forward(THINK_MS)
+                page.click("#undo")
+                page.click("#trial-canvas", position=canvas_px(page, point))
             clicks[(k, j)] = (point, canvas_view(page)[0])
             if screenshot and k == 2 and j == 1:
                 page.screenshot(path=str(screenshot))
@@ -191,7 +198,8 @@ def complete_session(page, base_url: str) -> dict:
     while current_state(page)["phase"] == "trial":
         n = len(clicks)  # 1 = the first main trial
         trial, trial_clicks = predict_trial(page, SCREENSHOTS / "predict.png" if n == 1 else None,
-                                            replay=n == 2, lose_answer=n == 3)
+                                            replay=n == 2, lose_answer=n == 3,
+                                            undo_once=n == 1)
         clicks[trial["trial_id"]] = trial_clicks
     visible(page, "survey")
     for name in sorted(set(page.eval_on_selector_all("#survey-form input[type=radio]",
@@ -270,6 +278,26 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
             if kind == "replay"] == [trial_ids[2]]
     resized = {"w": RESIZED["width"], "h": RESIZED["height"]}
     assert resized in [data for kind, data in events if kind == "resize"]
+    histories = stored_histories(browser_server.db_path, PID)
+    assert [[(h["action"], h["start_index"]) for h in histories[t]] for t in trial_ids] == [
+        [], [("undo", 1)], *[[]] * (len(trial_ids) - 2)]
+    assert stored_ending(browser_server.db_path, PID) == ("completed", code)
+
+
+def stored_histories(db_path: Path, external_id: str) -> dict[str, list]:
+    """Bank trial id -> the undo/reset history stored with that trial."""
+    with closing(sqlite3.connect(db_path)) as db:
+        rows = db.execute(
+            "SELECT trial_id, history FROM trialresponse JOIN participant ON participant.id = "
+            "trialresponse.participant_id WHERE external_id = ?", (external_id,)).fetchall()
+    return {trial_id: json.loads(history) for trial_id, history in rows}
+
+
+def stored_ending(db_path: Path, external_id: str) -> tuple[str, str]:
+    """(outcome, completion code) stored for a participant."""
+    with closing(sqlite3.connect(db_path)) as db:
+        return db.execute("SELECT outcome, completion_code FROM participant "
+                          "WHERE external_id = ?", (external_id,)).fetchone()
 
 
 def bank_ids_of_refs(db_path: Path, external_id: str) -> dict[str, str]:
