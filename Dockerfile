@@ -50,7 +50,7 @@ USER tomstudy
 EXPOSE 8000
 VOLUME ["/app/var"]
 # urlopen raises (exit 1) on the 503 /healthz answers when the database is down
-HEALTHCHECK --interval=30s --timeout=15s --start-period=20m \
+HEALTHCHECK --interval=30s --timeout=15s --start-period=10m \
   CMD python -c "import urllib.request as u; u.urlopen('http://127.0.0.1:8000/healthz', timeout=12)"
 # serves on 0.0.0.0:8000 inside the container; publish it on 127.0.0.1 only
 ENTRYPOINT ["/app/deploy/entrypoint.sh"]

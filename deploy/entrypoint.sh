@@ -5,7 +5,7 @@
 #
 # First start: when the data volume holds no trial bank for a served study, the server
 # first builds the study the way `make serve` does (`serve --prepare`: simulate both
-# worlds, train Ours and the VAE, build the bank; about 7 minutes on 2 cores, README
+# worlds, train Ours and the VAE, build the bank; 2.5 to 4 minutes on 2 cores, README
 # "Going live"). A bank that exists is never rebuilt here, even if a copied-in var/ no
 # longer matches the paths in its meta.json: participants must keep seeing the same trials.
 set -eu
