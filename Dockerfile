@@ -13,13 +13,15 @@
 # and put a reverse proxy that terminates HTTPS in front of it (README, "Hosting on the
 # internet"); never publish it on a public address as is.
 #
-# Without DATABASE_URL the server uses SQLite in the mounted var/ (one worker only). With a
-# PostgreSQL DATABASE_URL (psycopg 3), e.g. a line
+# compose.yaml runs this image with PostgreSQL (README, "Going live"). Without DATABASE_URL
+# the server uses SQLite in the mounted var/ (one worker only). With a PostgreSQL
+# DATABASE_URL (psycopg 3), e.g. a line
 # DATABASE_URL=postgresql+psycopg://tomstudy:<password>@db-host:5432/tomstudy in the env
-# file, it can run several workers: append `tomstudy serve --host 0.0.0.0 --workers 4` to
-# the run command. The trial bank and checkpoints are read from var/; build them once with
-# `docker run ... tomstudy tomstudy serve --prepare --host 0.0.0.0` or copy an existing
-# var/ in. HEALTHCHECK asks /healthz, which checks the database.
+# file, it can run several workers: append `--workers 4` to the run command (arguments are
+# serve options, see deploy/entrypoint.sh). On first start, when var/ holds no trial bank,
+# the entrypoint builds the paper's study (simulate, train, build-trials; minutes, see the
+# README) before serving; or copy an existing var/ in. HEALTHCHECK asks /healthz, which
+# checks the database; its start period covers that first build.
 FROM python:3.11-slim
 
 ENV PYTHONDONTWRITEBYTECODE=1 \
@@ -38,6 +40,7 @@ COPY app ./app
 COPY analysis ./analysis
 COPY frontend ./frontend
 COPY study_configs ./study_configs
+COPY deploy/entrypoint.sh ./deploy/
 # editable: the server finds frontend/ and study_configs/ beside the app package
 RUN pip install -e .
 
@@ -47,6 +50,7 @@ USER tomstudy
 EXPOSE 8000
 VOLUME ["/app/var"]
 # urlopen raises (exit 1) on the 503 /healthz answers when the database is down
-HEALTHCHECK --interval=30s --timeout=15s --start-period=120s \
+HEALTHCHECK --interval=30s --timeout=15s --start-period=10m \
   CMD python -c "import urllib.request as u; u.urlopen('http://127.0.0.1:8000/healthz', timeout=12)"
-CMD ["tomstudy", "serve", "--host", "0.0.0.0", "--port", "8000", "--study", "paper_study"]
+# serves on 0.0.0.0:8000 inside the container; publish it on 127.0.0.1 only
+ENTRYPOINT ["/app/deploy/entrypoint.sh"]

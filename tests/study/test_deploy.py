@@ -1,0 +1,157 @@
+"""compose.yaml and the image's entrypoint: real settings and commands, no secrets, loopback."""
+
+import os
+import re
+import subprocess
+from pathlib import Path
+
+import pytest
+import typer
+import yaml
+from sqlalchemy.engine import make_url
+
+from app.cli import cli
+from app.settings import Settings
+from app.study.trials import BANK_FILE, bank_dir
+from tests.conftest import REPO
+
+COMPOSE = yaml.safe_load((REPO / "compose.yaml").read_text())
+SERVER = COMPOSE["services"]["server"]
+DB = COMPOSE["services"]["db"]
+ENTRYPOINT = REPO / "deploy" / "entrypoint.sh"
+REQUIRED = re.compile(r"\$\{(\w+):\?[^}]+\}")  # compose's ${VAR:?message}: unset stops `up`
+
+
+def settings_env_names() -> set[str]:
+    """Every environment variable app/settings.py reads."""
+    prefix = Settings.model_config["env_prefix"]
+    return {field.validation_alias or f"{prefix}{name}".upper()
+            for name, field in Settings.model_fields.items()}
+
+
+def serve_command():
+    """The click command behind `tomstudy serve`."""
+    return typer.main.get_command(cli).commands["serve"]
+
+
+def serve_options() -> set[str]:
+    return {opt for param in serve_command().params for opt in param.opts}
+
+
+def test_the_server_environment_names_only_settings_the_app_reads():
+    env = SERVER["environment"]
+    assert set(env) <= settings_env_names()
+    assert {"DATABASE_URL", "TOMSTUDY_ADMIN_TOKEN"} <= set(env)
+    # production refuses bot clocks; the image sets production itself
+    assert not {"TOMSTUDY_TRUST_CLIENT_CLOCK", "TOMSTUDY_PRODUCTION"} & set(env)
+
+
+def test_secrets_come_from_the_environment_and_are_required():
+    env = SERVER["environment"]
+    assert REQUIRED.fullmatch(env["TOMSTUDY_ADMIN_TOKEN"]).group(1) == "TOMSTUDY_ADMIN_TOKEN"
+    assert REQUIRED.fullmatch(DB["environment"]["POSTGRES_PASSWORD"]).group(1) == \
+        "POSTGRES_PASSWORD"
+    url = make_url(REQUIRED.sub("PASSWORD", env["DATABASE_URL"]))
+    assert (url.drivername, url.host, url.password) == ("postgresql+psycopg", "db", "PASSWORD")
+    assert (url.username, url.database) == (DB["environment"]["POSTGRES_USER"],
+                                            DB["environment"]["POSTGRES_DB"])
+    assert REQUIRED.search(env["DATABASE_URL"]).group(1) == "POSTGRES_PASSWORD"
+
+
+def test_no_secret_literal_in_any_service():
+    for service in COMPOSE["services"].values():
+        for name, value in service.get("environment", {}).items():
+            if re.search("PASSWORD|TOKEN|SECRET|KEY", name):
+                assert REQUIRED.fullmatch(str(value)), f"{name} must be ${{{name}:?...}}"
+    text = (REPO / "compose.yaml").read_text()
+    # a long random-looking word outside ${...} would be a pasted token or password
+    words = re.findall(r"[A-Za-z0-9_-]{24,}", REQUIRED.sub("", text))
+    assert [w for w in words if re.search(r"\d", w) and re.search("[a-z]", w)
+            and re.search("[A-Z]", w)] == []
+
+
+def test_only_loopback_publishes_the_server_and_nothing_publishes_the_database():
+    assert "ports" not in DB
+    for port in SERVER["ports"]:
+        host_ip = port["host_ip"] if isinstance(port, dict) else str(port).split(":")[0]
+        assert host_ip == "127.0.0.1"
+
+
+def test_server_waits_for_a_healthy_database_and_keeps_its_data_in_a_named_volume():
+    assert DB["healthcheck"]["test"]
+    assert SERVER["depends_on"]["db"]["condition"] == "service_healthy"
+    data_dir = re.search(r"TOMSTUDY_DATA_DIR=(\S+)", (REPO / "Dockerfile").read_text()).group(1)
+    for service, target in ((SERVER, data_dir), (DB, "/var/lib/postgresql/data")):
+        volume = next(v for v in service["volumes"] if v.endswith(f":{target}"))
+        assert volume.split(":")[0] in COMPOSE["volumes"]
+
+
+def test_compose_command_and_entrypoint_call_real_serve_options():
+    options = serve_options()
+    assert {a for a in SERVER["command"] if a.startswith("-")} <= options
+    calls = re.findall(r"^\s*exec tomstudy (\S+)(.*)$", ENTRYPOINT.read_text(), re.M)
+    assert [name for name, _ in calls] == ["serve"]
+    assert set(re.findall(r"--[\w-]+", calls[0][1])) <= options
+    assert "--prepare" in options
+
+
+def test_the_image_runs_the_entrypoint_and_the_build_context_leaves_secrets_out():
+    dockerfile = (REPO / "Dockerfile").read_text()
+    assert 'ENTRYPOINT ["/app/deploy/entrypoint.sh"]' in dockerfile
+    assert "COPY deploy/entrypoint.sh ./deploy/" in dockerfile
+    assert os.access(ENTRYPOINT, os.X_OK)
+    ignored = (REPO / ".dockerignore").read_text().split()
+    assert {"var", ".venv", "*.env"} <= set(ignored)
+
+
+# ---------------------------------------------------------------- the entrypoint, run
+
+@pytest.fixture
+def run_entrypoint(tmp_path):
+    """Run deploy/entrypoint.sh with a stand-in `tomstudy` that prints its arguments."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    fake = bin_dir / "tomstudy"
+    fake.write_text('#!/bin/sh\necho "tomstudy $*"\n')
+    fake.chmod(0o755)
+    data_dir = tmp_path / "var"
+
+    def run(*args: str) -> list[str]:
+        env = dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}",
+                   TOMSTUDY_DATA_DIR=str(data_dir))
+        done = subprocess.run(["sh", str(ENTRYPOINT), *args], env=env, capture_output=True,
+                              text=True, timeout=10, check=True)
+        return done.stdout.splitlines()
+
+    run.data_dir = data_dir
+    return run
+
+
+def add_bank(data_dir: Path, study: str) -> None:
+    bank = bank_dir(data_dir, study) / BANK_FILE
+    bank.parent.mkdir(parents=True)
+    bank.write_text("{}")
+
+
+def test_first_start_builds_the_study_then_serves(run_entrypoint):
+    out = run_entrypoint("--workers", "2")
+    assert "first start: no trial bank for paper_study" in out[0]
+    assert out[-1] == "tomstudy serve --host 0.0.0.0 --port 8000 --prepare --workers 2"
+
+
+def test_a_study_with_a_bank_is_served_without_rebuilding(run_entrypoint):
+    add_bank(run_entrypoint.data_dir, "paper_study")
+    assert run_entrypoint() == ["tomstudy serve --host 0.0.0.0 --port 8000"]
+
+
+@pytest.mark.parametrize("study_args", [["--study", "paper_study,other"],
+                                        ["--study=paper_study,other"]])
+def test_every_served_study_needs_its_bank(run_entrypoint, study_args):
+    add_bank(run_entrypoint.data_dir, "paper_study")
+    out = run_entrypoint(*study_args)
+    assert len(out) == 2 and "no trial bank for other" in out[0]
+    assert out[-1].endswith("--prepare " + " ".join(study_args))
+
+
+def test_a_command_instead_of_options_runs_that_command(run_entrypoint):
+    assert run_entrypoint("tomstudy", "preview-link") == ["tomstudy preview-link"]
