@@ -18,7 +18,7 @@
 # DATABASE_URL (psycopg 3), e.g. a line
 # DATABASE_URL=postgresql+psycopg://tomstudy:<password>@db-host:5432/tomstudy in the env
 # file, it can run several workers: append `--workers 4` to the run command (arguments are
-# serve options, see deploy/entrypoint.sh). On first start, when var/ holds no trial bank,
+# serve options, see app/study/entrypoint.sh). On first start, when var/ holds no trial bank,
 # the entrypoint builds the paper's study (simulate, train, build-trials; minutes, see the
 # README) before serving; or copy an existing var/ in. HEALTHCHECK asks /healthz, which
 # checks the database; its start period covers that first build.
@@ -40,7 +40,6 @@ COPY app ./app
 COPY analysis ./analysis
 COPY frontend ./frontend
 COPY study_configs ./study_configs
-COPY deploy/entrypoint.sh ./deploy/
 # editable: the server finds frontend/ and study_configs/ beside the app package
 RUN pip install -e .
 
@@ -53,4 +52,4 @@ VOLUME ["/app/var"]
 HEALTHCHECK --interval=30s --timeout=15s --start-period=10m \
   CMD python -c "import urllib.request as u; u.urlopen('http://127.0.0.1:8000/healthz', timeout=12)"
 # serves on 0.0.0.0:8000 inside the container; publish it on 127.0.0.1 only
-ENTRYPOINT ["/app/deploy/entrypoint.sh"]
+ENTRYPOINT ["/app/app/study/entrypoint.sh"]

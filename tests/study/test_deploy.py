@@ -18,7 +18,7 @@ from tests.conftest import REPO
 COMPOSE = yaml.safe_load((REPO / "compose.yaml").read_text())
 SERVER = COMPOSE["services"]["server"]
 DB = COMPOSE["services"]["db"]
-ENTRYPOINT = REPO / "deploy" / "entrypoint.sh"
+ENTRYPOINT = REPO / "app" / "study" / "entrypoint.sh"
 REQUIRED = re.compile(r"\$\{(\w+):\?[^}]+\}")  # compose's ${VAR:?message}: unset stops `up`
 
 
@@ -97,8 +97,8 @@ def test_compose_command_and_entrypoint_call_real_serve_options():
 
 def test_the_image_runs_the_entrypoint_and_the_build_context_leaves_secrets_out():
     dockerfile = (REPO / "Dockerfile").read_text()
-    assert 'ENTRYPOINT ["/app/deploy/entrypoint.sh"]' in dockerfile
-    assert "COPY deploy/entrypoint.sh ./deploy/" in dockerfile
+    assert 'ENTRYPOINT ["/app/app/study/entrypoint.sh"]' in dockerfile
+    assert "COPY app ./app" in dockerfile  # the entrypoint comes with the package
     assert os.access(ENTRYPOINT, os.X_OK)
     ignored = (REPO / ".dockerignore").read_text().split()
     assert {"var", ".venv", "*.env"} <= set(ignored)
@@ -108,7 +108,7 @@ def test_the_image_runs_the_entrypoint_and_the_build_context_leaves_secrets_out(
 
 @pytest.fixture
 def run_entrypoint(tmp_path):
-    """Run deploy/entrypoint.sh with a stand-in `tomstudy` that prints its arguments."""
+    """Run app/study/entrypoint.sh with a stand-in `tomstudy` that prints its arguments."""
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     fake = bin_dir / "tomstudy"
