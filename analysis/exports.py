@@ -2,9 +2,9 @@
 
 `predictions` is the analysis table (analysis/load.py). The other three are
 `survey`, `events` and `participants`; each column has one of five types:
-text (object, "" when absent), int (int64, -1 when not applicable), float (float64,
-NaN when absent), bool, and time (datetime64[ns, UTC], NaT when absent; ISO 8601 in
-the CSV). Text cells are spreadsheet-safe in the CSV (analysis/csvsafe.py); the reader
+text (pandas `str`, "" when absent), int (int64, -1 when not applicable), float
+(float64, NaN when absent), bool, and time (datetime64[us, UTC], NaT when absent;
+ISO 8601 in the CSV). Text cells are spreadsheet-safe in the CSV (analysis/csvsafe.py); the reader
 gives back the text as stored.
 """
 
@@ -61,7 +61,7 @@ def _cast(values: pd.Series, kind: str) -> pd.Series:
         return pd.to_numeric(values, errors="coerce").astype(np.float64)
     if kind == "bool":
         return values.astype(bool)
-    return pd.to_datetime(values, utc=True, format="ISO8601")
+    return pd.to_datetime(values, utc=True, format="ISO8601").astype("datetime64[us, UTC]")
 
 
 def read_export(source: Path | IO[str], what: str) -> pd.DataFrame:
