@@ -9,8 +9,9 @@ from sqlmodel import Session
 from typer.testing import CliRunner
 
 from app.cli import cli
-from app.settings import get_settings
+from app.settings import Settings, get_settings
 from app.study import balance
+from app.study.main import create_app
 from app.study.tables import (
     Event,
     Participant,
@@ -151,3 +152,12 @@ def test_tomstudy_withdraw(client, small_study, study, db_url, monkeypatch):
                                   "submission": 3, "participant": 1}
     assert counts(client, ext)["participant"] == 0
     balance_is_exact(client, study)
+
+
+def test_the_schema_declares_what_the_new_routes_answer():
+    spec = create_app(Settings(production=False, admin_token="test-token")).openapi()
+    declared = {f"{method.upper()} {path}": sorted(int(s) for s in op["responses"])
+                for path, ops in spec["paths"].items() for method, op in ops.items()}
+    assert declared["POST /api/researcher/withdrawals"] == [201, 400, 401, 403, 404, 413, 422]
+    assert declared["GET /api/researcher/withdrawals"] == [200, 401, 403, 404, 422]
+    assert declared["GET /api/researcher/export/{what}.csv"] == [200, 401, 403, 404, 422]
