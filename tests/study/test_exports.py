@@ -226,7 +226,7 @@ def test_tomstudy_export_names_a_bad_option(client, small_study, cli_env):
 def test_every_researcher_endpoint_needs_the_token(client, small_study):
     query = f"?study_id={small_study.study_id}"
     gets = [f"/api/researcher/export/{what}.csv{query}" for what in WHAT]
-    gets += [f"/api/researcher/export.csv{query}", f"/api/researcher/withdrawals{query}"]
+    gets += [f"/api/researcher/export.csv{query}", f"/api/researcher/withdrawals/audit{query}"]
     for path in gets:
         assert client.get(path).status_code == 401, path
         assert client.get(path, headers={"Authorization": "Bearer nope"}).status_code == 403

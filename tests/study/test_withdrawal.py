@@ -99,8 +99,8 @@ def test_withdrawal_deletes_every_row_of_the_participant_only(client, small_stud
     assert ext not in r.text
     released = balance_is_exact(client, study)
     assert sum(released.values()) < sum(held.values())  # the completed attempt was counted
-    listed = client.get(f"/api/researcher/withdrawals?study_id={sid}", headers=ADMIN).json()
-    assert listed == [line]
+    listed = client.get(f"/api/researcher/withdrawals/audit?study_id={sid}", headers=ADMIN)
+    assert listed.json() == [line]
     with Session(client.app.state.engine) as db:
         stored = db.execute(select(WithdrawalAudit)).scalars().one()
         assert ext not in json.dumps(stored.model_dump(mode="json"))
@@ -159,5 +159,5 @@ def test_the_schema_declares_what_the_new_routes_answer():
     declared = {f"{method.upper()} {path}": sorted(int(s) for s in op["responses"])
                 for path, ops in spec["paths"].items() for method, op in ops.items()}
     assert declared["POST /api/researcher/withdrawals"] == [201, 400, 401, 403, 404, 413, 422]
-    assert declared["GET /api/researcher/withdrawals"] == [200, 401, 403, 404, 422]
+    assert declared["GET /api/researcher/withdrawals/audit"] == [200, 401, 403, 404, 422]
     assert declared["GET /api/researcher/export/{what}.csv"] == [200, 401, 403, 404, 422]

@@ -50,7 +50,7 @@ def create_withdrawal(body: WithdrawalCreate, request: Request, db: SessionDep,
     return withdrawal.audit_line(audit)
 
 
-@router.get("/withdrawals")
+@router.get("/withdrawals/audit")
 def read_withdrawals(study_id: str, request: Request, db: SessionDep, _: AdminDep) -> list[dict]:
     """Every withdrawal of the study, oldest first."""
     study_context(request, study_id)
