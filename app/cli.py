@@ -362,22 +362,21 @@ def export_cmd(
     """Write one of the study's exports as CSV, read from DATABASE_URL."""
     from sqlmodel import Session
 
+    from analysis.csvsafe import write_csv
     from analysis.exports import WHAT
-    from app.study.exports import export_csv
+    from app.study.exports import export_table
 
     if what not in WHAT:
         fail(f"--what: unknown export {what!r}; choose one of {', '.join(WHAT)}")
     config, engine = study_database(study)
     try:
         with Session(engine) as db:
-            text = export_csv(db, config, study, what)
+            frame = export_table(db, config, study, what)
     finally:
         engine.dispose()
-    if out is None:
-        typer.echo(text, nl=False)
-        return
-    out.write_text(text)
-    typer.echo(f"wrote {out} ({text.count(chr(10)) - 1} rows)", err=True)
+    write_csv(frame, out if out is not None else sys.stdout)
+    if out is not None:
+        typer.echo(f"wrote {out} ({len(frame)} rows)", err=True)
 
 
 @cli.command()
