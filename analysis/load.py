@@ -2,7 +2,8 @@
 
 Both readers return the same tidy DataFrame: one row per (participant, trial, start state,
 step), the columns of the export contract (app/study/API.md) with fixed dtypes, sorted
-by participant, trial, start state and step.
+by participant, trial, start state and step. `participant_id` is the session's random
+public id: the predictions carry no platform id.
 """
 
 import hashlib
@@ -15,9 +16,9 @@ import pandas as pd
 from analysis.csvsafe import restore_text
 
 # Export contract, in order. Types: the reader casts to these, so CSV and DB agree.
-STRING_COLUMNS = ("study_id", "participant_id", "recruitment", "external_id", "world",
+STRING_COLUMNS = ("study_id", "participant_id", "recruitment", "outcome", "world",
                   "trial_id", "clip_sha256", "start_kind", "ours_sha256", "vae_sha256",
-                  "submission_id", "submitted_at")
+                  "submission_id", "submitted_at", "config_sha256", "bank_sha256")
 BOOL_COLUMNS = ("completed", "attention_passed", "is_practice", "attention_check")
 INT_COLUMNS = ("world_position", "trial_index", "start_index", "step", "ours_code",
                "vae_code", "replays")
@@ -26,13 +27,13 @@ FLOAT_COLUMNS = ("start_x", "start_y", "human_x", "human_y", "click_x", "click_y
                  "cv_vx", "cv_vy", "policy_vx", "policy_vy", "click_time_ms",
                  "trial_duration_ms")
 EXPORT_COLUMNS = (
-    "study_id", "participant_id", "recruitment", "external_id", "completed",
+    "study_id", "participant_id", "recruitment", "completed", "outcome",
     "attention_passed", "world", "world_position", "trial_id", "trial_index", "is_practice",
     "attention_check", "clip_sha256", "start_index", "start_kind", "step", "start_x",
     "start_y", "human_x", "human_y", "click_x", "click_y", "human_vx", "human_vy", "ours_vx",
     "ours_vy", "vae_vx", "vae_vy", "cv_vx", "cv_vy", "policy_vx", "policy_vy", "ours_code",
     "vae_code", "ours_sha256", "vae_sha256", "click_time_ms", "trial_duration_ms", "replays",
-    "submission_id", "submitted_at",
+    "submission_id", "submitted_at", "config_sha256", "bank_sha256",
 )
 SORT_KEYS = ["participant_id", "trial_index", "trial_id", "start_index", "step"]
 
@@ -113,8 +114,8 @@ def load_database(url: str, study_id: str) -> pd.DataFrame:
                                                        "predictionrow"))
         query = (
             sa.select(
-                part.c.study_id, part.c.id.label("participant_id"), part.c.recruitment,
-                part.c.external_id, part.c.completed,
+                part.c.study_id, part.c.public_id.label("participant_id"), part.c.recruitment,
+                part.c.completed, part.c.outcome, part.c.config_sha256, part.c.bank_sha256,
                 (part.c.attention_failed == 0).label("attention_passed"),
                 trial.c.world, trial.c.world_position, trial.c.trial_id, trial.c.trial_index,
                 trial.c.is_practice, trial.c.attention_check, trial.c.clip_sha256,

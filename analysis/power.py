@@ -113,11 +113,11 @@ def export_frame(parts: list[dict[str, np.ndarray]], study_id: str, kind: str) -
     frame = pd.DataFrame(cols)
     size = len(frame)
     constants = {"study_id": study_id, "recruitment": "simulated", "completed": True,
+                 "outcome": "completed", "config_sha256": "", "bank_sha256": "",
                  "attention_passed": True, "is_practice": False, "attention_check": False,
                  "trial_duration_ms": SIMULATED_TRIAL_MS, "replays": 0, "submitted_at": ""}
     for name, value in constants.items():
         frame[name] = np.full(size, value)
-    frame["external_id"] = frame["participant_id"]
     frame["submission_id"] = frame["participant_id"] + "/" + frame["trial_id"] + f"/{kind}"
     return normalise(frame[list(EXPORT_COLUMNS)])
 

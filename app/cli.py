@@ -352,6 +352,90 @@ def preview_link_cmd(
     typer.echo(base_url.rstrip("/") + preview_path(study, key))
 
 
+@cli.command("export")
+def export_cmd(
+    study: Annotated[str, typer.Option(help="study id")] = "paper_study",
+    what: Annotated[str, typer.Option(help="predictions, survey, events or participants")]
+    = "predictions",
+    out: Annotated[Path | None, typer.Option(help="CSV file (default: stdout)")] = None,
+) -> None:
+    """Write one of the study's exports as CSV, read from DATABASE_URL."""
+    from sqlmodel import Session
+
+    from analysis.csvsafe import write_csv
+    from analysis.exports import WHAT
+    from app.study.exports import export_table
+
+    if what not in WHAT:
+        fail(f"--what: unknown export {what!r}; choose one of {', '.join(WHAT)}")
+    config, engine = study_database(study)
+    try:
+        with Session(engine) as db:
+            frame = export_table(db, config, study, what)
+    finally:
+        engine.dispose()
+    write_csv(frame, out if out is not None else sys.stdout)
+    if out is not None:
+        typer.echo(f"wrote {out} ({len(frame)} rows)", err=True)
+
+
+@cli.command()
+def withdraw(
+    study: Annotated[str, typer.Option(help="study id")],
+    external_id: Annotated[str, typer.Option("--external-id", help="the participant's platform "
+                                             "id (e.g. PROLIFIC_PID, workerId)")],
+) -> None:
+    """Delete every row of one participant (all sessions, one transaction); print the audit."""
+    import json
+
+    from sqlmodel import Session
+
+    from app.study import withdrawal
+    from app.study.errors import Refused
+
+    _, engine = study_database(study)
+    try:
+        with Session(engine) as db:
+            audit = withdrawal.withdraw(db, study, external_id, via="cli")
+            line = withdrawal.audit_line(audit)
+    except Refused as err:
+        fail(err.detail.replace("external_id:", "--external-id:", 1), 1)
+    finally:
+        engine.dispose()
+    typer.echo(json.dumps(line))
+
+
+def study_database(study: str):
+    """(study config, engine on DATABASE_URL) for a study's stored data; exit 2 if either is
+    missing, or the database was made by an older tomstudy."""
+    from sqlalchemy import inspect
+    from sqlalchemy.engine import make_url
+
+    from app.study.config import load_study_config
+    from app.study.db import make_engine, missing_columns, normalise_url
+
+    settings = get_settings()
+    try:
+        config = load_study_config(settings, study)
+    except ConfigError as err:
+        fail(f"--study: unknown study {study!r} ({err})")
+    url = normalise_url(settings.resolved_database_url())
+    parsed = make_url(url)
+    if parsed.get_backend_name() == "sqlite" and not Path(parsed.database or "").is_file():
+        fail(f"DATABASE_URL: no database file at {parsed.database}")
+    engine = make_engine(url)
+    where = parsed.render_as_string(hide_password=True)
+    if not inspect(engine).has_table("participant"):
+        engine.dispose()
+        fail(f"DATABASE_URL: {where} holds no study tables")
+    missing = missing_columns(engine)
+    if missing:
+        engine.dispose()
+        fail(f"DATABASE_URL: {where} was made by an older tomstudy (missing: "
+             f"{', '.join(missing)})")
+    return config, engine
+
+
 @cli.command()
 def interaction(
     data: Annotated[Path, typer.Option(help="folder with the INTERACTION files (v1.0 or v1.2)")],

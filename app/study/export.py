@@ -1,52 +1,17 @@
-"""Read side for researchers: the tidy export table and the dashboard summary."""
+"""Read side for researchers: the dashboard summary (the exports are in exports.py)."""
 
-import io
 from collections import Counter
 
 import pandas as pd
 from sqlalchemy import select
 from sqlmodel import Session
 
-from analysis.csvsafe import write_csv
-from analysis.load import EXPORT_COLUMNS  # one column contract for writer and reader
 from app.study.balance import in_progress_cutoff
 from app.study.context import StudyContext
+from app.study.exports import predictions_frame
 from app.study.recruitment import preview_path
-from app.study.sessions import as_utc, has_ended, is_in_progress
-from app.study.tables import Participant, PredictionRow, TrialResponse
-
-_FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields]
-
-
-def export_frame(db: Session, study_id: str) -> pd.DataFrame:
-    """One row per (participant, trial, start state, step), columns as in API.md."""
-    pred, trial, part = PredictionRow.__table__, TrialResponse.__table__, Participant.__table__
-    query = (
-        select(part.c.study_id, part.c.recruitment, part.c.external_id, part.c.completed,
-               (part.c.attention_failed == 0).label("attention_passed"), trial.c.world,
-               trial.c.world_position, trial.c.trial_index, trial.c.is_practice,
-               trial.c.attention_check, trial.c.clip_sha256,
-               trial.c.duration_ms.label("trial_duration_ms"), trial.c.replays,
-               trial.c.received_at.label("submitted_at"), *[pred.c[c] for c in _FROM_ROWS])
-        .select_from(pred.join(trial, trial.c.submission_id == pred.c.submission_id)
-                     .join(part, part.c.id == pred.c.participant_id))
-        .where(part.c.study_id == study_id)
-        .order_by(pred.c.participant_id, trial.c.id, pred.c.start_index, pred.c.step))
-    rows = db.execute(query).mappings().all()
-    frame = pd.DataFrame(rows, columns=list(rows[0].keys()) if rows else list(EXPORT_COLUMNS))
-    if len(frame):
-        frame["submitted_at"] = [as_utc(t).isoformat() for t in frame["submitted_at"]]
-        for col in ("completed", "attention_passed", "is_practice", "attention_check"):
-            frame[col] = frame[col].astype(bool)
-    return frame[list(EXPORT_COLUMNS)]
-
-
-def export_csv(db: Session, study_id: str) -> str:
-    """The export table as CSV text (pandas/R read it with no post-processing); text cells
-    that a spreadsheet would run as a formula start with a quote (analysis/csvsafe.py)."""
-    buffer = io.StringIO()
-    write_csv(export_frame(db, study_id), buffer)
-    return buffer.getvalue()
+from app.study.sessions import has_ended, is_in_progress
+from app.study.tables import Participant
 
 
 def progress(db: Session, ctx: StudyContext) -> dict:
@@ -114,7 +79,7 @@ def _world_means(means: pd.DataFrame) -> dict:
 
 def summary(db: Session, ctx: StudyContext) -> dict:
     """The dashboard's JSON: progress, exclusions and running alignment error."""
-    frame = export_frame(db, ctx.study_id)
+    frame = predictions_frame(db, ctx.study_id)
     return {"study_id": ctx.study_id, "title": ctx.config.title,
             "preview_link": preview_path(ctx.study_id, ctx.preview_key),
             "progress": progress(db, ctx), "alignment_error": alignment_summary(frame, ctx),

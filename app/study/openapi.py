@@ -63,10 +63,17 @@ RESEARCHER_STATUSES = {
     404: "study_id: unknown study",
     422: INVALID,
 }
+WITHDRAWAL_STATUSES = RESEARCHER_STATUSES | {
+    400: UNREADABLE,
+    404: "study_id: unknown study; external_id: no session of this id in the study",
+    413: TOO_LARGE,
+}
 
 
 def error_statuses(method: str, path: str) -> dict[int, str]:
     """The error statuses the route `method path` can answer, each with why."""
+    if path == "/api/researcher/withdrawals" and method == "POST":
+        return WITHDRAWAL_STATUSES
     if path.startswith("/api/researcher/"):
         return RESEARCHER_STATUSES
     if path == "/api/sessions" and method == "POST":

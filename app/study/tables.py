@@ -284,6 +284,13 @@ class SurveyCreate(SubmissionBody):
     answers: dict[str, str | int | float | None]
 
 
+class WithdrawalCreate(_Body):
+    """POST /api/researcher/withdrawals: the participant to delete, by their platform id."""
+
+    study_id: str = PydField(max_length=64)
+    external_id: str = PydField(min_length=1, max_length=128)
+
+
 class EventIn(_Body):
     """One telemetry event: a kind the browser sends, with that kind's `data` (EVENT_DATA)."""
 

@@ -35,7 +35,7 @@ def _row(p, world, w, t, s, k, start, click, human, rng) -> list:
     policy = human + rng.normal(scale=0.1, size=2)
     values = {
         "study_id": "paper_study", "participant_id": f"p{p:02d}", "recruitment": "prolific",
-        "external_id": f"ext{p}", "completed": True, "attention_passed": True,
+        "completed": True, "outcome": "completed", "attention_passed": True,
         "world": world, "world_position": w, "trial_id": f"{world}-{t}", "trial_index": t,
         "is_practice": False, "attention_check": False, "clip_sha256": "c" * 8,
         "start_index": s, "start_kind": START_KINDS[world][s], "step": k, "start_x": start[0],
@@ -46,7 +46,7 @@ def _row(p, world, w, t, s, k, start, click, human, rng) -> list:
         "policy_vx": policy[0], "policy_vy": policy[1], "ours_code": s % 2, "vae_code": t % 2,
         "ours_sha256": "o" * 8, "vae_sha256": "v" * 8, "click_time_ms": 100.0 * (k + 1),
         "trial_duration_ms": 8000.0, "replays": 0, "submission_id": f"sub-{p}-{w}-{t}",
-        "submitted_at": "2026-01-01T00:00:00Z",
+        "submitted_at": "2026-01-01T00:00:00Z", "config_sha256": "f" * 8, "bank_sha256": "b" * 8,
     }
     return [values[c] for c in EXPORT_COLUMNS]
 

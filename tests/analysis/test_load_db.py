@@ -6,9 +6,10 @@ import pandas as pd
 from sqlalchemy import insert
 from sqlmodel import Session
 
+from analysis.csvsafe import write_csv
 from analysis.load import load_csv, load_database
 from app.study.db import create_tables, make_engine
-from app.study.export import export_csv
+from app.study.exports import predictions_frame
 from app.study.tables import Participant, PredictionRow, TrialResponse
 from tests.analysis.fixed_data import fixed_predictions
 
@@ -17,13 +18,15 @@ def _store(engine, frame: pd.DataFrame) -> None:
     """Write the fixed rows into the server's tables (as crud.py would have)."""
     pred_cols = [c.name for c in PredictionRow.__table__.columns if c.name != "id"]
     with engine.begin() as conn:
-        for n, (_pid, rows) in enumerate(frame.groupby("participant_id", sort=True)):
+        for n, (pid, rows) in enumerate(frame.groupby("participant_id", sort=True)):
             first = rows.iloc[0]
             ident = conn.execute(insert(Participant.__table__).values(
                 study_id="paper_study", recruitment=first["recruitment"],
-                external_id=first["external_id"], session_token=f"tok{n}", public_id=f"pub{n}",
+                external_id=f"ext{n}", session_token=f"tok{n}", public_id=pid,
                 recruitment_params={}, client={}, world_order="highway,obstacle", plan=[],
                 position=0, completed=bool(n != 1), attention_failed=int(n == 2),
+                outcome="completed" if n != 1 else None, config_sha256=first["config_sha256"],
+                bank_sha256=first["bank_sha256"],
             )).inserted_primary_key[0]
             for _, trial in rows.groupby("submission_id", sort=False):
                 t = trial.iloc[0]
@@ -55,24 +58,32 @@ def test_database_and_csv_export_load_identically(tmp_path):
     assert set(from_db["start_kind"]) == {"own", "same_lane", "near"}
 
 
-def test_formula_ids_export_as_text_and_load_as_stored(tmp_path):
+def export_csv(db: Session, study_id: str) -> str:
+    """The predictions export as the server writes it."""
+    buffer = io.StringIO()
+    write_csv(predictions_frame(db, study_id), buffer)
+    return buffer.getvalue()
+
+
+def test_formula_text_exports_as_text_and_loads_as_stored(tmp_path):
     url = f"sqlite:///{tmp_path / 'study.db'}"
     engine = make_engine(url)
     create_tables(engine)
     frame = fixed_predictions()
     ids = {"p00": '=HYPERLINK("http://x","y")', "p01": "@SUM(1+1)", "p02": "-2+3",
            "p03": "'quoted"}
-    frame["external_id"] = frame["participant_id"].map(ids)
+    frame["clip_sha256"] = frame["participant_id"].map(ids)
     frame["cv_vx"] = -1.5
     _store(engine, frame)
     with Session(engine) as db:
         text = export_csv(db, "paper_study")
     engine.dispose()
     raw = pd.read_csv(io.StringIO(text))
-    assert sorted(set(raw["external_id"])) == [
+    assert sorted(set(raw["clip_sha256"])) == [
         "''quoted", "'-2+3", "'=HYPERLINK(\"http://x\",\"y\")", "'@SUM(1+1)"]
     assert raw["cv_vx"].dtype == float and (raw["cv_vx"] == -1.5).all()
     assert ",-1.5," in text and "\"-1.5\"" not in text
     from_csv = load_csv(io.StringIO(text))
     pd.testing.assert_frame_equal(from_csv, load_database(url, "paper_study"))
-    assert set(from_csv["external_id"]) == set(ids.values())
+    assert set(from_csv["clip_sha256"]) == set(ids.values())
+    assert "external_id" not in raw.columns

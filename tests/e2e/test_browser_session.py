@@ -245,7 +245,7 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
     assert errors == []
     context.close()
 
-    mine = [r for r in rows if r["external_id"] == PID]
+    mine = [r for r in rows if r["participant_id"] == public_id_of(browser_server.db_path, PID)]
     bank_ids = bank_ids_of_refs(browser_server.db_path, PID)  # the browser saw opaque ids
     done["clicks"] = {bank_ids[ref]: clicks for ref, clicks in done["clicks"].items()}
     main = [r for r in mine if not truthy(r["is_practice"]) and not truthy(r["attention_check"])]
@@ -298,6 +298,14 @@ def stored_ending(db_path: Path, external_id: str) -> tuple[str, str]:
     with closing(sqlite3.connect(db_path)) as db:
         return db.execute("SELECT outcome, completion_code FROM participant "
                           "WHERE external_id = ?", (external_id,)).fetchone()
+
+
+def public_id_of(db_path: Path, external_id: str) -> str:
+    """The pseudonymous id the exports carry for this platform id."""
+    with closing(sqlite3.connect(db_path)) as db:
+        (public_id,) = db.execute("SELECT public_id FROM participant WHERE external_id = ?",
+                                  (external_id,)).fetchone()
+    return public_id
 
 
 def bank_ids_of_refs(db_path: Path, external_id: str) -> dict[str, str]:

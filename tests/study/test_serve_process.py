@@ -17,11 +17,12 @@ from tests.study.flow import ADMIN, Participant, new_id, prediction_body, prolif
 pytestmark = pytest.mark.slow
 
 
-def export(base_url: str, study_id: str) -> pd.DataFrame:
-    """The researcher export as a DataFrame."""
-    r = httpx.get(f"{base_url}/api/researcher/export.csv?study_id={study_id}", headers=ADMIN)
+def export(base_url: str, study_id: str, what: str = "predictions") -> pd.DataFrame:
+    """One researcher export as a DataFrame."""
+    r = httpx.get(f"{base_url}/api/researcher/export/{what}.csv?study_id={study_id}",
+                  headers=ADMIN)
     assert r.status_code == 200, r.text
-    return pd.read_csv(io.StringIO(r.text))
+    return pd.read_csv(io.StringIO(r.text), dtype={"participant_id": str, "external_id": str})
 
 
 def test_sigkill_mid_session_loses_no_acknowledged_submission(small_study, tmp_path):
@@ -179,5 +180,7 @@ def test_many_concurrent_participants_on_one_sqlite_worker(small_study, live_ser
     assert asyncio.run(run()) == [2] * crowd
     frame = export(live_server, small_study.study_id)
     crowd_ids = {prolific(f"crowd-{i}")["PROLIFIC_PID"] for i in range(crowd)}
-    mine = frame[frame["external_id"].astype(str).isin(crowd_ids)]
+    sheet = export(live_server, small_study.study_id, "participants")
+    crowd_public = sheet.loc[sheet["external_id"].isin(crowd_ids), "participant_id"]
+    mine = frame[frame["participant_id"].isin(crowd_public)]
     assert len(mine) == crowd * 2 * 15
