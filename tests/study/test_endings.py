@@ -179,3 +179,32 @@ def test_mturk_preview_starts_nothing_and_completion_posts_to_turk_submit_to(cli
         "action": "https://workersandbox.mturk.com/mturk/externalSubmit",
         "fields": {"assignmentId": "3XYZ", "outcome": "completed",
                    "completion_code": "C1TOMSTUDY"}}
+
+
+def test_endings_and_history_reach_the_exports(client, small_study):
+    import io
+
+    import pandas as pd
+
+    sid = small_study.study_id
+    declined = Client(client, sid)
+    public_id = declined.start()["participant_id"]
+    declined.post("decline", {"submission_id": new_id()})
+    p = Client(client, sid)
+    p.start()
+    p.pass_intro()
+    body = prediction_body(p.state()["step"])
+    body["history"] = [{"action": "reset", "start_index": 3, "t_ms": 900.0}]
+    assert p.post("predictions", body).status_code == 201
+
+    def export(what: str) -> pd.DataFrame:
+        r = client.get(f"/api/researcher/export/{what}.csv?study_id={sid}", headers=ADMIN)
+        assert r.status_code == 200, r.text
+        return pd.read_csv(io.StringIO(r.text), keep_default_na=False)
+
+    sheet = export("participants").set_index("participant_id")
+    assert sheet.loc[public_id, ["outcome", "completion_code", "status"]].tolist() == [
+        "declined_consent", "C3TOMNOCONSENT", "ended"]
+    events = export("events")
+    pressed = events[events["source"] == "trial_history"]
+    assert pressed[["kind", "start_index", "t_trial_ms"]].values.tolist() == [["reset", 3, 900.0]]
