@@ -287,7 +287,8 @@ def serve(
 
     import uvicorn
 
-    from app.study.db import SchemaOutdated, create_tables, make_engine
+    from app.study.db import create_tables, make_engine
+    from app.study.migrate import SchemaError
     from app.study.main import STUDY_ENV
 
     settings = server_settings(host, workers)
@@ -306,7 +307,7 @@ def serve(
     engine = make_engine(settings.resolved_database_url())
     try:
         create_tables(engine)  # once, before workers race to create them
-    except SchemaOutdated as err:
+    except SchemaError as err:
         fail(str(err))
     finally:
         engine.dispose()

@@ -3,12 +3,12 @@
 from collections.abc import Iterator
 from pathlib import Path
 
-from sqlalchemy import Table, event, inspect
+from sqlalchemy import Table, event
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.engine import URL, Connection, Engine, make_url
-from sqlmodel import Session, SQLModel, create_engine
+from sqlmodel import Session, create_engine
 
-from app.study import tables  # noqa: F401  (registers the tables on SQLModel.metadata)
+from app.study import migrate, tables  # noqa: F401  (tables registers them on SQLModel.metadata)
 
 CONNECT_TIMEOUT_S = 10
 
@@ -65,31 +65,10 @@ def insert_skipping_duplicates(conn: Connection, table: Table):
     return dialect.insert(table).on_conflict_do_nothing()
 
 
-class SchemaOutdated(RuntimeError):
-    """The database was made by an older tomstudy: its tables lack columns this one writes."""
-
-
 def create_tables(engine: Engine) -> None:
-    """Create missing tables (idempotent; safe when several workers start together), then
-    refuse a database whose existing tables lack columns (SchemaOutdated)."""
-    SQLModel.metadata.create_all(engine, checkfirst=True)
-    missing = missing_columns(engine)
-    if missing:
-        where = engine.url.render_as_string(hide_password=True)
-        raise SchemaOutdated(
-            f"DATABASE_URL: the database at {where} was made by an older tomstudy "
-            f"(missing: {', '.join(missing)}); export its data with the version that made "
-            "it, then serve this version on a new database")
-
-
-def missing_columns(engine: Engine) -> list[str]:
-    """`table.column` of every column the models declare but the database lacks."""
-    inspector = inspect(engine)
-    missing = []
-    for table in SQLModel.metadata.sorted_tables:
-        present = {c["name"] for c in inspector.get_columns(table.name)}
-        missing += [f"{table.name}.{c.name}" for c in table.columns if c.name not in present]
-    return missing
+    """Create an empty database at the newest schema revision; refuse (migrate.SchemaError)
+    one at an older, unknown or no revision (safe when several workers start together)."""
+    migrate.prepare(engine)
 
 
 def session_scope(engine: Engine) -> Iterator[Session]:

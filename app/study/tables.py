@@ -32,6 +32,7 @@ class ParticipantBase(SQLModel):
 
 
 _LIVE = "replaced_at IS NULL"
+_EMPTY = {"server_default": ""}  # what rows stored before a column existed hold
 
 
 class Participant(ParticipantBase, table=True):
@@ -72,9 +73,10 @@ class Participant(ParticipantBase, table=True):
     ended_at: datetime | None = None
     # what this session ran: the study config, the trial bank (which pins both models'
     # answers) and the tomstudy version, so a changed study is visible per session
-    config_sha256: str = Field(default="", max_length=64)
-    bank_sha256: str = Field(default="", max_length=64)
-    app_version: str = Field(default="", max_length=32)
+    # (sessions from before they were stored have '': migration 0002's server default)
+    config_sha256: str = Field(default="", max_length=64, sa_column_kwargs=_EMPTY)
+    bank_sha256: str = Field(default="", max_length=64, sa_column_kwargs=_EMPTY)
+    app_version: str = Field(default="", max_length=32, sa_column_kwargs=_EMPTY)
 
 
 # How a session ends; each has its own completion code (config.Endings).
@@ -133,7 +135,8 @@ class TrialResponse(SQLModel, table=True):
     replays: int
     clip_sha256: str = Field(max_length=64)
     # the participant's undo and reset presses on this trial, in order (HistoryEntry)
-    history: list = Field(default_factory=list, sa_column=Column(JSON))
+    history: list = Field(default_factory=list,
+                          sa_column=Column(JSON, server_default=text("'[]'")))
     received_at: datetime = Field(default_factory=utcnow)
 
 

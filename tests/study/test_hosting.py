@@ -289,4 +289,4 @@ def test_a_database_of_an_older_schema_is_refused_with_what_to_do(small_study, t
                          env=small_study.env(f"sqlite:///{db}"), capture_output=True, text=True,
                          timeout=120)
     assert run.returncode == 2 and "Traceback" not in run.stderr
-    assert "older tomstudy" in run.stderr and "participant.public_id" in run.stderr
+    assert "older tomstudy" in run.stderr and "`tomstudy db upgrade`" in run.stderr
