@@ -12,6 +12,7 @@ from app.settings import get_settings
 if TYPE_CHECKING:
     from analysis.observers_config import ObserversConfig
     from app.settings import Settings
+    from app.study.migrate import UpgradeReport
 
 cli = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Worlds, models and the online study of how people predict a robot.")
@@ -288,8 +289,8 @@ def serve(
     import uvicorn
 
     from app.study.db import create_tables, make_engine
-    from app.study.migrate import SchemaError
     from app.study.main import STUDY_ENV
+    from app.study.migrate import SchemaError
 
     settings = server_settings(host, workers)
     if prepare:
@@ -339,6 +340,62 @@ def server_settings(host: str, workers: int) -> "Settings":
         os.environ["TOMSTUDY_PRODUCTION"] = "1"
         get_settings.cache_clear()
     return settings
+
+
+db_cli = typer.Typer(no_args_is_help=True,
+                     help="The study database's schema revision (reads DATABASE_URL).")
+cli.add_typer(db_cli, name="db")
+
+
+@db_cli.command("upgrade")
+def db_upgrade() -> None:
+    """Bring the database to this tomstudy's schema revision, keeping every row."""
+    from app.study.db import make_engine
+    from app.study.migrate import SchemaError, upgrade
+
+    engine = make_engine(get_settings().resolved_database_url())
+    try:
+        report = upgrade(engine)
+    except SchemaError as err:
+        fail(str(err))
+    finally:
+        engine.dispose()
+    for line in upgrade_lines(report, engine.url.render_as_string(hide_password=True)):
+        typer.echo(line)
+
+
+def upgrade_lines(report: "UpgradeReport", where: str) -> list[str]:
+    """What `db upgrade` did: from -> to revision, then rows per table before and after."""
+    if report.stamped:
+        before = f"no revision (made before migrations; its tables match {report.stamped})"
+    else:
+        before = report.before or "empty database"
+    verb = "already at" if report.before == report.after else "upgraded to"
+    lines = [f"{where}: {before} -> {verb} {report.after}",
+             f"{'table':<16}{'rows before':>12}{'rows after':>12}"]
+    for name in sorted(set(report.rows_before) | set(report.rows_after)):
+        rows = [str(counts[name]) if name in counts else "-"
+                for counts in (report.rows_before, report.rows_after)]
+        lines.append(f"{name:<16}{rows[0]:>12}{rows[1]:>12}")
+    return lines
+
+
+@db_cli.command("current")
+def db_current() -> None:
+    """Print the database's schema revision and this tomstudy's newest."""
+    from app.study.db import make_engine
+    from app.study.migrate import current, head, our_tables
+
+    engine = make_engine(get_settings().resolved_database_url())
+    try:
+        with engine.connect() as conn:
+            revision, tables = current(conn), our_tables(conn)
+    finally:
+        engine.dispose()
+    shown = revision or ("none (made before migrations)" if tables else "none (empty database)")
+    typer.echo(f"revision: {shown}\nhead: {head()}")
+    if tables and revision != head():
+        typer.echo("back up the database, then run `tomstudy db upgrade` before serving it")
 
 
 @cli.command("preview-link")
