@@ -282,17 +282,17 @@ def serve(
     study: Annotated[str, typer.Option(help="study id(s), comma-separated")] = "paper_study",
     prepare: Annotated[bool, typer.Option("--prepare", help="first simulate, train and "
                                           "build-trials whatever is missing")] = False,
+    allow_bank_change: Annotated[bool, typer.Option(
+        "--allow-bank-change", help="serve although sessions ran another trial bank")] = False,
 ) -> None:
     """Serve the study (participant app, API, researcher dashboard) with uvicorn."""
     import os
 
     import uvicorn
 
-    from app.study.db import create_tables, make_engine
     from app.study.main import STUDY_ENV
-    from app.study.migrate import SchemaError
 
-    settings = server_settings(host, workers)
+    settings = server_settings(host, workers, allow_bank_change)
     if prepare:
         from app.study.prepare import prepare_study
 
@@ -305,13 +305,7 @@ def serve(
         if missing:
             fail(f"{study_id}: missing {', '.join(map(str, missing))}; run "
                  f"`tomstudy serve --prepare` (or simulate, train and build-trials)")
-    engine = make_engine(settings.resolved_database_url())
-    try:
-        create_tables(engine)  # once, before workers race to create them
-    except SchemaError as err:
-        fail(str(err))
-    finally:
-        engine.dispose()
+    check_database(settings, study.split(","))
     os.environ[STUDY_ENV] = study
     docs = "off in production" if settings.production else "/docs"
     typer.echo(f"serving http://{host}:{port}/s/{study.split(',')[0]}  "
@@ -320,13 +314,37 @@ def serve(
                 workers=workers, log_level="warning")
 
 
-def server_settings(host: str, workers: int) -> "Settings":
+def check_database(settings: "Settings", studies: list[str]) -> None:
+    """Before any worker starts: make an empty database, and exit 2 on one that needs
+    `tomstudy db upgrade` or whose sessions ran another trial bank (unless allowed)."""
+    from app.study.bank_guard import BankChanged, check_bank_unchanged
+    from app.study.db import create_tables, make_engine
+    from app.study.migrate import SchemaError
+    from app.study.trials import TrialBank
+
+    engine = make_engine(settings.resolved_database_url())
+    try:
+        create_tables(engine)  # once, before workers race to create them
+        if not settings.allow_bank_change:
+            for study_id in studies:
+                bank = TrialBank.load(settings.data_dir, study_id)
+                check_bank_unchanged(engine, study_id, bank.sha256)
+    except (SchemaError, BankChanged) as err:
+        fail(str(err))
+    finally:
+        engine.dispose()
+
+
+def server_settings(host: str, workers: int, allow_bank_change: bool = False) -> "Settings":
     """Settings for `serve`: production off loopback; exit 2 if unsafe or unservable."""
     import os
 
     from app.study.db import is_sqlite
     from app.study.main import UnsafeSettings, check_production
 
+    if allow_bank_change:  # the app factory (in each worker) reads the environment
+        os.environ["TOMSTUDY_ALLOW_BANK_CHANGE"] = "1"
+        get_settings.cache_clear()
     settings = get_settings().for_host(host)
     try:
         check_production(settings)

@@ -24,6 +24,8 @@ class Settings(BaseSettings):
     production: bool = False
     # bots answer faster than people and report a simulated clock; only `make pilot` sets this
     trust_client_clock: bool = False
+    # serve a study although sessions ran another trial bank (app/study/bank_guard.py)
+    allow_bank_change: bool = False
 
     def resolved_database_url(self) -> str:
         """The configured URL, or SQLite under the data dir."""

@@ -18,6 +18,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from app.settings import DEFAULT_ADMIN_TOKEN, REPO_ROOT, Settings, get_settings
 from app.study import health
 from app.study.balance import ensure_rows
+from app.study.bank_guard import check_bank_unchanged
 from app.study.config import StudyConfig, config_sha256, load_study_config
 from app.study.context import StudyContext
 from app.study.db import create_tables, make_engine
@@ -87,6 +88,8 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
         create_tables(app.state.engine)
         app.state.studies = {sid: load_study(settings, sid) for sid in studies}
         for ctx in app.state.studies.values():
+            if not settings.allow_bank_change:
+                check_bank_unchanged(app.state.engine, ctx.study_id, ctx.bank.sha256)
             ensure_rows(app.state.engine, ctx)
         yield
         app.state.engine.dispose()
