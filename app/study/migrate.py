@@ -4,10 +4,12 @@ The server creates an empty database at the newest revision and refuses any othe
 database that is not at it; `tomstudy db upgrade` moves one there, including a database
 made before migrations existed (no alembic_version table), once its tables match a
 known revision. On PostgreSQL an advisory lock makes both safe when several processes
-start together.
+start together. A schema change is a change to tables.py plus a new script in
+migrations/versions/ (tests/study/test_migrations.py fails until the two agree).
 """
 
 import hashlib
+import re
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -76,6 +78,15 @@ def revisions() -> list[str]:
 def is_known(revision: str) -> bool:
     """True if `revision` is one of this tomstudy's scripts."""
     return revision in revisions()
+
+
+def server_default_differs(_context, _inspected_column, _metadata_column, inspected: str | None,
+                           _metadata_default, rendered: str | None) -> bool:
+    """Alembic's `compare_server_default` hook: compare the SQL text of two defaults, with
+    PostgreSQL's casts ('[]'::json) taken off (Alembic's own check cannot compare JSON)."""
+    def bare(default: str | None) -> str | None:
+        return None if default is None else re.sub(r"::[a-z ]+$", "", default.strip("() "))
+    return bare(inspected) != bare(rendered)
 
 
 def where(engine: Engine) -> str:

@@ -32,7 +32,7 @@ class ParticipantBase(SQLModel):
 
 
 _LIVE = "replaced_at IS NULL"
-_EMPTY = {"server_default": ""}  # what rows stored before a column existed hold
+_EMPTY = {"server_default": text("''")}  # what rows stored before a column existed hold
 
 
 class Participant(ParticipantBase, table=True):

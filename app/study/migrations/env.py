@@ -8,6 +8,7 @@ from alembic import context
 from sqlmodel import SQLModel
 
 from app.study import tables  # noqa: F401  (target metadata for autogenerate)
+from app.study.migrate import server_default_differs
 
 
 def run_migrations() -> None:
@@ -18,7 +19,8 @@ def run_migrations() -> None:
     # SQLite alters most columns only by copying the table: batch mode does that
     context.configure(connection=connection, target_metadata=SQLModel.metadata,
                       render_as_batch=connection.dialect.name == "sqlite",
-                      compare_type=True, compare_server_default=True)
+                      compare_type=True,
+                      compare_server_default=server_default_differs)
     with context.begin_transaction():
         context.run_migrations()
 

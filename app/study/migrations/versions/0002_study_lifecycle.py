@@ -24,7 +24,7 @@ def upgrade() -> None:
     op.add_column("participant", sa.Column("ended_at", sa.DateTime(timezone=True), nullable=True))
     for name, length in zip(RAN, (64, 64, 32), strict=True):
         op.add_column("participant", sa.Column(name, sa.String(length), nullable=False,
-                                               server_default=""))
+                                               server_default=sa.text("''")))
     op.add_column("trialresponse", sa.Column("history", sa.JSON(), nullable=True,
                                              server_default=sa.text("'[]'")))
     op.create_table(
