@@ -139,12 +139,14 @@ def free_port() -> int:
 
 
 def start_server(study: SmallStudy, db_url: str, port: int, workers: int = 1,
-                 log: Path | None = None, **env: str) -> subprocess.Popen:
-    """`tomstudy serve` as a real process (extra `env` variables); returns once it answers."""
+                 log: Path | None = None, args: tuple[str, ...] = (),
+                 **env: str) -> subprocess.Popen:
+    """`tomstudy serve` as a real process (extra `args` and `env` variables); returns once
+    it answers."""
     out = open(log, "ab") if log else subprocess.DEVNULL  # noqa: SIM115 (the child keeps it)
     proc = subprocess.Popen(
         [str(Path(sys.executable).parent / "tomstudy"), "serve", "--host", "127.0.0.1",
-         "--port", str(port), "--workers", str(workers), "--study", study.study_id],
+         "--port", str(port), "--workers", str(workers), "--study", study.study_id, *args],
         env=study.env(db_url, **env), stdout=out, stderr=subprocess.STDOUT, cwd=REPO)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:

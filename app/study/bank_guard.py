@@ -32,10 +32,10 @@ def check_bank_unchanged(engine: Engine, study_id: str, bank_sha256: str) -> Non
     runs = banks_run(engine, study_id)
     if set(runs) <= {bank_sha256}:
         return
-    ran = ", ".join(f"{n} ran bank {sha[:SHORT]}"
+    ran = ", ".join(f"{n} ran bank {sha[:SHORT]}{' (the loaded one)' if sha == bank_sha256 else ''}"
                     for sha, n in sorted(runs.items(), key=lambda item: (-item[1], item[0])))
     raise BankChanged(
-        f"{study_id}: the trial bank changed under a running study: the loaded bank is "
-        f"{bank_sha256[:SHORT]}, and of its sessions (pilots aside) {ran}; their trials and "
+        f"{study_id}: the trial bank changed under a running study: of its sessions (pilots "
+        f"not counted) {ran}, but the loaded bank is {bank_sha256[:SHORT]}; their trials and "
         "model answers differ. Restore the bank those sessions ran, or serve this one anyway "
         "with `tomstudy serve --allow-bank-change` (or TOMSTUDY_ALLOW_BANK_CHANGE=1)")

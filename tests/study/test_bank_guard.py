@@ -1,0 +1,107 @@
+"""The server refuses a study whose trial bank changed under its sessions, unless told to."""
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import httpx
+import pytest
+from fastapi.testclient import TestClient
+
+from app.fileio import sha256_file
+from app.settings import Settings
+from app.study.bank_guard import BankChanged, banks_run
+from app.study.db import make_engine
+from app.study.main import create_app
+from app.study.recruitment import preview_key
+from app.study.trials import BANK_FILE, bank_dir
+from tests.conftest import SmallStudy, free_port, start_server
+from tests.study.flow import TOKEN, Participant, make_client
+
+
+@pytest.fixture
+def rebuilt(small_study, tmp_path) -> SmallStudy:
+    """The small study with a bank of other bytes (and its meta.json to match), as after a
+    researcher rebuilt it."""
+    data_dir = tmp_path / "var"
+    shutil.copytree(small_study.data_dir, data_dir)
+    bank = bank_dir(data_dir, small_study.study_id) / BANK_FILE
+    bank.write_text(json.dumps(json.loads(bank.read_text()), indent=1))
+    meta = bank.with_name("meta.json")
+    meta.write_text(json.dumps(json.loads(meta.read_text()) | {"bank_sha256": sha256_file(bank)}))
+    return SmallStudy(data_dir, small_study.configs_dir)
+
+
+def run_sessions(study: SmallStudy, db_url: str, n: int, pilots: int = 0) -> str:
+    """`n` participants and `pilots` preview sessions start on `study`'s bank; its sha256."""
+    with make_client(study, db_url) as client:
+        for _ in range(n):
+            Participant(client, study.study_id).start()
+        for _ in range(pilots):
+            Participant(client, study.study_id).start(preview=preview_key(TOKEN, study.study_id))
+        return client.app.state.studies[study.study_id].bank.sha256
+
+
+def settings_of(study: SmallStudy, db_url: str, **extra) -> Settings:
+    """Server settings for `study` on `db_url`."""
+    return Settings(data_dir=study.data_dir, configs_dir=study.configs_dir, database_url=db_url,
+                    admin_token=TOKEN, **extra)
+
+
+def test_a_changed_bank_is_refused_naming_the_sessions_and_the_override(small_study, rebuilt,
+                                                                         db_url):
+    old = run_sessions(small_study, db_url, n=2, pilots=1)
+    app = create_app(settings_of(rebuilt, db_url), [rebuilt.study_id])
+    with pytest.raises(BankChanged) as refused, TestClient(app):
+        pass
+    message = str(refused.value)
+    new = json.loads(
+        (bank_dir(rebuilt.data_dir, rebuilt.study_id) / "meta.json").read_text())["bank_sha256"]
+    assert message.startswith(f"{rebuilt.study_id}: the trial bank changed")
+    assert f"2 ran bank {old[:12]}" in message and f"loaded bank is {new[:12]}" in message
+    assert "--allow-bank-change" in message and "TOMSTUDY_ALLOW_BANK_CHANGE=1" in message
+    engine = make_engine(db_url)
+    assert banks_run(engine, rebuilt.study_id) == {old: 2}  # the pilot is left out
+    engine.dispose()
+
+
+def test_the_override_serves_the_changed_bank(small_study, rebuilt, db_url, monkeypatch):
+    old = run_sessions(small_study, db_url, n=1)
+    monkeypatch.setenv("TOMSTUDY_ALLOW_BANK_CHANGE", "1")
+    settings = settings_of(rebuilt, db_url)
+    assert settings.allow_bank_change
+    with TestClient(create_app(settings, [rebuilt.study_id])) as client:
+        Participant(client, rebuilt.study_id).start()
+        new = client.app.state.studies[rebuilt.study_id].bank.sha256
+    engine = make_engine(db_url)
+    assert banks_run(engine, rebuilt.study_id) == {old: 1, new: 1}
+    engine.dispose()
+
+
+def test_pilots_and_the_same_bank_never_block(small_study, rebuilt, db_url):
+    run_sessions(small_study, db_url, n=0, pilots=2)  # the lab tried the old bank itself
+    with make_client(rebuilt, db_url) as client:
+        assert Participant(client, rebuilt.study_id).start()["resumed"] is False
+    with make_client(rebuilt, db_url) as client:  # now its own sessions ran the loaded bank
+        assert client.get("/healthz").status_code == 200
+
+
+def test_serve_refuses_a_changed_bank_unless_allowed(small_study, rebuilt, tmp_path):
+    db_url = f"sqlite:///{tmp_path / 'study.db'}"
+    old = run_sessions(small_study, db_url, n=3)
+    run = subprocess.run([str(Path(sys.executable).parent / "tomstudy"), "serve", "--port", "1",
+                          "--study", rebuilt.study_id], env=rebuilt.env(db_url),
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert f"{rebuilt.study_id}: the trial bank changed" in run.stderr
+    assert f"3 ran bank {old[:12]}" in run.stderr
+    port = free_port()
+    proc = start_server(rebuilt, db_url, port, log=tmp_path / "server.log",
+                        args=("--allow-bank-change",))
+    try:
+        assert httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=5).status_code == 200
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
