@@ -483,12 +483,13 @@ def withdraw(
 
 def study_database(study: str):
     """(study config, engine on DATABASE_URL) for a study's stored data; exit 2 if either is
-    missing, or the database was made by an older tomstudy."""
+    missing, or the database needs `tomstudy db upgrade`."""
     from sqlalchemy import inspect
     from sqlalchemy.engine import make_url
 
     from app.study.config import load_study_config
-    from app.study.db import make_engine, missing_columns, normalise_url
+    from app.study.db import make_engine, normalise_url
+    from app.study.migrate import SchemaError, check_at_head
 
     settings = get_settings()
     try:
@@ -504,11 +505,11 @@ def study_database(study: str):
     if not inspect(engine).has_table("participant"):
         engine.dispose()
         fail(f"DATABASE_URL: {where} holds no study tables")
-    missing = missing_columns(engine)
-    if missing:
+    try:
+        check_at_head(engine)
+    except SchemaError as err:
         engine.dispose()
-        fail(f"DATABASE_URL: {where} was made by an older tomstudy (missing: "
-             f"{', '.join(missing)})")
+        fail(str(err))
     return config, engine
 
 

@@ -118,11 +118,17 @@ def prepare(engine: Engine) -> None:
         if not our_tables(conn):
             command.upgrade(alembic_config(conn), "head")
             return
-        check_at_head(conn, engine)
+        refuse_unless_head(conn, engine)
 
 
-def check_at_head(conn: Connection, engine: Engine) -> None:
+def check_at_head(engine: Engine) -> None:
     """Raise SchemaOutdated or SchemaUnknown unless the database is at the head revision."""
+    with engine.connect() as conn:
+        refuse_unless_head(conn, engine)
+
+
+def refuse_unless_head(conn: Connection, engine: Engine) -> None:
+    """check_at_head on an open connection."""
     revision = current(conn)
     if revision == head():
         return

@@ -292,3 +292,10 @@ def test_workers_starting_together_make_the_database_once(postgres_url):
             [(migrate.head(),)]
     for engine in engines:
         engine.dispose()
+
+
+def test_export_refuses_a_database_that_needs_an_upgrade(tmp_path):
+    run = cli("export", "--study", "paper_study", "--what", "participants",
+              db_url=load_fixture(tmp_path / "study.db"))
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert "`tomstudy db upgrade`" in run.stderr
