@@ -11,8 +11,8 @@ from scipy import stats
 from sqlalchemy import update
 
 from app.study.tables import Participant, TrialResponse
-from tests.study.flow import ADMIN, Participant as Person
-from tests.study.flow import at_first_trial, prediction_body, straight_clicks
+from tests.study.flow import ADMIN, at_first_trial, prediction_body, straight_clicks
+from tests.study.flow import Participant as Person
 
 
 def dashboard(client, study_id: str, **params) -> dict:
