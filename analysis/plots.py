@@ -10,6 +10,14 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
+from analysis.fields import (  # noqa: E402
+    FIELD_MODELS,
+    arrow_length,
+    code_panels,
+    panel_error,
+    state_table,
+    unit,
+)
 from analysis.stats import PairedResult, mean_ci95  # noqa: E402
 
 # Okabe-Ito, as in app.worlds.scene: safe for colour-blind readers.
@@ -66,32 +74,6 @@ def plot_errors(means: pd.DataFrame, results: dict[str, PairedResult], base: Pat
     return save(fig, base)
 
 
-def state_table(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per (trial, start state): position, participants' mean first move, each model's first
-    move and code, and the sums and counts of each model's error over all steps."""
-    first = rows[rows["step"] == rows["step"].min()]
-    table = first.groupby(["trial_id", "start_index"], sort=True).agg(
-        x=("start_x", "first"), y=("start_y", "first"), human_vx=("human_vx", "mean"),
-        human_vy=("human_vy", "mean"), ours_vx=("ours_vx", "first"),
-        ours_vy=("ours_vy", "first"), vae_vx=("vae_vx", "first"), vae_vy=("vae_vy", "first"),
-        ours_code=("ours_code", "first"), vae_code=("vae_code", "first"))
-    errors = rows.groupby(["trial_id", "start_index"], sort=True).agg(
-        ours_sum=("err_ours", "sum"), vae_sum=("err_vae", "sum"), count=("err_ours", "size"))
-    return table.join(errors).reset_index()
-
-
-def top_codes(states: pd.DataFrame, model: str, k: int) -> list[int]:
-    """The model's k most common latent codes over the answered trials (trials, not rows)."""
-    trials = states.drop_duplicates(["trial_id"])
-    return trials[f"{model}_code"].value_counts().index[:k].tolist()
-
-
-def _unit(vx: np.ndarray, vy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    norm = np.hypot(vx, vy)
-    norm = np.where(norm > 1e-9, norm, 1.0)
-    return vx / norm, vy / norm
-
-
 def field_panel(ax, states: pd.DataFrame, model: str, scene, arrow_m: float) -> float:
     """Participants' mean first move and the model's at each start state (unit arrows)."""
     from app.worlds.scene import draw_scene
@@ -102,17 +84,17 @@ def field_panel(ax, states: pd.DataFrame, model: str, scene, arrow_m: float) -> 
         ax.invert_yaxis()
         ax.set_aspect("equal")
     for who, width in (("human", 0.006), (model, 0.004)):
-        ux, uy = _unit(states[f"{who}_vx"].to_numpy(), states[f"{who}_vy"].to_numpy())
+        ux, uy = unit(states[f"{who}_vx"].to_numpy(), states[f"{who}_vy"].to_numpy())
         ax.quiver(states["x"], states["y"], ux * arrow_m, uy * arrow_m, angles="xy",
                   scale_units="xy", scale=1, color=MODEL_COLORS[who], width=width, zorder=4,
                   label=MODEL_LABELS[who])
-    return float(states[f"{model}_sum"].sum() / states["count"].sum())
+    return panel_error(states, model)
 
 
 def plot_fields(frame: pd.DataFrame, scenes: dict, base: Path, k: int = 3) -> list[Path]:
     """Per world, for each model's k most common codes: participants' field beside the model's."""
     worlds = sorted(frame["world"].unique())
-    models = ("ours", "vae")
+    models = FIELD_MODELS
     paths: list[Path] = []
     for world in worlds:
         states_w = state_table(frame[frame["world"] == world])
@@ -122,19 +104,19 @@ def plot_fields(frame: pd.DataFrame, scenes: dict, base: Path, k: int = 3) -> li
         shape = (k, len(models)) if wide else (len(models), k)
         fig, axes = plt.subplots(*shape, squeeze=False,
                                  figsize=(13, 1.9 * k) if wide else (3.4 * k, 3.6 * len(models)))
-        arrow_m = _arrow_length(scene)
+        arrow_m = arrow_length(scene)
         for r, model in enumerate(models):
-            codes = top_codes(states_w, model, k)
+            panels = code_panels(states_w, model, k)
             for c in range(k):
                 ax = axes[c][r] if wide else axes[r][c]
-                if c >= len(codes):
+                if c >= len(panels):
                     ax.axis("off")
                     continue
-                states = states_w[states_w[f"{model}_code"] == codes[c]]
+                code, states = panels[c]
                 err = field_panel(ax, states, model, scene, arrow_m)
                 if wide:
                     _crop_x(ax, states_w, arrow_m)
-                ax.set_title(f"{MODEL_LABELS[model]} code {codes[c]}: "
+                ax.set_title(f"{MODEL_LABELS[model]} code {code}: "
                              f"{states['trial_id'].nunique()} trials, error {err:.2f}", fontsize=8)
                 ax.tick_params(labelsize=6)
         _figure_legend(fig)
@@ -153,15 +135,6 @@ def _figure_legend(fig) -> None:
             entries.setdefault(label, handle)
     fig.legend(list(entries.values()), list(entries), loc="lower center", ncols=len(entries),
                fontsize=8, frameon=False)
-
-
-def _arrow_length(scene) -> float:
-    if scene is None:
-        return 0.5
-    b = scene.bounds
-    if scene.lanes:
-        return 0.25 * (b.y_max_m - b.y_min_m)
-    return 0.08 * (b.x_max_m - b.x_min_m)
 
 
 def _crop_x(ax, states: pd.DataFrame, margin_m: float) -> None:

@@ -27,7 +27,7 @@ from app.study.headers import MTURK_FRAMERS, SecurityHeaders
 from app.study.openapi import declare_error_responses
 from app.study.predictor import Predictor
 from app.study.recruitment import preview_key
-from app.study.routes import pages, participant, researcher
+from app.study.routes import dashboard, pages, participant, researcher
 from app.study.trials import TrialBank
 
 MAX_BODY_BYTES = 64 * 1024
@@ -100,7 +100,8 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     app.state.default_study = studies[0]
     app.state.templates = Jinja2Templates(directory=FRONTEND_DIR / "templates")
     app.mount("/static", StaticFiles(directory=FRONTEND_DIR / "static"), name="static")
-    for router in (pages.router, participant.router, researcher.router, health.router):
+    for router in (pages.router, participant.router, researcher.router, dashboard.router,
+                   health.router):
         app.include_router(router)
     add_error_handlers(app)
     declare_error_responses(app)

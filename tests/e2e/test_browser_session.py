@@ -219,7 +219,7 @@ def download_export(page, base_url: str) -> list[dict]:
     page.wait_for_selector("#dashboard:not([hidden])")
     page.fill("#study-input", BROWSER_STUDY)
     page.click("#refresh")
-    page.wait_for_selector("#summary table")
+    page.wait_for_selector("table.sessions")  # the dashboard has loaded
     with page.expect_download() as download:
         page.click("#download")
     return list(csv.DictReader(io.StringIO(Path(download.value.path()).read_text())))

@@ -1,8 +1,10 @@
-// Researcher dashboard: token in sessionStorage, summary tables, CSV export with the bearer header.
-import { ApiError, ResearcherApi } from "./api.js";
+// Researcher dashboard: token in sessionStorage, sessions, live plots, replays, CSV export.
+import { ApiError, ResearcherApi, requestJson } from "./api.js";
+import { ParticipantsTable, renderErrors, renderFields, renderVersions } from "./dashboard.js";
+import { ReplayView } from "./replay.js";
 
 const TOKEN_KEY = "tomstudy.researcher.token";
-const REFRESH_MS = 15000;
+const REFRESH_MS = 10000;
 const $ = (id) => document.getElementById(id);
 
 function title(key) {
@@ -90,10 +92,33 @@ function progressLine(progress) {
   return line;
 }
 
+/** GET a researcher route with the bearer token; `params` become the query string. */
+function researcherGet(api, path, params) {
+  return requestJson("GET", `/api/researcher/${path}?${new URLSearchParams(params)}`, undefined, api.auth());
+}
+
+function exclusionsText(counts) {
+  if (!counts?.participants_total) return "No answers yet.";
+  const rules = Object.entries(counts).filter(([k, v]) => k.startsWith("excluded_") && v).map(([k, v]) => `${title(k.slice(9))} ${v}`);
+  return `${counts.participants_kept} of ${counts.participants_total} participants kept`
+    + `${rules.length ? ` (excluded: ${rules.join(", ")})` : ""}; ${counts.too_fast_trials_dropped} too-fast trials dropped. `
+    + "Dots: each participant's mean; black: mean of those means with its 95% t interval.";
+}
+
 class Dashboard {
   constructor() {
     this.api = null;
     this.timer = null;
+    this.fieldsKey = "";
+    this.table = new ParticipantsTable($("participants"), (row) => this.replay.openSession(row).catch((e) => this.report(e)));
+    this.replay = new ReplayView(
+      (publicId) => researcherGet(this.api, `participants/${encodeURIComponent(publicId)}/trials`, { study_id: this.studyId() }),
+      (publicId, trialId) => researcherGet(this.api, `participants/${encodeURIComponent(publicId)}/trials/${encodeURIComponent(trialId)}`, { study_id: this.studyId() }),
+    );
+  }
+
+  report(error) {
+    $("dashboard-message").textContent = `Could not load: ${error.message}`;
   }
 
   start() {
@@ -104,6 +129,8 @@ class Dashboard {
     $("refresh").onclick = () => this.refresh();
     $("download").onclick = () => this.download();
     $("logout").onclick = () => this.logout();
+    $("rules-select").onchange = () => this.refresh();
+    $("show-external-ids").onchange = () => this.refresh();
     const saved = sessionStorage.getItem(TOKEN_KEY);
     if (saved) this.login(saved);
   }
@@ -114,10 +141,11 @@ class Dashboard {
 
   async login(token) {
     this.api = new ResearcherApi(token);
+    let data;
     try {
-      await this.refresh(true);
+      data = await this.load();
     } catch (error) {
-      $("login-message").textContent = error instanceof ApiError && error.status === 401
+      $("login-message").textContent = error instanceof ApiError && [401, 403].includes(error.status)
         ? "That token is not valid." : `Could not load the summary: ${error.message}`;
       sessionStorage.removeItem(TOKEN_KEY);
       return;
@@ -125,9 +153,10 @@ class Dashboard {
     sessionStorage.setItem(TOKEN_KEY, token);
     $("login-message").textContent = "";
     $("login").hidden = true;
-    $("dashboard").hidden = false;
+    $("dashboard").hidden = false; // before drawing: canvases take their parent's width
+    this.render(data);
     clearInterval(this.timer);
-    this.timer = setInterval(() => this.refresh().catch(() => {}), REFRESH_MS);
+    this.timer = setInterval(() => this.refresh(), REFRESH_MS);
   }
 
   logout() {
@@ -139,15 +168,41 @@ class Dashboard {
     $("token-input").value = "";
   }
 
-  async refresh(throwErrors = false) {
+  /** The summary and the dashboard's data, fetched together. */
+  load() {
+    return Promise.all([this.api.summary(this.studyId()), this.dashboard()]);
+  }
+
+  render([summary, board]) {
+    $("progress-line").replaceChildren(progressLine(summary.progress));
+    $("summary").replaceChildren(renderSummary(summary));
+    this.show(board);
+    $("dashboard-message").textContent = `Updated ${new Date().toLocaleTimeString()}.`;
+  }
+
+  async refresh() {
     try {
-      const summary = await this.api.summary(this.studyId());
-      $("summary").replaceChildren(progressLine(summary.progress), renderSummary(summary));
-      $("dashboard-message").textContent = `Updated ${new Date().toLocaleTimeString()}.`;
+      this.render(await this.load());
     } catch (error) {
-      if (throwErrors) throw error;
       $("dashboard-message").textContent = `Could not refresh: ${error.message}`;
     }
+  }
+
+  dashboard() {
+    return researcherGet(this.api, "dashboard", {
+      study_id: this.studyId(), rules: $("rules-select").value, external_ids: $("show-external-ids").checked,
+    });
+  }
+
+  show(board) {
+    renderVersions($("versions"), board.versions);
+    this.table.show(board.participants);
+    const { alignment } = board;
+    $("exclusions").textContent = exclusionsText(alignment.exclusions);
+    renderErrors($("error-plots"), alignment.worlds);
+    const key = JSON.stringify(alignment.fields); // redraw the canvases only when they change
+    if (key !== this.fieldsKey) renderFields($("fields"), alignment.fields);
+    this.fieldsKey = key;
   }
 
   async download() {

@@ -1,0 +1,73 @@
+"""The researcher dashboard in Debian's chromium: bot sessions in the table, one replay drawn."""
+
+import asyncio
+
+import pytest
+
+from app.study.bots import run_bots
+from tests.conftest import REPO
+from tests.e2e.conftest import ADMIN_TOKEN, BROWSER_STUDY
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+BOTS = 3
+SCREENSHOTS = REPO / "var" / "screenshots"
+
+# Distinct colours among a grid of pixels: a blank or single-colour canvas has one or two.
+CANVAS_COLOURS = """c => {
+    const data = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+    const seen = new Set();
+    for (let i = 0; i < data.length; i += 4 * 97) seen.add(data.slice(i, i + 4).join(","));
+    return seen.size;
+}"""
+
+
+@pytest.fixture(scope="module")
+def bot_sessions(browser_server) -> list:
+    """A few coarse bots take the study through HTTP (before Playwright opens its loop)."""
+    results = asyncio.run(run_bots(browser_server.url, BROWSER_STUDY, "coarse", BOTS,
+                                   concurrency=BOTS, seed=3))
+    assert [r.error for r in results if r.error] == []
+    return results
+
+
+def test_dashboard_lists_sessions_and_replays_a_trial(browser_server, bot_sessions, chromium):
+    page = chromium.new_page(viewport={"width": 1300, "height": 900})
+    errors = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(f"{browser_server.url}/researcher")
+    page.fill("#token-input", ADMIN_TOKEN)
+    page.click("#token-form button")
+    page.wait_for_selector("table.sessions tbody tr")
+    rows = page.locator("table.sessions tbody tr")
+    assert rows.count() >= BOTS
+    assert page.locator("table.sessions th", has_text="external id").count() == 0
+    done = [row for row in rows.all_inner_texts() if "completed" in row]
+    assert len(done) >= BOTS
+    bot_row = page.locator("table.sessions tbody tr", has_text="completed").first
+    public_id = bot_row.get_attribute("data-public-id")
+    bot_row.locator("button").click()
+    page.wait_for_selector(".trial-row")
+    assert public_id in page.text_content("#replay-heading")
+    trials = page.locator(".trial-row")
+    assert trials.count() == 23  # 1 practice + 2 worlds x (10 trials + 1 attention check)
+    trials.nth(2).locator("button").click()
+    page.wait_for_selector("#replay-view:not([hidden])")
+    assert page.get_attribute("#replay-clicks-count", "data-clicks") == "15"
+    assert page.text_content("#replay-clicks-count").startswith("15 clicks")
+    assert page.locator("#replay-click-table tbody tr").count() == 15
+    canvas = page.locator("#replay-canvas")
+    assert canvas.get_attribute("data-clicks-drawn") == "15"
+    assert canvas.evaluate(CANVAS_COLOURS) > 10
+    page.select_option("#replay-start", "0")
+    assert canvas.get_attribute("data-clicks-drawn") == "3"
+    page.fill("#replay-time", "0")
+    page.dispatch_event("#replay-time", "input")
+    assert canvas.get_attribute("data-clicks-drawn") == "0"
+    page.click("#replay-play")  # the participant page's own clip player
+    page.wait_for_function("document.getElementById('replay-caption').textContent"
+                           ".startsWith('Example 1 of')")
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SCREENSHOTS / "dashboard_replay_e2e.png"), full_page=True)
+    assert errors == []
+    page.close()
