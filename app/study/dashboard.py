@@ -17,7 +17,7 @@ from app import __version__
 from app.study.balance import in_progress_cutoff
 from app.study.context import StudyContext
 from app.study.export import export_frame
-from app.study.sessions import as_utc, is_in_progress
+from app.study.sessions import as_utc, session_status
 from app.study.state import progress_of
 from app.study.tables import Participant, TrialResponse
 
@@ -35,15 +35,6 @@ def _finite(value: float) -> float | None:
 
 
 # ---------------------------------------------------------------- sessions
-
-def session_status(p: Participant, cutoff: datetime) -> str:
-    """replaced, ended (an outcome or completion), in_progress or stale."""
-    if p.replaced_at is not None:
-        return "replaced"
-    if p.completed or p.outcome is not None:
-        return "ended"
-    return "in_progress" if is_in_progress(p, cutoff) else "stale"
-
 
 def attention_seen(db: Session, study_id: str) -> dict[int, int]:
     """Attention-check trials answered per participant row id."""

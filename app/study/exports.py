@@ -25,7 +25,7 @@ from analysis.exports import EVENTS, PARTICIPANTS, SURVEY, WHAT, typed
 from analysis.load import EXPORT_COLUMNS, normalise  # one column contract for writer and reader
 from app.study.balance import in_progress_cutoff
 from app.study.config import StudyConfig
-from app.study.sessions import as_utc
+from app.study.sessions import as_utc, session_status
 from app.study.tables import Event, Participant, PredictionRow, Submission, TrialResponse
 
 _FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields
@@ -213,15 +213,6 @@ def _participant_row(p: Participant, version: dict, checks: int, cutoff: datetim
             "attention_verdict": attention_verdict(checks, p.attention_failed),
             "pilot": p.pilot, "replaced": p.replaced_at is not None,
             "app_version": p.app_version}
-
-
-def session_status(p: Participant, cutoff: datetime) -> str:
-    """ended (an outcome or completed), in_progress (written since `cutoff`), else stale."""
-    if p.outcome is not None or p.completed:
-        return "ended"
-    if p.replaced_at is None and as_utc(p.updated_at) >= cutoff:
-        return "in_progress"
-    return "stale"
 
 
 def attention_verdict(checks: int, failed: int) -> str:

@@ -123,6 +123,15 @@ def has_ended(participant: Participant) -> bool:
     return participant.completed or participant.ended_at is not None
 
 
+def session_status(participant: Participant, cutoff: datetime) -> str:
+    """replaced (a new attempt took over), ended, in_progress (written since `cutoff`), stale."""
+    if participant.replaced_at is not None:
+        return "replaced"
+    if has_ended(participant):
+        return "ended"
+    return "in_progress" if is_in_progress(participant, cutoff) else "stale"
+
+
 def is_in_progress(participant: Participant, cutoff: datetime) -> bool:
     """Not ended and updated since `cutoff`."""
     return not has_ended(participant) and as_utc(participant.updated_at) >= cutoff
