@@ -16,7 +16,7 @@ from sqlmodel import Session
 from app import __version__
 from app.study.balance import in_progress_cutoff
 from app.study.context import StudyContext
-from app.study.export import export_frame
+from app.study.exports import predictions_frame
 from app.study.sessions import as_utc, session_status
 from app.study.state import progress_of
 from app.study.tables import Participant, TrialResponse
@@ -176,7 +176,7 @@ def _panel(model: str, code: int, states: pd.DataFrame, arrow_m: float) -> dict:
 
 def alignment(db: Session, ctx: StudyContext, rule_set: str) -> dict:
     """Exclusions, per-world error CIs and field panels under one rule set."""
-    frame = export_frame(db, ctx.study_id)
+    frame = predictions_frame(db, ctx.study_id)
     if frame.empty:
         return {"rules": rule_set, "exclusions": {}, "worlds": {}, "fields": {}}
     kept, counts = kept_rows(frame, ctx, rule_set)
