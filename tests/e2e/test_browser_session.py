@@ -201,14 +201,29 @@ def complete_session(page, base_url: str) -> dict:
                                             replay=n == 2, lose_answer=n == 3,
                                             undo_once=n == 1)
         clicks[trial["trial_id"]] = trial_clicks
+    answer_survey(page)
+    visible(page, "done")
+    return {"clicks": clicks, "code": page.inner_text("#completion-code"),
+            "redirect": page.get_attribute("#redirect-link", "href")}
+
+
+def through_instructions(page) -> None:
+    """Consent and instructions, by clicking."""
+    visible(page, "consent")
+    page.check("#consent-check")
+    page.click("#consent-agree")
+    visible(page, "instructions")
+    page.click("#instructions-done")
+    visible(page, "trial")
+
+
+def answer_survey(page) -> None:
+    """Pick the first option of each closing question and finish."""
     visible(page, "survey")
     for name in sorted(set(page.eval_on_selector_all("#survey-form input[type=radio]",
                                                      "els => els.map(e => e.name)"))):
         page.check(f"#survey-form input[name={name}] >> nth=0")
     page.click("#survey-form button[type=submit]")
-    visible(page, "done")
-    return {"clicks": clicks, "code": page.inner_text("#completion-code"),
-            "redirect": page.get_attribute("#redirect-link", "href")}
 
 
 def download_export(page, base_url: str) -> list[dict]:
@@ -407,12 +422,7 @@ def first_clip_frames(chromium, base_url: str, reduced_motion: str) -> tuple[str
     page = context.new_page()
     page.clock.install()
     page.goto(f"{base_url}/s/{BROWSER_STUDY}?{fresh_recruitment()}")  # a new participant
-    visible(page, "consent")
-    page.check("#consent-check")
-    page.click("#consent-agree")
-    visible(page, "instructions")
-    page.click("#instructions-done")
-    visible(page, "trial")
+    through_instructions(page)
     grab = "c => c.toDataURL()"
     page.clock.fast_forward(100)
     first = page.eval_on_selector("#trial-canvas", grab)

@@ -24,7 +24,13 @@ import yaml
 from app.study.trials import BANK_FILE, bank_dir
 from tests.conftest import SmallStudy, free_port, start_server
 from tests.e2e.conftest import BROWSER_STUDY
-from tests.e2e.test_browser_session import VIEWPORT, fresh_recruitment, visible
+from tests.e2e.test_browser_session import (
+    VIEWPORT,
+    answer_survey,
+    fresh_recruitment,
+    through_instructions,
+    visible,
+)
 from tests.study.flow import Participant as ApiParticipant
 from tests.study.test_endings import fail_attention_checks
 
@@ -69,25 +75,6 @@ def bank_of(study: SmallStudy, study_id: str) -> dict:
     """Bank trials by id."""
     raw = json.loads((bank_dir(study.data_dir, study_id) / BANK_FILE).read_text())
     return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}
-
-
-def through_instructions(page) -> None:
-    """Consent and instructions, by clicking."""
-    visible(page, "consent")
-    page.check("#consent-check")
-    page.click("#consent-agree")
-    visible(page, "instructions")
-    page.click("#instructions-done")
-    visible(page, "trial")
-
-
-def answer_survey(page) -> None:
-    """Pick the first option of each closing question and finish."""
-    visible(page, "survey")
-    for name in sorted(set(page.eval_on_selector_all("#survey-form input[type=radio]",
-                                                     "els => els.map(e => e.name)"))):
-        page.check(f"#survey-form input[name={name}] >> nth=0")
-    page.click("#survey-form button[type=submit]")
 
 
 def to_survey_failing_checks(page, base_url: str, study: SmallStudy, study_id: str) -> str:

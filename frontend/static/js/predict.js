@@ -1,5 +1,5 @@
 // Prediction input: for each start state the participant places successive robot positions.
-import { ROBOT_COLOR, agentStyle, drawAgent, drawBackground, drawTrace, prepareCanvas } from "./scene.js";
+import { ROBOT_COLOR, agentStyle, drawAgent, drawBackground, drawClickMarker, drawTrace, prepareCanvas } from "./scene.js";
 
 const KEY_STEP_FRACTION = 0.1; // arrow key moves the cursor by this share of max_step_m
 const FINE_FACTOR = 0.25; // with Shift held
@@ -289,21 +289,7 @@ export class PredictionInput {
   /** Numbered markers on the clicked positions, drawn last so nothing hides them. */
   drawMarkers(ctx, view) {
     this.current.forEach((point, k) => {
-      const [px, py] = view.toPx(point);
-      ctx.save();
-      ctx.fillStyle = "#ffffff";
-      ctx.strokeStyle = ROBOT_COLOR;
-      ctx.lineWidth = 2.5;
-      ctx.beginPath();
-      ctx.arc(px, py, 9, 0, 2 * Math.PI);
-      ctx.fill();
-      ctx.stroke();
-      ctx.fillStyle = "#111111";
-      ctx.font = "bold 11px system-ui, sans-serif";
-      ctx.textAlign = "center";
-      ctx.textBaseline = "middle";
-      ctx.fillText(String(k + 1), px, py + 0.5);
-      ctx.restore();
+      drawClickMarker(ctx, view, point, String(k + 1), { stroke: ROBOT_COLOR, radius: 9 });
     });
   }
 

@@ -2,7 +2,7 @@
 // clicks up to a time in the trial, with Ours', the VAE's and the policy's moves over them.
 import { MODEL_COLORS, MODEL_LABELS } from "./dashboard.js";
 import { ClipPlayer, trialClips } from "./player.js";
-import { agentStyle, drawAgent, drawBackground, drawTrace, prepareCanvas } from "./scene.js";
+import { agentStyle, drawAgent, drawBackground, drawClickMarker, drawTrace, prepareCanvas } from "./scene.js";
 
 export const REPLAY_MODELS = ["ours", "vae", "policy"];
 const CLICK_PLAYBACK_SPEED = 8; // trial milliseconds per wall-clock millisecond
@@ -39,25 +39,6 @@ function modelPath(ctx, view, model, start, points) {
     const [px, py] = view.toPx(p);
     ctx.fillRect(px - 2.5, py - 2.5, 5, 5);
   }
-  ctx.restore();
-}
-
-/** A numbered white disc on a clicked position (as predict.js marks clicks). */
-function clickMarker(ctx, view, point, label) {
-  const [px, py] = view.toPx(point);
-  ctx.save();
-  ctx.fillStyle = "#ffffff";
-  ctx.strokeStyle = "#000000";
-  ctx.lineWidth = 2;
-  ctx.beginPath();
-  ctx.arc(px, py, 8, 0, 2 * Math.PI);
-  ctx.fill();
-  ctx.stroke();
-  ctx.fillStyle = "#111111";
-  ctx.font = "bold 10px system-ui, sans-serif";
-  ctx.textAlign = "center";
-  ctx.textBaseline = "middle";
-  ctx.fillText(label, px, py + 0.5);
   ctx.restore();
 }
 
@@ -104,7 +85,7 @@ export function drawAnswers(canvas, replay, tMs, only = null) {
   for (const start of shown) {
     const made = start.clicks.filter((c) => c.t_ms <= tMs);
     drawTrace(ctx, view, { color: "#000000", hatched: false }, [start.robot, ...made.map((c) => c.at)], { alpha: 1, width: 3 });
-    for (const click of made) clickMarker(ctx, view, click.at, String(rank.get(`${start.start_index}:${click.step}`)));
+    for (const click of made) drawClickMarker(ctx, view, click.at, String(rank.get(`${start.start_index}:${click.step}`)));
     drawn += made.length;
   }
   // the models' moves last, over the clicks, so a close match does not hide them

@@ -256,3 +256,22 @@ export function drawTrace(ctx, view, style, points, { alpha = 0.8, dots = false,
   }
   ctx.restore();
 }
+
+/** A numbered white disc on a clicked position (the participant's input and the replay). */
+export function drawClickMarker(ctx, view, point, label, { stroke = "#000000", radius = 8 } = {}) {
+  const [px, py] = view.toPx(point);
+  ctx.save();
+  ctx.fillStyle = "#ffffff";
+  ctx.strokeStyle = stroke;
+  ctx.lineWidth = radius > 8 ? 2.5 : 2;
+  ctx.beginPath();
+  ctx.arc(px, py, radius, 0, 2 * Math.PI);
+  ctx.fill();
+  ctx.stroke();
+  ctx.fillStyle = "#111111";
+  ctx.font = `bold ${radius + 2}px system-ui, sans-serif`;
+  ctx.textAlign = "center";
+  ctx.textBaseline = "middle";
+  ctx.fillText(label, px, py + 0.5);
+  ctx.restore();
+}
