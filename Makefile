@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install serve test lint data bench pilot fuzz clean
+.PHONY: install serve test lint data bench pilot screens fuzz clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -46,6 +46,10 @@ pilot: $(STAMP)
 	status=$$?; kill $$pid; wait $$pid; test $$status -eq 0
 	$(BIN)/tomstudy analyze --study paper_study --database-url sqlite:///$(CURDIR)/var/pilot_$(KIND).db \
 	  --out var/reports/pilot_$(KIND) $(PILOT_WAIVE)
+
+# The researcher dashboard and one replay on a copy of the coarse pilot's database (var/screens)
+screens: $(STAMP)
+	$(BIN)/python -m tests.e2e.shoot_dashboard
 
 # Schemathesis with every check on the study API: at least 5,000 cases, 0 failures (issue 10)
 fuzz: $(STAMP)

@@ -226,8 +226,8 @@ def answer_survey(page) -> None:
     page.click("#survey-form button[type=submit]")
 
 
-def download_export(page, base_url: str) -> list[dict]:
-    """Log into the researcher dashboard and download export.csv through its button."""
+def download_export(page, base_url: str, what: str = "predictions") -> list[dict]:
+    """Log into the researcher dashboard and download one export through its button."""
     page.goto(f"{base_url}/researcher")
     page.fill("#token-input", ADMIN_TOKEN)
     page.click("#token-form button[type=submit]")
@@ -235,6 +235,7 @@ def download_export(page, base_url: str) -> list[dict]:
     page.fill("#study-input", BROWSER_STUDY)
     page.click("#refresh")
     page.wait_for_selector("table.sessions")  # the dashboard has loaded
+    page.select_option("#export-what", what)
     with page.expect_download() as download:
         page.click("#download")
     return list(csv.DictReader(io.StringIO(Path(download.value.path()).read_text())))
@@ -257,8 +258,11 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
     assert done["code"] == code
     assert done["redirect"].endswith(f"cc={code}")
     rows = download_export(page, browser_server.url)
+    sheet = {r["external_id"]: r for r in download_export(page, browser_server.url,
+                                                           "participants")}
     assert errors == []
     context.close()
+    assert (sheet[PID]["outcome"], sheet[PID]["completion_code"]) == ("completed", code)
 
     mine = [r for r in rows if r["participant_id"] == public_id_of(browser_server.db_path, PID)]
     bank_ids = bank_ids_of_refs(browser_server.db_path, PID)  # the browser saw opaque ids

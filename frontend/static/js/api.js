@@ -139,9 +139,10 @@ export class ResearcherApi {
     return requestJson("GET", `/api/researcher/summary${query}`, undefined, this.auth());
   }
 
-  async exportCsv(studyId) {
+  /** One export (`what`: predictions, survey, events or participants) as a Blob. */
+  async exportCsv(studyId, what = "predictions") {
     const query = studyId ? `?study_id=${enc(studyId)}` : "";
-    const response = await fetch(`/api/researcher/export.csv${query}`, { headers: this.auth() });
+    const response = await fetch(`/api/researcher/export/${enc(what)}.csv${query}`, { headers: this.auth() });
     if (!response.ok) throw new ApiError(response.status, await response.text());
     return response.blob();
   }

@@ -208,9 +208,10 @@ class Dashboard {
   async download() {
     $("dashboard-message").textContent = "Preparing the export…";
     try {
-      const blob = await this.api.exportCsv(this.studyId());
+      const what = $("export-what").value;
+      const blob = await this.api.exportCsv(this.studyId(), what);
       const url = URL.createObjectURL(blob);
-      const link = Object.assign(document.createElement("a"), { href: url, download: `${this.studyId() || "study"}-export.csv` });
+      const link = Object.assign(document.createElement("a"), { href: url, download: `${this.studyId() || "study"}_${what}.csv` });
       document.body.append(link);
       link.click();
       link.remove();
