@@ -155,9 +155,14 @@ def test_upgrading_keeps_every_row_and_value(db_url, tmp_path, small_study):
     old_columns = {name: list(migrate.revision_columns("0001")[name]) for name in before}
     assert snapshot(engine, old_columns) == before
     added = snapshot(engine, {"participant": ["config_sha256", "bank_sha256", "app_version",
-                                              "outcome", "completion_code", "ended_at"],
+                                              "outcome", "completion_code", "completed",
+                                              "completed_at", "ended_at"],
                               "trialresponse": ["history"]})
-    assert set(added["participant"]) == {("", "", "", None, None, None)}
+    # a session completed before endings existed ended as `completed`; its code is unknown
+    assert {row[:5] for row in added["participant"]} == {("", "", "", None, None),
+                                                         ("", "", "", "completed", None)}
+    for *_, outcome, _code, completed, completed_at, ended_at in added["participant"]:
+        assert (outcome == "completed") == bool(completed) and ended_at == completed_at
     assert added["trialresponse"] == [([],)] * FIXTURE_ROWS["trialresponse"]
     with make_client(small_study, db_url) as client:  # the ORM writes into the old tables
         Participant(client, small_study.study_id).start()

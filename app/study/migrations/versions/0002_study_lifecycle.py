@@ -18,7 +18,8 @@ RAN = ("config_sha256", "bank_sha256", "app_version")
 
 
 def upgrade() -> None:
-    """Add the lifecycle columns and the withdrawalaudit table."""
+    """Add the lifecycle columns and the withdrawalaudit table; completed sessions get their
+    outcome."""
     op.add_column("participant", sa.Column("outcome", sa.String(20), nullable=True))
     op.add_column("participant", sa.Column("completion_code", sa.String(64), nullable=True))
     op.add_column("participant", sa.Column("ended_at", sa.DateTime(timezone=True), nullable=True))
@@ -39,6 +40,10 @@ def upgrade() -> None:
         sa.PrimaryKeyConstraint("id"),
     )
     op.create_index("ix_withdrawalaudit_study_id", "withdrawalaudit", ["study_id"])
+    # Sessions completed before endings existed ended as `completed` (the only ending then);
+    # the code they were shown came from the config of the day, so it stays unknown (NULL).
+    op.execute(sa.text("UPDATE participant SET outcome = 'completed', ended_at = completed_at "
+                       "WHERE completed AND outcome IS NULL"))
 
 
 def downgrade() -> None:
