@@ -226,8 +226,8 @@ def answer_survey(page) -> None:
     page.click("#survey-form button[type=submit]")
 
 
-def download_export(page, base_url: str, what: str = "predictions") -> list[dict]:
-    """Log into the researcher dashboard and download one export through its button."""
+def open_dashboard(page, base_url: str) -> None:
+    """Log into the researcher dashboard and show the browser study."""
     page.goto(f"{base_url}/researcher")
     page.fill("#token-input", ADMIN_TOKEN)
     page.click("#token-form button[type=submit]")
@@ -235,6 +235,10 @@ def download_export(page, base_url: str, what: str = "predictions") -> list[dict
     page.fill("#study-input", BROWSER_STUDY)
     page.click("#refresh")
     page.wait_for_selector("table.sessions")  # the dashboard has loaded
+
+
+def download_export(page, what: str = "predictions") -> list[dict]:
+    """Download one export through the open dashboard's button."""
     page.select_option("#export-what", what)
     with page.expect_download() as download:
         page.click("#download")
@@ -257,9 +261,9 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
     code = config["recruitment"]["completion_code"]
     assert done["code"] == code
     assert done["redirect"].endswith(f"cc={code}")
-    rows = download_export(page, browser_server.url)
-    sheet = {r["external_id"]: r for r in download_export(page, browser_server.url,
-                                                           "participants")}
+    open_dashboard(page, browser_server.url)
+    rows = download_export(page)
+    sheet = {r["external_id"]: r for r in download_export(page, "participants")}
     assert errors == []
     context.close()
     assert (sheet[PID]["outcome"], sheet[PID]["completion_code"]) == ("completed", code)
