@@ -16,10 +16,11 @@ from sqlmodel import Session
 from app import __version__
 from app.study.balance import in_progress_cutoff
 from app.study.context import StudyContext
-from app.study.exports import predictions_frame
+from app.study.export import exclusion_rules, progress
+from app.study.exports import checks_answered, predictions_frame
 from app.study.sessions import as_utc, session_status
 from app.study.state import progress_of
-from app.study.tables import Participant, TrialResponse
+from app.study.tables import Participant
 
 RULE_SETS = ("kept", "live")  # every exclusion rule / the same with `incomplete` waived
 FIELD_CODES = 3  # most common codes per model, as the report's figures
@@ -36,25 +37,16 @@ def _finite(value: float) -> float | None:
 
 # ---------------------------------------------------------------- sessions
 
-def attention_seen(db: Session, study_id: str) -> dict[int, int]:
-    """Attention-check trials answered per participant row id."""
-    query = (select(TrialResponse.participant_id, func.count())
-             .join(Participant, Participant.id == TrialResponse.participant_id)
-             .where(Participant.study_id == study_id, TrialResponse.attention_check.is_(True))
-             .group_by(TrialResponse.participant_id))
-    return dict(db.execute(query).all())
-
-
 def participant_row(p: Participant, ctx: StudyContext, cutoff: datetime, checks_seen: int,
                     external_ids: bool) -> dict:
     """One session as the table shows it (the external id only when asked for)."""
-    end = p.ended_at or p.completed_at or p.updated_at
+    end = p.ended_at or p.updated_at
     row = {
         "public_id": p.public_id, "platform": p.recruitment, "pilot": p.pilot,
         "status": session_status(p, cutoff),
-        "outcome": p.outcome or ("completed" if p.completed else None),
+        "outcome": p.outcome,
         "started_at": _iso(p.created_at), "last_seen": _iso(p.updated_at),
-        "ended_at": _iso(p.ended_at or p.completed_at), "world_order": p.world_order,
+        "ended_at": _iso(p.ended_at), "world_order": p.world_order,
         "attention": {"failed": p.attention_failed, "seen": checks_seen},
         "duration_s": round((as_utc(end) - as_utc(p.created_at)).total_seconds(), 1),
         "progress": progress_of(p),
@@ -69,7 +61,7 @@ def participant_row(p: Participant, ctx: StudyContext, cutoff: datetime, checks_
 def participant_rows(db: Session, ctx: StudyContext, external_ids: bool = False) -> list[dict]:
     """Every session of the study, pilots and replaced ones included, in order of start."""
     cutoff = in_progress_cutoff(ctx.config)
-    seen = attention_seen(db, ctx.study_id)
+    seen = checks_answered(db, ctx.study_id)
     people = db.execute(select(Participant).where(Participant.study_id == ctx.study_id)
                         .order_by(Participant.created_at, Participant.id)).scalars().all()
     return [participant_row(p, ctx, cutoff, seen.get(p.id, 0), external_ids) for p in people]
@@ -105,18 +97,12 @@ def versions(db: Session, ctx: StudyContext) -> dict:
 
 # ---------------------------------------------------------------- alignment
 
-def rules_of(ctx: StudyContext, rule_set: str):
-    """The study's exclusion rules, or (`live`) the same with the `incomplete` rule waived."""
-    rules = ctx.config.exclusions
-    return rules if rule_set == "kept" else rules.model_copy(update={"incomplete": False})
-
-
 def kept_rows(frame: pd.DataFrame, ctx: StudyContext, rule_set: str) -> tuple[pd.DataFrame, dict]:
-    """The rows the analysis keeps, with alignment errors, and what each rule removed."""
-    from analysis.load import normalise
+    """The rows the analysis keeps (of predictions_frame's, already normalised), with
+    alignment errors, and what each rule removed."""
     from analysis.metrics import add_alignment_errors, apply_exclusions
 
-    result = apply_exclusions(normalise(frame), rules_of(ctx, rule_set))
+    result = apply_exclusions(frame, exclusion_rules(ctx, rule_set))
     return add_alignment_errors(result.kept), result.counts()
 
 
@@ -187,5 +173,6 @@ def alignment(db: Session, ctx: StudyContext, rule_set: str) -> dict:
 def dashboard(db: Session, ctx: StudyContext, rule_set: str = "kept",
               external_ids: bool = False) -> dict:
     """Everything the dashboard's live part shows, in one answer."""
-    return {"study_id": ctx.study_id, "participants": participant_rows(db, ctx, external_ids),
+    return {"study_id": ctx.study_id, "progress": progress(db, ctx),
+            "participants": participant_rows(db, ctx, external_ids),
             "versions": versions(db, ctx), "alignment": alignment(db, ctx, rule_set)}

@@ -46,22 +46,26 @@ def progress(db: Session, ctx: StudyContext) -> dict:
             "world_orders": orders}
 
 
+def exclusion_rules(ctx: StudyContext, rule_set: str):
+    """The study's exclusion rules (`kept`), or (`live`) the same with `incomplete` waived."""
+    rules = ctx.config.exclusions
+    return rules if rule_set == "kept" else rules.model_copy(update={"incomplete": False})
+
+
 def alignment_summary(frame: pd.DataFrame, ctx: StudyContext) -> dict:
     """Running mean alignment error per world and model, with the analysis' exclusion rules.
 
     `kept` applies every rule (so only completed sessions); `live` waives the
-    `incomplete` rule to show sessions still running.
+    `incomplete` rule to show sessions still running. `frame` is predictions_frame's
+    (already normalised).
     """
-    from analysis.load import normalise
     from analysis.metrics import apply_exclusions, participant_means
 
     if frame.empty:
         return {"kept": {}, "live": {}, "exclusions": {}}
-    frame = normalise(frame)
-    rules = ctx.config.exclusions
     out = {}
-    for name, active in (("kept", rules), ("live", rules.model_copy(update={"incomplete": False}))):
-        result = apply_exclusions(frame, active)
+    for name in ("kept", "live"):
+        result = apply_exclusions(frame, exclusion_rules(ctx, name))
         out[name] = _world_means(participant_means(result.kept)) if len(result.kept) else {}
         if name == "kept":
             out["exclusions"] = result.counts()

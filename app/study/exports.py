@@ -186,13 +186,14 @@ def participants_frame(db: Session, config: StudyConfig, study_id: str) -> pd.Da
     """The payment and approval sheet: one row per session (replaced and pilot ones too)."""
     sessions = _sessions(db, study_id)
     versions = _versions(sessions, _models(db, study_id))
-    checks = _checks_answered(db, study_id)
+    checks = checks_answered(db, study_id)
     cutoff = in_progress_cutoff(config)
     rows = [_participant_row(p, versions[p.id], checks.get(p.id, 0), cutoff) for p in sessions]
     return typed(pd.DataFrame(rows), PARTICIPANTS)
 
 
-def _checks_answered(db: Session, study_id: str) -> dict[int, int]:
+def checks_answered(db: Session, study_id: str) -> dict[int, int]:
+    """Attention-check trials answered, per participant row id."""
     query = _of_study(select(TrialResponse.participant_id, func.count()), TrialResponse,
                       study_id)
     rows = db.execute(query.where(TrialResponse.attention_check.is_(True))
@@ -202,7 +203,7 @@ def _checks_answered(db: Session, study_id: str) -> dict[int, int]:
 
 def _participant_row(p: Participant, version: dict, checks: int, cutoff: datetime) -> dict:
     started, last_seen = as_utc(p.created_at), as_utc(p.updated_at)
-    ended = _utc(p.ended_at or p.completed_at)
+    ended = _utc(p.ended_at)
     return {**version, "external_id": p.external_id, "recruitment": p.recruitment,
             "outcome": p.outcome, "completion_code": p.completion_code,
             "status": session_status(p, cutoff), "started_at": started, "ended_at": ended,

@@ -14,7 +14,6 @@ from app.study.errors import Refused
 from app.study.sessions import as_utc
 from app.study.state import static_trial
 from app.study.tables import Participant, PredictionRow, TrialResponse
-from app.study.trials import clip_sha256
 
 REPLAY_MODELS = ("ours", "vae", "policy", "cv")
 
@@ -54,8 +53,7 @@ def shown_trial(ctx: StudyContext, response: TrialResponse) -> dict:
     if trial is None:
         raise Refused(409, f"clip_sha256: trial {response.trial_id!r} is not in the trial bank "
                            f"this server loaded ({ctx.bank.sha256[:12]})")
-    world = ctx.bank.world(trial.world)
-    if clip_sha256(world.scene, world.dt_s, trial.browser_payload()) != response.clip_sha256:
+    if trial.clip_sha256 != response.clip_sha256:  # the hash the answer was stored with
         raise Refused(409, f"clip_sha256: the bank's clip of {response.trial_id!r} is not the "
                            f"one this participant saw ({response.clip_sha256[:12]}); replay "
                            "needs the bank the session ran under")

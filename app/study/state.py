@@ -41,9 +41,9 @@ def done_payload(cfg: StudyConfig, participant: Participant) -> dict:
     An MTurk assignment is handed in by a form posted to MTurk (`mturk_submit`) instead
     of a redirect.
     """
-    outcome = participant.outcome or "completed"  # sessions done before endings existed
+    outcome = participant.outcome  # set by every ending; migration 0002 set the older ones
     code = participant.completion_code
-    if code is None:
+    if code is None:  # completed before endings existed: the code of today's config
         code = cfg.recruitment.ending(outcome).completion_code
     return {"outcome": outcome, "completion_code": code,
             "message": cfg.recruitment.ending(outcome).message,

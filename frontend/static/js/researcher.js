@@ -131,6 +131,7 @@ class Dashboard {
     $("logout").onclick = () => this.logout();
     $("rules-select").onchange = () => this.refresh();
     $("show-external-ids").onchange = () => this.refresh();
+    $("summary-box").ontoggle = () => this.refresh();
     const saved = sessionStorage.getItem(TOKEN_KEY);
     if (saved) this.login(saved);
   }
@@ -168,14 +169,18 @@ class Dashboard {
     $("token-input").value = "";
   }
 
-  /** The summary and the dashboard's data, fetched together. */
+  /**
+   * The dashboard's data, and the raw summary only while its box is open: both read every
+   * prediction row, so a refresh reads them once unless the researcher asks for the JSON.
+   */
   load() {
-    return Promise.all([this.api.summary(this.studyId()), this.dashboard()]);
+    const summary = $("summary-box").open ? this.api.summary(this.studyId()) : null;
+    return Promise.all([summary, this.dashboard()]);
   }
 
   render([summary, board]) {
-    $("progress-line").replaceChildren(progressLine(summary.progress));
-    $("summary").replaceChildren(renderSummary(summary));
+    $("progress-line").replaceChildren(progressLine(board.progress));
+    if (summary) $("summary").replaceChildren(renderSummary(summary));
     this.show(board);
     $("dashboard-message").textContent = `Updated ${new Date().toLocaleTimeString()}.`;
   }
