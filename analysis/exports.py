@@ -1,4 +1,4 @@
-"""Column contracts of the researcher's exports, and one reader that gives each its dtypes.
+"""One reader for every researcher export that gives each column its contract's dtype.
 
 `predictions` is the analysis table (analysis/load.py). The other three are
 `survey`, `events` and `participants`; each column has one of five types:
@@ -14,33 +14,9 @@ from typing import IO
 import numpy as np
 import pandas as pd
 
+from analysis.contracts import SCHEMAS
 from analysis.csvsafe import restore_text
 from analysis.load import load_csv
-
-# Every export except predictions (whose rows carry each model's hash already) names
-# the models a session's answers came from as JSON: {"<world>": {"ours": sha, "vae": sha}}.
-STUDY_VERSION = {"config_sha256": "text", "bank_sha256": "text", "models_sha256": "text"}
-
-SURVEY = {
-    "study_id": "text", "participant_id": "text", "question": "text", "kind": "text",
-    "answer": "text", "answered_at": "time", **STUDY_VERSION,
-}
-EVENTS = {
-    "study_id": "text", "participant_id": "text", "source": "text", "kind": "text",
-    "t_client_ms": "float", "t_trial_ms": "float", "received_at": "time",
-    "trial_id": "text", "start_index": "int", "replays": "int", "w": "int", "h": "int",
-    **STUDY_VERSION,
-}
-PARTICIPANTS = {
-    "study_id": "text", "external_id": "text", "recruitment": "text",
-    "participant_id": "text", "outcome": "text", "completion_code": "text",
-    "status": "text", "started_at": "time", "ended_at": "time", "duration_min": "float",
-    "last_seen": "time", "world_order": "text", "steps_done": "int", "steps_total": "int",
-    "attention_checks": "int", "attention_failed": "int", "attention_verdict": "text",
-    "pilot": "bool", "replaced": "bool", "app_version": "text", **STUDY_VERSION,
-}
-SCHEMAS = {"survey": SURVEY, "events": EVENTS, "participants": PARTICIPANTS}
-WHAT = ("predictions", *SCHEMAS)
 
 
 def typed(frame: pd.DataFrame, schema: dict[str, str]) -> pd.DataFrame:

@@ -1,37 +1,26 @@
-"""Alignment error between people's and models' predicted actions, and exclusion rules.
+"""Alignment errors over the predictions table, per-participant means, and exclusions.
 
-Only numpy and pandas: the researcher dashboard imports these for its running numbers.
-
-Alignment error = 1 - cos(angle between two action vectors), in [0, 2]: 0 = same
-direction, 1 = perpendicular, 2 = opposite. A cosine needs two directions; when either
-vector is shorter than ZERO_SPEED_MPS (a model may predict standing still; a person
-cannot, the server rejects zero-length moves) the error is defined as 1, the value of
-"no directional information" (the mean error of a uniformly random direction), and such
-rows are counted as `zero_vectors` so a report can say how often it happened.
+The metric and the rules themselves are defined once in analysis/contracts.py. Rows where
+a vector is shorter than ZERO_SPEED_MPS are counted as `zero_vectors`, so a report can say
+how often the error fell back to 1. Only numpy and pandas: the researcher dashboard
+imports these for its running numbers.
 """
 
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from pydantic import BaseModel, ConfigDict, Field
 
-MODELS = ("ours", "vae", "cv", "policy")
-ZERO_SPEED_MPS = 1e-6
+from analysis.contracts import (
+    MODELS,
+    PILOT,
+    ZERO_SPEED_MPS,
+    ExclusionRules,
+    alignment_error,
+    too_fast_share_exceeds,
+)
+
 UNIT_KEYS = ["participant_id", "world"]
-
-
-def alignment_error(a: np.ndarray, b: np.ndarray, zero_speed: float = ZERO_SPEED_MPS) -> np.ndarray:
-    """1 - cos(angle) between action vectors a[..., 2] and b[..., 2]; 1 where either is ~0."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    norm_a = np.hypot(a[..., 0], a[..., 1])
-    norm_b = np.hypot(b[..., 0], b[..., 1])
-    defined = (norm_a > zero_speed) & (norm_b > zero_speed)
-    dot = a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos = np.where(defined, dot / (norm_a * norm_b), 0.0)
-    return 1.0 - np.clip(cos, -1.0, 1.0)
 
 
 def add_alignment_errors(frame: pd.DataFrame, models: tuple[str, ...] = MODELS) -> pd.DataFrame:
@@ -65,25 +54,6 @@ def participant_means(frame: pd.DataFrame, models: tuple[str, ...] = MODELS,
     means["n_rows"] = grouped.size()
     means["n_trials"] = grouped["trial_id"].nunique()
     return means.reset_index()
-
-
-PILOT = "pilot"  # the recruitment of a researcher's preview session
-
-
-class ExclusionRules(BaseModel):
-    """Named exclusion rules, the study config's `exclusions` section (same keys).
-
-    A participant is excluded for a failed attention check, an incomplete session, or
-    more than `too_fast_max_fraction` of scored trials answered within `too_fast_trial_ms`;
-    of the participants kept, single too-fast trials are dropped.
-    """
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    failed_attention_check: bool = True
-    incomplete: bool = True
-    too_fast_trial_ms: float = Field(default=4000.0, ge=0)
-    too_fast_max_fraction: float = Field(default=0.25, ge=0, le=1)
 
 
 @dataclass
@@ -128,9 +98,9 @@ def apply_exclusions(frame: pd.DataFrame, rules: ExclusionRules) -> Exclusions:
     scored = frame[~frame["is_practice"] & ~frame["attention_check"]]
     trials = scored.drop_duplicates(["participant_id", "trial_id"])
     fast_trial = trials["trial_duration_ms"] < rules.too_fast_trial_ms
-    fast_share = fast_trial.groupby(trials["participant_id"]).mean()
-    too_fast = fast_share[fast_share > rules.too_fast_max_fraction]
-    excluded["too_fast"] = sorted(too_fast.index)
+    fast = fast_trial.groupby(trials["participant_id"]).agg(["sum", "count"])
+    too_fast = too_fast_share_exceeds(fast["sum"], fast["count"], rules)
+    excluded["too_fast"] = sorted(fast.index[too_fast])
     dropped_ids = set().union(*excluded.values())
     keep = scored[~scored["participant_id"].isin(dropped_ids)]
     fast_rows = keep["trial_duration_ms"] < rules.too_fast_trial_ms

@@ -22,7 +22,8 @@ from scipy import stats
 from tqdm import tqdm
 
 from analysis import predictors
-from analysis.load import EXPORT_COLUMNS, normalise
+from analysis.contracts import EXPORT_COLUMNS
+from analysis.load import normalise
 from analysis.metrics import participant_means
 from analysis.observers_config import ObserversConfig, default_observers
 

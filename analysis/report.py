@@ -16,11 +16,10 @@ import pandas as pd
 import yaml
 from tqdm import tqdm
 
+from analysis.contracts import MODELS, ExclusionRules
 from analysis.csvsafe import write_csv
 from analysis.load import data_hash, load_csv
 from analysis.metrics import (
-    MODELS,
-    ExclusionRules,
     add_alignment_errors,
     apply_exclusions,
     participant_means,

@@ -6,7 +6,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from analysis.metrics import MODELS, UNIT_KEYS
+from analysis.contracts import MODELS
+from analysis.metrics import UNIT_KEYS
 
 POSITION_MODELS = ("ours", "vae", "cv")
 PREDICTION_KEYS = ["participant_id", "trial_id", "start_index"]

@@ -438,8 +438,8 @@ def export_cmd(
     """Write one of the study's exports as CSV, read from DATABASE_URL."""
     from sqlmodel import Session
 
+    from analysis.contracts import WHAT
     from analysis.csvsafe import write_csv
-    from analysis.exports import WHAT
     from app.study.exports import export_table
 
     if what not in WHAT:

@@ -278,7 +278,7 @@ def window_labels(windows: Windows, val: PairData) -> dict[str, np.ndarray]:
 
 def score_model(model, windows: Windows, scored: np.ndarray) -> dict:
     """Alignment errors [W] of the next action, displacement errors, codes."""
-    from analysis.metrics import alignment_error
+    from analysis.contracts import alignment_error
     from app.learning.metrics import trajectory_errors
 
     z = model.encode_batch(windows.segment_positions)
@@ -291,7 +291,7 @@ def score_model(model, windows: Windows, scored: np.ndarray) -> dict:
 
 def score_constant_velocity(windows: Windows, scored: np.ndarray) -> dict:
     """The baseline: the last observed robot velocity, kept for all n steps."""
-    from analysis.metrics import alignment_error
+    from analysis.contracts import alignment_error
     from app.learning.metrics import constant_velocity, trajectory_errors
 
     pred = constant_velocity(windows)

@@ -20,6 +20,7 @@ from sqlalchemy import case, func, select, text, update
 from sqlalchemy.engine import Engine
 from sqlmodel import Session
 
+from analysis.contracts import too_fast_share_exceeds
 from app.study.config import StudyConfig
 from app.study.context import StudyContext
 from app.study.db import insert_skipping_duplicates
@@ -150,7 +151,7 @@ def is_excluded(db: Session, config: StudyConfig, participant: Participant) -> b
     n_fast, n = db.execute(select(fast, func.count()).where(
         TrialResponse.participant_id == participant.id, TrialResponse.is_practice.is_(False),
         TrialResponse.attention_check.is_(False))).one()
-    return bool(n) and (n_fast or 0) / n > rules.too_fast_max_fraction
+    return bool(too_fast_share_exceeds(n_fast or 0, n, rules))
 
 
 def recount(db: Session, ctx: StudyContext) -> dict[str, int]:

@@ -8,7 +8,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from analysis.metrics import ExclusionRules  # the analysis' own rules: one definition
+from analysis.contracts import ExclusionRules
 from app.configio import ConfigError, StrictModel, load_yaml_model
 from app.settings import Settings
 

@@ -108,7 +108,8 @@ def kept_rows(frame: pd.DataFrame, ctx: StudyContext, rule_set: str) -> tuple[pd
 
 def world_errors(kept: pd.DataFrame) -> dict:
     """Per world and model: mean of per-participant means, its 95% t interval, the means."""
-    from analysis.metrics import MODELS, participant_means
+    from analysis.contracts import MODELS
+    from analysis.metrics import participant_means
     from analysis.stats import compare_per_world, mean_ci95
 
     if kept.empty:

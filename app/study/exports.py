@@ -20,9 +20,10 @@ import pandas as pd
 from sqlalchemy import func, select
 from sqlmodel import Session
 
+from analysis.contracts import EVENTS, EXPORT_COLUMNS, PARTICIPANTS, SURVEY, WHAT
 from analysis.csvsafe import write_csv
-from analysis.exports import EVENTS, PARTICIPANTS, SURVEY, WHAT, typed
-from analysis.load import EXPORT_COLUMNS, normalise  # one column contract for writer and reader
+from analysis.exports import typed
+from analysis.load import normalise
 from app.study.balance import in_progress_cutoff
 from app.study.config import StudyConfig
 from app.study.sessions import as_utc, session_status

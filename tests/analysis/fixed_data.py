@@ -3,7 +3,8 @@
 import numpy as np
 import pandas as pd
 
-from analysis.load import EXPORT_COLUMNS, normalise
+from analysis.contracts import EXPORT_COLUMNS
+from analysis.load import normalise
 
 DT_S = 0.5
 START_KINDS = {"highway": ("own", "same_lane", "adjacent_lane", "same_lane", "adjacent_lane"),

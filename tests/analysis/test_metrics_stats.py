@@ -6,13 +6,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from analysis.contracts import ExclusionRules, alignment_error
 from analysis.load import load_csv
-from analysis.metrics import (
-    ExclusionRules,
-    alignment_error,
-    apply_exclusions,
-    participant_means,
-)
+from analysis.metrics import apply_exclusions, participant_means
 from analysis.stats import compare_per_world, displacement_errors, infer_dt_s, paired_comparison
 from tests.analysis.fixed_data import DT_S, fixed_predictions
 

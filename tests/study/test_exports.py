@@ -14,8 +14,9 @@ from sqlalchemy import update
 from sqlmodel import Session
 from typer.testing import CliRunner
 
-from analysis.exports import SCHEMAS, WHAT, read_export
-from analysis.load import BOOL_COLUMNS, EXPORT_COLUMNS, INT_COLUMNS, load_csv, load_database
+from analysis.contracts import BOOL_COLUMNS, EXPORT_COLUMNS, INT_COLUMNS, SCHEMAS, WHAT
+from analysis.exports import read_export
+from analysis.load import load_csv, load_database
 from app.cli import cli
 from app.settings import get_settings
 from app.study.exports import export_table

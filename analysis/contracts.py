@@ -1,0 +1,109 @@
+"""The contracts the study server and the analysis share: one definition each.
+
+- the export columns and their types (predictions, survey, events, participants);
+- alignment error, the study's one metric;
+- the exclusion rules a study config names and the analysis applies.
+
+Both `app` and `analysis` import this module; it imports neither, so the packages
+depend one way. Only numpy and pydantic.
+
+Alignment error = 1 - cos(angle between two action vectors), in [0, 2]: 0 = same
+direction, 1 = perpendicular, 2 = opposite. A cosine needs two directions; when either
+vector is shorter than ZERO_SPEED_MPS (a model may predict standing still; a person
+cannot, the server rejects zero-length moves) the error is defined as 1, the value of
+"no directional information" (the mean error of a uniformly random direction).
+"""
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+# Export contract, in order. Types: the reader casts to these, so CSV and DB agree.
+STRING_COLUMNS = ("study_id", "participant_id", "recruitment", "outcome", "world",
+                  "trial_id", "clip_sha256", "start_kind", "ours_sha256", "vae_sha256",
+                  "submission_id", "submitted_at", "config_sha256", "bank_sha256")
+BOOL_COLUMNS = ("completed", "attention_passed", "is_practice", "attention_check")
+INT_COLUMNS = ("world_position", "trial_index", "start_index", "step", "ours_code",
+               "vae_code", "replays")
+FLOAT_COLUMNS = ("start_x", "start_y", "human_x", "human_y", "click_x", "click_y",
+                 "human_vx", "human_vy", "ours_vx", "ours_vy", "vae_vx", "vae_vy",
+                 "cv_vx", "cv_vy", "policy_vx", "policy_vy", "click_time_ms",
+                 "trial_duration_ms")
+EXPORT_COLUMNS = (
+    "study_id", "participant_id", "recruitment", "completed", "outcome",
+    "attention_passed", "world", "world_position", "trial_id", "trial_index", "is_practice",
+    "attention_check", "clip_sha256", "start_index", "start_kind", "step", "start_x",
+    "start_y", "human_x", "human_y", "click_x", "click_y", "human_vx", "human_vy", "ours_vx",
+    "ours_vy", "vae_vx", "vae_vy", "cv_vx", "cv_vy", "policy_vx", "policy_vy", "ours_code",
+    "vae_code", "ours_sha256", "vae_sha256", "click_time_ms", "trial_duration_ms", "replays",
+    "submission_id", "submitted_at", "config_sha256", "bank_sha256",
+)
+SORT_KEYS = ["participant_id", "trial_index", "trial_id", "start_index", "step"]
+
+# Every export except predictions (whose rows carry each model's hash already) names
+# the models a session's answers came from as JSON: {"<world>": {"ours": sha, "vae": sha}}.
+STUDY_VERSION = {"config_sha256": "text", "bank_sha256": "text", "models_sha256": "text"}
+
+SURVEY = {
+    "study_id": "text", "participant_id": "text", "question": "text", "kind": "text",
+    "answer": "text", "answered_at": "time", **STUDY_VERSION,
+}
+EVENTS = {
+    "study_id": "text", "participant_id": "text", "source": "text", "kind": "text",
+    "t_client_ms": "float", "t_trial_ms": "float", "received_at": "time",
+    "trial_id": "text", "start_index": "int", "replays": "int", "w": "int", "h": "int",
+    **STUDY_VERSION,
+}
+PARTICIPANTS = {
+    "study_id": "text", "external_id": "text", "recruitment": "text",
+    "participant_id": "text", "outcome": "text", "completion_code": "text",
+    "status": "text", "started_at": "time", "ended_at": "time", "duration_min": "float",
+    "last_seen": "time", "world_order": "text", "steps_done": "int", "steps_total": "int",
+    "attention_checks": "int", "attention_failed": "int", "attention_verdict": "text",
+    "pilot": "bool", "replaced": "bool", "app_version": "text", **STUDY_VERSION,
+}
+SCHEMAS = {"survey": SURVEY, "events": EVENTS, "participants": PARTICIPANTS}
+WHAT = ("predictions", *SCHEMAS)
+
+MODELS = ("ours", "vae", "cv", "policy")
+ZERO_SPEED_MPS = 1e-6
+
+
+def alignment_error(a: np.ndarray, b: np.ndarray, zero_speed: float = ZERO_SPEED_MPS) -> np.ndarray:
+    """1 - cos(angle) between action vectors a[..., 2] and b[..., 2]; 1 where either is ~0."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    norm_a = np.hypot(a[..., 0], a[..., 1])
+    norm_b = np.hypot(b[..., 0], b[..., 1])
+    defined = (norm_a > zero_speed) & (norm_b > zero_speed)
+    dot = a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = np.where(defined, dot / (norm_a * norm_b), 0.0)
+    return 1.0 - np.clip(cos, -1.0, 1.0)
+
+
+PILOT = "pilot"  # the recruitment of a researcher's preview session
+
+
+class ExclusionRules(BaseModel):
+    """Named exclusion rules, the study config's `exclusions` section (same keys).
+
+    A participant is excluded for a failed attention check, an incomplete session, or
+    more than `too_fast_max_fraction` of scored trials answered within `too_fast_trial_ms`;
+    of the participants kept, single too-fast trials are dropped.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    failed_attention_check: bool = True
+    incomplete: bool = True
+    too_fast_trial_ms: float = Field(default=4000.0, ge=0)
+    too_fast_max_fraction: float = Field(default=0.25, ge=0, le=1)
+
+
+def too_fast_share_exceeds(n_fast, n_trials, rules: ExclusionRules) -> np.ndarray:
+    """Where more than the rules' share of a participant's scored trials were too fast
+    (elementwise over counts; False without trials)."""
+    n_fast = np.asarray(n_fast, dtype=np.float64)
+    n_trials = np.asarray(n_trials, dtype=np.float64)
+    share = np.where(n_trials > 0, n_fast / np.maximum(n_trials, 1.0), 0.0)
+    return share > rules.too_fast_max_fraction
