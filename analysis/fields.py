@@ -49,7 +49,7 @@ def code_panels(states_w: pd.DataFrame, model: str, k: int) -> list[tuple[int, p
 
 
 def arrow_length(scene) -> float:
-    """Arrow length [m] that reads well on a world's scene (app.worlds.scene.Scene or None)."""
+    """Arrow length [m] that reads well on a world's scene (app.data.scene.Scene or None)."""
     if scene is None:
         return 0.5
     b = scene.bounds

@@ -20,7 +20,7 @@ from analysis.fields import (  # noqa: E402
 )
 from analysis.stats import PairedResult, mean_ci95  # noqa: E402
 
-# Okabe-Ito, as in app.worlds.scene: safe for colour-blind readers.
+# Okabe-Ito, as in app.data.scene: safe for colour-blind readers.
 MODEL_COLORS = {"ours": "#E69F00", "vae": "#0072B2", "cv": "#009E73", "policy": "#CC79A7",
                 "human": "#000000"}
 MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy",
@@ -76,7 +76,7 @@ def plot_errors(means: pd.DataFrame, results: dict[str, PairedResult], base: Pat
 
 def field_panel(ax, states: pd.DataFrame, model: str, scene, arrow_m: float) -> float:
     """Participants' mean first move and the model's at each start state (unit arrows)."""
-    from app.worlds.scene import draw_scene
+    from app.data.scene import draw_scene
 
     if scene is not None:
         draw_scene(ax, scene)

@@ -87,8 +87,8 @@ def checkpoint_hashes(config: dict, data_dir: Path) -> dict:
 
 def load_scenes(data_dir: Path, study_id: str) -> tuple[dict, str | None]:
     """Each world's Scene from the trial bank (empty if there is no bank) and the bank's hash."""
+    from app.data.scene import Scene
     from app.fileio import sha256_file
-    from app.worlds.scene import Scene
 
     path = Path(data_dir) / "trials" / study_id / "bank.json"
     if not path.is_file():

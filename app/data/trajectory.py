@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from app.data.scene import Scene
 from app.fileio import write_npz
-from app.worlds.scene import Scene
 
 ROBOT, HUMAN = 0, 1
 

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
+from app.data.scene import HUMAN_COLOR, Scene, draw_scene
 from app.fileio import atomic_path, write_json
 from app.learning.checkpoint import TrainedModel, load_model
-from app.worlds.scene import HUMAN_COLOR, Scene, draw_scene
 
 
 def grid_points(scene: Scene, grid_n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -29,11 +29,11 @@ import app
 from app.configio import StrictModel
 from app.data import interaction as ix
 from app.data.lanelet_map import LaneLine, MapError, read_lanelet_map
+from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Scene
 from app.data.trajectory import ROBOT, TrajectorySet
 from app.data.windows import Windows, make_windows
 from app.fileio import sha256_file, write_json
 from app.learning.config import TrainConfig
-from app.worlds.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Scene
 
 MODELS = ("ours", "vae", "cv")
 TURN_NAMES = ["left", "straight", "right"]

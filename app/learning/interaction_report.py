@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
+from app.data.scene import HUMAN_COLOR, LABEL_COLORS, ROBOT_COLOR
 from app.data.trajectory import HUMAN, ROBOT
 from app.data.windows import Windows
 from app.fileio import atomic_path, write_json
 from app.learning.interaction_experiment import MODELS, Experiment, InteractionConfig
-from app.worlds.scene import HUMAN_COLOR, LABEL_COLORS, ROBOT_COLOR
 
 MODEL_NAMES = {"ours": "Ours", "vae": "VAE", "cv": "constant velocity"}
 

@@ -135,7 +135,7 @@ def world_fields(kept: pd.DataFrame, ctx: StudyContext, k: int = FIELD_CODES) ->
     """Per world, the report's field panels: for Ours' and the VAE's k most common codes,
     each start state's position, participants' mean first move and the model's (unit)."""
     from analysis.fields import FIELD_MODELS, arrow_length, code_panels, state_table
-    from app.worlds.scene import Scene
+    from app.data.scene import Scene
 
     out = {}
     for world in sorted(kept["world"].unique()) if len(kept) else []:

@@ -16,18 +16,15 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict
-
+from app.configio import StrictModel
 from app.fileio import sha256_bytes
 
 BANK_FILE = "bank.json"
 
 
-class _Bank(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-class Clip(_Bank):
+class Clip(StrictModel):
     """An animation: positions [steps+1, 2, 2] and headings [steps+1, 2]."""
 
     positions: list[list[list[float]]]
@@ -36,7 +33,7 @@ class Clip(_Bank):
     source_index: int | None = None
 
 
-class StartState(_Bank):
+class StartState(StrictModel):
     """Where the robot starts one prediction; the human is fixed.
 
     `start_kind`: `own` (the robot's segment end), or how a data-covered start relates to
@@ -52,7 +49,7 @@ class StartState(_Bank):
     start_kind: str
 
 
-class ModelAnswer(_Bank):
+class ModelAnswer(StrictModel):
     """One model's reading of the segment and its predicted actions [K, n, 2].
 
     `segment_positions` is what the model read: the latest `segment_len` steps ending at
@@ -66,7 +63,7 @@ class ModelAnswer(_Bank):
     content_hash: str
 
 
-class TrialRecord(_Bank):
+class TrialRecord(StrictModel):
     """One trial as stored in the bank (model predictions never leave the server)."""
 
     trial_id: str
@@ -94,7 +91,7 @@ class TrialRecord(_Bank):
         }
 
 
-class WorldBank(_Bank):
+class WorldBank(StrictModel):
     """One world's scene, click limits and trials."""
 
     world: str
@@ -107,7 +104,7 @@ class WorldBank(_Bank):
     trials: list[TrialRecord]
 
 
-class BankFile(_Bank):
+class BankFile(StrictModel):
     """The whole bank.json."""
 
     study_id: str

@@ -30,9 +30,9 @@ from highway_env.vehicle.kinematics import Vehicle
 from pydantic import Field, model_validator
 
 from app.configio import StrictModel, load_yaml_model
+from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Lane, Scene
 from app.data.trajectory import Episode, Rejected
 from app.worlds.mpc import SamplingMPC
-from app.worlds.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Lane, Scene
 
 INTENTS = ["keep", "left", "right"]
 LANE_SHIFT = {0: 0, 1: -1, 2: +1}  # left = towards lane 0 (smaller y) for cars driving +x

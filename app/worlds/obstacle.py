@@ -15,9 +15,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from app.configio import ConfigError, StrictModel, load_yaml_model
+from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Circle, Scene
 from app.data.trajectory import HUMAN, ROBOT, Episode, Rejected
 from app.worlds.mpc import SamplingMPC
-from app.worlds.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Circle, Scene
 
 AGENTS = (ROBOT, HUMAN)
 COLLISION_SUBSTEPS = 4  # check each step's straight segment at 4 points, not just its end

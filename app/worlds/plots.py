@@ -4,8 +4,8 @@ from pathlib import Path
 
 import numpy as np
 
+from app.data.scene import HUMAN_COLOR, LABEL_COLORS, draw_scene
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
-from app.worlds.scene import HUMAN_COLOR, LABEL_COLORS, draw_scene
 
 
 def plot_trajectories(trajs: TrajectorySet, path: Path, label: str, count: int = 20) -> Path:

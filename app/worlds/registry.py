@@ -6,9 +6,9 @@ from typing import Protocol
 import numpy as np
 
 from app.configio import ConfigError, StrictModel
+from app.data.scene import Scene
 from app.data.trajectory import Episode
 from app.settings import get_settings
-from app.worlds.scene import Scene
 
 WORLD_NAMES = ("highway", "obstacle")
 POLICIES = ("mpc", "sac")

@@ -2,8 +2,8 @@
 
 import numpy as np
 
+from app.data.scene import AgentShape, Bounds, Lane, Scene
 from app.data.trajectory import Episode, TrajectorySet
-from app.worlds.scene import AgentShape, Bounds, Lane, Scene
 
 LANE_WIDTH_M = 4.0
 INTENTS = ["keep", "left", "right"]

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from app.configio import ConfigError
+from app.data.scene import Scene
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 from app.fileio import sha256_file
 from app.worlds.highway import LANE_SHIFT, HighwayWorld
 from app.worlds.registry import build_world, default_config_path
-from app.worlds.scene import Scene
 from app.worlds.simulate import simulate
 
 CONFIG = default_config_path("highway")

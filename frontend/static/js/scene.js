@@ -1,9 +1,9 @@
-// Draw a world from its scene JSON (app/worlds/scene.py) on a canvas.
+// Draw a world from its scene JSON (app/data/scene.py) on a canvas.
 // Scene metres map to CSS pixels with one uniform scale; y grows downward in both.
 
 export const ROBOT_COLOR = "#0072B2";
 export const HUMAN_COLOR = "#E69F00";
-// Okabe-Ito, as in app/worlds/scene.py LABEL_COLORS.
+// Okabe-Ito, as in app/data/scene.py LABEL_COLORS.
 export const LABEL_COLORS = ["#009E73", "#D55E00", "#CC79A7", "#56B4E9", "#F0E442", "#000000"];
 const MARGIN_PX = 24;
 

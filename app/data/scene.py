@@ -1,13 +1,11 @@
 """One JSON-able description of a world's geometry, shared by plots, trial bank and browser."""
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from app.configio import StrictModel
 
 
-class _Frozen(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class Bounds(_Frozen):
+class Bounds(StrictModel):
     """Axis-aligned drawable area [m]."""
 
     x_min_m: float
@@ -16,7 +14,7 @@ class Bounds(_Frozen):
     y_max_m: float
 
 
-class Lane(_Frozen):
+class Lane(StrictModel):
     """A straight lane parallel to x; lane 0 is the leftmost (smallest y)."""
 
     index: int
@@ -24,7 +22,7 @@ class Lane(_Frozen):
     width_m: float
 
 
-class Circle(_Frozen):
+class Circle(StrictModel):
     """A circular obstacle or goal region."""
 
     x_m: float
@@ -33,7 +31,7 @@ class Circle(_Frozen):
     label: str = ""
 
 
-class AgentShape(_Frozen):
+class AgentShape(StrictModel):
     """How an agent is drawn: a car (rectangle with heading) or a disc."""
 
     name: str
@@ -43,7 +41,7 @@ class AgentShape(_Frozen):
     color: str
 
 
-class Scene(_Frozen):
+class Scene(StrictModel):
     """Everything needed to draw a world; `frame` says what the coordinates mean."""
 
     world: str
