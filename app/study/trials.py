@@ -22,8 +22,6 @@ from app.fileio import sha256_bytes
 BANK_FILE = "bank.json"
 
 
-
-
 class Clip(StrictModel):
     """An animation: positions [steps+1, 2, 2] and headings [steps+1, 2]."""
 
