@@ -321,7 +321,7 @@ def _window_states(track: Track, first: int, size: int) -> tuple[np.ndarray, ...
     return track.xy[start:stop], heading, np.hypot(v[:, 0], v[:, 1])
 
 
-def window_starts(recording: Recording, size: int, stride: int,
+def window_first_frames(recording: Recording, size: int, stride: int,
                   frame_range: tuple[int, int] | None = None) -> list[int]:
     """First frames of the windows of `size` frames, every `stride` frames, inside the range."""
     cars = [t for t in recording.tracks if t.is_car]
@@ -372,7 +372,7 @@ def extract_pairs(recordings: list[Recording], size: int, stride: int, max_dista
     for rec in tqdm(sorted(recordings, key=lambda r: r.name), desc="pairs", unit="recording",
                     leave=False):
         span = (frame_ranges or {}).get(rec.name)
-        for first in window_starts(rec, size, stride, span):
+        for first in window_first_frames(rec, size, stride, span):
             pairs.extend(pairs_in_window(rec, first, size, max_distance_m))
     return pairs
 

@@ -74,7 +74,7 @@ def segment_features(segment_positions: np.ndarray, dt_s: float) -> np.ndarray:
                           axis=-1, dtype=np.float32)
 
 
-def window_starts(length: int, span: int, count: int) -> np.ndarray:
+def evenly_spaced_starts(length: int, span: int, count: int) -> np.ndarray:
     """Up to `count` evenly spaced start steps whose window of `span` actions fits in `length`."""
     last = length - span
     if last < 0:
@@ -89,7 +89,7 @@ def make_windows(trajs: TrajectorySet, segment_len: int, n_actions: int,
     span = segment_len + n_actions
     traj_rows, starts = [], []
     for row in index:
-        found = window_starts(int(trajs.lengths[row]), span, per_trajectory)
+        found = evenly_spaced_starts(int(trajs.lengths[row]), span, per_trajectory)
         traj_rows.append(np.full(len(found), row, dtype=np.int64))
         starts.append(found)
     traj_index = np.concatenate(traj_rows) if traj_rows else np.zeros(0, np.int64)

@@ -3,7 +3,12 @@
 import numpy as np
 import pytest
 
-from app.data.windows import make_windows, segment_features, split_by_trajectory, window_starts
+from app.data.windows import (
+    evenly_spaced_starts,
+    make_windows,
+    segment_features,
+    split_by_trajectory,
+)
 from tests.learning.synthetic import make_lane_trajs
 
 
@@ -12,10 +17,10 @@ def trajs():
     return make_lane_trajs(30, seed=1)
 
 
-def test_window_starts_fit_inside_the_valid_steps():
-    assert window_starts(10, 8, 5).tolist() == [0, 1, 2]
-    assert window_starts(7, 8, 5).tolist() == []
-    starts = window_starts(40, 8, 4)
+def test_evenly_spaced_starts_fit_inside_the_valid_steps():
+    assert evenly_spaced_starts(10, 8, 5).tolist() == [0, 1, 2]
+    assert evenly_spaced_starts(7, 8, 5).tolist() == []
+    starts = evenly_spaced_starts(40, 8, 4)
     assert starts[0] == 0 and starts[-1] == 32 and len(starts) == 4
 
 
