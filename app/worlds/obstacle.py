@@ -4,17 +4,19 @@ Shape legend: A = 2 agents (0 robot, 1 human), D = 2 (x, y), K MPC candidates, H
 Coordinates are metres in the scene frame: origin at the top-left corner, y grows downwards.
 Both agents optimise the same kind of reward (progress along a geodesic distance-to-goal field,
 clearance from obstacles, walls and the other agent predicted at constant velocity, effort),
-with the shared sampling MPC by default or with a soft actor-critic policy (`policy="sac"`).
+with the shared sampling MPC by default, or with a learnt `AgentPolicy` passed in (the soft
+actor-critic of sac.py, which `registry.build_world(..., policy="sac")` wires up).
 """
 
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 from pydantic import Field, model_validator
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from app.configio import ConfigError, StrictModel, load_yaml_model
+from app.configio import StrictModel, load_yaml_model
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Circle, Scene
 from app.data.trajectory import HUMAN, ROBOT, Episode, Rejected
 from app.worlds.mpc import SamplingMPC
@@ -187,17 +189,27 @@ class GeodesicFields:
         return -grad / norm if norm > 1e-9 else np.zeros(2)
 
 
+class AgentPolicy(Protocol):
+    """A learnt policy that moves both agents instead of the MPC (sac.py's `SACPolicy`)."""
+
+    def prepare(self, data_dir: Path) -> None:
+        """Train or load it once, in the parent before simulation workers fork."""
+        ...
+
+    def act(self, observation: np.ndarray) -> np.ndarray:
+        """The action in [-1, 1]^2 (a velocity over the speed limit) for one observation."""
+        ...
+
+
 class ObstacleWorld:
     """The Obstacle world: random distinct goals and starts, both agents reward-optimising."""
 
     name = "obstacle"
     robot_label = "robot_goal"
 
-    def __init__(self, config: ObstacleConfig, policy: str = "mpc"):
-        if policy not in ("mpc", "sac"):
-            raise ConfigError(f"policy: unknown policy {policy!r}; choose mpc or sac")
+    def __init__(self, config: ObstacleConfig, agent_policy: AgentPolicy | None = None):
         self.config = config
-        self.policy = policy
+        self.agent_policy = agent_policy  # None: both agents run the sampling MPC
         self.dt_s = config.dt_s
         self.fields = GeodesicFields(config)
         goal_names = [goal.label for goal in config.goals]
@@ -215,12 +227,11 @@ class ObstacleWorld:
                                control_low=(-vmax, -vmax), control_high=(vmax, vmax),
                                iterations=config.mpc.iterations)
         self._discounts = config.reward.discount ** np.arange(config.mpc.horizon_steps)
-        self._sac_policy = None
 
     @classmethod
-    def from_yaml(cls, path: Path, policy: str = "mpc") -> "ObstacleWorld":
-        """Load study_configs/worlds/obstacle.yaml (or another file) into a world."""
-        return cls(load_yaml_model(path, ObstacleConfig), policy=policy)
+    def from_yaml(cls, path: Path) -> "ObstacleWorld":
+        """Load study_configs/worlds/obstacle.yaml (or another file) into an MPC-driven world."""
+        return cls(load_yaml_model(path, ObstacleConfig))
 
     # ----- geometry ---------------------------------------------------------------------------
 
@@ -410,9 +421,9 @@ class ObstacleWorld:
              plan: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """The agent's next velocity [2] and the warm start for its next plan."""
         other = 1 - agent
-        if self.policy == "sac":
+        if self.agent_policy is not None:
             obs = self.observation(pos[agent], goals[agent], pos[other], vel[other])
-            action = self.sac_policy().act(obs)
+            action = self.agent_policy.act(obs)
             return self.limit_speed(action * self.config.max_speed_mps), plan
         return self.mpc_action(agent, pos, vel, goals, plan, rng)
 
@@ -448,7 +459,7 @@ class ObstacleWorld:
         actions = np.diff(track[:, ROBOT], axis=0) / self.dt_s
         return np.concatenate([actions, np.zeros((n_steps - len(actions), 2))])
 
-    # ----- SAC --------------------------------------------------------------------------------
+    # ----- a learnt agent policy --------------------------------------------------------------
 
     def observation(self, pos: np.ndarray, goal: int, other_pos: np.ndarray,
                     other_vel: np.ndarray) -> np.ndarray:
@@ -466,19 +477,9 @@ class ObstacleWorld:
         ]).astype(np.float32)
 
     def prepare(self, data_dir: Path) -> None:
-        """Train or load the SAC policy once (in the parent, before workers fork)."""
-        if self.policy == "sac":
-            from app.worlds.sac import prepare_policy
-
-            self._sac_policy = prepare_policy(self, Path(data_dir))
-
-    def sac_policy(self):
-        """The SAC policy, loaded on first use from where `prepare` left it."""
-        if self._sac_policy is None:
-            from app.worlds.sac import load_prepared_policy
-
-            self._sac_policy = load_prepared_policy(self)
-        return self._sac_policy
+        """Train or load the agent policy, if any, once (in the parent, before workers fork)."""
+        if self.agent_policy is not None:
+            self.agent_policy.prepare(Path(data_dir))
 
 
 def norm2(vectors: np.ndarray) -> np.ndarray:

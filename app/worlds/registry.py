@@ -5,7 +5,7 @@ from typing import Protocol
 
 import numpy as np
 
-from app.configio import ConfigError, StrictModel
+from app.configio import ConfigError, StrictModel, load_yaml_model
 from app.data.scene import Scene
 from app.data.trajectory import Episode
 from app.settings import get_settings
@@ -48,6 +48,16 @@ def build_world(world: str, config_path: Path | None = None, policy: str = "mpc"
         from app.worlds.highway import HighwayWorld
 
         return HighwayWorld.from_yaml(path)
-    from app.worlds.obstacle import ObstacleWorld
+    return build_obstacle_world(path, policy)
 
-    return ObstacleWorld.from_yaml(path, policy=policy)
+
+def build_obstacle_world(path: Path, policy: str) -> World:
+    """The Obstacle world, its agents on the MPC or on the SAC policy passed into it."""
+    from app.worlds.obstacle import ObstacleConfig, ObstacleWorld
+
+    config = load_yaml_model(path, ObstacleConfig)
+    if policy == "mpc":
+        return ObstacleWorld(config)
+    from app.worlds.sac import SACPolicy
+
+    return ObstacleWorld(config, agent_policy=SACPolicy(config))

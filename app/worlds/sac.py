@@ -4,7 +4,8 @@ One goal-conditioned policy is learnt on the world's own reward (`ObstacleWorld.
 gymnasium env where the learner is one agent and the other agent is driven by the world's MPC.
 The trained policy is saved under <data_dir>/policies/obstacle_sac.zip with a meta.json that
 names the exact world config it was trained on, so a changed config retrains instead of
-silently reusing a stale policy.
+silently reusing a stale policy. `SACPolicy` is what an `ObstacleWorld` is given to act with
+(see `registry.build_world`); this module depends on the world, never the other way round.
 """
 
 import json
@@ -22,7 +23,7 @@ from tqdm import tqdm
 from app.data.trajectory import HUMAN, ROBOT, Rejected
 from app.fileio import atomic_path, sha256_bytes, write_json
 from app.settings import get_settings
-from app.worlds.obstacle import ObstacleWorld
+from app.worlds.obstacle import ObstacleConfig, ObstacleWorld
 
 POLICY_NAME = "obstacle_sac"
 LEARNER, OTHER = ROBOT, HUMAN
@@ -89,20 +90,28 @@ class ObstacleAgentEnv(gym.Env):
 
 
 class SACPolicy:
-    """A trained SB3 SAC model used deterministically: observation -> action in [-1, 1]^2."""
+    """The SAC policy of one obstacle config, used deterministically: observation -> action
+    in [-1, 1]^2. An `ObstacleWorld`'s `AgentPolicy`."""
 
-    def __init__(self, model):
-        self.model = model
+    def __init__(self, config: ObstacleConfig, model: SAC | None = None):
+        self.config = config
+        self.model = model  # None: loaded on first use from where `prepare` left it
+
+    def prepare(self, data_dir: Path) -> None:
+        """Load the policy trained on this config, or train, evaluate and save it first."""
+        self.model = prepare_model(self.config, data_dir)
 
     def act(self, observation: np.ndarray) -> np.ndarray:
         """Deterministic (mean) action for one observation."""
+        if self.model is None:
+            self.model = load_prepared_model(self.config)
         action, _ = self.model.predict(observation, deterministic=True)
         return np.asarray(action, dtype=np.float64)
 
 
-def config_key(world: ObstacleWorld) -> str:
+def config_key(config: ObstacleConfig) -> str:
     """SHA-256 of the world config the policy depends on (all of it: reward, geometry, SAC)."""
-    text = json.dumps(world.config.model_dump(), sort_keys=True)
+    text = json.dumps(config.model_dump(), sort_keys=True)
     return sha256_bytes(text.encode())
 
 
@@ -112,22 +121,21 @@ def policy_paths(data_dir: Path) -> tuple[Path, Path]:
     return folder / f"{POLICY_NAME}.zip", folder / f"{POLICY_NAME}.meta.json"
 
 
-def prepare_policy(world: ObstacleWorld, data_dir: Path) -> SACPolicy:
-    """Load the policy trained on this exact config, or train, evaluate and save it."""
+def prepare_model(config: ObstacleConfig, data_dir: Path) -> SAC:
+    """Load the model trained on this exact config, or train, evaluate and save it."""
     zip_path, meta_path = policy_paths(data_dir)
-    key = config_key(world)
+    key = config_key(config)
     if not _is_current(zip_path, meta_path, key):
-        model, train_s = train_model(world)
+        model, train_s = train_sac_policy(config)
         with atomic_path(zip_path) as tmp, open(tmp, "wb") as fh:
             model.save(fh)
-        policy = SACPolicy(model)
-        evaluation = evaluate_policy(world, policy, world.config.sac.eval_episodes)
-        write_json(meta_path, {"config_sha256": key, "config": world.config.model_dump(),
-                               "total_timesteps": world.config.sac.total_timesteps,
+        evaluation = evaluate_policy(SACPolicy(config, model), config.sac.eval_episodes)
+        write_json(meta_path, {"config_sha256": key, "config": config.model_dump(),
+                               "total_timesteps": config.sac.total_timesteps,
                                "train_wall_time_s": round(train_s, 2),
                                "evaluation": evaluation, "file": zip_path.name})
     _PREPARED[key] = zip_path
-    return load_policy(zip_path)
+    return load_sac_model(zip_path)
 
 
 def _is_current(zip_path: Path, meta_path: Path, key: str) -> bool:
@@ -137,28 +145,28 @@ def _is_current(zip_path: Path, meta_path: Path, key: str) -> bool:
     return json.loads(meta_path.read_text()).get("config_sha256") == key
 
 
-def load_policy(zip_path: Path) -> SACPolicy:
-    """Load a saved SAC policy on the CPU."""
-    return SACPolicy(SAC.load(zip_path, device="cpu"))
+def load_sac_model(zip_path: Path) -> SAC:
+    """Load a saved SAC model on the CPU."""
+    return SAC.load(zip_path, device="cpu")
 
 
-def load_prepared_policy(world: ObstacleWorld) -> SACPolicy:
-    """The policy `prepare_policy` made for this config (in this process or its parent)."""
-    key = config_key(world)
+def load_prepared_model(config: ObstacleConfig) -> SAC:
+    """The model `prepare_model` made for this config (in this process or its parent)."""
+    key = config_key(config)
     zip_path = _PREPARED.get(key)
     if zip_path is None:
         zip_path, meta_path = policy_paths(get_settings().data_dir)
         if not _is_current(zip_path, meta_path, key):
             raise RuntimeError(f"no SAC policy trained on this obstacle config at {zip_path}; "
                                "call ObstacleWorld.prepare(data_dir) first")
-    return load_policy(zip_path)
+    return load_sac_model(zip_path)
 
 
-def train_model(world: ObstacleWorld):
-    """Train SB3 SAC on ObstacleAgentEnv; returns (model, wall time [s])."""
-    cfg = world.config.sac
+def train_sac_policy(config: ObstacleConfig) -> tuple[SAC, float]:
+    """Train SB3 SAC on ObstacleAgentEnv of an MPC-driven world; returns (model, wall time [s])."""
+    cfg = config.sac
     torch.set_num_threads(cfg.torch_threads)
-    env = ObstacleAgentEnv(world)
+    env = ObstacleAgentEnv(ObstacleWorld(config))
     env.reset(seed=cfg.seed)
     model = SAC("MlpPolicy", env, learning_rate=cfg.learning_rate, buffer_size=cfg.buffer_size,
                 learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
@@ -187,11 +195,9 @@ class TqdmCallback(BaseCallback):
         self.bar.close()
 
 
-def evaluate_policy(world: ObstacleWorld, policy: SACPolicy, n_episodes: int,
-                    seed: int = 12345) -> dict:
+def evaluate_policy(policy: SACPolicy, n_episodes: int, seed: int = 12345) -> dict:
     """Both agents on the SAC policy: kept (goal reached, no collision) and rejection rates."""
-    sac_world = ObstacleWorld(world.config, policy="sac")
-    sac_world._sac_policy = policy
+    sac_world = ObstacleWorld(policy.config, agent_policy=policy)
     outcomes: Counter = Counter()
     for i in range(n_episodes):
         try:

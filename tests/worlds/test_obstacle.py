@@ -10,6 +10,7 @@ from app.configio import ConfigError
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 from app.settings import REPO_ROOT
 from app.worlds.obstacle import ObstacleConfig, ObstacleWorld
+from app.worlds.registry import build_world
 from app.worlds.simulate import episode_rng, simulate
 
 CONFIG = REPO_ROOT / "study_configs" / "worlds" / "obstacle.yaml"
@@ -139,7 +140,7 @@ def test_sac_policy_trains_saves_and_rolls_out(tmp_path):
         data["sac"].update(sac)
 
     config_path = write_config(tmp_path / "w.yaml", tiny_sac)
-    world = ObstacleWorld.from_yaml(config_path, policy="sac")
+    world = build_world("obstacle", config_path, policy="sac")
     world.prepare(tmp_path)
     assert (tmp_path / "policies" / "obstacle_sac.zip").is_file()
     meta = yaml.safe_load((tmp_path / "policies" / "obstacle_sac.meta.json").read_text())
@@ -152,7 +153,10 @@ def test_sac_policy_trains_saves_and_rolls_out(tmp_path):
     steps = np.linalg.norm(np.diff(positions, axis=0), axis=-1) / world.dt_s
     assert steps.max() <= world.config.max_speed_mps + 1e-9
 
-    reloaded = ObstacleWorld(ObstacleConfig.model_validate(world.config.model_dump()), "sac")
+    from app.worlds.sac import SACPolicy
+
+    config = ObstacleConfig.model_validate(world.config.model_dump())
+    reloaded = ObstacleWorld(config, agent_policy=SACPolicy(config))
     labels = {"robot_goal": int(goals[ROBOT]), "human_goal": int(goals[HUMAN])}
     args = (starts, 0.0, 0.0, np.zeros(2), labels, 3)
     first = world.robot_policy_actions(*args, np.random.default_rng(1))
