@@ -1,10 +1,11 @@
 """`tomstudy build-trials`: held-out trajectories -> the study's trial bank (JSON + meta.json).
 
-Per world: the test split both checkpoints held out; segments cut where the robot's
-behaviour is still visible (before a Highway lane change completes, well before an
-Obstacle goal is reached); `start_states` start states on the data near the robot; both
-models, a constant-velocity baseline and the world's own policy answered for every start
-state. Everything is computed from the rounded numbers the participant is shown.
+Per world: the test split both checkpoints held out; segments cut where the world says the
+robot's behaviour is still visible (`World.visible_ends`: before a Highway lane change
+completes, well before an Obstacle goal is reached); `start_states` start states on the
+data near the robot; both models, a constant-velocity baseline and the world's own policy
+(`World.robot_policy_actions`) answered for every start state. Everything is computed from
+the rounded numbers the participant is shown. Nothing here depends on which world it is.
 
 Start states (K = the config's `start_states`, n = `steps_to_predict`, r = the reachable
 radius `max_step_m`). The first is the robot's own segment-end state (`own`). The other
@@ -12,14 +13,10 @@ K - 1 are robot positions that occur in the data the models learned from: every 
 every trajectory outside both checkpoints' test splits (their train and validation
 trajectories, so no held-out future), kept if
 - the point is at least r from every start already chosen (the robot's own included);
-- Highway: |x - x_robot| <= n r, with n r of road ahead of it (the way the robot's last
-  segment move goes along x) inside the view; in the robot's lane (`same_lane`) or one
-  lane away (`adjacent_lane`), lanes by nearest centre; not within two car lengths along
-  and half a lane across of the human;
-- Obstacle: within n r of the robot (`near`) or between n r and 2 n r (`mid`); more than
-  one agent width clear of every obstacle and goal disc, two agent widths from the human
-  (the whole walled plane is in view, so there is always room for n steps).
-The two kinds take turns (same_lane first, or near first), each turn a uniform draw with
+- the world keeps it as one of its two start kinds within reach n r of the robot
+  (`World.data_start_candidates`: Highway `same_lane` / `adjacent_lane`, Obstacle
+  `near` / `mid`; the rules are in highway.py and obstacle.py).
+The two kinds take turns (the world's first kind first), each turn a uniform draw with
 the bank's rng among that kind's points, so each gets half of K - 1 (the first kind the
 odd one); a kind with no point left passes its turn to the other, and a segment where
 neither has one is skipped (meta.json counts it). Every start keeps the segment end's
@@ -27,7 +24,8 @@ heading and speed: the question is what this robot, moving as the segment shows,
 from there; a data state's own heading and speed belong to another trajectory's
 behaviour, would be drawn in the browser and would make the world's policy answer a
 situation the segment does not show. Attention checks instead place K - 1 starts a step
-beside or behind the robot (`offset`).
+beside or behind the robot (`offset`, `World.offset_start_candidates`). The worlds apply
+their rules to the scene the trajectories were simulated in.
 """
 
 import platform
@@ -53,6 +51,7 @@ from app.study.trials import (
     bank_dir,
     clip_sha256,
 )
+from app.worlds.registry import World, build_world
 from app.worlds.simulate import output_paths
 
 POS_DECIMALS = 3
@@ -65,7 +64,7 @@ EXTRA_CANDIDATES = 40  # segments tried as attention checks (the most obvious wi
 class WorldInputs:
     """What one world's bank is built from."""
 
-    world: object
+    world: World
     trajs: TrajectorySet
     models: dict
     held_out: np.ndarray
@@ -102,7 +101,6 @@ def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
         load_model,
         trajectory_hash,
     )
-    from app.worlds.registry import build_world
 
     npz_path, _ = output_paths(data_dir, name)
     if not npz_path.is_file():
@@ -142,8 +140,7 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
     max_step = config.prediction_input.max_step_factor * robot_step_percentile(
         trajs, inputs.held_out)
     need_segment = max(m.segment_len for m in inputs.models.values())
-    candidates = segment_candidates(config, trajs, inputs.held_out, label_name,
-                                    need_segment, rng)
+    candidates = segment_candidates(config, world, trajs, inputs.held_out, need_segment, rng)
     needed = (config.bank_trials_per_world + config.practice_trials
               + config.attention_checks.per_world)
     if len(candidates) < needed:
@@ -225,17 +222,18 @@ def robot_step_percentile(trajs: TrajectorySet, index: np.ndarray) -> float:
 
 # ---------------------------------------------------------------- segments
 
-def segment_candidates(config: StudyConfig, trajs: TrajectorySet, held_out: np.ndarray,
-                       label_name: str, need_segment: int,
+def segment_candidates(config: StudyConfig, world: World, trajs: TrajectorySet,
+                       held_out: np.ndarray, need_segment: int,
                        rng: np.random.Generator) -> list[tuple[int, int, int]]:
     """(trajectory, segment start, segment end) per usable trajectory, labels interleaved."""
     by_label: dict[int, list] = {}
     for i in rng.permutation(held_out):
         length = int(rng.integers(config.segment_steps.min, config.segment_steps.max + 1))
-        ends = visible_ends(trajs, int(i), max(length, need_segment), config.steps_to_predict)
+        ends = segment_ends(world, trajs, int(i), max(length, need_segment),
+                            config.steps_to_predict)
         if len(ends):
             end = int(rng.choice(ends))
-            by_label.setdefault(int(trajs.labels[label_name][i]), []).append(
+            by_label.setdefault(int(trajs.labels[world.robot_label][i]), []).append(
                 (int(i), end - length, end))
     return interleave(by_label)
 
@@ -250,25 +248,15 @@ def interleave(groups: dict[int, list]) -> list:
     return out
 
 
-def visible_ends(trajs: TrajectorySet, i: int, history: int, n_after: int) -> np.ndarray:
-    """Segment end steps where the robot's behaviour is under way but not finished."""
+def segment_ends(world: World, trajs: TrajectorySet, i: int, history: int,
+                 n_after: int) -> np.ndarray:
+    """End steps of trajectory i with `history` steps before and `n_after` after, where the
+    world shows the robot's behaviour under way but not finished."""
     length = int(trajs.lengths[i])
     ends = np.arange(history, length - n_after + 1)
     if not len(ends):
         return ends
-    robot = trajs.positions[i, : length + 1, ROBOT].astype(np.float64)
-    if trajs.scene.lanes:
-        # Highway: before the lane change completes (or early on, when keeping the lane)
-        lane_w = trajs.scene.lanes[0].width_m
-        shift = robot[:, 1] - robot[0, 1]
-        total = shift[-1]
-        if abs(total) > 0.5 * lane_w:
-            done = shift[ends] / total
-            return ends[(done >= 0.05) & (done <= 0.75)]
-        return ends[ends <= 0.6 * length]
-    # Obstacle: well before the goal (at least 40% of the way still to go)
-    remaining = np.linalg.norm(robot[ends] - robot[-1], axis=1)
-    return ends[remaining >= 0.4 * np.linalg.norm(robot[0] - robot[-1])]
+    return world.visible_ends(trajs.positions[i, : length + 1, ROBOT].astype(np.float64), ends)
 
 
 # ---------------------------------------------------------------- one trial
@@ -283,7 +271,7 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
     history = max(m.segment_len for m in inputs.models.values())
     model_input = clip_of(trajs, src, end - history, end, label_name)
     segment = np.asarray(shown.positions)
-    states = start_states(config, trajs, src, end, segment, inputs.covered, max_step, rng, near)
+    states = start_states(config, inputs, src, end, segment, max_step, rng, near)
     examples = [clip_of(trajs, e, 0, int(trajs.lengths[e]), label_name)
                 for e in pick_examples(trajs, inputs.held_out, src, label_name,
                                        config.examples_per_trial, rng)]
@@ -336,20 +324,22 @@ class NoStartStates(ValueError):
     """Too few points near the robot for the study's start states."""
 
 
-def start_states(config: StudyConfig, trajs: TrajectorySet, src: int, end: int,
-                 segment: np.ndarray, covered: np.ndarray, max_step: float,
-                 rng: np.random.Generator, near: bool = False) -> list[StartState]:
+def start_states(config: StudyConfig, inputs: WorldInputs, src: int, end: int,
+                 segment: np.ndarray, max_step: float, rng: np.random.Generator,
+                 near: bool = False) -> list[StartState]:
     """The robot's segment-end state plus K - 1 others by the module docstring's rule (or a
     step beside or behind it, `near`); the human stays at its segment-end position."""
+    trajs, world = inputs.trajs, inputs.world
     robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
     others = config.start_states - 1
     if near:
-        points = farthest_points(robot, near_points(trajs.scene, segment, max_step,
-                                                    config.steps_to_predict), others)
+        offsets = world.offset_start_candidates(trajs.scene, segment, max_step,
+                                                config.steps_to_predict)
+        points = farthest_points(robot, offsets, others)
         kinds = ["offset"] * others
     else:
-        pools = data_candidates(trajs.scene, segment, covered, max_step,
-                                config.steps_to_predict)
+        pools = world.data_start_candidates(trajs.scene, segment, inputs.covered,
+                                            config.steps_to_predict * max_step)
         points, kinds = take_turns(robot, pools, others, max_step, rng)
     heading = trajs.headings[src, end]
     speed = float(trajs.speeds[src, end, ROBOT])
@@ -359,54 +349,6 @@ def start_states(config: StudyConfig, trajs: TrajectorySet, src: int, end: int,
                        human_heading=round(float(heading[HUMAN]), HEADING_DECIMALS),
                        robot_speed=round(speed, 4), start_kind=kind)
             for p, kind in zip([robot, *points], ["own", *kinds], strict=True)]
-
-
-def heading_unit(segment: np.ndarray) -> np.ndarray:
-    """Unit vector of the robot's last segment move."""
-    motion = segment[-1, ROBOT] - segment[-2, ROBOT]
-    return motion / (np.linalg.norm(motion) + 1e-12)
-
-
-def data_candidates(scene, segment: np.ndarray, covered: np.ndarray, max_step: float,
-                    n_steps: int) -> dict[str, np.ndarray]:
-    """Data-covered robot positions near the segment end, by start kind (first kind first)."""
-    robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
-    reach = n_steps * max_step
-    if scene.lanes:
-        travel = 1.0 if segment[-1, ROBOT, 0] >= segment[-2, ROBOT, 0] else -1.0
-        return lane_kinds(scene, robot, human, covered, reach, travel)
-    return ring_kinds(scene, robot, human, covered, reach)
-
-
-def lane_kinds(scene, robot: np.ndarray, human: np.ndarray, pts: np.ndarray, reach: float,
-               travel: float) -> dict[str, np.ndarray]:
-    """Highway: `same_lane` and `adjacent_lane` points within `reach` along the road, with
-    `reach` of road ahead (in the direction `travel`, +1 or -1) inside the view."""
-    centres = np.array([lane.y_center_m for lane in scene.lanes])
-    index = np.array([lane.index for lane in scene.lanes])
-    lane_of = index[np.argmin(np.abs(pts[:, 1, None] - centres), axis=1)]
-    robot_lane = index[np.argmin(np.abs(robot[1] - centres))]
-    half_lane = scene.lanes[0].width_m / 2
-    car = max(a.length_m for a in scene.agents)
-    clear = ~((np.abs(pts[:, 0] - human[0]) < 2 * car) & (np.abs(pts[:, 1] - human[1]) < half_lane))
-    ahead = pts[:, 0] + travel * reach
-    b = scene.bounds
-    keep = (clear & (np.abs(pts[:, 0] - robot[0]) <= reach)
-            & (ahead > b.x_min_m) & (ahead < b.x_max_m))
-    gap = np.abs(lane_of - robot_lane)
-    return {"same_lane": pts[keep & (gap == 0)], "adjacent_lane": pts[keep & (gap == 1)]}
-
-
-def ring_kinds(scene, robot: np.ndarray, human: np.ndarray, pts: np.ndarray,
-               reach: float) -> dict[str, np.ndarray]:
-    """Obstacle: `near` (within `reach` of the robot) and `mid` (reach to 2 reach) points."""
-    dist = np.linalg.norm(pts - robot, axis=1)
-    pts, dist = pts[dist <= 2 * reach], dist[dist <= 2 * reach]
-    agent = max(a.width_m for a in scene.agents)
-    clear = np.linalg.norm(pts - human, axis=1) > 2 * agent
-    for c in [*scene.obstacles, *scene.goals]:
-        clear &= np.hypot(pts[:, 0] - c.x_m, pts[:, 1] - c.y_m) > c.radius_m + agent
-    return {"near": pts[clear & (dist <= reach)], "mid": pts[clear & (dist > reach)]}
 
 
 def take_turns(robot: np.ndarray, pools: dict[str, np.ndarray], count: int, min_gap: float,
@@ -428,30 +370,6 @@ def take_turns(robot: np.ndarray, pools: dict[str, np.ndarray], count: int, min_
             raise NoStartStates(f"only {turn} of {count} data-covered start states "
                                 "near the robot")
     return chosen[1:], kinds
-
-
-def near_points(scene, segment: np.ndarray, max_step: float, n_steps: int) -> np.ndarray:
-    """Points 0.5-1 step beside or behind the robot's segment end, inside free space."""
-    robot = segment[-1, ROBOT]
-    ahead = heading_unit(segment)
-    side = np.array([-ahead[1], ahead[0]])
-    offsets = [a * ahead + b * side for a in (-1.0, -0.5, 0.0) for b in (-1.0, -0.5, 0.5, 1.0)]
-    pts = robot + max_step * np.array(offsets + [-ahead, -0.5 * ahead])
-    b = scene.bounds
-    ends = pts + n_steps * max_step * ahead  # the obvious continuation must stay in view
-    keep = np.ones(len(pts), dtype=bool)
-    for p in (pts, ends):
-        keep &= (p[:, 0] > b.x_min_m) & (p[:, 0] < b.x_max_m) \
-            & (p[:, 1] > b.y_min_m) & (p[:, 1] < b.y_max_m)
-    if scene.lanes:  # stay on the road
-        top = min(lane.y_center_m - lane.width_m / 2 for lane in scene.lanes)
-        bottom = max(lane.y_center_m + lane.width_m / 2 for lane in scene.lanes)
-        keep &= (pts[:, 1] > top + 1.0) & (pts[:, 1] < bottom - 1.0)
-    for c in scene.obstacles:
-        keep &= np.hypot(pts[:, 0] - c.x_m, pts[:, 1] - c.y_m) > c.radius_m + 0.3
-    human = segment[-1, HUMAN]
-    keep &= np.linalg.norm(pts - human, axis=1) > 2 * max(a.width_m for a in scene.agents)
-    return pts[keep]
 
 
 def farthest_points(seed: np.ndarray, candidates: np.ndarray, k: int) -> list[np.ndarray]:

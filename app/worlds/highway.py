@@ -31,8 +31,9 @@ from pydantic import Field, model_validator
 
 from app.configio import StrictModel, load_yaml_model
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Lane, Scene
-from app.data.trajectory import Episode, Rejected
+from app.data.trajectory import HUMAN, ROBOT, Episode, Rejected
 from app.worlds.mpc import SamplingMPC
+from app.worlds.offset_starts import offset_points
 
 INTENTS = ["keep", "left", "right"]
 LANE_SHIFT = {0: 0, 1: -1, 2: +1}  # left = towards lane 0 (smaller y) for cars driving +x
@@ -168,6 +169,9 @@ class HighwayWorld:
     def from_yaml(cls, path: Path) -> "HighwayWorld":
         """Build from a YAML file typed by `HighwayConfig`."""
         return cls(load_yaml_model(path, HighwayConfig))
+
+    def prepare(self, data_dir: Path) -> None:
+        """Nothing to set up: both cars run the sampling MPC, which needs no training."""
 
     def scene(self) -> Scene:
         """Lanes, view bounds and car shapes in the moving frame."""
@@ -486,3 +490,46 @@ class HighwayWorld:
             return int(labels["robot_final_lane"])
         lane = self._lane_of(robot_y) + LANE_SHIFT[int(labels.get("robot_intent", 0))]
         return int(np.clip(lane, 0, self.config.lanes_count - 1))
+
+    # ----- segments and start states for the trial bank ---------------------------------
+
+    def visible_ends(self, robot_track: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """Before the lane change completes (5-75% of the way across), or in the first 60% of
+        the interaction when the robot keeps its lane."""
+        shift = robot_track[:, 1] - robot_track[0, 1]
+        total = shift[-1]
+        if abs(total) > 0.5 * LANE_WIDTH_M:
+            done = shift[ends] / total
+            return ends[(done >= 0.05) & (done <= 0.75)]
+        return ends[ends <= 0.6 * (len(robot_track) - 1)]
+
+    def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: np.ndarray,
+                              reach: float) -> dict[str, np.ndarray]:
+        """`same_lane` and `adjacent_lane` points (lanes by nearest centre) within `reach`
+        along the road, with `reach` of road ahead (the way the robot's last segment move goes
+        along x) inside the view; not within two car lengths along and half a lane across of
+        the human."""
+        robot, human, pts = segment[-1, ROBOT], segment[-1, HUMAN], covered
+        travel = 1.0 if segment[-1, ROBOT, 0] >= segment[-2, ROBOT, 0] else -1.0
+        centres = np.array([lane.y_center_m for lane in scene.lanes])
+        index = np.array([lane.index for lane in scene.lanes])
+        lane_of = index[np.argmin(np.abs(pts[:, 1, None] - centres), axis=1)]
+        robot_lane = index[np.argmin(np.abs(robot[1] - centres))]
+        half_lane = scene.lanes[0].width_m / 2
+        car = max(a.length_m for a in scene.agents)
+        clear = ~((np.abs(pts[:, 0] - human[0]) < 2 * car)
+                  & (np.abs(pts[:, 1] - human[1]) < half_lane))
+        ahead = pts[:, 0] + travel * reach
+        b = scene.bounds
+        keep = (clear & (np.abs(pts[:, 0] - robot[0]) <= reach)
+                & (ahead > b.x_min_m) & (ahead < b.x_max_m))
+        gap = np.abs(lane_of - robot_lane)
+        return {"same_lane": pts[keep & (gap == 0)], "adjacent_lane": pts[keep & (gap == 1)]}
+
+    def offset_start_candidates(self, scene: Scene, segment: np.ndarray, max_step: float,
+                                n_steps: int) -> np.ndarray:
+        """The shared offset points that stay on the road (1 m inside its outer edges)."""
+        pts = offset_points(scene, segment, max_step, n_steps)
+        top = min(lane.y_center_m - lane.width_m / 2 for lane in scene.lanes)
+        bottom = max(lane.y_center_m + lane.width_m / 2 for lane in scene.lanes)
+        return pts[(pts[:, 1] > top + 1.0) & (pts[:, 1] < bottom - 1.0)]

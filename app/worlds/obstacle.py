@@ -20,6 +20,7 @@ from app.configio import StrictModel, load_yaml_model
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Circle, Scene
 from app.data.trajectory import HUMAN, ROBOT, Episode, Rejected
 from app.worlds.mpc import SamplingMPC
+from app.worlds.offset_starts import offset_points
 
 AGENTS = (ROBOT, HUMAN)
 COLLISION_SUBSTEPS = 4  # check each step's straight segment at 4 points, not just its end
@@ -480,6 +481,32 @@ class ObstacleWorld:
         """Train or load the agent policy, if any, once (in the parent, before workers fork)."""
         if self.agent_policy is not None:
             self.agent_policy.prepare(Path(data_dir))
+
+    # ----- segments and start states for the trial bank ---------------------------------------
+
+    def visible_ends(self, robot_track: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """Well before the goal: at least 40% of the start-to-goal distance still to go."""
+        remaining = np.linalg.norm(robot_track[ends] - robot_track[-1], axis=1)
+        return ends[remaining >= 0.4 * np.linalg.norm(robot_track[0] - robot_track[-1])]
+
+    def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: np.ndarray,
+                              reach: float) -> dict[str, np.ndarray]:
+        """`near` (within `reach` of the robot) and `mid` (`reach` to 2 `reach`) points, more
+        than one agent width clear of every obstacle and goal disc and two from the human (the
+        whole walled plane is in view, so there is always room for n steps)."""
+        robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
+        dist = np.linalg.norm(covered - robot, axis=1)
+        pts, dist = covered[dist <= 2 * reach], dist[dist <= 2 * reach]
+        agent = max(a.width_m for a in scene.agents)
+        clear = np.linalg.norm(pts - human, axis=1) > 2 * agent
+        for c in [*scene.obstacles, *scene.goals]:
+            clear &= np.hypot(pts[:, 0] - c.x_m, pts[:, 1] - c.y_m) > c.radius_m + agent
+        return {"near": pts[clear & (dist <= reach)], "mid": pts[clear & (dist > reach)]}
+
+    def offset_start_candidates(self, scene: Scene, segment: np.ndarray, max_step: float,
+                                n_steps: int) -> np.ndarray:
+        """The shared offset points (the plane has no road to stay on)."""
+        return offset_points(scene, segment, max_step, n_steps)
 
 
 def norm2(vectors: np.ndarray) -> np.ndarray:

@@ -1,7 +1,8 @@
-"""Names of the worlds and how to build each one from its YAML config."""
+"""The `World` protocol every world implements, the worlds' names, and how to build each one
+from its YAML config (the Obstacle world's SAC policy is wired in here)."""
 
 from pathlib import Path
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -14,8 +15,15 @@ WORLD_NAMES = ("highway", "obstacle")
 POLICIES = ("mpc", "sac")
 
 
+@runtime_checkable
 class World(Protocol):
-    """What the simulation driver needs from a world."""
+    """Everything the simulation, the learning and the trial bank need from a world, so
+    nothing outside app/worlds/ asks which world it has.
+
+    Shapes: A = 2 agents (0 robot, 1 human), positions in the scene frame [m]; a segment is
+    [T+1, A, 2] states, the last one the segment end. Start candidates are computed on the
+    `scene` passed in: the one the trajectories were simulated in and the browser shows.
+    """
 
     name: str
     dt_s: float
@@ -23,10 +31,40 @@ class World(Protocol):
     robot_label: str  # the label plots colour by and latent metrics score against
     config: StrictModel
 
-    def scene(self) -> Scene: ...
+    def scene(self) -> Scene:
+        """The world's geometry for plots, the trial bank and the browser."""
+        ...
+
+    def prepare(self, data_dir: Path) -> None:
+        """Per-world set-up before rollouts (e.g. train a learnt policy); may do nothing."""
+        ...
 
     def rollout(self, rng: np.random.Generator) -> Episode:
         """One episode; raises `Rejected(reason)` when it must not enter the dataset."""
+        ...
+
+    def robot_policy_actions(self, positions: np.ndarray, robot_heading: float,
+                             robot_speed: float, human_velocity: np.ndarray, labels: dict,
+                             n_steps: int, rng: np.random.Generator) -> np.ndarray:
+        """The robot's own next actions [n_steps, 2] (m/s) from the start state positions
+        [A, 2], the human moving at constant velocity."""
+        ...
+
+    def visible_ends(self, robot_track: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """The segment ends among `ends` (steps of one trajectory's robot track [L+1, 2])
+        where the robot's behaviour is under way but not finished."""
+        ...
+
+    def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: np.ndarray,
+                              reach: float) -> dict[str, np.ndarray]:
+        """Robot positions from the data `covered` [M, 2] that may start a prediction after
+        `segment`, by start kind (the first kind draws first); `reach` = n steps x max step."""
+        ...
+
+    def offset_start_candidates(self, scene: Scene, segment: np.ndarray, max_step: float,
+                                n_steps: int) -> np.ndarray:
+        """Robot positions [P, 2] a step or so beside or behind the segment end, for
+        attention checks."""
         ...
 
 

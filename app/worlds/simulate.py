@@ -65,8 +65,7 @@ def simulate(world: str, n: int, seed: int, data_dir: Path, config_path: Path | 
     """Simulate `n` kept trajectories of `world` and write them with a meta.json."""
     started = time.perf_counter()
     built = build_world(world, config_path, policy)  # validates config before forking
-    if hasattr(built, "prepare"):
-        built.prepare(data_dir)  # e.g. train the SAC policy once, in the parent
+    built.prepare(data_dir)  # e.g. train the SAC policy once, in the parent
     workers = workers or min(2, os.cpu_count() or 1)
     episodes, rejections = _run_pool(world, config_path, policy, n, seed, workers)
     if any(ep is None for ep in episodes):

@@ -1,0 +1,60 @@
+"""The World protocol: both worlds implement all of it, and the trial bank's world rules."""
+
+import numpy as np
+import pytest
+
+from app.configio import ConfigError
+from app.worlds.registry import WORLD_NAMES, World, build_world
+
+
+@pytest.fixture(scope="module")
+def worlds() -> dict[str, World]:
+    return {name: build_world(name) for name in WORLD_NAMES}
+
+
+def test_every_world_implements_the_whole_protocol(worlds):
+    for world in worlds.values():
+        assert isinstance(world, World), world.name
+
+
+def test_highway_has_no_sac_policy():
+    with pytest.raises(ConfigError, match="highway supports only 'mpc'"):
+        build_world("highway", policy="sac")
+
+
+def test_highway_segments_end_during_the_lane_change(worlds):
+    across = np.linspace(0.0, 4.0, 11)  # one lane to the left of lane 0 ... straight across
+    track = np.stack([np.arange(11.0), across], axis=1)
+    ends = worlds["highway"].visible_ends(track, np.arange(11))
+    assert ends.tolist() == [1, 2, 3, 4, 5, 6, 7]  # 10% .. 70% of the way across
+    keep = np.stack([np.arange(11.0), np.zeros(11)], axis=1)
+    assert worlds["highway"].visible_ends(keep, np.arange(11)).tolist() == list(range(7))
+
+
+def test_obstacle_segments_end_well_before_the_goal(worlds):
+    track = np.stack([np.arange(11.0), np.zeros(11)], axis=1)
+    ends = worlds["obstacle"].visible_ends(track, np.arange(11))
+    assert ends.tolist() == list(range(7))  # at least 4 of the 10 m still to go
+
+
+def test_highway_offset_starts_stay_on_the_road(worlds):
+    world = worlds["highway"]
+    scene = world.scene()
+    segment = np.array([[[0.0, 0.0], [-20.0, 8.0]], [[3.0, 0.0], [-18.0, 8.0]]])  # lane 0
+    points = world.offset_start_candidates(scene, segment, 2.0, 3)
+    top = min(lane.y_center_m - lane.width_m / 2 for lane in scene.lanes)
+    assert len(points) and (points[:, 1] > top + 1.0).all()
+    assert (np.abs(points[:, 1]) < 2.0 + 1e-9).all()  # sideways steps off the road are gone
+
+
+def test_data_start_kinds_are_the_worlds_own(worlds):
+    segment = np.array([[[0.0, 4.0], [-20.0, 8.0]], [[3.0, 4.0], [-18.0, 8.0]]])
+    covered = np.array([[4.0, 4.0], [5.0, 0.0], [6.0, 8.0], [40.0, 4.0]])
+    highway = worlds["highway"]
+    pools = highway.data_start_candidates(highway.scene(), segment, covered, 9.0)
+    assert list(pools) == ["same_lane", "adjacent_lane"]
+    assert pools["same_lane"].tolist() == [[4.0, 4.0]]
+    assert sorted(pools["adjacent_lane"].tolist()) == [[5.0, 0.0], [6.0, 8.0]]
+    obstacle = worlds["obstacle"]
+    assert list(obstacle.data_start_candidates(obstacle.scene(), segment + 5, covered,
+                                               1.0)) == ["near", "mid"]
