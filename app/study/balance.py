@@ -1,4 +1,4 @@
-"""Balanced assignment kept in the database, so a session start costs the same at any size.
+"""Balance counts kept in the database, so assigning a plan costs the same at any study size.
 
 BalanceCount holds, per study, how many counted sessions use each world order
 (`order:a,b`) and each trial (`trial:<id>`). A session is counted from its start while
@@ -13,9 +13,7 @@ and the server refuses several workers on it.
 import hashlib
 from collections import Counter
 from datetime import datetime, timedelta
-from itertools import permutations
 
-import numpy as np
 from sqlalchemy import case, func, select, text, update
 from sqlalchemy.engine import Engine
 from sqlmodel import Session
@@ -24,17 +22,11 @@ from analysis.contracts import too_fast_share_exceeds
 from app.study.config import StudyConfig
 from app.study.context import StudyContext
 from app.study.db import insert_skipping_duplicates
+from app.study.plan import TrialStep, Usage, parse_plan, world_orders
 from app.study.tables import BalanceCount, Participant, TrialResponse, utcnow
 
 ORDER = "order:"
 TRIAL = "trial:"
-
-
-def world_orders(config: StudyConfig) -> list[tuple[str, ...]]:
-    """All orders when counterbalanced, else the configured one."""
-    if config.counterbalance_world_order:
-        return list(permutations(config.worlds))
-    return [tuple(config.worlds)]
 
 
 def order_key(order: tuple[str, ...]) -> str:
@@ -43,8 +35,9 @@ def order_key(order: tuple[str, ...]) -> str:
 
 
 def plan_keys(world_order: str, plan: list[dict]) -> list[str]:
-    """The keys a session holds: its world order and every trial of its plan."""
-    return [ORDER + world_order] + [TRIAL + s["trial_id"] for s in plan if "trial_id" in s]
+    """The keys a session holds: its world order and every trial of its stored plan."""
+    steps = parse_plan(plan)
+    return [ORDER + world_order] + [TRIAL + s.trial_id for s in steps if isinstance(s, TrialStep)]
 
 
 def ensure_rows(engine: Engine, ctx: StudyContext) -> None:
@@ -71,11 +64,13 @@ def read_counts(db: Session, study_id: str) -> dict[str, int]:
     return dict(rows.all())
 
 
-def least_used(candidates: list, counts: dict, k: int, rng: np.random.Generator) -> list:
-    """The k candidates with the lowest counts, ties broken at random."""
-    noise = rng.random(len(candidates))
-    keys = np.lexsort((noise, [counts.get(c, 0) for c in candidates]))
-    return [candidates[i] for i in keys[:k]]
+def read_usage(db: Session, study_id: str) -> Usage:
+    """The study's counts per world order and per trial, as a plan's assignment reads them."""
+    counts = read_counts(db, study_id)
+    orders = {tuple(k[len(ORDER):].split(",")): v for k, v in counts.items()
+              if k.startswith(ORDER)}
+    trials = {k[len(TRIAL):]: v for k, v in counts.items() if k.startswith(TRIAL)}
+    return Usage(orders=orders, trials=trials)
 
 
 def _add(db: Session, study_id: str, keys: list[str], delta: int) -> None:

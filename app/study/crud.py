@@ -1,10 +1,11 @@
-"""Every step write of a participant's session, and the reads the writes depend on.
+"""Database transactions of a participant's steps: each write, and the reads it depends on.
 
-A participant's plan is fixed at session start (sessions.py); `position` indexes into
-it. A step is advanced by a conditional UPDATE (`WHERE position = expected`), so two
-workers racing on one participant cannot both advance it, and a client UUID
-(`submission_id`, unique, bound to its request kind and body hash) makes a retried
-request a no-op that answers the current state.
+What a step is and whether an answer is acceptable are decided elsewhere (plan.py,
+validation.py); this module stores. A step is advanced by a conditional UPDATE
+(`WHERE position = expected`), so two workers racing on one participant cannot both
+advance it, and a client UUID (`submission_id`, unique, bound to its submission kind
+and body hash) makes a retried request a no-op that answers the current state. Every
+write commits before the route answers, so a 2xx means the answer is stored.
 """
 
 import hashlib
@@ -20,6 +21,7 @@ from app.study import balance
 from app.study.config import StudyConfig
 from app.study.context import StudyContext
 from app.study.errors import Refused
+from app.study.plan import BEFORE_TRIALS, Phase, TrialStep, expect_phase, expect_trial
 from app.study.sessions import as_utc
 from app.study.tables import (
     ConsentCreate,
@@ -36,19 +38,17 @@ from app.study.tables import (
     utcnow,
 )
 from app.study.trials import TrialRecord
+from app.study.validation import (
+    attention_passed,
+    human_actions,
+    validate_points,
+    validate_survey,
+)
 
-TRIAL_PHASES = ("practice", "trial")
-BEFORE_TRIALS = ("consent", "instructions")
 FINISHED = ("completed", "failed_checks")  # outcomes of a session that did every trial
-MAX_TRIAL_MS = 6 * 3600 * 1000  # a trial "shown" longer than this is a broken clock
 
 
 # ---------------------------------------------------------------- step writes
-
-def current_step(participant: Participant) -> dict:
-    """The plan step the participant is at."""
-    return participant.plan[min(participant.position, len(participant.plan) - 1)]
-
 
 def body_hash(body: SubmissionBody) -> str:
     """SHA-256 of the body as the server parsed it: a retry must send the same one."""
@@ -56,7 +56,7 @@ def body_hash(body: SubmissionBody) -> str:
 
 
 def already_stored(db: Session, participant: Participant, body: SubmissionBody,
-                   kind: str) -> bool:
+                   submission_kind: str) -> bool:
     """True if this UUID was stored for this same request (a retry); else 409 or 422."""
     stored = db.execute(select(Submission.participant_id, Submission.kind,
                                Submission.body_sha256)
@@ -65,23 +65,14 @@ def already_stored(db: Session, participant: Participant, body: SubmissionBody,
         return False
     if stored.participant_id != participant.id:
         raise Refused(409, "submission_id: already used by another session")
-    if stored.kind != kind or stored.body_sha256 != body_hash(body):
+    if stored.kind != submission_kind or stored.body_sha256 != body_hash(body):
         raise Refused(422, f"submission_id: already used for a different {stored.kind} "
                            "request; a retry must resend the same body, a new answer needs "
                            "a new submission_id")
     return True
 
 
-def expect_phase(participant: Participant, *phases: str) -> dict:
-    """The current step if its phase is one of `phases`, else 409."""
-    step = current_step(participant)
-    if step["phase"] not in phases:
-        raise Refused(409, f"phase: this request belongs to {' or '.join(phases)}, "
-                           f"but the session is at {step['phase']}")
-    return step
-
-
-def advance(db: Session, participant: Participant, body: SubmissionBody, kind: str,
+def advance(db: Session, participant: Participant, body: SubmissionBody, submission_kind: str,
             payload: dict, extra_inserts: list[tuple[object, list[dict]]] = (),
             ending: dict | None = None,
             before_commit: Callable[[], None] | None = None) -> bool:
@@ -104,7 +95,7 @@ def advance(db: Session, participant: Participant, body: SubmissionBody, kind: s
     try:
         conn.execute(Submission.__table__.insert(), [{
             "submission_id": str(body.submission_id), "participant_id": participant.id,
-            "kind": kind, "body_sha256": body_hash(body), "step_index": expected,
+            "kind": submission_kind, "body_sha256": body_hash(body), "step_index": expected,
             "payload": payload, "received_at": now}])
         for table, rows in extra_inserts:
             conn.execute(table.__table__.insert(), rows)
@@ -119,7 +110,7 @@ def advance(db: Session, participant: Participant, body: SubmissionBody, kind: s
         db.commit()
     except IntegrityError:
         db.rollback()
-        if already_stored(db, participant, body, kind):
+        if already_stored(db, participant, body, submission_kind):
             return False
         raise
     except BaseException:
@@ -153,14 +144,14 @@ def _mirror(participant: Participant, values: dict) -> None:
 def record_consent(db: Session, participant: Participant, body: ConsentCreate) -> None:
     """The participant agreed to take part."""
     with replay_if_stored(db, participant, body, "consent") as fresh:
-        expect_phase(participant, "consent")
+        expect_phase(participant, Phase.CONSENT)
         fresh.stored = advance(db, participant, body, "consent", {"agree": True})
 
 
 def record_instructions(db: Session, participant: Participant, body: SubmissionBody) -> None:
     """The participant has read the instructions."""
     with replay_if_stored(db, participant, body, "instructions") as fresh:
-        expect_phase(participant, "instructions")
+        expect_phase(participant, Phase.INSTRUCTIONS)
         fresh.stored = advance(db, participant, body, "instructions", {})
 
 
@@ -168,8 +159,8 @@ def record_survey(db: Session, ctx: StudyContext, participant: Participant,
                   body: SurveyCreate) -> None:
     """Closing answers; the session is then complete and settles its balance counts."""
     with replay_if_stored(db, participant, body, "survey") as fresh:
-        expect_phase(participant, "survey")
-        answers = validate_survey(ctx.config, body.answers)
+        expect_phase(participant, Phase.SURVEY)
+        answers = validate_survey(ctx.config.survey, body.answers)
         ending = ending_values(ctx.config, finished_outcome(ctx.config, participant))
         fresh.stored = advance(
             db, participant, body, "survey", {"answers": answers}, ending=ending,
@@ -180,7 +171,7 @@ def record_decline(db: Session, ctx: StudyContext, participant: Participant,
                    body: DeclineCreate) -> None:
     """The participant does not consent: the session ends and keeps only its receipt."""
     with replay_if_stored(db, participant, body, "decline") as fresh:
-        expect_phase(participant, "consent")
+        expect_phase(participant, Phase.CONSENT)
         fresh.stored = advance(db, participant, body, "decline", {},
                                ending=ending_values(ctx.config, "declined_consent"),
                                before_commit=lambda: _forget(db, participant))
@@ -210,7 +201,8 @@ class _Outcome:
 
 
 @contextmanager
-def replay_if_stored(db: Session, participant: Participant, body: SubmissionBody, kind: str):
+def replay_if_stored(db: Session, participant: Participant, body: SubmissionBody,
+                     submission_kind: str):
     """Run a write; if it is refused, a retry of a stored UUID is not an error.
 
     The common first-time path costs no lookup: a retry is recognised only when the
@@ -221,42 +213,10 @@ def replay_if_stored(db: Session, participant: Participant, body: SubmissionBody
     try:
         yield outcome
     except Refused:
-        if already_stored(db, participant, body, kind):
+        if already_stored(db, participant, body, submission_kind):
             outcome.stored = False
             return
         raise
-
-
-def validate_survey(config: StudyConfig, answers: dict) -> dict:
-    """Answers checked against the configured questions (422 naming the question)."""
-    known = {q.key: q for q in config.survey}
-    for key in answers:
-        if key not in known:
-            raise Refused(422, f"answers.{key}: not a question of this study")
-    clean = {}
-    for key, q in known.items():
-        value = answers.get(key)
-        if value is None or value == "":
-            if q.required:
-                raise Refused(422, f"answers.{key}: an answer is required")
-            continue
-        clean[key] = _survey_value(q, key, value)
-    return clean
-
-
-def _survey_value(q, key: str, value):
-    if q.kind == "likert":
-        if isinstance(value, bool) or not isinstance(value, int | float) or value != int(value):
-            raise Refused(422, f"answers.{key}: must be a whole number")
-        if not q.scale_min <= value <= q.scale_max:
-            raise Refused(422, f"answers.{key}: must be between {q.scale_min} and {q.scale_max}")
-        return int(value)
-    if q.kind == "choice" and value not in q.options:
-        raise Refused(422, f"answers.{key}: must be one of {', '.join(q.options)}")
-    text = str(value)
-    if len(text) > q.max_chars:
-        raise Refused(422, f"answers.{key}: at most {q.max_chars} characters")
-    return text
 
 
 # ---------------------------------------------------------------- predictions
@@ -269,37 +229,35 @@ def record_predictions(db: Session, ctx: StudyContext, participant: Participant,
     return fresh.stored
 
 
-def current_trial_step(participant: Participant, ref: str) -> dict:
-    """The current trial step if the browser's opaque `ref` names it; 409/404 otherwise."""
-    step = expect_phase(participant, *TRIAL_PHASES)
-    if step["ref"] == ref:
-        return step
-    if any(s.get("ref") == ref for s in participant.plan):
-        raise Refused(409, f"trial_id: {ref!r} is not the current trial of this session")
-    raise Refused(404, f"trial_id: {ref!r} is not a trial of this session")
-
-
 def _store_predictions(db: Session, ctx: StudyContext, participant: Participant,
                        body: PredictionCreate) -> bool:
-    step = current_trial_step(participant, body.trial_id)
-    trial = ctx.bank.by_id[step["trial_id"]]
-    points = validate_points(ctx, trial, body)
+    step = expect_trial(participant, body.trial_id)
+    trial = ctx.bank.by_id[step.trial_id]
+    points = validate_points(ctx.bank, trial, body)
     rows = prediction_rows(ctx, participant, trial, body, points)
-    attention_ok = attention_verdict(ctx.config, trial, points) if step["attention_check"] else None
-    response = {
+    attention_ok = (attention_passed(ctx.config.attention_checks, trial, points)
+                    if step.attention_check else None)
+    response = trial_response(ctx, participant, step, trial, body, attention_ok)
+    payload = {"trial_id": trial.trial_id, "attention_ok": attention_ok}
+    return advance(db, participant, body, "predictions", payload,
+                   [(TrialResponse, [response]), (PredictionRow, rows)])
+
+
+def trial_response(ctx: StudyContext, participant: Participant, step: TrialStep,
+                   trial: TrialRecord, body: PredictionCreate,
+                   attention_ok: bool | None) -> dict:
+    """The TrialResponse row of one answered trial: timings, replays, undo history, verdict."""
+    return {
         "submission_id": str(body.submission_id), "participant_id": participant.id,
         "trial_id": trial.trial_id, "world": trial.world,
-        "world_position": step["world_position"], "trial_index": step["trial_index"],
-        "is_practice": step["phase"] == "practice", "attention_check": step["attention_check"],
+        "world_position": step.world_position, "trial_index": step.trial_index,
+        "is_practice": step.phase == Phase.PRACTICE, "attention_check": step.attention_check,
         "attention_ok": attention_ok, "shown_at_ms": body.shown_at_ms,
         "submitted_at_ms": body.submitted_at_ms, "replays": body.replays,
         "clip_sha256": trial.clip_sha256, "received_at": utcnow(),
         "history": [entry.model_dump() for entry in body.history],
         **trial_durations(ctx, participant, body),
     }
-    payload = {"trial_id": trial.trial_id, "attention_ok": attention_ok}
-    return advance(db, participant, body, "predictions", payload,
-                   [(TrialResponse, [response]), (PredictionRow, rows)])
 
 
 def trial_durations(ctx: StudyContext, participant: Participant, body: PredictionCreate) -> dict:
@@ -314,98 +272,6 @@ def trial_durations(ctx: StudyContext, participant: Participant, body: Predictio
     used = client_ms if ctx.trust_client_clock else min(client_ms, server_ms)
     return {"client_duration_ms": client_ms, "server_duration_ms": server_ms,
             "duration_ms": used}
-
-
-def validate_points(ctx: StudyContext, trial: TrialRecord, body: PredictionCreate) -> np.ndarray:
-    """Clicked positions [K, n, 2] after checking counts, bounds and move lengths."""
-    world = ctx.bank.world(trial.world)
-    k, n = len(trial.start_states), ctx.bank.data.steps_to_predict
-    _check_counts("points", body.points, k, n)
-    _check_counts("click_times_ms", body.click_times_ms, k, n)
-    check_times(body)
-    check_history(body, k)
-    points = np.asarray(body.points, dtype=np.float64)
-    bounds = world.scene["bounds"]
-    for i, j in np.argwhere(~_inside(points, bounds)):
-        x, y = points[i, j]
-        raise Refused(422, f"points.{i}.{j}: ({x:g}, {y:g}) is outside the scene "
-                           f"x [{bounds['x_min_m']:g}, {bounds['x_max_m']:g}] "
-                           f"y [{bounds['y_min_m']:g}, {bounds['y_max_m']:g}] m")
-    moves = step_moves(trial, points)
-    lengths = np.hypot(moves[..., 0], moves[..., 1])
-    for i, j in np.argwhere(lengths < world.min_step_m):
-        raise Refused(422, f"points.{i}.{j}: move of {lengths[i, j]:.3g} m is shorter than "
-                           f"the minimum {world.min_step_m:.3g} m")
-    for i, j in np.argwhere(lengths > world.max_step_m * (1 + 1e-6)):
-        raise Refused(422, f"points.{i}.{j}: move of {lengths[i, j]:.3g} m is longer than "
-                           f"the reachable {world.max_step_m:.3g} m")
-    return points
-
-
-def check_times(body: PredictionCreate) -> None:
-    """Client times: submitted after shown, within MAX_TRIAL_MS; every click time (ms since
-    the trial was shown, as the browser measures it) inside that span."""
-    if body.submitted_at_ms < body.shown_at_ms:
-        raise Refused(422, "submitted_at_ms: earlier than shown_at_ms")
-    if body.submitted_at_ms - body.shown_at_ms > MAX_TRIAL_MS:
-        raise Refused(422, f"submitted_at_ms: more than {MAX_TRIAL_MS // 3_600_000} h after "
-                           "shown_at_ms")
-    span = body.submitted_at_ms - body.shown_at_ms
-    for i, row in enumerate(body.click_times_ms):
-        for j, t in enumerate(row):
-            if not 0 <= t <= span:
-                raise Refused(422, f"click_times_ms.{i}.{j}: {t:g} ms is outside the trial "
-                                   f"(0 to submitted_at_ms - shown_at_ms = {span:g} ms)")
-
-
-def check_history(body: PredictionCreate, k: int) -> None:
-    """Undo/reset presses name one of the `k` start states, in time order, inside the trial."""
-    span = body.submitted_at_ms - body.shown_at_ms
-    last = 0.0
-    for i, entry in enumerate(body.history):
-        if entry.start_index >= k:
-            raise Refused(422, f"history.{i}.start_index: {entry.start_index} is not one of "
-                               f"the {k} start states")
-        if not last <= entry.t_ms <= span:
-            raise Refused(422, f"history.{i}.t_ms: {entry.t_ms:g} ms is out of order or "
-                               f"outside the trial (0 to {span:g} ms)")
-        last = entry.t_ms
-
-
-def _check_counts(field: str, values: list, k: int, n: int) -> None:
-    if len(values) != k:
-        raise Refused(422, f"{field}: expected {k} start states, got {len(values)}")
-    for i, row in enumerate(values):
-        if len(row) != n:
-            raise Refused(422, f"{field}.{i}: expected {n} steps, got {len(row)}")
-
-
-def _inside(points: np.ndarray, bounds: dict) -> np.ndarray:
-    x, y = points[..., 0], points[..., 1]
-    return ((x >= bounds["x_min_m"]) & (x <= bounds["x_max_m"])
-            & (y >= bounds["y_min_m"]) & (y <= bounds["y_max_m"]))
-
-
-def step_moves(trial: TrialRecord, points: np.ndarray) -> np.ndarray:
-    """Clicked positions [K, n, 2] -> moves [K, n, 2] (m) from each start state, step by step."""
-    starts = np.asarray([s.robot for s in trial.start_states], dtype=np.float64)
-    return np.diff(np.concatenate([starts[:, None], points], axis=1), axis=1)
-
-
-def human_actions(trial: TrialRecord, points: np.ndarray, dt_s: float) -> np.ndarray:
-    """Clicked positions [K, n, 2] -> actions [K, n, 2] = position differences / dt."""
-    return step_moves(trial, points) / dt_s
-
-
-def attention_verdict(config: StudyConfig, trial: TrialRecord, points: np.ndarray) -> bool:
-    """Passed if enough first moves point within the allowed angle of the robot's true move."""
-    rule = config.attention_checks
-    first = step_moves(trial, points)[:, 0]
-    truth = np.asarray(trial.policy_actions, dtype=np.float64)[:, 0]
-    cos = (first * truth).sum(-1) / (np.linalg.norm(first, axis=-1)
-                                     * np.linalg.norm(truth, axis=-1) + 1e-12)
-    within = cos >= np.cos(np.deg2rad(rule.max_angle_deg))
-    return int(within.sum()) >= rule.min_passing_starts
 
 
 def prediction_rows(ctx: StudyContext, participant: Participant, trial: TrialRecord,

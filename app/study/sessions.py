@@ -3,8 +3,8 @@
 A session start is checked against the study's platform (recruitment.py), then, under
 the study's lock, either resumes the live session of that external id (same attempt
 key), replaces it (a new attempt after it went stale), or creates a new one whose plan
-takes the least-used world order and the least-exposed trials (balance.py). Its cost
-does not grow with the number of stored participants.
+takes the least-used world order and the least-exposed trials (plan.py, from the counts
+balance.py keeps). Its cost does not grow with the number of stored participants.
 """
 
 import secrets
@@ -19,6 +19,7 @@ from app import __version__
 from app.study import balance
 from app.study.context import StudyContext
 from app.study.errors import Refused
+from app.study.plan import assign_plan, dump_plan
 from app.study.recruitment import ATTEMPT_KEYS, Identity, identify
 from app.study.tables import Participant, SessionCreate, utcnow
 
@@ -52,12 +53,12 @@ def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Iden
             return existing, True
         _replace(db, existing)
     balance.release_stale(db, ctx)
-    order, plan = assign_plan(db, ctx, rng)
+    order, steps = assign_plan(ctx.config, ctx.bank, balance.read_usage(db, ctx.study_id), rng)
     participant = Participant(
         study_id=ctx.study_id, recruitment=who.recruitment, external_id=who.external_id,
         attempt_key=who.attempt_key, pilot=who.pilot, public_id=secrets.token_hex(8),
         session_token=secrets.token_urlsafe(24), recruitment_params=who.params,
-        client=body.client.model_dump(), world_order=",".join(order), plan=plan,
+        client=body.client.model_dump(), world_order=",".join(order), plan=dump_plan(steps),
         config_sha256=ctx.config_sha256, bank_sha256=ctx.bank.sha256, app_version=__version__)
     db.add(participant)
     db.flush()
@@ -135,48 +136,3 @@ def session_status(participant: Participant, cutoff: datetime) -> str:
 def is_in_progress(participant: Participant, cutoff: datetime) -> bool:
     """Not ended and updated since `cutoff`."""
     return not has_ended(participant) and as_utc(participant.updated_at) >= cutoff
-
-
-# ---------------------------------------------------------------- the plan
-
-def assign_plan(db: Session, ctx: StudyContext,
-                rng: np.random.Generator) -> tuple[tuple[str, ...], list[dict]]:
-    """Pick the least-used world order and least-exposed trials; lay out the steps."""
-    counts = balance.read_counts(db, ctx.study_id)
-    orders = balance.world_orders(ctx.config)
-    order_counts = {o: counts.get(balance.order_key(o), 0) for o in orders}
-    exposure = {k[len(balance.TRIAL):]: v for k, v in counts.items()
-                if k.startswith(balance.TRIAL)}
-    order = balance.least_used(orders, order_counts, 1, rng)[0]
-    return order, layout_plan(ctx, order, exposure, rng)
-
-
-def layout_plan(ctx: StudyContext, order: tuple[str, ...], exposure: dict,
-                rng: np.random.Generator) -> list[dict]:
-    """consent, instructions, practice, per world its trials with attention checks, survey, done."""
-    cfg = ctx.config
-    least_used = balance.least_used
-    plan: list[dict] = [{"phase": "consent"}, {"phase": "instructions"}]
-    practice_pool = [t.trial_id for t in ctx.bank.trials_of(order[0], "practice")]
-    for i, tid in enumerate(least_used(practice_pool, exposure, cfg.practice_trials, rng)):
-        plan.append(_trial_step("practice", tid, order[0], 0, i, False))
-    for position, world in enumerate(order):
-        main = [t.trial_id for t in ctx.bank.trials_of(world, "main")]
-        chosen = least_used(main, exposure, cfg.trials_per_world, rng)
-        rng.shuffle(chosen)
-        checks = [t.trial_id for t in ctx.bank.trials_of(world, "attention")]
-        block = [(tid, False) for tid in chosen]
-        for tid in least_used(checks, exposure, cfg.attention_checks.per_world, rng):
-            block.insert(int(rng.integers(1, len(block) + 1)), (tid, True))
-        plan += [_trial_step("trial", tid, world, position, index, check)
-                 for index, (tid, check) in enumerate(block)]
-    return plan + [{"phase": "survey"}, {"phase": "done"}]
-
-
-def _trial_step(phase: str, trial_id: str, world: str, world_position: int, index: int,
-                attention_check: bool) -> dict:
-    # `ref` is the only id the browser sees: random per session, so neither the bank's
-    # trial id nor whether this is an attention check can be read from the payload
-    return {"phase": phase, "trial_id": trial_id, "ref": secrets.token_hex(8), "world": world,
-            "world_position": world_position, "trial_index": index,
-            "attention_check": attention_check}

@@ -9,28 +9,27 @@ import json
 
 from app.study.config import StudyConfig
 from app.study.context import StudyContext
-from app.study.crud import TRIAL_PHASES, current_step
+from app.study.plan import Phase, Step, TrialStep, current_step, trial_steps
 from app.study.recruitment import MTURK_SUBMIT_PATH
 from app.study.tables import Participant
 
 
 def progress_of(participant: Participant) -> dict:
     """Trials (practice included) done and in total."""
-    trial_positions = [i for i, s in enumerate(participant.plan) if s["phase"] in TRIAL_PHASES]
+    trial_positions = [i for i, _ in trial_steps(participant)]
     done = sum(1 for i in trial_positions if i < participant.position)
     return {"done": done, "total": len(trial_positions)}
 
 
-def step_payload(ctx: StudyContext, participant: Participant, step: dict) -> dict:
+def step_payload(ctx: StudyContext, participant: Participant, step: Step) -> dict:
     """What a non-trial phase needs: texts, the survey or the completion code."""
     cfg = ctx.config
-    phase = step["phase"]
-    if phase == "consent":
+    if step.phase == Phase.CONSENT:
         return {"title": cfg.title, "text": cfg.consent_text}
-    if phase == "instructions":
+    if step.phase == Phase.INSTRUCTIONS:
         return {"title": cfg.title, "text": cfg.instructions_text,
                 "world_order": participant.world_order.split(",")}
-    if phase == "survey":
+    if step.phase == Phase.SURVEY:
         return {"questions": [q.model_dump() for q in cfg.survey]}
     return done_payload(cfg, participant)
 
@@ -61,15 +60,15 @@ def mturk_submit(participant: Participant, outcome: str, code: str) -> dict | No
                        "completion_code": code}}
 
 
-def step_fields(step: dict) -> dict:
+def step_fields(step: TrialStep) -> dict:
     """The parts of a trial payload that depend on the participant's plan.
 
     The browser gets the step's random `ref` as `trial_id` and no attention-check flag:
     nothing in the payload tells a script which trial is the check.
     """
-    return {"trial_id": step["ref"], "world": step["world"],
-            "index_in_world": step["trial_index"], "world_position": step["world_position"],
-            "is_practice": step["phase"] == "practice"}
+    return {"trial_id": step.ref, "world": step.world,
+            "index_in_world": step.trial_index, "world_position": step.world_position,
+            "is_practice": step.phase == Phase.PRACTICE}
 
 
 def static_trial(ctx: StudyContext, trial_id: str) -> dict:
@@ -84,13 +83,13 @@ def static_trial(ctx: StudyContext, trial_id: str) -> dict:
 def state_json(ctx: StudyContext, participant: Participant) -> str:
     """`{phase, progress: {done, total}, step}` as JSON; a trial's static part is encoded once."""
     step = current_step(participant)
-    state = {"phase": step["phase"], "progress": progress_of(participant)}
-    if step["phase"] not in TRIAL_PHASES:
+    state = {"phase": step.phase, "progress": progress_of(participant)}
+    if not isinstance(step, TrialStep):
         return json.dumps({**state, "step": step_payload(ctx, participant, step)})
-    static = ctx.trial_json.get(step["trial_id"])
+    static = ctx.trial_json.get(step.trial_id)
     if static is None:
-        static = json.dumps(static_trial(ctx, step["trial_id"]))
-        ctx.trial_json[step["trial_id"]] = static
+        static = json.dumps(static_trial(ctx, step.trial_id))
+        ctx.trial_json[step.trial_id] = static
     head = json.dumps({**state, "step": step_fields(step)})
     return f"{head[:-2]}, {static[1:]}}}"
 

@@ -59,7 +59,7 @@ class Participant(ParticipantBase, table=True):
     recruitment_params: dict = Field(default_factory=dict, sa_column=Column(JSON))
     client: dict = Field(default_factory=dict, sa_column=Column(JSON))
     world_order: str = Field(max_length=64)
-    plan: list = Field(default_factory=list, sa_column=Column(JSON))
+    plan: list = Field(default_factory=list, sa_column=Column(JSON))  # plan.Step entries as JSON
     position: int = 0
     completed: bool = False
     attention_failed: int = 0
