@@ -13,7 +13,6 @@ from app.configio import ConfigError, StrictModel, load_yaml_model
 from app.settings import Settings
 
 WorldName = Literal["highway", "obstacle"]
-ModelKind = Literal["ours", "vae"]
 
 
 class SegmentSteps(StrictModel):
@@ -97,8 +96,9 @@ Platform = Literal["prolific", "mturk", "open"]
 _REDIRECT_FIELDS = ("prolific_redirect_url", "mturk_redirect_url", "open_redirect_url")
 
 
-class Recruitment(StrictModel):
-    """Where participants come from, what the server demands of them, and where they go.
+class RecruitmentConfig(StrictModel):
+    """The `recruitment` section: where participants come from, what the server demands of
+    them (enforced by recruitment.py), and where they go.
 
     `platform` is enforced at session start: `prolific` needs PROLIFIC_PID (24 hex),
     STUDY_ID (equal to `prolific_study_id` when that is set) and SESSION_ID; `mturk`
@@ -118,7 +118,7 @@ class Recruitment(StrictModel):
     endings: Endings = Endings()
 
     @model_validator(mode="after")
-    def _redirects_render(self) -> "Recruitment":
+    def _redirects_render(self) -> "RecruitmentConfig":
         for name in _REDIRECT_FIELDS:
             check_redirect_template(name, getattr(self, name), self.completion_code)
         for host in self.mturk_submit_hosts:
@@ -183,7 +183,7 @@ class StudyConfig(StrictModel):
     attention_checks: AttentionChecks = AttentionChecks()
     prediction_input: PredictionInput = PredictionInput()
     survey: list[SurveyQuestion] = []
-    recruitment: Recruitment
+    recruitment: RecruitmentConfig
     target_sample_size: int = Field(ge=1)
     exclusions: ExclusionRules = ExclusionRules()
     in_progress_timeout_min: float = Field(default=90.0, gt=0)
