@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from app.study.plan import Phase
 from tests.conftest import REPO
 from tests.e2e.conftest import ADMIN_TOKEN, BROWSER_STUDY
 
@@ -195,7 +196,7 @@ def complete_session(page, base_url: str) -> dict:
     clicks = {}
     trial, trial_clicks = predict_trial(page)
     clicks[trial["trial_id"]] = trial_clicks
-    while current_state(page)["phase"] == "trial":
+    while current_state(page)["phase"] == Phase.TRIAL:
         n = len(clicks)  # 1 = the first main trial
         trial, trial_clicks = predict_trial(page, SCREENSHOTS / "predict.png" if n == 1 else None,
                                             replay=n == 2, lose_answer=n == 3,

@@ -10,6 +10,7 @@ from fastapi.testclient import TestClient
 from app.settings import Settings
 from app.study.bots import segment_key
 from app.study.main import create_app
+from app.study.plan import TRIAL_PHASES
 
 TOKEN = "test-token"
 ADMIN = {"Authorization": f"Bearer {TOKEN}"}
@@ -135,7 +136,7 @@ class Participant:
 
     def finish(self, bank: dict | None = None, duration_ms: float = 8000) -> dict:
         """Answer every remaining trial and the survey."""
-        while self.state()["phase"] in ("practice", "trial"):
+        while self.state()["phase"] in TRIAL_PHASES:
             self.answer_trial(bank, duration_ms)
         r = self.post("survey", {"submission_id": new_id(),
                                  "answers": {"difficulty": 4, "confidence": 5, "driving": "yes",

@@ -9,6 +9,7 @@ import pytest
 
 from app.configio import load_yaml_model
 from app.study.config import StudyConfig
+from app.study.plan import Phase
 from tests.study.flow import (
     ADMIN,
     Participant,
@@ -33,9 +34,9 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
     body = p.start(**prolific("alice"))
     assert p.status == 201 and body["resumed"] is False
     assert isinstance(body["participant_id"], str) and len(body["participant_id"]) == 16
-    assert p.state()["phase"] == "consent"
+    assert p.state()["phase"] == Phase.CONSENT
     state = p.pass_intro()
-    assert state["phase"] == "practice"
+    assert state["phase"] == Phase.PRACTICE
     trial = state["step"]
     k, n = per_trial
     assert len(trial["examples"]) == 4 and len(trial["start_states"]) == k
@@ -45,7 +46,7 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
     assert 5 <= len(trial["segment"]["positions"]) - 1 <= 7
     assert "predictions" not in trial and "policy_actions" not in trial
     done = p.finish(bank)
-    assert done["phase"] == "done" and done["step"]["completion_code"] == "C1TOMSTUDY"
+    assert done["phase"] == Phase.DONE and done["step"]["completion_code"] == "C1TOMSTUDY"
     assert done["step"]["redirect_url"].endswith("cc=C1TOMSTUDY")
     total = done["progress"]["total"]
     assert total == 1 + 2 * (3 + 1)  # practice + per world 3 trials and 1 attention check
@@ -182,7 +183,7 @@ def test_excluded_completions_do_not_count_for_balance(client, small_study, bank
     excluded = summary["alignment_error"]["exclusions"]
     assert excluded["excluded_too_fast"] == 1 and excluded["excluded_incomplete"] == 1
     assert excluded["participants_kept"] == 2 - ("careless" not in counted)
-    assert running.state()["phase"] == "trial"
+    assert running.state()["phase"] == Phase.TRIAL
 
 
 # ---------------------------------------------------------------- refusals
@@ -273,7 +274,7 @@ def test_other_bad_inputs(client, small_study):
 
 def test_survey_answers_are_checked(client, small_study, bank):
     p = at_first_trial(client, small_study.study_id)
-    while p.state()["phase"] != "survey":
+    while p.state()["phase"] != Phase.SURVEY:
         p.answer_trial(bank)
     r = p.post("survey", {"submission_id": new_id(), "answers": {"difficulty": 9}})
     assert r.status_code == 422 and r.json()["detail"].startswith("answers.difficulty")

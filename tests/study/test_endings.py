@@ -5,6 +5,7 @@ and hand-in; each trial's undo/reset history (SQLite and PostgreSQL, same tests)
 import numpy as np
 from sqlmodel import Session, select
 
+from app.study.plan import TRIAL_PHASES, Phase
 from app.study.tables import Event, Participant, Submission, TrialResponse
 from tests.study.flow import ADMIN, bank_trial, new_id, prediction_body, straight_clicks
 from tests.study.flow import Participant as Client
@@ -27,7 +28,7 @@ def rows_of(client, table, participant_id: int) -> list:
 
 def fail_attention_checks(p: Client, bank: dict) -> None:
     """Answer every trial; attention checks against the robot's plain move."""
-    while p.state()["phase"] in ("practice", "trial"):
+    while p.state()["phase"] in TRIAL_PHASES:
         trial = p.state()["step"]
         record = bank_trial(bank, trial)
         points = straight_clicks(trial)
@@ -52,7 +53,7 @@ def test_a_completed_session_stores_its_receipt_before_the_redirect(client, smal
     p.start()
     p.pass_intro()
     done = p.finish(bank)
-    assert done["phase"] == "done"
+    assert done["phase"] == Phase.DONE
     assert done["step"] | {"message": ""} == {
         "outcome": "completed", "completion_code": "C1TOMSTUDY", "message": "",
         "redirect_url": "https://app.prolific.com/submissions/complete?cc=C1TOMSTUDY",
@@ -96,7 +97,7 @@ def test_declining_consent_ends_the_session_and_keeps_only_the_receipt(client, s
     r = p.post("decline", {"submission_id": new_id()})
     assert r.status_code == 200, r.text
     done = r.json()
-    assert done["phase"] == "done" and done["step"]["outcome"] == "declined_consent"
+    assert done["phase"] == Phase.DONE and done["step"]["outcome"] == "declined_consent"
     assert done["step"]["completion_code"] == "C3TOMNOCONSENT"
     assert "return" in done["step"]["message"]
     row = stored(client, p.token)

@@ -20,6 +20,7 @@ from analysis.load import load_csv, load_database
 from app.cli import cli
 from app.settings import get_settings
 from app.study.exports import export_table
+from app.study.plan import TRIAL_PHASES
 from app.study.tables import Participant, TrialResponse, utcnow
 from tests.study.flow import ADMIN, at_first_trial, new_id, prolific
 
@@ -38,7 +39,7 @@ def export(client, study_id: str, what: str) -> str:
 
 def finish_with(p, bank, strategy: str) -> None:
     """Answer every trial, then the survey with `strategy` as the free-text answer."""
-    while p.state()["phase"] in ("practice", "trial"):
+    while p.state()["phase"] in TRIAL_PHASES:
         p.answer_trial(bank)
     r = p.post("survey", {"submission_id": new_id(), "answers": {
         "difficulty": 4, "confidence": 5, "driving": "yes", "strategy": strategy}})

@@ -10,6 +10,7 @@ from sqlalchemy import update
 from sqlmodel import Session, select
 
 from app.study import balance
+from app.study.plan import TRIAL_PHASES
 from app.study.recruitment import preview_key
 from app.study.tables import BalanceCount, Participant, TrialResponse, utcnow
 from tests.study.flow import ADMIN, TOKEN, make_client, new_id, prediction_body, prolific
@@ -140,7 +141,7 @@ def test_the_browser_cannot_tell_which_trial_is_the_attention_check(client, smal
         p.start(**prolific(name))
         p.pass_intro()
         seen = []
-        while (state := p.state())["phase"] in ("practice", "trial"):
+        while (state := p.state())["phase"] in TRIAL_PHASES:
             raw = client.get(p.url("state")).text
             assert "attention" not in raw and "clip_sha256" not in raw
             seen.append(state["step"]["trial_id"])

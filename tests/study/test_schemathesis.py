@@ -20,6 +20,7 @@ from schemathesis.config import SchemathesisConfig
 
 from app.settings import Settings
 from app.study.main import create_app
+from app.study.plan import TRIAL_PHASES, Phase
 from app.study.recruitment import preview_key
 from tests.study.flow import ADMIN, TOKEN, Participant, new_id, prolific
 
@@ -58,7 +59,8 @@ def real_values(study_app, small_study) -> dict[str, list]:
     """Real values to swap in for drawn ones, by key (None: keep the drawn value)."""
     tokens = []
     with TestClient(study_app) as client:
-        for phase in ("consent", "instructions", "practice", "survey", "done"):
+        for phase in (Phase.CONSENT, Phase.INSTRUCTIONS, Phase.PRACTICE, Phase.SURVEY,
+                      Phase.DONE):
             tokens.append(session_at(client, small_study.study_id, phase))
     people = [prolific(f"fuzz-{i}") for i in range(20)]  # a new session, then resumes
     return {"token": [None, *tokens], "study_id": [None, small_study.study_id],
@@ -66,18 +68,18 @@ def real_values(study_app, small_study) -> dict[str, list]:
             "preview": [None, preview_key(TOKEN, small_study.study_id)]}
 
 
-def session_at(client, study_id: str, phase: str) -> str:
+def session_at(client, study_id: str, phase: Phase) -> str:
     """The token of a new anonymous session moved on to `phase`."""
     p = Participant(client, study_id)
     p.start()
-    if phase != "consent":
+    if phase != Phase.CONSENT:
         p.post("consent", {"submission_id": new_id(), "agree": True})
-    if phase in ("practice", "survey", "done"):
+    if phase in (Phase.PRACTICE, Phase.SURVEY, Phase.DONE):
         p.post("instructions", {"submission_id": new_id()})
-    if phase in ("survey", "done"):
-        while p.state()["phase"] in ("practice", "trial"):
+    if phase in (Phase.SURVEY, Phase.DONE):
+        while p.state()["phase"] in TRIAL_PHASES:
             p.answer_trial()
-    if phase == "done":
+    if phase == Phase.DONE:
         p.finish()
     assert p.state()["phase"] == phase
     return p.token

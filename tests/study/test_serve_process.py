@@ -11,6 +11,7 @@ import httpx
 import pandas as pd
 import pytest
 
+from app.study.plan import TRIAL_PHASES
 from tests.conftest import free_port, fresh_database, start_server
 from tests.study.flow import ADMIN, Participant, new_id, prediction_body, prolific
 
@@ -81,7 +82,7 @@ def test_sigkill_under_load_keeps_every_acknowledged_submission(small_study, tmp
             while not stop.is_set():
                 try:
                     state = p.state()
-                    if state["phase"] not in ("practice", "trial"):
+                    if state["phase"] not in TRIAL_PHASES:
                         return
                     body = prediction_body(state["step"])
                     if p.post("predictions", body).status_code == 201:

@@ -9,6 +9,7 @@ from sqlmodel import Session
 
 from app.study import telemetry
 from app.study.errors import Refused
+from app.study.plan import Phase
 from app.study.sessions import participant_by_token
 from app.study.tables import EVENT_DATA, Event, EventsCreate
 from app.study.tables import Participant as ParticipantRow
@@ -143,7 +144,7 @@ def test_concurrent_batches_cannot_pass_the_cap_together(client, small_study):
 def test_events_after_the_session_is_done_are_refused(client, small_study):
     p = at_first_trial(client, small_study.study_id)
     assert p.post("events", batch(2)).status_code == 202
-    assert p.finish()["phase"] == "done"
+    assert p.finish()["phase"] == Phase.DONE
     r = p.post("events", batch(1))
     assert (r.status_code, r.json()["detail"]) == (
         409, "phase: the session is complete; no more events")

@@ -12,6 +12,7 @@ from app.cli import cli
 from app.settings import Settings, get_settings
 from app.study import balance
 from app.study.main import create_app
+from app.study.plan import Phase
 from app.study.tables import (
     Event,
     Participant,
@@ -127,7 +128,7 @@ def test_a_withdrawn_id_may_start_again_as_a_new_person(client, small_study, stu
     again = Driver(client, sid)
     body = again.start(**LEAVER)
     assert again.status == 201 and body["resumed"] is False  # not the completed one: a 409 before
-    assert again.state()["phase"] == "consent"
+    assert again.state()["phase"] == Phase.CONSENT
     assert counts(client, ext) == {"participant": 1, "submission": 0, "trialresponse": 0,
                                    "predictionrow": 0, "event": 0}
     balance_is_exact(client, study)

@@ -4,17 +4,22 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 
 from app.study.deps import study_context
+from app.study.plan import BEFORE_TRIALS, Phase
 from app.study.recruitment import MTURK_PREVIEW
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
+# what the participant page is told about phases (app.js keeps one handler per phase)
+PHASES = {"phases": [phase.value for phase in Phase],
+          "screen_out_phases": [phase.value for phase in BEFORE_TRIALS]}
 
 
-def _render(request: Request, name: str, study_id: str) -> HTMLResponse:
+def _render(request: Request, name: str, study_id: str, **extra) -> HTMLResponse:
     ctx = study_context(request, study_id)
     return request.app.state.templates.TemplateResponse(
         request, name, {"study_id": study_id, "title": ctx.config.title,
                         "description": ctx.config.description,
-                        "static_url": "/static", "studies": sorted(request.app.state.studies)})
+                        "static_url": "/static", "studies": sorted(request.app.state.studies),
+                        **extra})
 
 
 @router.get("/", response_class=HTMLResponse)
@@ -32,7 +37,7 @@ def show_study(study_id: str, request: Request) -> HTMLResponse:
     """
     if request.query_params.get("assignmentId") == MTURK_PREVIEW:
         return _render(request, "mturk_preview.html", study_id)
-    return _render(request, "study.html", study_id)
+    return _render(request, "study.html", study_id, **PHASES)
 
 
 @router.get("/researcher", response_class=HTMLResponse)

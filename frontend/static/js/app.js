@@ -12,6 +12,27 @@ const SCREENS = ["loading", "unsupported", "consent", "instructions", "trial", "
 
 const $ = (id) => document.getElementById(id);
 
+/**
+ * One handler per phase the server sends (app/study/plan.py `Phase`; the page lists them in
+ * `data-phases`). `show` resolves with the next state once the participant's answer is
+ * stored (or with null: read the state again); `ends` marks the phase that ends the session.
+ */
+const PHASE_HANDLERS = {
+  consent: { show: (app, state) => app.showConsent(state.step) },
+  instructions: { show: (app, state) => app.showInstructions(state.step) },
+  practice: { show: (app, state) => app.showTrial(state) },
+  trial: { show: (app, state) => app.showTrial(state) },
+  survey: { show: (app, state) => app.showSurvey(state.step) },
+  done: { show: (app, state) => app.showDone(state), ends: true },
+};
+
+/** The handler of every phase the page lists; throws on a phase this script cannot show. */
+function handlerTable(phases) {
+  const missing = phases.filter((phase) => !Object.hasOwn(PHASE_HANDLERS, phase));
+  if (missing.length) throw new Error(`no handler for phase ${missing.join(", ")}`);
+  return new Map(phases.map((phase) => [phase, PHASE_HANDLERS[phase]]));
+}
+
 function show(screen) {
   for (const name of SCREENS) $(`screen-${name}`).hidden = name !== screen;
 }
@@ -79,21 +100,31 @@ function clientInfo() {
 }
 
 class ParticipantApp {
-  constructor(studyId) {
+  constructor(root) {
+    const studyId = root.dataset.studyId;
     this.api = new StudyApi(studyId);
     this.telemetry = new Telemetry(this.api);
     this.storageKey = `tomstudy.${studyId}.session`;
+    this.phases = JSON.parse(root.dataset.phases);
+    this.screenOutPhases = JSON.parse(root.dataset.screenOutPhases);
   }
 
   async run() {
     show("loading");
+    this.handlers = handlerTable(this.phases);
     const started = await this.ensureSession();
     if (!started) return;
     this.watchPage();
     let state = await this.api.state();
-    if (state.phase !== "done") state = await this.checkDevice(state);
-    while (state.phase !== "done") state = await this.showPhase(state);
-    this.showDone(state);
+    if (!this.handler(state.phase).ends) state = await this.checkDevice(state);
+    while (!this.handler(state.phase).ends) state = await this.showPhase(state);
+    this.handler(state.phase).show(this, state);
+  }
+
+  handler(phase) {
+    const handler = this.handlers.get(phase);
+    if (!handler) throw new Error(`unknown phase ${phase}`);
+    return handler;
   }
 
   /**
@@ -102,7 +133,7 @@ class ParticipantApp {
    * screened-out ending and the promise resolves with the done state.
    */
   checkDevice(state) {
-    const canEnd = state.phase === "consent" || state.phase === "instructions";
+    const canEnd = this.screenOutPhases.includes(state.phase);
     return new Promise((resolve, reject) => {
       const check = () => {
         const reason = unsupportedReason();
@@ -187,20 +218,8 @@ class ParticipantApp {
   /** Show one phase; resolves with the state after the participant's answer is stored. */
   async showPhase(state) {
     if (state.progress) this.updateProgress(state.progress);
-    const next = await this.phaseHandler(state.phase)(state);
+    const next = await this.handler(state.phase).show(this, state);
     return next?.phase ? next : this.api.state();
-  }
-
-  phaseHandler(phase) {
-    const handlers = {
-      consent: (s) => this.showConsent(s.step),
-      instructions: (s) => this.showInstructions(s.step),
-      practice: (s) => this.showTrial(s),
-      trial: (s) => this.showTrial(s),
-      survey: (s) => this.showSurvey(s.step),
-    };
-    if (!handlers[phase]) throw new Error(`unknown phase ${phase}`);
-    return handlers[phase];
   }
 
   showConsent(step) {
@@ -508,8 +527,7 @@ function collectAnswers(form, questions) {
   return { answers, missing };
 }
 
-const root = $("app");
-const participantApp = new ParticipantApp(root.dataset.studyId);
+const participantApp = new ParticipantApp($("app"));
 participantApp.run().catch((error) => {
   console.error(error);
   participantApp.fail(`The study could not continue (${error.message}). Your answers so far are saved; reloading the page resumes where you were.`);

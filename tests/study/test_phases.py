@@ -1,0 +1,53 @@
+"""Phases are spelled once (app/study/plan.py) and the participant page follows the server."""
+
+import json
+import re
+
+from sqlmodel import Session, select
+
+from app.study.plan import BEFORE_TRIALS, Phase, dump_plan, parse_plan
+from app.study.tables import Participant
+from tests.conftest import REPO
+from tests.study.flow import at_first_trial
+
+APP_JS = REPO / "frontend" / "static" / "js" / "app.js"
+# a phase compared with a literal, in either order, or a literal `case` label
+PHASE_LITERAL = re.compile(r"""phase\s*[!=]==?\s*["'`]|["'`]\s*[!=]==?\s*[\w.]*phase\b"""
+                           r"""|case\s+["'`]""")
+
+
+def handler_keys(source: str) -> list[str]:
+    """The phases app.js's PHASE_HANDLERS table has an entry for (its top-level keys)."""
+    table = re.search(r"^const PHASE_HANDLERS = \{\n(.*?)^\};", source, re.M | re.S)
+    assert table, "app.js: PHASE_HANDLERS table not found"
+    return re.findall(r"^  (\w+): ", table.group(1), re.M)
+
+
+def test_every_phase_has_exactly_one_handler_in_app_js():
+    keys = handler_keys(APP_JS.read_text())
+    assert sorted(keys) == sorted(Phase), "app.js PHASE_HANDLERS must match plan.Phase"
+    assert len(keys) == len(set(keys))
+
+
+def test_app_js_compares_no_phase_with_a_literal():
+    found = [line.strip() for line in APP_JS.read_text().splitlines()
+             if PHASE_LITERAL.search(line)]
+    assert found == [], "app.js: look phases up in the handler table instead"
+
+
+def test_the_study_page_embeds_the_phases(client, small_study):
+    page = client.get(f"/s/{small_study.study_id}").text
+    phases = re.search(r"data-phases='([^']*)'", page).group(1)
+    screen_out = re.search(r"data-screen-out-phases='([^']*)'", page).group(1)
+    assert json.loads(phases) == [phase.value for phase in Phase]
+    assert json.loads(screen_out) == [phase.value for phase in BEFORE_TRIALS]
+
+
+def test_a_stored_plan_reads_back_to_the_same_json(client, small_study):
+    p = at_first_trial(client, small_study.study_id)
+    with Session(client.app.state.engine) as db:
+        stored = db.exec(select(Participant.plan)
+                         .where(Participant.session_token == p.token)).one()
+    steps = parse_plan(stored)
+    assert [s.phase for s in steps][:2] == [Phase.CONSENT, Phase.INSTRUCTIONS]
+    assert json.dumps(dump_plan(steps)) == json.dumps(stored)
