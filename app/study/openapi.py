@@ -1,6 +1,6 @@
 """The OpenAPI schema declares every error status each route can answer, in one place.
 
-Routes raise `Refused(status, "field: message")` deep in crud and deps, so their
+Routes raise `Refused(status, "field: message")` deep in plan, validation, crud and deps, so their
 decorators cannot see what they may answer; `error_statuses` names it by route instead,
 and `declare_error_responses` adds it to the generated schema with the error bodies the
 handlers in main.py write.
