@@ -10,7 +10,7 @@ from app.configio import ConfigError
 from app.settings import get_settings
 
 if TYPE_CHECKING:
-    from analysis.observers_config import ObserversConfig
+    from app.observers.config import ObserversConfig
     from app.settings import Settings
     from app.study.migrate import UpgradeReport
 
@@ -120,21 +120,21 @@ def fields(
 def pilot(
     url: Annotated[str, typer.Option(help="the study server")] = "http://127.0.0.1:8000",
     n: Annotated[int, typer.Option("--n", min=1, help="bots to run")] = 22,
-    kind: Annotated[str, typer.Option(help="coarse, precise or random")] = "coarse",
+    preset: Annotated[str, typer.Option("--kind", help="coarse, precise or random")] = "coarse",
     concurrency: Annotated[int, typer.Option(min=1, help="bots at once")] = 8,
     study: Annotated[str, typer.Option(help="study id")] = "paper_study",
     seed: Annotated[int, typer.Option(min=0)] = 0,
     bank: Annotated[Path | None, typer.Option(help="trial bank (precise bots)")] = None,
 ) -> None:
     """Pilot the study: simulated participants take it through the real HTTP flow."""
-    from app.study.bots import KINDS, run_pilot
+    from app.study.bots import PRESETS, run_pilot
 
-    if kind not in KINDS:
-        fail(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
+    if preset not in PRESETS:
+        fail(f"kind: unknown bot kind {preset!r}; choose one of {', '.join(PRESETS)}")
     bank = bank or get_settings().data_dir / "trials" / study / "bank.json"
-    if kind == "precise" and not bank.is_file():
+    if preset == "precise" and not bank.is_file():
         fail(f"bank: {bank} not found (precise bots read the policy's moves from it)")
-    failed = run_pilot(url, study, kind, n, concurrency, seed, bank)
+    failed = run_pilot(url, study, preset, n, concurrency, seed, bank)
     if failed:
         raise typer.Exit(1)
 
@@ -164,8 +164,8 @@ def analyze(
 @cli.command()
 def power(
     study: Annotated[str, typer.Option(help="study id")] = "paper_study",
-    kind: Annotated[str, typer.Option(help="coarse, precise, random or coarse_relative")
-                    ] = "coarse",
+    preset: Annotated[str, typer.Option("--kind", help="coarse, precise, random or "
+                                        "coarse_relative")] = "coarse",
     n_max: Annotated[int, typer.Option("--n-max", min=3, help="largest n")] = 60,
     pool: Annotated[int, typer.Option(min=3, help="simulated participants")] = 400,
     reps: Annotated[int, typer.Option(min=10, help="resampled studies per n")] = 2000,
@@ -174,14 +174,15 @@ def power(
     seed: Annotated[int, typer.Option(min=0)] = 0,
 ) -> None:
     """Power to detect Ours < VAE vs n, from bots run in process on the trial bank."""
-    from analysis.power import KINDS, run_power
+    from app.observers.inverse_planning import PRESETS
+    from app.observers.simulated_study import run_power
 
-    if kind not in KINDS:
-        fail(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
+    if preset not in PRESETS:
+        fail(f"kind: unknown bot kind {preset!r}; choose one of {', '.join(PRESETS)}")
     settings = get_settings()
     bank, observers, trials = simulation_inputs(study, None)
-    out = out or settings.data_dir / "reports" / f"power-{study}-{kind}"
-    summary = run_power(bank, kind, trials, out, n_max, pool, reps, alpha, seed, observers)
+    out = out or settings.data_dir / "reports" / f"power-{study}-{preset}"
+    summary = run_power(bank, preset, trials, out, n_max, pool, reps, alpha, seed, observers)
     for world, needed in summary["n_for_power_0.8"].items():
         typer.echo(f"{world}: d_z = {summary['d_z'][world]:.3f}, n for power 0.8 = {needed}")
     typer.echo(f"wrote {out}")
@@ -190,8 +191,8 @@ def power(
 def simulation_inputs(study: str, observers: Path | None
                       ) -> tuple[Path, "ObserversConfig", int]:
     """(bank path, observers config, trials per world) for simulated participants of `study`."""
-    from analysis.observers_config import default_observers, load_observers
     from analysis.report import read_study_config
+    from app.observers.config import default_observers, load_observers
     from app.study.trials import BANK_FILE, bank_dir
 
     settings = get_settings()
@@ -239,7 +240,7 @@ def instrument(
     reading (coarse_relative) is a sensitivity row. Writes instrument.json and
     instrument.csv; exits 1 if a world fails.
     """
-    from analysis.power import run_instrument
+    from app.observers.simulated_study import run_instrument
 
     bank, config, trials = simulation_inputs(study, observers)
     out = out or get_settings().data_dir / "reports" / f"instrument-{study}"

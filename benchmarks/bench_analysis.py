@@ -1,7 +1,7 @@
 """Time `tomstudy analyze` on 300,000 predictions against just reading the same CSV.
 
 1,000 simulated participants x 20 trials x 5 start states x 3 steps, answered by the
-coarse bots' in-process predictors on the study's trial bank (var/trials/<study>/bank.json;
+coarse observers run in process on the study's trial bank (var/trials/<study>/bank.json;
 run `tomstudy build-trials` first). Prints both wall times and their ratio; target: the
 whole analysis (load, exclusions, errors, tests, ADE/FDE, figures, report) under 10 s.
 
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis.power import load_bank, simulate_participants
 from analysis.report import run_analyze
+from app.observers.simulated_study import load_bank, simulate_participants
 from app.settings import get_settings
 
 TARGET_S = 10.0

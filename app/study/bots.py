@@ -2,11 +2,11 @@
 
 Each bot starts a session with Prolific-style URL parameters, consents, reads the
 instructions, answers the practice and every trial (clicked positions from
-analysis.predictors, a uuid4 per write, telemetry events), fills in the survey and
+app/observers/inverse_planning.py, a uuid4 per write, telemetry events), fills in the survey and
 reaches the completion code. Loops are bounded and every request has a timeout; a
 failed request is retried with the same submission id (the server stores it once).
 
-Kinds: the inverse-planning observer presets of analysis/predictors.py: coarse (infers
+Presets: the inverse-planning observers of app/observers/inverse_planning.py: coarse (infers
 the robot's target lane or goal and moves the way it moves), coarse_relative (the same,
 reading lanes as merge left/keep/right), precise (the world's own next moves) and
 random; their parameters come from study_configs/observers.yaml. The payload never holds the
@@ -32,9 +32,8 @@ from pathlib import Path
 import httpx
 import numpy as np
 
-from analysis import predictors
+from app.observers.inverse_planning import PRESETS, predict
 
-KINDS = predictors.KINDS
 THINK_MEDIAN_S = 2.5
 MAX_STEPS = 200  # no study has this many phases; a bot that gets here is stuck
 RETRIES = 3
@@ -72,15 +71,20 @@ def load_policy_actions(bank_path: Path) -> dict[str, np.ndarray]:
             for w in bank["worlds"].values() for t in w["trials"]}
 
 
-def choose_clicks(kind: str, payload: dict, rng: np.random.Generator,
+def check_preset(preset: str) -> None:
+    """BotError unless `preset` is an observer preset."""
+    if preset not in PRESETS:
+        raise BotError(f"kind: unknown bot kind {preset!r}; choose one of {', '.join(PRESETS)}")
+
+
+def choose_clicks(preset: str, payload: dict, rng: np.random.Generator,
                   policy: dict[str, np.ndarray] | None) -> np.ndarray:
     """The bot's clicked positions [K, n, 2] for one trial payload."""
-    if kind not in KINDS:
-        raise BotError(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
+    check_preset(preset)
     actions = (policy or {}).get(segment_key(payload["segment"]["positions"]))
-    if kind == "precise" and actions is None:
+    if preset == "precise" and actions is None:
         raise BotError(f"precise bot: no policy actions for trial {payload['trial_id']}")
-    return predictors.predict(kind, payload, rng, actions)
+    return predict(preset, payload, rng, actions)
 
 
 def survey_answers(step: dict, rng: np.random.Generator) -> dict:
@@ -100,11 +104,11 @@ def survey_answers(step: dict, rng: np.random.Generator) -> dict:
 class Bot:
     """One simulated participant talking to the server over HTTP."""
 
-    def __init__(self, client: httpx.AsyncClient, study_id: str, kind: str, index: int,
+    def __init__(self, client: httpx.AsyncClient, study_id: str, preset: str, index: int,
                  seed: int, policy: dict[str, np.ndarray] | None) -> None:
         self.client = client
         self.study_id = study_id
-        self.kind = kind
+        self.preset = preset
         self.rng = np.random.default_rng([seed, index])
         self.policy = policy
         self.result = BotResult(index=index)
@@ -156,7 +160,7 @@ class Bot:
                                 "STUDY_ID": self.prolific_study_id,
                                 "SESSION_ID": uuid.uuid4().hex},
                 "client": {"screen_w": 1600, "screen_h": 900, "touch_only": False,
-                           "user_agent": f"tomstudy-bot/{self.kind}"}}
+                           "user_agent": f"tomstudy-bot/{self.preset}"}}
         session = await self.request("POST", "/api/sessions", body)
         self.token = session["session_token"]
         self.result.participant_id = session["participant_id"]
@@ -190,7 +194,7 @@ class Bot:
             self.event("clip_finished", {"trial_id": payload["trial_id"], "replays": 0}),
             self.event("resize", {"w": 1600, "h": 900}),
         ]})
-        clicks = choose_clicks(self.kind, payload, self.rng, self.policy)
+        clicks = choose_clicks(self.preset, payload, self.rng, self.policy)
         think = self.rng.lognormal(np.log(THINK_MEDIAN_S), 0.4, size=clicks.shape[:2]) * 1000
         click_times = self.clock_ms - shown_at + np.cumsum(think.ravel()).reshape(think.shape)
         self.clock_ms = shown_at + float(click_times[-1, -1]) + 800.0
@@ -207,14 +211,13 @@ class Bot:
                 "t_client_ms": round(self.clock_ms, 1), "data": data}
 
 
-async def run_bots(url: str, study_id: str, kind: str, n: int, concurrency: int = 8,
+async def run_bots(url: str, study_id: str, preset: str, n: int, concurrency: int = 8,
                    seed: int = 0, bank_path: Path | None = None, timeout_s: float = 30.0,
                    progress=None, transport: httpx.AsyncBaseTransport | None = None
                    ) -> list[BotResult]:
-    """Run `n` bots of one kind against the server at `url`, at most `concurrency` at once."""
-    if kind not in KINDS:
-        raise BotError(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
-    policy = load_policy_actions(bank_path) if kind == "precise" else None
+    """Run `n` bots of one preset against the server at `url`, at most `concurrency` at once."""
+    check_preset(preset)
+    policy = load_policy_actions(bank_path) if preset == "precise" else None
     limits = httpx.Limits(max_connections=concurrency, max_keepalive_connections=concurrency)
     gate = asyncio.Semaphore(concurrency)
     async with httpx.AsyncClient(base_url=url, timeout=timeout_s, limits=limits,
@@ -222,7 +225,7 @@ async def run_bots(url: str, study_id: str, kind: str, n: int, concurrency: int 
 
         async def one(index: int) -> BotResult:
             async with gate:
-                result = await Bot(client, study_id, kind, index, seed, policy).run()
+                result = await Bot(client, study_id, preset, index, seed, policy).run()
             if progress is not None:
                 progress.update(1)
             return result
@@ -230,14 +233,14 @@ async def run_bots(url: str, study_id: str, kind: str, n: int, concurrency: int 
         return list(await asyncio.gather(*(one(i) for i in range(n))))
 
 
-def run_pilot(url: str, study_id: str, kind: str, n: int, concurrency: int, seed: int,
+def run_pilot(url: str, study_id: str, preset: str, n: int, concurrency: int, seed: int,
               bank_path: Path | None) -> list[BotResult]:
     """Run the bots with a progress bar, print a summary; returns the bots that failed."""
     from tqdm import tqdm
 
     started = time.perf_counter()
-    with tqdm(total=n, desc=f"{kind} bots", unit="bot") as bar:
-        results = asyncio.run(run_bots(url, study_id, kind, n, concurrency, seed, bank_path,
+    with tqdm(total=n, desc=f"{preset} bots", unit="bot") as bar:
+        results = asyncio.run(run_bots(url, study_id, preset, n, concurrency, seed, bank_path,
                                        progress=bar))
     failed = [r for r in results if r.error]
     wall = time.perf_counter() - started

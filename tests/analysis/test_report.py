@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from analysis.metrics import add_alignment_errors
-from analysis.power import simulate_participants
 from analysis.report import run_analyze, start_kind_table
+from app.observers.simulated_study import simulate_participants
 from tests.analysis.fixed_data import fixed_predictions, small_bank
 
 STUDY_YAML = """

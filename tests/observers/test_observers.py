@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 import yaml
 
-from analysis import predictors
 from analysis.metrics import participant_means
-from analysis.observers_config import ObserversConfig, default_observers, load_observers
-from analysis.power import (
+from app.configio import ConfigError
+from app.observers import inverse_planning
+from app.observers.config import ObserversConfig, default_observers, load_observers
+from app.observers.simulated_study import (
     instrument_check,
     power_curve,
     run_instrument,
     simulate_participants,
     trial_payload,
 )
-from app.configio import ConfigError
 from app.settings import REPO_ROOT
 from tests.analysis.fixed_data import (
     HIGHWAY_SCENE,
@@ -85,7 +85,7 @@ def _assert_valid(p: dict, clicks: np.ndarray) -> None:
     assert clicks.shape == (len(p["start_states"]), p["steps_to_predict"], 2)
     assert np.all((clicks[..., 0] > b["x_min_m"]) & (clicks[..., 0] < b["x_max_m"]))
     assert np.all((clicks[..., 1] > b["y_min_m"]) & (clicks[..., 1] < b["y_max_m"]))
-    starts = predictors.start_positions(p)[:, None, :]
+    starts = inverse_planning.start_positions(p)[:, None, :]
     steps = np.linalg.norm(np.diff(np.concatenate([starts, clicks], axis=1), axis=1), axis=-1)
     assert np.all(steps >= p["min_step_m"]) and np.all(steps <= p["max_step_m"])
 
@@ -102,17 +102,17 @@ def merged_segment(lane_from: int, lane_to: int) -> list:
 def test_posterior_picks_the_lane_the_robot_merges_into(lane_from, lane_to, complete):
     segment = (merged_segment if complete else highway_segment)(lane_from, lane_to)
     p = payload(HIGHWAY_SCENE, segment, [[20.0, 4.0]] * 5)
-    absolute = predictors.infer_intent(p, CONFIG)
+    absolute = inverse_planning.infer_intent(p, CONFIG)
     assert absolute.intents[np.argmax(absolute.posterior)] == lane_to
     assert absolute.posterior.max() > 0.95
-    relative = predictors.infer_intent(p, CONFIG, relative=True)
+    relative = inverse_planning.infer_intent(p, CONFIG, relative=True)
     assert relative.intents[np.argmax(relative.posterior)] == lane_to - lane_from
 
 
 @pytest.mark.parametrize("goal", range(4))
 def test_posterior_picks_the_goal_the_robot_heads_straight_for(goal):
     p = payload(OBSTACLE_SCENE, obstacle_segment([5.0, 5.5], GOALS[goal]), [[3.0, 4.0]] * 5)
-    reading = predictors.infer_intent(p, CONFIG)
+    reading = inverse_planning.infer_intent(p, CONFIG)
     assert int(np.argmax(reading.posterior)) == goal
     assert reading.posterior.max() > 0.95
 
@@ -120,24 +120,24 @@ def test_posterior_picks_the_goal_the_robot_heads_straight_for(goal):
 def test_prior_from_the_examples_shifts_the_posterior():
     # moving down from lane 0, still above lane 1: lanes 1 and 2 explain the moves equally
     p = payload(HIGHWAY_SCENE, highway_segment(0, 1), [[20.0, 4.0]] * 5)
-    tie = predictors.infer_intent(p, CONFIG).posterior
+    tie = inverse_planning.infer_intent(p, CONFIG).posterior
     assert tie[1] == pytest.approx(tie[2]) and tie[0] < 0.01
     for lane in (1, 2):
         shown = {**p, "examples": [lane_clip(0, lane)] * 4}
-        reading = predictors.infer_intent(shown, CONFIG)
+        reading = inverse_planning.infer_intent(shown, CONFIG)
         np.testing.assert_allclose(reading.prior, np.where(np.arange(3) == lane, 5, 1) / 7)
         assert int(np.argmax(reading.posterior)) == lane
     segment = obstacle_segment([5.0, 5.0], [5.0, 0.0])  # straight up, between goals 0 and 1
     p = payload(OBSTACLE_SCENE, segment, [[3.0, 4.0]] * 5)
     shown = {**p, "examples": [goal_clip([5.0, 5.0], 1)] * 4}
-    before, after = (predictors.infer_intent(q, CONFIG).posterior for q in (p, shown))
+    before, after = (inverse_planning.infer_intent(q, CONFIG).posterior for q in (p, shown))
     assert before[0] == pytest.approx(before[1]) and after[1] > 0.8
 
 
 def test_relative_reading_moves_from_each_start_states_own_lane():
     p = payload(HIGHWAY_SCENE, highway_segment(1, 0), [[0.0, 8.0], [0.0, 4.0], [0.0, 0.0]])
-    absolute = predictors.predict_coarse(p, np.random.default_rng(0), QUIET, relative=False)
-    relative = predictors.predict_coarse(p, np.random.default_rng(0), QUIET, relative=True)
+    absolute = inverse_planning.predict_coarse(p, np.random.default_rng(0), QUIET, relative=False)
+    relative = inverse_planning.predict_coarse(p, np.random.default_rng(0), QUIET, relative=True)
     assert np.all(np.diff(np.concatenate([[8.0], absolute[0, :, 1]])) < 0)  # all head for lane 0
     assert relative[0, -1, 1] >= 4.0 - 1e-9 and relative[0, -1, 1] < 8.0  # lane 2 -> lane 1
     assert relative[2, -1, 1] == pytest.approx(0.0)  # no lane left of lane 0: keeps it
@@ -145,16 +145,16 @@ def test_relative_reading_moves_from_each_start_states_own_lane():
 
 def test_coarse_moves_forward_and_into_the_lane_without_overshooting():
     p = payload(HIGHWAY_SCENE, highway_segment(1, 0, steps=6), [[0.0, 0.6], [0.0, 5.0]])
-    clicks = predictors.predict_coarse(p, np.random.default_rng(0), QUIET)
-    path = np.concatenate([predictors.start_positions(p)[:, None], clicks], axis=1)
-    forward = predictors.forward_speed(p) * p["dt_s"]
+    clicks = inverse_planning.predict_coarse(p, np.random.default_rng(0), QUIET)
+    path = np.concatenate([inverse_planning.start_positions(p)[:, None], clicks], axis=1)
+    forward = inverse_planning.forward_speed(p) * p["dt_s"]
     np.testing.assert_allclose(np.diff(path[..., 0], axis=1), forward)
-    lateral = predictors.lateral_step_m(p, CONFIG)
+    lateral = inverse_planning.lateral_step_m(p, CONFIG)
     assert lateral == pytest.approx(4.0 / 4.6 * 0.5)
     np.testing.assert_allclose(path[0, :, 1], [0.6, 0.6 - lateral, 0.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(np.diff(path[1, :, 1]), -lateral)
     p = payload(OBSTACLE_SCENE, obstacle_segment([5.0, 5.5], GOALS[3]), [[2.0, 2.0]])
-    clicks = predictors.predict_coarse(p, np.random.default_rng(0), QUIET)
+    clicks = inverse_planning.predict_coarse(p, np.random.default_rng(0), QUIET)
     moves = np.diff(np.concatenate([[[2.0, 2.0]], clicks[0]]), axis=0)
     np.testing.assert_allclose(moves / np.linalg.norm(moves, axis=1, keepdims=True),
                                np.tile([[1, 1]], (3, 1)) / np.sqrt(2))
@@ -166,7 +166,7 @@ def _speed_and_angle_errors(p, predict, draws: int) -> tuple[np.ndarray, np.ndar
     ratios, angles = [], []
     for seed in range(draws):
         clicks = predict(np.random.default_rng(seed))
-        path = np.concatenate([predictors.start_positions(p)[:, None], clicks], axis=1)
+        path = np.concatenate([inverse_planning.start_positions(p)[:, None], clicks], axis=1)
         moves = np.diff(path, axis=1).reshape(-1, 2)
         ratios.append(np.linalg.norm(moves[0]) / 0.4)
         angles.append(np.degrees(np.arctan2(moves[:, 1], moves[:, 0]) - np.pi / 4))
@@ -180,10 +180,10 @@ def test_noise_statistics_match_the_config(preset):
     noise = getattr(MAP, f"{preset}_noise")
     if preset == "coarse":
         ratios, angles = _speed_and_angle_errors(
-            p, lambda rng: predictors.predict_coarse(p, rng, MAP), 1500)
+            p, lambda rng: inverse_planning.predict_coarse(p, rng, MAP), 1500)
     else:
         ratios, angles = _speed_and_angle_errors(
-            p, lambda rng: predictors.predict_from_actions(p, actions, rng, noise), 1500)
+            p, lambda rng: inverse_planning.predict_from_actions(p, actions, rng, noise), 1500)
     assert ratios.mean() == pytest.approx(1.0, abs=0.01)
     assert ratios.std() == pytest.approx(noise.speed_weber_fraction.value, rel=0.1)
     assert angles.std() == pytest.approx(noise.direction_sd_deg.value, rel=0.1)
@@ -203,15 +203,15 @@ def test_observers_never_read_the_models_answers():
         p = trial_payload(world, world["trials"][0], 3)
         assert not {"predictions", "cv_actions", "policy_actions"} & set(p)
     clicks = ["participant_id", "trial_id", "click_x", "click_y"]
-    for kind in predictors.KINDS:
-        clean = simulate_participants(bank, kind, 4, 5, seed=3, show_progress=False)
-        dirty = simulate_participants(poisoned, kind, 4, 5, seed=3, show_progress=False)
+    for preset in inverse_planning.PRESETS:
+        clean = simulate_participants(bank, preset, 4, 5, seed=3, show_progress=False)
+        dirty = simulate_participants(poisoned, preset, 4, 5, seed=3, show_progress=False)
         assert clean[clicks].equals(dirty[clicks])
         assert not clean["ours_vx"].equals(dirty["ours_vx"])
 
 
-@pytest.mark.parametrize("kind", predictors.KINDS)
-def test_clicks_are_always_valid(kind):
+@pytest.mark.parametrize("preset", inverse_planning.PRESETS)
+def test_clicks_are_always_valid(preset):
     rng = np.random.default_rng(2)
     corners = {"highway": [[-9.5, -1.5], [59.5, 9.5], [20.0, 4.0], [59.0, -1.0], [0.0, 8.0]],
                "obstacle": [[0.2, 0.2], [9.8, 9.8], [5.0, 5.0], [9.9, 0.1], [1.0, 1.0]]}
@@ -224,7 +224,7 @@ def test_clicks_are_always_valid(kind):
             p = payload(scene, seg, corners[scene["world"]])
             p["examples"] = [lane_clip(0, 2)] if scene["lanes"] else [goal_clip([5, 5], 2)]
             actions = rng.normal(scale=30.0, size=(5, 3, 2))  # too long, some off the scene
-            _assert_valid(p, predictors.predict(kind, p, rng, actions, CONFIG))
+            _assert_valid(p, inverse_planning.predict(preset, p, rng, actions, CONFIG))
 
 
 def test_config_typos_and_missing_sources_are_rejected(tmp_path):

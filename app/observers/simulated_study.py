@@ -1,13 +1,14 @@
-"""Power to detect Ours < VAE, from simulated participants run in process (no HTTP).
+"""Simulated studies run in process (no HTTP): power to find Ours < VAE, the instrument check.
 
-The bots' predictors answer the trial bank's trials directly; the models' answers are
-the bank's precomputed actions, exactly what the server stores beside a participant's.
+The observer presets (app/observers/inverse_planning.py) answer the trial bank's trials
+directly; the models' answers are the bank's precomputed actions, exactly what the server
+stores beside a participant's.
 The rows have the export CSV's columns, so the same analysis code scores them.
 Power at n = the share of `reps` studies of n participants (drawn with replacement from a
 simulated pool) where the one-sided paired t-test gives p < alpha in that world.
 
-The instrument check (`run_instrument`) asks whether the study can tell the two kinds of
-observer apart at all: n coarse and n precise simulated participants, per world the
+The instrument check (`run_instrument`) asks whether the study can tell the two observer
+presets apart at all: n coarse and n precise simulated participants, per world the
 per-participant err_ours - err_vae of each population, and Welch's one-sided t-test that
 the coarse population's difference is lower (alpha 0.01), plus the same test for the
 relative lane reading (`coarse_relative`) as a sensitivity row.
@@ -21,13 +22,14 @@ import pandas as pd
 from scipy import stats
 from tqdm import tqdm
 
-from analysis import predictors
 from analysis.contracts import EXPORT_COLUMNS
 from analysis.load import normalise
 from analysis.metrics import participant_means
-from analysis.observers_config import ObserversConfig, default_observers
+from analysis.plots import plot_power
+from app.fileio import sha256_bytes, write_json
+from app.observers import inverse_planning
+from app.observers.config import ObserversConfig, default_observers
 
-KINDS = predictors.KINDS
 SIMULATED_TRIAL_MS = 20000.0
 INSTRUMENT_POPULATIONS = ("coarse", "precise", "coarse_relative")
 INSTRUMENT_ROWS = (("absolute", "coarse"), ("relative", "coarse_relative"))  # reading, preset
@@ -54,9 +56,9 @@ def trial_rows(participant: str, world_position: int, trial_index: int, payload:
                trial: dict, clicks: np.ndarray) -> dict[str, np.ndarray]:
     """Export-shaped columns for one answered trial (K x n rows)."""
     k, n = clicks.shape[:2]
-    starts = predictors.start_positions(payload)
+    starts = inverse_planning.start_positions(payload)
     humans = np.array([s["human"] for s in payload["start_states"]], dtype=np.float64)
-    human_v = predictors.clicks_to_actions(payload, clicks)
+    human_v = inverse_planning.clicks_to_actions(payload, clicks)
     cols = {
         "participant_id": np.full(k * n, participant),
         "world": np.full(k * n, payload["world"]),
@@ -85,16 +87,16 @@ def trial_rows(participant: str, world_position: int, trial_index: int, payload:
     return cols
 
 
-def simulate_participants(bank: dict, kind: str, n: int, trials_per_world: int, seed: int = 0,
+def simulate_participants(bank: dict, preset: str, n: int, trials_per_world: int, seed: int = 0,
                           show_progress: bool = True,
                           observers: ObserversConfig | None = None) -> pd.DataFrame:
-    """Rows of `n` simulated participants of one bot kind, in the export CSV's columns."""
+    """Rows of `n` simulated participants of one observer preset, in the export CSV's columns."""
     observers = observers or default_observers()
     rng = np.random.default_rng(seed)
     steps = bank["steps_to_predict"]
     worlds = sorted(bank["worlds"])
     parts: list[dict[str, np.ndarray]] = []
-    for p in tqdm(range(n), desc=f"{kind} participants", disable=not show_progress):
+    for p in tqdm(range(n), desc=f"{preset} participants", disable=not show_progress):
         order = worlds if p % 2 == 0 else worlds[::-1]
         for position, world in enumerate(order):
             world_bank = bank["worlds"][world]
@@ -103,12 +105,13 @@ def simulate_participants(bank: dict, kind: str, n: int, trials_per_world: int, 
             for index, t in enumerate(chosen):
                 trial = main[int(t)]
                 payload = trial_payload(world_bank, trial, steps)
-                clicks = predictors.predict(kind, payload, rng, trial["policy_actions"], observers)
+                clicks = inverse_planning.predict(preset, payload, rng, trial["policy_actions"],
+                                                  observers)
                 parts.append(trial_rows(f"sim-{p:05d}", position, index, payload, trial, clicks))
-    return export_frame(parts, bank["study_id"], kind)
+    return export_frame(parts, bank["study_id"], preset)
 
 
-def export_frame(parts: list[dict[str, np.ndarray]], study_id: str, kind: str) -> pd.DataFrame:
+def export_frame(parts: list[dict[str, np.ndarray]], study_id: str, preset: str) -> pd.DataFrame:
     """Concatenate per-trial columns and fill the constant export columns."""
     cols = {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
     frame = pd.DataFrame(cols)
@@ -119,7 +122,7 @@ def export_frame(parts: list[dict[str, np.ndarray]], study_id: str, kind: str) -
                  "trial_duration_ms": SIMULATED_TRIAL_MS, "replays": 0, "submitted_at": ""}
     for name, value in constants.items():
         frame[name] = np.full(size, value)
-    frame["submission_id"] = frame["participant_id"] + "/" + frame["trial_id"] + f"/{kind}"
+    frame["submission_id"] = frame["participant_id"] + "/" + frame["trial_id"] + f"/{preset}"
     return normalise(frame[list(EXPORT_COLUMNS)])
 
 
@@ -144,24 +147,21 @@ def power_curve(means: pd.DataFrame, n_values: list[int], reps: int = 2000, alph
     return pd.DataFrame(rows)
 
 
-def run_power(bank_path: Path, kind: str, trials_per_world: int, out_dir: Path, n_max: int = 60,
+def run_power(bank_path: Path, preset: str, trials_per_world: int, out_dir: Path, n_max: int = 60,
               pool: int = 400, reps: int = 2000, alpha: float = 0.01, seed: int = 0,
               observers: ObserversConfig | None = None) -> dict:
     """Simulate a pool of participants, estimate power vs n, write power.json/.csv and a plot."""
-    from analysis.plots import plot_power
-    from app.fileio import write_json
-
     bank = load_bank(bank_path)
-    frame = simulate_participants(bank, kind, pool, trials_per_world, seed, observers=observers)
+    frame = simulate_participants(bank, preset, pool, trials_per_world, seed, observers=observers)
     means = participant_means(frame)
     n_values = list(range(3, n_max + 1))
     curve = power_curve(means, n_values, reps, alpha, seed)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     curve.to_csv(out_dir / "power.csv", index=False)
-    figures = plot_power(curve, alpha, kind, out_dir / "power")
+    figures = plot_power(curve, alpha, preset, out_dir / "power")
     needed = {world: _smallest_n(group, 0.8) for world, group in curve.groupby("world")}
-    summary = {"kind": kind, "alpha": alpha, "pool": pool, "reps": reps, "seed": seed,
+    summary = {"kind": preset, "alpha": alpha, "pool": pool, "reps": reps, "seed": seed,
                "trials_per_world": trials_per_world, "n_for_power_0.8": needed,
                "d_z": curve.groupby("world")["d_z"].first().to_dict(),
                "power_at": {f"{w}@{n}": float(g.loc[g["n"] == n, "power"].iloc[0])
@@ -177,12 +177,13 @@ def _smallest_n(group: pd.DataFrame, target: float) -> int | None:
     return int(reached["n"].min()) if len(reached) else None
 
 
-def population_diffs(bank: dict, kind: str, n: int, trials_per_world: int, seed: int,
+def population_diffs(bank: dict, preset: str, n: int, trials_per_world: int, seed: int,
                      observers: ObserversConfig, show_progress: bool = True) -> pd.DataFrame:
     """Per participant and world: err_ours, err_vae and their difference, for one preset."""
-    frame = simulate_participants(bank, kind, n, trials_per_world, seed, show_progress, observers)
+    frame = simulate_participants(bank, preset, n, trials_per_world, seed, show_progress,
+                                  observers)
     means = participant_means(frame)[["participant_id", "world", "err_ours", "err_vae"]]
-    return means.assign(diff=means["err_ours"] - means["err_vae"], kind=kind)
+    return means.assign(diff=means["err_ours"] - means["err_vae"], preset=preset)
 
 
 def welch_row(world: str, reading: str, coarse: pd.DataFrame, precise: pd.DataFrame,
@@ -206,14 +207,14 @@ def instrument_check(bank: dict, trials_per_world: int, n: int = 22, seed: int =
                      show_progress: bool = True) -> pd.DataFrame:
     """Per world and lane reading: can err_ours - err_vae tell coarse from precise observers?"""
     observers = observers or default_observers()
-    diffs = {kind: population_diffs(bank, kind, n, trials_per_world, seed + offset, observers,
-                                    show_progress)
-             for offset, kind in enumerate(INSTRUMENT_POPULATIONS)}
+    diffs = {preset: population_diffs(bank, preset, n, trials_per_world, seed + offset,
+                                      observers, show_progress)
+             for offset, preset in enumerate(INSTRUMENT_POPULATIONS)}
     rows = []
     for world in sorted(bank["worlds"]):
         precise = diffs["precise"][diffs["precise"]["world"] == world]
-        for reading, kind in INSTRUMENT_ROWS:
-            coarse = diffs[kind][diffs[kind]["world"] == world]
+        for reading, preset in INSTRUMENT_ROWS:
+            coarse = diffs[preset][diffs[preset]["world"] == world]
             rows.append(welch_row(world, reading, coarse, precise, alpha))
     return pd.DataFrame(rows)
 
@@ -222,8 +223,6 @@ def run_instrument(bank_path: Path, trials_per_world: int, out_dir: Path, n: int
                    seed: int = 0, alpha: float = 0.01,
                    observers: ObserversConfig | None = None) -> dict:
     """Run the instrument check on a bank; write instrument.json and instrument.csv."""
-    from app.fileio import sha256_bytes, write_json
-
     observers = observers or default_observers()
     bank_path = Path(bank_path)
     table = instrument_check(load_bank(bank_path), trials_per_world, n, seed, alpha, observers)

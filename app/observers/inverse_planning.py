@@ -2,7 +2,7 @@
 
 A trial payload is the `step` the server sends in a trial (app/study/API.md): scene,
 dt_s, example clips, segment positions, start states, steps_to_predict, min/max step
-length. Each preset returns clicked robot positions [starts, steps, 2] that the server
+length. Each observer preset returns clicked robot positions [starts, steps, 2] that the server
 accepts (inside the scene bounds, every move within [min_step_m, max_step_m]). Observers
 read only the payload (and, for `precise`, the world's own policy moves): never a
 checkpoint nor a model's answer. Their parameters and sources: study_configs/observers.yaml.
@@ -41,9 +41,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import logsumexp
 
-from analysis.observers_config import NoiseConfig, ObserversConfig, default_observers
+from app.observers.config import NoiseConfig, ObserversConfig, default_observers
 
-KINDS = ("coarse", "precise", "random", "coarse_relative")
+PRESETS = ("coarse", "precise", "random", "coarse_relative")
 LANE_OFFSETS = np.array([-1, 0, 1])  # relative reading: merge left (towards lane 0), keep, right
 LATERAL_CANDIDATES = 41  # lateral moves the Highway likelihood normalises over
 DIRECTION_CANDIDATES = 72  # directions (5 deg apart) the Obstacle likelihood normalises over
@@ -340,18 +340,19 @@ def predict_random(payload: dict, rng: np.random.Generator) -> np.ndarray:
     return walk(payload, next_move)
 
 
-def predict(kind: str, payload: dict, rng: np.random.Generator,
+def predict(preset: str, payload: dict, rng: np.random.Generator,
             policy_actions: np.ndarray | None = None,
             config: ObserversConfig | None = None) -> np.ndarray:
-    """Clicks [S, K, 2] of a bot of `kind`; a precise bot follows `policy_actions` [S, K, 2]."""
-    if kind not in KINDS:
-        raise ValueError(f"kind: unknown bot kind {kind!r}; choose one of {', '.join(KINDS)}")
+    """Clicks [S, K, 2] of an observer `preset`; `precise` follows `policy_actions` [S, K, 2]."""
+    if preset not in PRESETS:
+        raise ValueError(f"preset: unknown observer preset {preset!r}; "
+                         f"choose one of {', '.join(PRESETS)}")
     config = config or default_observers()
-    if kind == "coarse":
+    if preset == "coarse":
         return predict_coarse(payload, rng, config)
-    if kind == "coarse_relative":
+    if preset == "coarse_relative":
         return predict_coarse(payload, rng, config, relative=True)
-    if kind == "precise":
+    if preset == "precise":
         if policy_actions is None:
             raise ValueError(f"precise bot: no policy actions for trial {payload['trial_id']}")
         return predict_from_actions(payload, np.asarray(policy_actions), rng,
