@@ -20,6 +20,7 @@ from app.observers.simulated_study import (
     trial_payload,
 )
 from app.settings import REPO_ROOT
+from app.worlds.intents import forward_speed
 from tests.analysis.fixed_data import (
     HIGHWAY_SCENE,
     OBSTACLE_SCENE,
@@ -134,6 +135,20 @@ def test_prior_from_the_examples_shifts_the_posterior():
     assert before[0] == pytest.approx(before[1]) and after[1] > 0.8
 
 
+@pytest.mark.parametrize(("scene", "n_intents"), [(HIGHWAY_SCENE, 3), (OBSTACLE_SCENE, 4)])
+def test_each_worlds_intents_answer_the_same_questions(scene, n_intents):
+    segment = highway_segment(1, 0) if scene["lanes"] else obstacle_segment([5, 5.5], GOALS[2])
+    p = payload(scene, segment, [[20.0, 4.0], [3.0, 4.0]])
+    intents = inverse_planning.payload_intents(p, CONFIG, relative=False)
+    progress, candidates = intents.progress()
+    assert progress.shape == (6, n_intents) and candidates.shape[:2] == (6, n_intents)
+    assert len(intents.labels) == len(intents.feasible) == n_intents
+    track = inverse_planning.robot_track(segment)
+    assert intents.outcome(track) == (0 if scene["lanes"] else 2)
+    direction, length = intents.course(intents.outcome(track), track[-1:], 1.0)(0, track[-1])
+    assert direction.shape == (2,) and length >= 0
+
+
 def test_relative_reading_moves_from_each_start_states_own_lane():
     p = payload(HIGHWAY_SCENE, highway_segment(1, 0), [[0.0, 8.0], [0.0, 4.0], [0.0, 0.0]])
     absolute = inverse_planning.predict_coarse(p, np.random.default_rng(0), QUIET, relative=False)
@@ -147,9 +162,10 @@ def test_coarse_moves_forward_and_into_the_lane_without_overshooting():
     p = payload(HIGHWAY_SCENE, highway_segment(1, 0, steps=6), [[0.0, 0.6], [0.0, 5.0]])
     clicks = inverse_planning.predict_coarse(p, np.random.default_rng(0), QUIET)
     path = np.concatenate([inverse_planning.start_positions(p)[:, None], clicks], axis=1)
-    forward = inverse_planning.forward_speed(p) * p["dt_s"]
+    track = inverse_planning.robot_track(p["segment"]["positions"])
+    forward = forward_speed(track, p["dt_s"]) * p["dt_s"]
     np.testing.assert_allclose(np.diff(path[..., 0], axis=1), forward)
-    lateral = inverse_planning.lateral_step_m(p, CONFIG)
+    lateral = inverse_planning.payload_intents(p, CONFIG, relative=False).step_m
     assert lateral == pytest.approx(4.0 / 4.6 * 0.5)
     np.testing.assert_allclose(path[0, :, 1], [0.6, 0.6 - lateral, 0.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(np.diff(path[1, :, 1]), -lateral)

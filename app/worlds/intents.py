@@ -1,0 +1,188 @@
+"""What a simulated observer can read into the robot's moves, per world, from the scene a bot sees.
+
+An observer (app/observers/inverse_planning.py) explains a trial's segment by an intent and
+then moves the way that intent moves. What an intent is depends on the world; this module
+is the only place that knows it, behind one interface (`Intents`):
+- lanes (Highway): a target lane, by its absolute index or, in the relative reading, as a
+  change of -1/0/+1 lanes from the robot's lane at the segment's start. Progress of a step
+  is the lateral distance gained towards the lane centre over one nominal lateral step
+  (lane width / lane-change duration, times dt), normalised over lateral moves of up to
+  one nominal step: forward motion is common to every intent and says nothing about it.
+  The coarse move: forward at the segment's forward speed plus a lateral step towards the
+  target lane centre, never past it.
+- goals (Obstacle): one of the scene's goal discs. Progress of a step is the straight-line
+  distance gained towards the goal over the step's length (about cos of the angle to the
+  goal), normalised over all directions of the same length. The coarse move: straight at
+  the goal at the segment's speed.
+
+Everything is read from what the browser is shown: the scene as JSON (bank.json's
+`scene`), dt and robot tracks [T+1, 2].
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+LANE_OFFSETS = np.array([-1, 0, 1])  # relative reading: merge left (towards lane 0), keep, right
+LATERAL_CANDIDATES = 41  # lateral moves the lane likelihood normalises over
+DIRECTION_CANDIDATES = 72  # directions (5 deg apart) the goal likelihood normalises over
+
+# move(i, position) -> (direction, length [m]) of start state i's next move
+Move = Callable[[int, np.ndarray], tuple[np.ndarray, float]]
+
+
+@dataclass(frozen=True)
+class IntentOptions:
+    """How an observer reads lanes: absolute or relative, and how long a lane change takes."""
+
+    relative_lanes: bool
+    lane_change_duration_s: float
+
+
+class Intents(Protocol):
+    """One trial's intents: what they are called, which exist, the evidence, the moves."""
+
+    labels: np.ndarray  # lane index, lane change (-1/0/+1) or goal index, per intent
+    feasible: np.ndarray  # per intent: whether it exists from the segment's start
+
+    def outcome(self, clip_track: np.ndarray) -> int:
+        """Index (into `labels`) of the intent a full example clip's robot track ended in."""
+        ...
+
+    def progress(self) -> tuple[np.ndarray, np.ndarray]:
+        """Progress of each observed segment step towards each intent [T, J], and that of
+        every alternative move the likelihood normalises over [T, J, C]."""
+        ...
+
+    def course(self, label: int, starts: np.ndarray, speed_factor: float) -> Move:
+        """How a coarse observer acting on intent `label` moves from each start state."""
+        ...
+
+
+def trial_intents(scene: dict, dt_s: float, segment_track: np.ndarray,
+                  options: IntentOptions) -> Intents:
+    """The intents of the scene's world for one trial (its robot segment track [T+1, 2])."""
+    if scene["lanes"]:
+        return LaneIntents(scene, dt_s, segment_track, options)
+    return GoalIntents(scene, dt_s, segment_track)
+
+
+def segment_speed(track: np.ndarray, dt_s: float) -> float:
+    """The robot's mean speed over a track [m/s]."""
+    steps = np.linalg.norm(np.diff(track, axis=0), axis=1)
+    return float(steps.mean() / dt_s) if len(steps) else 0.0
+
+
+def forward_speed(track: np.ndarray, dt_s: float) -> float:
+    """The robot's mean x velocity over a track in the displayed frame [m/s]."""
+    return float((track[-1, 0] - track[0, 0]) / (dt_s * max(len(track) - 1, 1)))
+
+
+class LaneIntents:
+    """Target lanes of a road scene (lane 0 on top)."""
+
+    def __init__(self, scene: dict, dt_s: float, track: np.ndarray,
+                 options: IntentOptions) -> None:
+        lanes = sorted(scene["lanes"], key=lambda lane: lane["index"])
+        self.centres = np.array([lane["y_center_m"] for lane in lanes], dtype=np.float64)
+        width = float(np.median([lane["width_m"] for lane in scene["lanes"]]))
+        self.step_m = width / options.lane_change_duration_s * dt_s  # one nominal lateral move
+        self.dt_s, self.track, self.relative = dt_s, track, options.relative_lanes
+        if self.relative:
+            self.targets, self.feasible = self.relative_targets(self.nearest_lane(track[0, 1]))
+            self.labels = LANE_OFFSETS
+        else:
+            self.targets = self.centres
+            self.feasible = np.ones(len(self.centres), dtype=bool)
+            self.labels = np.arange(len(self.centres))
+
+    def nearest_lane(self, y: float) -> int:
+        """Index of the lane whose centre is nearest to y."""
+        return int(np.argmin(np.abs(np.asarray(y, dtype=np.float64)[..., None] - self.centres),
+                             axis=-1))
+
+    def relative_targets(self, lane: int) -> tuple[np.ndarray, np.ndarray]:
+        """Lane centres [3] of merge left / keep / right from `lane`, and which of them exist."""
+        lanes = lane + LANE_OFFSETS
+        n = len(self.centres)
+        return self.centres[np.clip(lanes, 0, n - 1)], (lanes >= 0) & (lanes < n)
+
+    def outcome(self, clip_track: np.ndarray) -> int:
+        """The lane a clip ends in, or (relative) its lane change clipped to one lane."""
+        end = self.nearest_lane(clip_track[-1, 1])
+        if not self.relative:
+            return end
+        return int(np.clip(end - self.nearest_lane(clip_track[0, 1]), -1, 1)) + 1
+
+    def progress(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lateral progress towards each target lane centre, in nominal lateral steps."""
+        y, step_m = self.track[:, 1], self.step_m
+        moves = np.clip(np.diff(y), -step_m, step_m)[:, None]  # a faster move reads as a full one
+        start = y[:-1, None]
+        gap = np.abs(start - self.targets)
+        progress = (gap - np.abs(start + moves - self.targets)) / step_m  # [T, J]
+        lateral = np.linspace(-step_m, step_m, LATERAL_CANDIDATES)
+        after = np.abs(start[..., None] + lateral - self.targets[:, None])
+        return progress, (gap[..., None] - after) / step_m  # [T, J, C]
+
+    def target_y(self, label: int, start: np.ndarray) -> float:
+        """Centre y of the lane an observer acting on `label` heads for from `start`."""
+        if not self.relative:
+            return float(self.centres[label])
+        targets, feasible = self.relative_targets(self.nearest_lane(start[1]))
+        return float(targets[label + 1] if feasible[label + 1] else targets[1])
+
+    def course(self, label: int, starts: np.ndarray, speed_factor: float) -> Move:
+        """Forward at the segment's forward speed, sideways towards the target lane centre."""
+        forward = forward_speed(self.track, self.dt_s) * speed_factor * self.dt_s
+        lateral = self.step_m
+        targets = [self.target_y(label, s) for s in starts]
+
+        def move(i: int, position: np.ndarray) -> tuple[np.ndarray, float]:
+            side = float(np.clip(targets[i] - position[1], -lateral, lateral))
+            return np.array([forward, side]), float(np.hypot(forward, side))
+
+        return move
+
+
+class GoalIntents:
+    """The goal discs of a plane scene."""
+
+    def __init__(self, scene: dict, dt_s: float, track: np.ndarray) -> None:
+        self.goals = np.array([[g["x_m"], g["y_m"]] for g in scene["goals"]], dtype=np.float64)
+        self.dt_s, self.track = dt_s, track
+        self.labels = np.arange(len(self.goals))
+        self.feasible = np.ones(len(self.goals), dtype=bool)
+
+    def outcome(self, clip_track: np.ndarray) -> int:
+        """The goal nearest to where the clip's robot ends."""
+        return int(np.argmin(np.linalg.norm(self.goals - clip_track[-1], axis=1)))
+
+    def progress(self) -> tuple[np.ndarray, np.ndarray]:
+        """Straight-line distance gained towards each goal, per metre moved."""
+        track, goals = self.track, self.goals
+        moves = np.diff(track, axis=0)
+        length = np.linalg.norm(moves, axis=1)
+        moving = length > 1e-9  # a standing robot says nothing about its direction
+        start, moves, length = track[:-1][moving], moves[moving], length[moving]
+        gap = np.linalg.norm(start[:, None, :] - goals, axis=-1)  # [T, G]
+        progress = (gap - np.linalg.norm(start[:, None, :] + moves[:, None, :] - goals, axis=-1))
+        angles = np.linspace(0.0, 2 * np.pi, DIRECTION_CANDIDATES, endpoint=False)
+        turns = length[:, None, None] * np.stack([np.cos(angles), np.sin(angles)], axis=-1)
+        ends = start[:, None, None, :] + turns[:, None, :, :] - goals[None, :, None, :]
+        candidates = gap[..., None] - np.linalg.norm(ends, axis=-1)  # [T, G, C]
+        scale = length[:, None]
+        return progress / scale, candidates / scale[..., None]
+
+    def course(self, label: int, starts: np.ndarray, speed_factor: float) -> Move:
+        """Straight at the goal at the segment's speed, stopping on it."""
+        goal = self.goals[label]
+        reach = segment_speed(self.track, self.dt_s) * speed_factor * self.dt_s
+
+        def move(i: int, position: np.ndarray) -> tuple[np.ndarray, float]:
+            to_goal = goal - position
+            return to_goal, min(reach, float(np.linalg.norm(to_goal)))
+
+        return move
