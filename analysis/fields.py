@@ -48,11 +48,22 @@ def code_panels(states_w: pd.DataFrame, model: str, k: int) -> list[tuple[int, p
             for code in top_codes(states_w, model, k)]
 
 
-def arrow_length(scene) -> float:
-    """Arrow length [m] that reads well on a world's scene (app.data.scene.Scene or None)."""
+def scene_size(scene: dict) -> tuple[float, float]:
+    """Width and height [m] of a scene's bounds (scene JSON, as in bank.json)."""
+    b = scene["bounds"]
+    return b["x_max_m"] - b["x_min_m"], b["y_max_m"] - b["y_min_m"]
+
+
+def is_long_and_thin(scene: dict) -> bool:
+    """Whether a scene is more than twice as wide as high (a road rather than a plane)."""
+    width, height = scene_size(scene)
+    return width > 2 * height
+
+
+def arrow_length(scene: dict | None) -> float:
+    """Arrow length [m] that reads well on a scene: 8% of its width, at most a quarter of its
+    height (so arrows stay inside a road's lanes)."""
     if scene is None:
         return 0.5
-    b = scene.bounds
-    if scene.lanes:
-        return 0.25 * (b.y_max_m - b.y_min_m)
-    return 0.08 * (b.x_max_m - b.x_min_m)
+    width, height = scene_size(scene)
+    return min(0.08 * width, 0.25 * height)

@@ -14,13 +14,15 @@ from analysis.fields import (  # noqa: E402
     FIELD_MODELS,
     arrow_length,
     code_panels,
+    is_long_and_thin,
     panel_error,
     state_table,
     unit,
 )
+from analysis.scene_plot import draw_scene  # noqa: E402
 from analysis.stats import PairedResult, mean_ci95  # noqa: E402
 
-# Okabe-Ito, as in app.data.scene: safe for colour-blind readers.
+# Okabe-Ito, as in analysis/scene_plot.py: safe for colour-blind readers.
 MODEL_COLORS = {"ours": "#E69F00", "vae": "#0072B2", "cv": "#009E73", "policy": "#CC79A7",
                 "human": "#000000"}
 MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy",
@@ -74,10 +76,9 @@ def plot_errors(means: pd.DataFrame, results: dict[str, PairedResult], base: Pat
     return save(fig, base)
 
 
-def field_panel(ax, states: pd.DataFrame, model: str, scene, arrow_m: float) -> float:
+def field_panel(ax, states: pd.DataFrame, model: str, scene: dict | None,
+                arrow_m: float) -> float:
     """Participants' mean first move and the model's at each start state (unit arrows)."""
-    from app.data.scene import draw_scene
-
     if scene is not None:
         draw_scene(ax, scene)
     else:
@@ -92,15 +93,18 @@ def field_panel(ax, states: pd.DataFrame, model: str, scene, arrow_m: float) -> 
 
 
 def plot_fields(frame: pd.DataFrame, scenes: dict, base: Path, k: int = 3) -> list[Path]:
-    """Per world, for each model's k most common codes: participants' field beside the model's."""
+    """Per world, for each model's k most common codes: participants' field beside the model's.
+
+    `scenes` maps a world to its scene JSON (bank.json's `scene`); a world without one is
+    drawn on bare axes."""
     worlds = sorted(frame["world"].unique())
     models = FIELD_MODELS
     paths: list[Path] = []
     for world in worlds:
         states_w = state_table(frame[frame["world"] == world])
         scene = scenes.get(world)
-        wide = scene is not None and bool(scene.lanes)
-        # Highway panels are long and thin: models side by side, one code per row.
+        wide = scene is not None and is_long_and_thin(scene)
+        # panels of a long, thin scene (a road): models side by side, one code per row
         shape = (k, len(models)) if wide else (len(models), k)
         fig, axes = plt.subplots(*shape, squeeze=False,
                                  figsize=(13, 1.9 * k) if wide else (3.4 * k, 3.6 * len(models)))
@@ -144,7 +148,7 @@ def _crop_x(ax, states: pd.DataFrame, margin_m: float) -> None:
     ax.set_xlim(max(left, low), min(right, high))
 
 
-def plot_power(curve: pd.DataFrame, alpha: float, kind: str, base: Path) -> list[Path]:
+def plot_power(curve: pd.DataFrame, alpha: float, preset: str, base: Path) -> list[Path]:
     """Power to detect Ours < VAE vs number of participants, one line per world."""
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
     colors = ["#0072B2", "#D55E00", "#009E73"]
@@ -157,7 +161,7 @@ def plot_power(curve: pd.DataFrame, alpha: float, kind: str, base: Path) -> list
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel("participants n")
     ax.set_ylabel(f"power (one-sided paired t, alpha = {alpha})")
-    ax.set_title(f"Power to find Ours < VAE with '{kind}' simulated participants", fontsize=9)
+    ax.set_title(f"Power to find Ours < VAE with '{preset}' simulated participants", fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()

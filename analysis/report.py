@@ -86,16 +86,14 @@ def checkpoint_hashes(config: dict, data_dir: Path) -> dict:
 
 
 def load_scenes(data_dir: Path, study_id: str) -> tuple[dict, str | None]:
-    """Each world's Scene from the trial bank (empty if there is no bank) and the bank's hash."""
-    from app.data.scene import Scene
+    """Each world's scene (JSON) from the trial bank (empty if there is no bank) and its hash."""
     from app.fileio import sha256_file
 
     path = Path(data_dir) / "trials" / study_id / "bank.json"
     if not path.is_file():
         return {}, None
     bank = json.loads(path.read_text())
-    scenes = {w: Scene.model_validate(b["scene"]) for w, b in bank["worlds"].items()}
-    return scenes, sha256_file(path)
+    return {w: b["scene"] for w, b in bank["worlds"].items()}, sha256_file(path)
 
 
 def world_summary(means: pd.DataFrame, ade: pd.DataFrame) -> dict:

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from app.data.scene import HUMAN_COLOR, Scene, draw_scene
+from analysis.scene_plot import draw_scene
+from app.data.scene import HUMAN_COLOR, Scene
 from app.fileio import atomic_path, write_json
 from app.learning.checkpoint import TrainedModel, load_model
 
@@ -71,7 +72,7 @@ def _plot_field(model: TrainedModel, scene: Scene, field: dict, entry: dict, pat
     b = scene.bounds
     aspect = (b.x_max_m - b.x_min_m) / max(b.y_max_m - b.y_min_m, 1e-6)
     fig, ax = plt.subplots(figsize=(min(12, 3 + 3 * aspect), 4 if aspect > 2 else 6))
-    draw_scene(ax, scene)
+    draw_scene(ax, scene.model_dump())
     gx, gy = np.meshgrid(field["xs"], field["ys"])
     actions = np.asarray(entry["actions"]).reshape(len(field["ys"]), len(field["xs"]), 2)
     # colour by the y component so that lateral moves (merges) stand out even where

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from app.data.scene import HUMAN_COLOR, LABEL_COLORS, ROBOT_COLOR
+from analysis.scene_plot import LABEL_COLORS
+from app.data.scene import HUMAN_COLOR, ROBOT_COLOR
 from app.data.trajectory import HUMAN, ROBOT
 from app.data.windows import Windows
 from app.fileio import atomic_path, write_json

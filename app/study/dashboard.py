@@ -135,13 +135,12 @@ def world_fields(kept: pd.DataFrame, ctx: StudyContext, k: int = FIELD_CODES) ->
     """Per world, the report's field panels: for Ours' and the VAE's k most common codes,
     each start state's position, participants' mean first move and the model's (unit)."""
     from analysis.fields import FIELD_MODELS, arrow_length, code_panels, state_table
-    from app.data.scene import Scene
 
     out = {}
     for world in sorted(kept["world"].unique()) if len(kept) else []:
         scene = ctx.bank.world(world).scene
         states_w = state_table(kept[kept["world"] == world])
-        arrow_m = arrow_length(Scene.model_validate(scene))
+        arrow_m = arrow_length(scene)
         panels = [_panel(model, code, states, arrow_m)
                   for model in FIELD_MODELS for code, states in code_panels(states_w, model, k)]
         out[world] = {"scene": scene, "arrow_m": arrow_m, "panels": panels,

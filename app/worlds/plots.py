@@ -4,7 +4,8 @@ from pathlib import Path
 
 import numpy as np
 
-from app.data.scene import HUMAN_COLOR, LABEL_COLORS, draw_scene
+from analysis.scene_plot import LABEL_COLORS, draw_scene
+from app.data.scene import HUMAN_COLOR
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 
 
@@ -18,7 +19,7 @@ def plot_trajectories(trajs: TrajectorySet, path: Path, label: str, count: int =
     scene = trajs.scene
     width = 12 if scene.lanes else 7
     fig, ax = plt.subplots(figsize=(width, 7 if not scene.lanes else 3.2))
-    draw_scene(ax, scene)
+    draw_scene(ax, scene.model_dump())
     names = trajs.label_names[label]
     for i in range(min(count, len(trajs))):
         end = int(trajs.lengths[i]) + 1
