@@ -10,6 +10,7 @@ from app.configio import ConfigError
 from app.settings import get_settings
 
 if TYPE_CHECKING:
+    from analysis.report import StudyInputs
     from app.observers.config import ObserversConfig
     from app.settings import Settings
     from app.study.migrate import UpgradeReport
@@ -149,7 +150,7 @@ def analyze(
                                                     "(sensitivity analysis; repeatable)")] = None,
 ) -> None:
     """Alignment error, paired tests, figures and a self-contained report."""
-    from analysis.report import run_analyze
+    from analysis.report import AnalysisError, run_analyze
 
     if csv is not None and database_url is not None:
         fail("give either --csv or --database-url, not both")
@@ -157,8 +158,26 @@ def analyze(
         fail(f"csv: {csv} not found")
     settings = get_settings()
     out = out or settings.data_dir / "reports" / study
-    run_analyze(study, out, csv, database_url or settings.resolved_database_url(),
-                settings.configs_dir, settings.data_dir, tuple(waive or ()))
+    try:
+        run_analyze(study, out, csv, database_url or settings.resolved_database_url(),
+                    analysis_inputs(study), tuple(waive or ()))
+    except AnalysisError as err:
+        fail(str(err))
+
+
+def analysis_inputs(study: str) -> "StudyInputs":
+    """What `analyze` takes from the study config, as plain values and paths."""
+    from analysis.report import StudyInputs
+    from app.study.config import load_study_config
+    from app.study.trials import BANK_FILE, bank_dir
+
+    settings = get_settings()
+    config = load_study_config(settings, study)
+    checkpoints = {f"{world}/{model}": settings.data_dir / path
+                   for world, paths in config.models.items()
+                   for model, path in paths.model_dump().items()}
+    return StudyInputs(config=config.model_dump(mode="json"), rules=config.exclusions,
+                       checkpoints=checkpoints, bank=bank_dir(settings.data_dir, study) / BANK_FILE)
 
 
 @cli.command()
@@ -191,8 +210,8 @@ def power(
 def simulation_inputs(study: str, observers: Path | None
                       ) -> tuple[Path, "ObserversConfig", int]:
     """(bank path, observers config, trials per world) for simulated participants of `study`."""
-    from analysis.report import read_study_config
     from app.observers.config import default_observers, load_observers
+    from app.study.config import load_study_config
     from app.study.trials import BANK_FILE, bank_dir
 
     settings = get_settings()
@@ -203,7 +222,7 @@ def simulation_inputs(study: str, observers: Path | None
         config = load_observers(observers) if observers else default_observers(settings.configs_dir)
     except ConfigError as err:
         fail(str(err))
-    trials = int(read_study_config(settings.configs_dir, study).get("trials_per_world", 10))
+    trials = load_study_config(settings, study).trials_per_world
     return bank, config, trials
 
 

@@ -16,6 +16,7 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.report import run_analyze
+from app.cli import analysis_inputs
 from app.observers.simulated_study import load_bank, simulate_participants
 from app.settings import get_settings
 
@@ -40,8 +41,7 @@ def main() -> None:
         pd.read_csv(csv)
         baseline = time.perf_counter() - start
         start = time.perf_counter()
-        run_analyze(args.study, Path(tmp) / "report", csv, "", settings.configs_dir,
-                    settings.data_dir)
+        run_analyze(args.study, Path(tmp) / "report", csv, "", analysis_inputs(args.study))
         analysis = time.perf_counter() - start
     print(f"rows: {len(frame):,} ({args.participants} participants x 20 trials x 5 x 3)")
     print(f"baseline pd.read_csv: {baseline:.2f} s")

@@ -6,37 +6,33 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from analysis.contracts import ExclusionRules
 from analysis.metrics import add_alignment_errors
-from analysis.report import run_analyze, start_kind_table
+from analysis.report import AnalysisError, StudyInputs, run_analyze, start_kind_table
 from app.observers.simulated_study import simulate_participants
 from tests.analysis.fixed_data import fixed_predictions, small_bank
 
-STUDY_YAML = """
-exclusions: {failed_attention_check: true, incomplete: true, too_fast_trial_ms: 4000,
-             too_fast_max_fraction: 0.25}
-models:
-  highway: {ours: models/highway/ours/checkpoint.pt, vae: models/highway/vae/checkpoint.pt}
-"""
+RULES = ExclusionRules(failed_attention_check=True, incomplete=True, too_fast_trial_ms=4000,
+                       too_fast_max_fraction=0.25)
 
 
 @pytest.fixture
-def study_dirs(tmp_path):
-    configs, data = tmp_path / "configs", tmp_path / "var"
-    configs.mkdir()
-    (configs / "paper_study.yaml").write_text(STUDY_YAML)
-    bank = data / "trials" / "paper_study" / "bank.json"
+def inputs(tmp_path) -> StudyInputs:
+    """The study's side of an analysis: a bank on disk, one absent checkpoint."""
+    bank = tmp_path / "var" / "trials" / "paper_study" / "bank.json"
     bank.parent.mkdir(parents=True)
     bank.write_text(json.dumps(small_bank()))
-    return configs, data
+    config = {"exclusions": RULES.model_dump(), "models": {"highway": {"ours": "ours.pt"}}}
+    return StudyInputs(config=config, rules=RULES, bank=bank,
+                       checkpoints={"highway/ours": tmp_path / "var" / "ours.pt"})
 
 
-def test_report_from_csv(tmp_path, study_dirs):
-    configs, data = study_dirs
+def test_report_from_csv(tmp_path, inputs):
     frame = simulate_participants(small_bank(), "coarse", 12, 5, seed=3, show_progress=False)
     frame.loc[frame["participant_id"] == "sim-00001", "completed"] = False
     frame.to_csv(tmp_path / "export.csv", index=False)
     out = tmp_path / "report"
-    summary = run_analyze("paper_study", out, tmp_path / "export.csv", "", configs, data)
+    summary = run_analyze("paper_study", out, tmp_path / "export.csv", "", inputs)
     for name in ("report.html", "summary.json", "per_participant.csv", "meta.json",
                  "alignment_error.png", "alignment_error.svg", "fields_highway.png",
                  "fields_obstacle.svg"):
@@ -53,6 +49,8 @@ def test_report_from_csv(tmp_path, study_dirs):
     assert "data:image/png;base64," in html and "src='http" not in html
     meta = json.loads((out / "meta.json").read_text())
     assert len(meta["data_sha256"]) == 64 and meta["trial_bank_sha256"]
+    assert meta["checkpoint_sha256"] == {"highway/ours": None}
+    assert meta["study_config"] == inputs.config
 
     assert "start_kind" in pd.read_csv(tmp_path / "export.csv").columns
     kinds = pd.read_csv(out / "by_start_kind.csv")
@@ -82,19 +80,16 @@ def test_start_kind_table_with_one_participant_has_no_test():
     assert one["n"] == 1 and np.isnan(one["t"]) and np.isfinite(one["mean_diff"])
 
 
-def test_all_excluded_is_a_clear_error_and_waive_is_reported(tmp_path, study_dirs):
-    from app.configio import ConfigError
-
-    configs, data = study_dirs
+def test_all_excluded_is_a_clear_error_and_waive_is_reported(tmp_path, inputs):
     frame = simulate_participants(small_bank(), "random", 6, 5, seed=4, show_progress=False)
     frame["attention_passed"] = False
     frame.to_csv(tmp_path / "export.csv", index=False)
-    with pytest.raises(ConfigError, match="every participant was excluded"):
-        run_analyze("paper_study", tmp_path / "r1", tmp_path / "export.csv", "", configs, data)
-    summary = run_analyze("paper_study", tmp_path / "r2", tmp_path / "export.csv", "", configs,
-                          data, waive=("failed_attention_check",))
+    with pytest.raises(AnalysisError, match="every participant was excluded"):
+        run_analyze("paper_study", tmp_path / "r1", tmp_path / "export.csv", "", inputs)
+    summary = run_analyze("paper_study", tmp_path / "r2", tmp_path / "export.csv", "", inputs,
+                          waive=("failed_attention_check",))
     assert summary["waived_rules"] == ["failed_attention_check"]
     assert summary["exclusions"]["participants_kept"] == 6
-    with pytest.raises(ConfigError, match="waive: unknown"):
-        run_analyze("paper_study", tmp_path / "r3", tmp_path / "export.csv", "", configs, data,
+    with pytest.raises(AnalysisError, match="waive: unknown"):
+        run_analyze("paper_study", tmp_path / "r3", tmp_path / "export.csv", "", inputs,
                     waive=("attention",))
