@@ -34,6 +34,7 @@ from app.data.trajectory import ROBOT, TrajectorySet
 from app.data.windows import Windows, make_windows
 from app.fileio import sha256_file, write_json
 from app.learning.config import TrainConfig
+from app.learning.interaction_report import FigureInputs, write_figures, write_report
 
 MODELS = ("ours", "vae", "cv")
 TURN_NAMES = ["left", "straight", "right"]
@@ -350,9 +351,9 @@ def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Pat
                         vae=f"{per_seed[-1]['vae']['alignment_error']:.3f}")
     summary = summarise(exp, cfg, windows, scored, labels, per_seed, cv)
     out_dir = Path(out_dir)
-    from app.learning.interaction_report import write_figures, write_report
-
-    figures = write_figures(exp, cfg, per_seed, summary, windows, scored, out_dir)
+    inputs = FigureInputs(exp.scenario, exp.train.trajs, exp.lane_lines, windows, scored,
+                          cfg.field_grid, cfg.field_codes)
+    figures = write_figures(inputs, per_seed, summary, out_dir)
     write_report(out_dir, summary, per_seed, figures)
     write_json(out_dir / "meta.json", {
         "scenario": scenario, "layout": exp.layout, "config": cfg.model_dump(),
