@@ -89,7 +89,7 @@ def obstacle_segment(start, goal, steps: int = 6) -> list:
 
 
 def payload(scene: dict, segment: list, starts: list, trial_id: str = "t0") -> dict:
-    """A trial payload as the server sends it (only the keys predictors read)."""
+    """A trial payload as the server sends it (only the keys the observers read)."""
     return {"trial_id": trial_id, "world": scene["world"], "scene": scene, "dt_s": 0.5,
             "segment": {"positions": segment, "headings": [[0.0, 0.0]] * len(segment)},
             "start_states": [{"robot": s, "human": segment[-1][1], "robot_heading": 0.0,

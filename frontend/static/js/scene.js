@@ -3,7 +3,7 @@
 
 export const ROBOT_COLOR = "#0072B2";
 export const HUMAN_COLOR = "#E69F00";
-// Okabe-Ito, as in app/data/scene.py LABEL_COLORS.
+// Okabe-Ito, as in analysis/scene_plot.py LABEL_COLORS.
 export const LABEL_COLORS = ["#009E73", "#D55E00", "#CC79A7", "#56B4E9", "#F0E442", "#000000"];
 const MARGIN_PX = 24;
 
