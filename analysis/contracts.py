@@ -68,13 +68,19 @@ MODELS = ("ours", "vae", "cv", "policy")
 ZERO_SPEED_MPS = 1e-6
 
 
+def has_direction(v: np.ndarray, zero_speed: float = ZERO_SPEED_MPS) -> np.ndarray:
+    """Where action vectors v[..., 2] are longer than `zero_speed` (so have a direction)."""
+    v = np.asarray(v, dtype=np.float64)
+    return np.hypot(v[..., 0], v[..., 1]) > zero_speed
+
+
 def alignment_error(a: np.ndarray, b: np.ndarray, zero_speed: float = ZERO_SPEED_MPS) -> np.ndarray:
     """1 - cos(angle) between action vectors a[..., 2] and b[..., 2]; 1 where either is ~0."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     norm_a = np.hypot(a[..., 0], a[..., 1])
     norm_b = np.hypot(b[..., 0], b[..., 1])
-    defined = (norm_a > zero_speed) & (norm_b > zero_speed)
+    defined = has_direction(a, zero_speed) & has_direction(b, zero_speed)
     dot = a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         cos = np.where(defined, dot / (norm_a * norm_b), 0.0)
@@ -98,6 +104,10 @@ class ExclusionRules(BaseModel):
     incomplete: bool = True
     too_fast_trial_ms: float = Field(default=4000.0, ge=0)
     too_fast_max_fraction: float = Field(default=0.25, ge=0, le=1)
+
+    def too_fast(self, duration_ms):
+        """Where a trial's duration [ms] is under the limit (numbers, arrays or SQL columns)."""
+        return duration_ms < self.too_fast_trial_ms
 
 
 def too_fast_share_exceeds(n_fast, n_trials, rules: ExclusionRules) -> np.ndarray:

@@ -14,9 +14,9 @@ import pandas as pd
 from analysis.contracts import (
     MODELS,
     PILOT,
-    ZERO_SPEED_MPS,
     ExclusionRules,
     alignment_error,
+    has_direction,
     too_fast_share_exceeds,
 )
 
@@ -37,8 +37,7 @@ def zero_vector_counts(frame: pd.DataFrame, models: tuple[str, ...] = MODELS) ->
     """How many rows each model (and the human column) has an action shorter than ZERO_SPEED_MPS."""
     counts = {}
     for who in ("human", *models):
-        speed = np.hypot(frame[f"{who}_vx"].to_numpy(), frame[f"{who}_vy"].to_numpy())
-        counts[who] = int(np.sum(~(speed > ZERO_SPEED_MPS)))
+        counts[who] = int(np.sum(~has_direction(frame[[f"{who}_vx", f"{who}_vy"]].to_numpy())))
     return counts
 
 
@@ -97,13 +96,13 @@ def apply_exclusions(frame: pd.DataFrame, rules: ExclusionRules) -> Exclusions:
         excluded["incomplete"] = sorted(incomplete[incomplete].index)
     scored = frame[~frame["is_practice"] & ~frame["attention_check"]]
     trials = scored.drop_duplicates(["participant_id", "trial_id"])
-    fast_trial = trials["trial_duration_ms"] < rules.too_fast_trial_ms
+    fast_trial = rules.too_fast(trials["trial_duration_ms"])
     fast = fast_trial.groupby(trials["participant_id"]).agg(["sum", "count"])
     too_fast = too_fast_share_exceeds(fast["sum"], fast["count"], rules)
     excluded["too_fast"] = sorted(fast.index[too_fast])
     dropped_ids = set().union(*excluded.values())
     keep = scored[~scored["participant_id"].isin(dropped_ids)]
-    fast_rows = keep["trial_duration_ms"] < rules.too_fast_trial_ms
+    fast_rows = rules.too_fast(keep["trial_duration_ms"])
     fast_trials_dropped = keep[fast_rows].drop_duplicates(["participant_id", "trial_id"])
     return Exclusions(
         kept=keep[~fast_rows].reset_index(drop=True),

@@ -6,6 +6,7 @@ import pandas as pd
 from sqlalchemy import select
 from sqlmodel import Session
 
+from analysis.contracts import MODELS
 from app.study.balance import in_progress_cutoff
 from app.study.context import StudyContext
 from app.study.exports import predictions_frame
@@ -77,7 +78,7 @@ def _world_means(means: pd.DataFrame) -> dict:
     for world, group in means.groupby("world", sort=True):
         summary[world] = {"participants": int(len(group)), **{
             model: round(float(group[f"err_{model}"].mean()), 4)
-            for model in ("ours", "vae", "cv", "policy")}}
+            for model in MODELS}}
     return summary
 
 
