@@ -1,2 +1,1 @@
-"""Simulated participants: observer presets that click like people, and the in-process
-studies (power, instrument check) that run them on a trial bank."""
+"""Simulated participants: observers that click like people, and studies run on them in process."""

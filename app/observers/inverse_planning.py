@@ -1,4 +1,4 @@
-"""Simulated participants' predictions: what a bot clicks for one trial payload.
+"""Inverse-planning observers: what a simulated participant clicks for one trial payload.
 
 A trial payload is the `step` the server sends in a trial (app/study/API.md): scene,
 dt_s, example clips, segment positions, start states, steps_to_predict, min/max step
