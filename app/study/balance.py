@@ -142,7 +142,7 @@ def is_excluded(db: Session, config: StudyConfig, participant: Participant) -> b
     rules = config.exclusions
     if rules.failed_attention_check and participant.attention_failed > 0:
         return True
-    fast = func.sum(case((TrialResponse.duration_ms < rules.too_fast_trial_ms, 1), else_=0))
+    fast = func.sum(case((rules.too_fast(TrialResponse.duration_ms), 1), else_=0))
     n_fast, n = db.execute(select(fast, func.count()).where(
         TrialResponse.participant_id == participant.id, TrialResponse.is_practice.is_(False),
         TrialResponse.attention_check.is_(False))).one()
