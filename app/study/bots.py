@@ -33,6 +33,7 @@ import httpx
 import numpy as np
 
 from app.observers.inverse_planning import PRESETS, predict
+from app.study.plan import TRIAL_PHASES, Phase
 
 THINK_MEDIAN_S = 2.5
 MAX_STEPS = 200  # no study has this many phases; a bot that gets here is stuck
@@ -142,7 +143,7 @@ class Bot:
             state = await self.start()
             for _ in range(MAX_STEPS):
                 self.result.phases.append(state["phase"])
-                if state["phase"] == "done":
+                if state["phase"] == Phase.DONE:
                     self.result.completion_code = (state.get("step") or {}).get("completion_code")
                     break
                 state = await self.answer(state)
@@ -169,13 +170,13 @@ class Bot:
     async def answer(self, state: dict) -> dict:
         """Do what the current phase asks; returns the next state."""
         phase, base = state["phase"], f"/api/sessions/{self.token}"
-        if phase == "consent":
+        if phase == Phase.CONSENT:
             return await self.request("POST", f"{base}/consent", self.write(agree=True))
-        if phase == "instructions":
+        if phase == Phase.INSTRUCTIONS:
             return await self.request("POST", f"{base}/instructions", self.write())
-        if phase in ("practice", "trial"):
+        if phase in TRIAL_PHASES:
             return await self.predict(state["step"])
-        if phase == "survey":
+        if phase == Phase.SURVEY:
             answers = survey_answers(state.get("step") or {}, self.rng)
             return await self.request("POST", f"{base}/survey", self.write(answers=answers))
         raise BotError(f"unknown phase {phase!r}")

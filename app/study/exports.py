@@ -26,6 +26,7 @@ from analysis.exports import typed
 from analysis.load import normalise
 from app.study.balance import in_progress_cutoff
 from app.study.config import StudyConfig
+from app.study.plan import trial_steps
 from app.study.sessions import as_utc, session_status
 from app.study.tables import Event, Participant, PredictionRow, Submission, TrialResponse
 
@@ -143,7 +144,7 @@ def events_frame(db: Session, study_id: str) -> pd.DataFrame:
     """Telemetry events and undo/reset presses of every session, by session and client time."""
     sessions = _sessions(db, study_id)
     versions = _versions(sessions, _models(db, study_id))
-    bank_ids = {p.id: {s["ref"]: s["trial_id"] for s in p.plan if "ref" in s} for p in sessions}
+    bank_ids = {p.id: {step.ref: step.trial_id for _, step in trial_steps(p)} for p in sessions}
     rows = (_telemetry_rows(db, study_id, versions, bank_ids)
             + _history_rows(db, study_id, versions))
     frame = typed(pd.DataFrame(rows), EVENTS)
