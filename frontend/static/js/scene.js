@@ -11,7 +11,9 @@ const MARGIN_PX = 24;
 export function fitView(bounds, cssWidth, cssHeight, margin = MARGIN_PX) {
   const spanX = bounds.x_max_m - bounds.x_min_m;
   const spanY = bounds.y_max_m - bounds.y_min_m;
-  const scale = Math.min((cssWidth - 2 * margin) / spanX, (cssHeight - 2 * margin) / spanY);
+  // a box not laid out yet (hidden panel, zero width) must not give a negative scale: canvas
+  // calls reject negative radii, and the next resize redraws at the real size
+  const scale = Math.max(1e-3, Math.min((cssWidth - 2 * margin) / spanX, (cssHeight - 2 * margin) / spanY));
   const offsetX = (cssWidth - scale * spanX) / 2;
   const offsetY = (cssHeight - scale * spanY) / 2;
   return {
