@@ -81,11 +81,11 @@ def train(
     = False,
 ) -> None:
     """Train Ours (FSQ autoencoder) or the VAE; writes checkpoint.pt, metrics.json, loss.png."""
-    from app.learning.config import MODEL_KINDS, load_train_config
+    from app.learning.config import MODELS, load_train_config
     from app.learning.train import default_model_dir, train_world
 
-    if model not in MODEL_KINDS:
-        fail(f"--model: unknown model {model!r}; choose one of {', '.join(MODEL_KINDS)}")
+    if model not in MODELS:
+        fail(f"--model: unknown model {model!r}; choose one of {', '.join(MODELS)}")
     data_dir = get_settings().data_dir
     target = (out or default_model_dir(data_dir, world, model)) / "checkpoint.pt"
     if if_missing and target.exists():

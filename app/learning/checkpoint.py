@@ -180,7 +180,7 @@ class TrainedModel:
 
     def torch_module(self):
         """The torch network with these weights (for tests and further training)."""
-        from app.learning.train import build_model
+        from app.learning.models import build_model
 
         module = build_model(self.kind, self.model_args)
         module.load_state_dict(self._state_dict)

@@ -7,7 +7,7 @@ from pydantic import Field, model_validator
 from app.configio import StrictModel, load_yaml_model
 from app.settings import get_settings
 
-MODEL_KINDS = ("ours", "vae")
+MODELS = ("ours", "vae")
 
 
 class WorldSelection(StrictModel):
@@ -58,9 +58,9 @@ class TrainConfig(StrictModel):
             raise ValueError("val_fraction + test_fraction must leave at least 10% for training")
         return self
 
-    def latent_dim(self, kind: str) -> int:
-        """Latent size of `kind`: one channel per FSQ level entry (Ours), vae_latent_dim (VAE)."""
-        return len(self.levels) if kind == "ours" else self.vae_latent_dim
+    def latent_dim(self, model_name: str) -> int:
+        """Latent size of a model: one channel per FSQ level entry (Ours), vae_latent_dim (VAE)."""
+        return len(self.levels) if model_name == "ours" else self.vae_latent_dim
 
     def for_world(self, world: str) -> "TrainConfig":
         """The config training uses for `world`: selected[world] applied, `selected` emptied."""

@@ -40,13 +40,13 @@ from app.fileio import atomic_path, write_json
 from app.learning.checkpoint import model_from_payload, trajectory_hash
 from app.learning.config import TrainConfig, load_train_config
 from app.learning.metrics import code_usage, evaluate
+from app.learning.models import model_args
 from app.learning.networks import LatentActionModel
 from app.learning.train import (
     Prepared,
     SplitTensors,
     build_payload,
     fit_network,
-    model_args,
     one_thread,
     prepare,
 )

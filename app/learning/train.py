@@ -19,33 +19,10 @@ from app.learning.checkpoint import (
     save_checkpoint,
     trajectory_hash,
 )
-from app.learning.config import MODEL_KINDS, TrainConfig
+from app.learning.config import MODELS, TrainConfig
 from app.learning.metrics import code_usage, derived_labels, evaluate
+from app.learning.models import build_model, model_args
 from app.learning.networks import Batch, LatentActionModel, Normaliser
-from app.learning.ours import OursModel
-from app.learning.vae import VAEModel
-
-
-def build_model(kind: str, args: dict) -> LatentActionModel:
-    """Construct the torch network of `kind` from plain model args."""
-    common = dict(segment_len=args["segment_len"], n_actions=args["n_actions"],
-                  encoder_hidden=list(args["encoder_hidden"]),
-                  decoder_hidden=list(args["decoder_hidden"]))
-    if kind == "ours":
-        # checkpoints written before the option existed trained without noise
-        return OursModel(levels=list(args["levels"]),
-                         fsq_noise_fraction=float(args.get("fsq_noise_fraction", 0.0)), **common)
-    if kind == "vae":
-        return VAEModel(latent_dim=args["latent_dim"], beta_kl=args["beta_kl"], **common)
-    raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
-
-
-def model_args(cfg: TrainConfig, kind: str) -> dict:
-    """The architecture part of the config, stored in the checkpoint."""
-    return {"segment_len": cfg.segment_len, "n_actions": cfg.n_actions, "levels": cfg.levels,
-            "latent_dim": cfg.latent_dim(kind), "encoder_hidden": cfg.encoder_hidden,
-            "decoder_hidden": cfg.decoder_hidden, "beta_kl": cfg.beta_kl,
-            "fsq_noise_fraction": cfg.fsq_noise_fraction}
 
 
 @dataclass
@@ -263,8 +240,8 @@ def train_model(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, ou
     """Train one model; write out_dir/checkpoint.pt, metrics.json, loss.png; return the .pt.
 
     cfg.selected[trajs.world] (the values model selection chose) is applied on top of cfg."""
-    if kind not in MODEL_KINDS:
-        raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
+    if kind not in MODELS:
+        raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODELS)}")
     started = time.perf_counter()
     with one_thread():
         return _train(trajs, kind, seed, cfg.for_world(trajs.world), Path(out_dir), data_meta,

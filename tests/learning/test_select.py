@@ -9,6 +9,7 @@ import yaml
 from app.configio import ConfigError
 from app.learning.checkpoint import CheckpointError, load_model, save_checkpoint
 from app.learning.config import TrainConfig
+from app.learning.models import build_model, model_args
 from app.learning.select import (
     OursGrid,
     SelectionConfig,
@@ -21,7 +22,7 @@ from app.learning.select import (
     write_outputs,
     yaml_lines,
 )
-from app.learning.train import build_model, model_args, prepare, train_model
+from app.learning.train import prepare, train_model
 from tests.learning.synthetic import make_lane_trajs
 
 TINY = TrainConfig(max_epochs=2, patience_epochs=1, windows_per_trajectory=4,
