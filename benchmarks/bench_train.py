@@ -25,6 +25,7 @@ from app.data.trajectory import TrajectorySet
 from app.data.windows import make_windows, segment_features
 from app.learning.checkpoint import load_model, mlp_numpy
 from app.learning.config import load_train_config
+from app.learning.fsq import quantize
 from app.learning.train import train_model
 from app.settings import get_settings
 
@@ -39,11 +40,12 @@ def best_per_call(fn, number: int = 2000, repeat: int = 7) -> float:
 
 def bare_numpy_trial(model, x: np.ndarray, states_norm: np.ndarray):
     """The same weights with nothing around them: encoder, quantise/mean, decoder."""
+    levels = np.asarray(model.levels or [], dtype=np.float32)
+
     def run():
         z = mlp_numpy(x, model.encoder_layers)[:, : model.latent_dim]
         if model.kind == "ours":
-            half = (np.asarray(model.levels, np.float32) - 1) / 2
-            z = np.round(half * (np.tanh(z) + 1)) / half - 1
+            z = quantize(z, levels)
         return mlp_numpy(np.concatenate([np.repeat(z, len(states_norm), 0), states_norm], 1),
                          model.decoder_layers)
     return run

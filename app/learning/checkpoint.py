@@ -18,7 +18,7 @@ import numpy as np
 
 from app.data.windows import segment_features
 from app.fileio import atomic_path
-from app.learning.fsq import indices_to_codes_numpy
+from app.learning.fsq import codes_to_indices, indices_to_codes, mixed_radix_basis, quantize
 from app.learning.networks import Normaliser
 
 FORMAT = "tomstudy-model-v1"
@@ -103,10 +103,9 @@ class TrainedModel:
 
     def __post_init__(self) -> None:
         # per-call constants of the study server's fast path, computed once
-        levels = self.levels or [2] * self.latent_dim
-        self._levels_arr = np.asarray(levels, dtype=np.float32)
-        self._basis = np.cumprod([1] + levels[:-1]).astype(np.int64)
-        self._half = (self._levels_arr - 1) / 2
+        if self.levels:  # Ours: the quantiser's level set and code-index place values
+            self._levels_arr = np.asarray(self.levels, dtype=np.float32)
+            self._basis = np.asarray(mixed_radix_basis(self.levels), dtype=np.int64)
         # the decoder's first layer split into its latent rows and its state rows, so that
         # one z is applied to K states without tiling it
         first_w, first_b = self.decoder_layers[0]
@@ -136,8 +135,7 @@ class TrainedModel:
         x = self.norm.features(segment_features(segments, self.dt_s))
         out = mlp_numpy(x, self.encoder_layers)
         if self.kind == "ours":
-            k = np.round(self._half * (np.tanh(out) + 1))
-            return (2 * k / (self._levels_arr - 1) - 1).astype(np.float32)
+            return quantize(out, self._levels_arr)
         return out[:, : self.latent_dim].astype(np.float32)  # posterior mean
 
     def code_of(self, z: np.ndarray) -> int:
@@ -147,15 +145,14 @@ class TrainedModel:
     def codes_of(self, z: np.ndarray) -> np.ndarray:
         """Vectorised `code_of` for latents [B, d]."""
         if self.kind == "ours":
-            k = np.round((z + 1) * (self._levels_arr - 1) / 2).astype(np.int64)
-            return (k * self._basis).sum(axis=-1)
+            return codes_to_indices(z, self._levels_arr, self._basis)
         dists = ((z[:, None, :] - self.kmeans_centres[None]) ** 2).sum(-1)
         return dists.argmin(axis=1)
 
     def latent_of_code(self, code: int) -> np.ndarray:
         """The latent vector a code stands for (FSQ code vector or k-means centre)."""
         if self.kind == "ours":
-            return indices_to_codes_numpy(np.array([code]), np.asarray(self.levels))[0]
+            return indices_to_codes(np.array([code]), self._levels_arr, self._basis)[0]
         return self.kmeans_centres[code].astype(np.float32)
 
     def predict(self, z: np.ndarray, states: np.ndarray) -> np.ndarray:
