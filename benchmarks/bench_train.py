@@ -2,7 +2,7 @@
 
 Run: .venv/bin/python benchmarks/bench_train.py [--worlds highway obstacle] [--models ours vae]
 Needs var/data/<world>/trajectories.npz (`make data`). Prints:
-- wall time of `train_model` (default training.yaml) per model and world; target < 60 s
+- wall time of `train_and_save` (default training.yaml) per model and world; target < 60 s
   on 2000 trajectories (its CPU time and the load average are printed too: on a machine
   shared with other jobs, wall time overstates the cost);
 - one trial (encode one segment, predict n steps from 5 states) through `TrainedModel.trial`,
@@ -26,7 +26,7 @@ from app.data.windows import make_windows, segment_features
 from app.learning.checkpoint import load_model, mlp_numpy
 from app.learning.config import load_train_config
 from app.learning.fsq import quantize
-from app.learning.train import train_model
+from app.learning.train import train_and_save
 from app.settings import get_settings
 
 TRAIN_TARGET_S = 60.0
@@ -44,7 +44,7 @@ def bare_numpy_trial(model, x: np.ndarray, states_norm: np.ndarray):
 
     def run():
         z = mlp_numpy(x, model.encoder_layers)[:, : model.latent_dim]
-        if model.kind == "ours":
+        if model.name == "ours":
             z = quantize(z, levels)
         return mlp_numpy(np.concatenate([np.repeat(z, len(states_norm), 0), states_norm], 1),
                          model.decoder_layers)
@@ -93,14 +93,15 @@ def main() -> int:
             continue
         trajs = TrajectorySet.load(npz)
         with tempfile.TemporaryDirectory() as tmp:
-            for kind in args.models:
+            for model_name in args.models:
                 started, cpu_started = time.perf_counter(), time.process_time()
-                ckpt = train_model(trajs, kind, 0, cfg, Path(tmp) / kind, progress=False)
+                ckpt = train_and_save(trajs, model_name, 0, cfg, Path(tmp) / model_name,
+                                      progress=False)
                 wall = time.perf_counter() - started
                 cpu = time.process_time() - cpu_started
                 t = time_trial(ckpt, trajs)
                 ratio = t["api_us"] / t["bare_us"]
-                print(f"{world:9s} {kind:5s} train {wall:6.1f} s wall ({cpu:5.1f} s CPU) on "
+                print(f"{world:9s} {model_name:5s} train {wall:6.1f} s wall ({cpu:5.1f} s CPU) on "
                       f"{len(trajs)} trajectories (target < {TRAIN_TARGET_S:.0f} s, ratio "
                       f"{wall / TRAIN_TARGET_S:.2f}; load average {os.getloadavg()[0]:.1f}) | "
                       f"trial {t['api_us']:6.1f} us vs bare numpy {t['bare_us']:5.1f} us = "

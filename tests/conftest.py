@@ -77,7 +77,7 @@ def build_small_study(root: Path) -> SmallStudy:
     from app.configio import load_yaml_model
     from app.data.trajectory import TrajectorySet
     from app.learning.config import TrainConfig
-    from app.learning.train import train_model
+    from app.learning.train import train_and_save
     from app.study.config import StudyConfig
     from app.study.trial_builder import build_trials
     from app.worlds.simulate import simulate
@@ -91,7 +91,7 @@ def build_small_study(root: Path) -> SmallStudy:
         trajs = TrajectorySet.load(result.npz_path)
         for kind in ("ours", "vae"):
             out = data_dir / getattr(config.models[world], kind)
-            train_model(trajs, kind, 0, TrainConfig(**SMALL_TRAINING), out.parent,
+            train_and_save(trajs, kind, 0, TrainConfig(**SMALL_TRAINING), out.parent,
                         data_meta=result.meta, progress=False)
     build_trials(config, SMALL_STUDY, data_dir)
     return SmallStudy(data_dir, configs_dir)

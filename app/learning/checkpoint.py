@@ -81,7 +81,7 @@ def mlp_numpy(x: np.ndarray, layers: list[tuple[np.ndarray, np.ndarray]]) -> np.
 class TrainedModel:
     """A loaded checkpoint: numpy in, numpy out, for the study server, fields and metrics."""
 
-    kind: str
+    name: str
     world: str
     segment_len: int
     n_actions: int
@@ -134,7 +134,7 @@ class TrainedModel:
                              f"got {segments.shape}")
         x = self.norm.features(segment_features(segments, self.dt_s))
         out = mlp_numpy(x, self.encoder_layers)
-        if self.kind == "ours":
+        if self.name == "ours":
             return quantize(out, self._levels_arr)
         return out[:, : self.latent_dim].astype(np.float32)  # posterior mean
 
@@ -144,14 +144,14 @@ class TrainedModel:
 
     def codes_of(self, z: np.ndarray) -> np.ndarray:
         """Vectorised `code_of` for latents [B, d]."""
-        if self.kind == "ours":
+        if self.name == "ours":
             return codes_to_indices(z, self._levels_arr, self._basis)
         dists = ((z[:, None, :] - self.kmeans_centres[None]) ** 2).sum(-1)
         return dists.argmin(axis=1)
 
     def latent_of_code(self, code: int) -> np.ndarray:
         """The latent vector a code stands for (FSQ code vector or k-means centre)."""
-        if self.kind == "ours":
+        if self.name == "ours":
             return indices_to_codes(np.array([code]), self._levels_arr, self._basis)[0]
         return self.kmeans_centres[code].astype(np.float32)
 
@@ -179,7 +179,7 @@ class TrainedModel:
         """The torch network with these weights (for tests and further training)."""
         from app.learning.models import build_model
 
-        module = build_model(self.kind, self.model_args)
+        module = build_model(self.name, self.model_args)
         module.load_state_dict(self._state_dict)
         return module.eval()
 
@@ -230,7 +230,7 @@ def model_from_payload(payload: dict, path: Path | None = None) -> TrainedModel:
     state = payload["state_dict"]
     try:
         model = TrainedModel(
-            kind=payload["kind"], world=payload["world"], segment_len=int(args["segment_len"]),
+            name=payload["kind"], world=payload["world"], segment_len=int(args["segment_len"]),
             n_actions=int(args["n_actions"]), dt_s=float(payload["dt_s"]),
             content_hash=payload.get("content_hash", ""), latent_dim=int(args["latent_dim"]),
             levels=list(args["levels"]) if payload["kind"] == "ours" else None,
@@ -245,8 +245,8 @@ def model_from_payload(payload: dict, path: Path | None = None) -> TrainedModel:
         )
     except (KeyError, TypeError, ValueError) as err:
         raise CheckpointError(f"{path}: checkpoint content is inconsistent ({err!r})") from None
-    if model.kind not in ("ours", "vae"):
-        raise CheckpointError(f"{path}: unknown model kind {model.kind!r}")
+    if model.name not in ("ours", "vae"):
+        raise CheckpointError(f"{path}: unknown model kind {model.name!r}")
     expected_in = model.segment_len * 8
     if model.encoder_layers[0][0].shape[0] != expected_in:
         raise CheckpointError(f"{path}: encoder weights do not match segment_len")

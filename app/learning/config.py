@@ -43,7 +43,7 @@ class TrainConfig(StrictModel):
     test_fraction: float = Field(0.15, gt=0, lt=1)
     vae_clusters: int = Field(3, ge=1)
     min_code_share: float = Field(0.01, ge=0, lt=1)
-    # world name -> chosen values; train_model applies them on top of the keys above
+    # world name -> chosen values; train_and_save applies them on top of the keys above
     selected: dict[str, WorldSelection] = Field(default_factory=dict)
 
     @model_validator(mode="after")

@@ -280,7 +280,7 @@ def window_labels(windows: Windows, val: PairData) -> dict[str, np.ndarray]:
 def score_model(model, windows: Windows, scored: np.ndarray) -> dict:
     """Alignment errors [W] of the next action, displacement errors, codes."""
     from analysis.contracts import alignment_error
-    from app.learning.metrics import trajectory_errors
+    from app.learning.model_metrics import trajectory_errors
 
     z = model.encode_batch(windows.segment_positions)
     pred = model.predict_batch(z, windows.end_states)
@@ -293,7 +293,7 @@ def score_model(model, windows: Windows, scored: np.ndarray) -> dict:
 def score_constant_velocity(windows: Windows, scored: np.ndarray) -> dict:
     """The baseline: the last observed robot velocity, kept for all n steps."""
     from analysis.contracts import alignment_error
-    from app.learning.metrics import constant_velocity, trajectory_errors
+    from app.learning.model_metrics import constant_velocity, trajectory_errors
 
     pred = constant_velocity(windows)
     return {"errors": alignment_error(pred[:, 0], windows.pred_targets[:, 0]),
@@ -305,12 +305,12 @@ def run_seed(exp: Experiment, seed: int, train_cfg: TrainConfig, models_dir: Pat
              windows: Windows, scored: np.ndarray, labels: dict) -> dict:
     """Train Ours then the VAE (its k = Ours' used codes) with `seed`; score both on val."""
     from app.learning.checkpoint import load_model
-    from app.learning.metrics import agreement, code_usage
-    from app.learning.train import train_model
+    from app.learning.model_metrics import agreement, code_usage
+    from app.learning.train import train_and_save
 
     out = {"seed": seed}
     for kind in ("ours", "vae"):
-        ckpt = train_model(exp.train.trajs, kind, seed, train_cfg,
+        ckpt = train_and_save(exp.train.trajs, kind, seed, train_cfg,
                            models_dir / f"seed_{seed}" / kind,
                            data_meta={"scenario": exp.scenario, "layout": exp.layout,
                                       "inputs": exp.inputs}, progress=False)

@@ -39,7 +39,7 @@ from app.data.trajectory import TrajectorySet
 from app.fileio import atomic_path, write_json
 from app.learning.checkpoint import model_from_payload, trajectory_hash
 from app.learning.config import TrainConfig, load_train_config
-from app.learning.metrics import code_usage, evaluate
+from app.learning.model_metrics import code_usage, evaluate
 from app.learning.models import model_args
 from app.learning.networks import LatentActionModel
 from app.learning.train import (
@@ -94,7 +94,7 @@ def ours_rule(grid: OursGrid) -> str:
 
 
 def grid_cells(sel: SelectionConfig) -> list[tuple[str, dict]]:
-    """(kind, training-config values) of every cell, VAE first."""
+    """(model_name, training-config values) of every cell, VAE first."""
     vae = [("vae", {"beta_kl": beta, "vae_latent_dim": dim})
            for dim in sel.vae.latent_dim for beta in sel.vae.beta_kl]
     return vae + [("ours", {"levels": levels}) for levels in sel.ours.levels]
@@ -130,15 +130,15 @@ def cell_config(base: TrainConfig, values: dict) -> TrainConfig:
     return TrainConfig.model_validate({**base.model_dump(), **values, "selected": {}})
 
 
-def score_cell(kind: str, values: dict, base: TrainConfig, data: Prepared,
+def score_cell(model_name: str, values: dict, base: TrainConfig, data: Prepared,
                seed: int) -> tuple[dict, LatentActionModel]:
     """Train one cell on the train split and score it on validation; (row, model)."""
     started = time.perf_counter()
     cfg = cell_config(base, values)
-    model, _, history = fit_network(kind, seed, cfg, data, progress=False)
-    row = {"model": kind, "settings": values, **task_loss(model, data.val, cfg),
+    model, _, history = fit_network(model_name, seed, cfg, data, progress=False)
+    row = {"model": model_name, "settings": values, **task_loss(model, data.val, cfg),
            "epochs": len(history), "wall_s": round(time.perf_counter() - started, 1)}
-    if kind == "ours":
+    if model_name == "ours":
         row.update(val_code_usage(model, data.val, cfg.min_code_share))
     return row, model
 
@@ -185,9 +185,9 @@ def run_selection(trajs: TrajectorySet, base: TrainConfig, sel: SelectionConfig,
                             disable=not progress) as bar:
         data = prepare(trajs, base)
         rows, models = [], []
-        for kind, values in cells:
-            bar.set_postfix_str(f"{kind} {json.dumps(values)}")
-            row, model = score_cell(kind, values, base, data, sel.seed)
+        for model_name, values in cells:
+            bar.set_postfix_str(f"{model_name} {json.dumps(values)}")
+            row, model = score_cell(model_name, values, base, data, sel.seed)
             rows.append(row)
             models.append(model)
             bar.update()

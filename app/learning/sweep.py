@@ -22,7 +22,7 @@ from pathlib import Path
 
 from app.data.trajectory import TrajectorySet
 from app.learning.config import load_train_config
-from app.learning.train import train_model
+from app.learning.train import train_and_save
 from app.settings import get_settings
 
 SETTINGS = [
@@ -43,7 +43,7 @@ def sweep_row(trajs: TrajectorySet, overrides: dict, out_dir: Path) -> dict:
     """Train one setting and summarise its held-out metrics."""
     started = time.perf_counter()
     cfg = load_train_config(overrides={**overrides, "selected": {}})
-    ckpt = train_model(trajs, "ours", 0, cfg, out_dir, progress=False)
+    ckpt = train_and_save(trajs, "ours", 0, cfg, out_dir, progress=False)
     metrics = json.loads((ckpt.parent / "metrics.json").read_text())
     test = metrics["test"]
     return {"world": trajs.world, "settings": overrides,
@@ -61,7 +61,7 @@ def label_ceiling(trajs: TrajectorySet, overrides: dict | None = None) -> dict:
     from sklearn.ensemble import HistGradientBoostingClassifier
 
     from app.data.windows import segment_features
-    from app.learning.metrics import derived_labels
+    from app.learning.model_metrics import derived_labels
     from app.learning.train import prepare_windows
 
     windows = prepare_windows(trajs, load_train_config(overrides=overrides or {}))

@@ -20,7 +20,7 @@ from app.learning.checkpoint import (
     trajectory_hash,
 )
 from app.learning.config import MODELS, TrainConfig
-from app.learning.metrics import code_usage, derived_labels, evaluate
+from app.learning.model_metrics import code_usage, derived_labels, evaluate
 from app.learning.models import build_model, model_args
 from app.learning.networks import Batch, LatentActionModel, Normaliser
 
@@ -103,12 +103,13 @@ def one_thread():
         torch.set_num_threads(threads)
 
 
-def fit_network(kind: str, seed: int, cfg: TrainConfig, data: Prepared,
+def fit_network(model_name: str, seed: int, cfg: TrainConfig, data: Prepared,
                 progress: bool = True) -> tuple[LatentActionModel, dict, list[dict]]:
-    """Seed torch, build `kind` from cfg and fit it; returns (model in eval mode, args, history)."""
+    """Seed torch, build `model_name` from cfg and fit it; returns (model in eval mode, args,
+    history)."""
     torch.manual_seed(seed)
-    args = model_args(cfg, kind)
-    model = build_model(kind, args)
+    args = model_args(cfg, model_name)
+    model = build_model(model_name, args)
     return model, args, fit(model, data.train, data.val, cfg, seed, progress)
 
 
@@ -234,26 +235,26 @@ def _plot_losses(history: list[dict], path: Path, title: str) -> None:
     plt.close(fig)
 
 
-def train_model(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir: Path,
-                data_meta: dict | None = None, progress: bool = True,
-                vae_k: int | None = None) -> Path:
+def train_and_save(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig,
+                   out_dir: Path, data_meta: dict | None = None, progress: bool = True,
+                   vae_k: int | None = None) -> Path:
     """Train one model; write out_dir/checkpoint.pt, metrics.json, loss.png; return the .pt.
 
     cfg.selected[trajs.world] (the values model selection chose) is applied on top of cfg."""
-    if kind not in MODELS:
-        raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODELS)}")
+    if model_name not in MODELS:
+        raise ValueError(f"unknown model {model_name!r}; choose one of {', '.join(MODELS)}")
     started = time.perf_counter()
     with one_thread():
-        return _train(trajs, kind, seed, cfg.for_world(trajs.world), Path(out_dir), data_meta,
+        return _train(trajs, model_name, seed, cfg.for_world(trajs.world), Path(out_dir), data_meta,
                       progress, vae_k, started)
 
 
-def build_payload(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig,
+def build_payload(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig,
                   model: LatentActionModel, args: dict, data: Prepared,
                   centres: np.ndarray | None = None, data_meta: dict | None = None) -> dict:
     """The checkpoint dict of a fitted network (codes summarised on validation windows)."""
     payload = {
-        "kind": kind, "world": trajs.world, "dt_s": float(trajs.dt_s), "model_args": args,
+        "kind": model_name, "world": trajs.world, "dt_s": float(trajs.dt_s), "model_args": args,
         "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
         "norm": data.norm.to_dict(), "data_meta": _data_meta(trajs, data.windows, data_meta),
         "data_hash": trajectory_hash(trajs.positions, trajs.lengths, trajs.labels),
@@ -267,24 +268,24 @@ def build_payload(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig,
     return payload
 
 
-def _train(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir: Path,
+def _train(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig, out_dir: Path,
            data_meta: dict | None, progress: bool, vae_k: int | None, started: float) -> Path:
     data = prepare(trajs, cfg)
-    model, args, history = fit_network(kind, seed, cfg, data, progress)
+    model, args, history = fit_network(model_name, seed, cfg, data, progress)
     train_seconds = time.perf_counter() - started
 
     centres = None
-    if kind == "vae":
+    if model_name == "vae":
         k = vae_k or vae_cluster_count(out_dir, trajs.world, cfg)
         centres = kmeans_centres(_latents(model, data.val), k, seed)
-    payload = build_payload(trajs, kind, seed, cfg, model, args, data, centres, data_meta)
+    payload = build_payload(trajs, model_name, seed, cfg, model, args, data, centres, data_meta)
     ckpt_path = out_dir / "checkpoint.pt"
     content = save_checkpoint(ckpt_path, payload)
     loaded = load_model(ckpt_path)
     windows = data.windows
     test = evaluate(loaded, windows["test"], trajs.label_names, cfg.min_code_share)
     metrics = {
-        "kind": kind, "world": trajs.world, "seed": seed, "content_hash": content,
+        "kind": model_name, "world": trajs.world, "seed": seed, "content_hash": content,
         "train_wall_time_s": round(train_seconds, 2), "epochs_run": len(history),
         "best_val": min(h["val_total"] for h in history), "history": history,
         "n_windows": {k: len(w) for k, w in windows.items()},
@@ -292,7 +293,7 @@ def _train(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir
         "test": test, "train_config": cfg.model_dump(),
     }
     write_json(out_dir / "metrics.json", metrics)
-    _plot_losses(history, out_dir / "loss.png", f"{trajs.world} / {kind} (seed {seed})")
+    _plot_losses(history, out_dir / "loss.png", f"{trajs.world} / {model_name} (seed {seed})")
     return ckpt_path
 
 
@@ -309,12 +310,12 @@ def _data_meta(trajs: TrajectorySet, windows: dict[str, Windows], extra: dict | 
     return meta
 
 
-def default_model_dir(data_dir: Path, world: str, kind: str) -> Path:
-    """var/models/<world>/<kind>/."""
-    return Path(data_dir) / "models" / world / kind
+def default_model_dir(data_dir: Path, world: str, model_name: str) -> Path:
+    """var/models/<world>/<model_name>/."""
+    return Path(data_dir) / "models" / world / model_name
 
 
-def train_world(data_dir: Path, world: str, kind: str, seed: int, cfg: TrainConfig,
+def train_world(data_dir: Path, world: str, model_name: str, seed: int, cfg: TrainConfig,
                 out_dir: Path | None = None) -> Path:
     """Train on var/data/<world>/trajectories.npz; FileNotFoundError names the missing file."""
     npz = Path(data_dir) / "data" / world / "trajectories.npz"
@@ -323,5 +324,5 @@ def train_world(data_dir: Path, world: str, kind: str, seed: int, cfg: TrainConf
     meta_path = npz.with_name("meta.json")
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
     meta = {"trajectories_file": str(npz), "meta_json": meta}
-    out_dir = Path(out_dir) if out_dir else default_model_dir(data_dir, world, kind)
-    return train_model(TrajectorySet.load(npz), kind, seed, cfg, out_dir, meta)
+    out_dir = Path(out_dir) if out_dir else default_model_dir(data_dir, world, model_name)
+    return train_and_save(TrajectorySet.load(npz), model_name, seed, cfg, out_dir, meta)

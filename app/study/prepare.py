@@ -23,9 +23,9 @@ def prepare_study(settings: Settings, study_id: str, n_trajectories: int = 2000,
     data_dir = Path(settings.data_dir)
     for world in config.worlds:
         ensure_trajectories(data_dir, world, n_trajectories, seed, say)
-        for kind in ("ours", "vae"):  # ours first: the VAE's k-means k = codes Ours uses
-            ensure_checkpoint(data_dir, world, kind, data_dir / getattr(config.models[world], kind),
-                              seed, say)
+        for model_name in ("ours", "vae"):  # ours first: the VAE's k-means k = codes Ours uses
+            checkpoint = data_dir / getattr(config.models[world], model_name)
+            ensure_checkpoint(data_dir, world, model_name, checkpoint, seed, say)
     bank = bank_dir(data_dir, study_id) / BANK_FILE
     if bank_is_current(bank):
         say(f"{bank} is up to date; skipping build-trials")
@@ -41,8 +41,8 @@ def missing_inputs(settings: Settings, study_id: str) -> list[Path]:
     config = load_study_config(settings, study_id)
     data_dir = Path(settings.data_dir)
     needed = [bank_dir(data_dir, study_id) / BANK_FILE]
-    needed += [data_dir / getattr(config.models[w], kind)
-               for w in config.worlds for kind in ("ours", "vae")]
+    needed += [data_dir / getattr(config.models[w], model_name)
+               for w in config.worlds for model_name in ("ours", "vae")]
     return [path for path in needed if not path.is_file()]
 
 
@@ -58,7 +58,7 @@ def ensure_trajectories(data_dir: Path, world: str, n: int, seed: int, say) -> N
     simulate(world, n, seed, data_dir)
 
 
-def ensure_checkpoint(data_dir: Path, world: str, kind: str, checkpoint: Path, seed: int,
+def ensure_checkpoint(data_dir: Path, world: str, model_name: str, checkpoint: Path, seed: int,
                       say) -> None:
     """Train one model unless its checkpoint exists (written to checkpoint.parent)."""
     if checkpoint.is_file():
@@ -66,11 +66,11 @@ def ensure_checkpoint(data_dir: Path, world: str, kind: str, checkpoint: Path, s
         return
     from app.data.trajectory import TrajectorySet
     from app.learning.config import load_train_config
-    from app.learning.train import train_model
+    from app.learning.train import train_and_save
 
     npz_path, meta_path = output_paths(data_dir, world)
-    say(f"training {kind} on {world}")
-    written = train_model(TrajectorySet.load(npz_path), kind, seed, load_train_config(),
+    say(f"training {model_name} on {world}")
+    written = train_and_save(TrajectorySet.load(npz_path), model_name, seed, load_train_config(),
                           checkpoint.parent, data_meta=json.loads(meta_path.read_text()))
     if written != checkpoint:
         raise RuntimeError(f"training wrote {written}, the study config expects {checkpoint}")

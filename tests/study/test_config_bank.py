@@ -23,7 +23,7 @@ from app.study.config import StudyConfig, load_study_config
 from app.study.db import create_tables
 from app.study.deps import get_db
 from app.study.main import UnsafeSettings, create_app
-from app.study.predictor import BankMismatch, Predictor
+from app.study.model_answers import BankMismatch, ModelAnswers
 from app.study.prepare import bank_is_current, prepare_study
 from app.study.tables import Participant
 from app.study.trial_builder import NoStartStates, build_trials, take_turns
@@ -248,7 +248,7 @@ def test_predictor_refuses_a_bank_from_other_checkpoints(small_study, bank, tmp_
     out.write_text(json.dumps(raw))
     cfg = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml", StudyConfig)
     with pytest.raises(BankMismatch, match="vae answers differ"):
-        Predictor(cfg, TrialBank.load(data, small_study.study_id), data)
+        ModelAnswers(cfg, TrialBank.load(data, small_study.study_id), data)
 
 
 def test_prepare_skips_what_exists(small_study):
