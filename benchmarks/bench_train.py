@@ -3,6 +3,7 @@
 Run: .venv/bin/python benchmarks/bench_train.py [--worlds highway obstacle] [--models ours vae]
 Needs var/data/<world>/trajectories.npz (`make data`). Prints:
 - wall time of `train_and_save` (default training.yaml) per model and world; target < 60 s
+  (the VAE's k-means k: the codes of the Ours trained before it, else of var/models' Ours)
   on 2000 trajectories (its CPU time and the load average are printed too: on a machine
   shared with other jobs, wall time overstates the cost);
 - one trial (encode one segment, predict n steps from 5 states) through `TrainedModel.trial`,
@@ -26,7 +27,7 @@ from app.data.windows import make_windows, segment_features
 from app.learning.checkpoint import load_model, mlp_numpy
 from app.learning.config import load_train_config
 from app.learning.fsq import quantize
-from app.learning.train import train_and_save
+from app.learning.train import ours_code_count, train_and_save
 from app.settings import get_settings
 
 TRAIN_TARGET_S = 60.0
@@ -83,20 +84,24 @@ def main() -> int:
     parser.add_argument("--models", nargs="+", default=["ours", "vae"])
     args = parser.parse_args()
     cfg = load_train_config()
-    data_dir = get_settings().data_dir
+    layout = get_settings().layout
     failed = False
     for world in args.worlds:
-        npz = data_dir / "data" / world / "trajectories.npz"
+        npz = layout.trajectories(world)
         if not npz.is_file():
             print(f"{world}: {npz} missing; run `make data` first")
             failed = True
             continue
         trajs = TrajectorySet.load(npz)
+        ours_checkpoint = layout.checkpoint(world, "ours")  # until this run trains its own
         with tempfile.TemporaryDirectory() as tmp:
             for model_name in args.models:
+                clusters = ours_code_count(ours_checkpoint, world) if model_name == "vae" else None
                 started, cpu_started = time.perf_counter(), time.process_time()
                 ckpt = train_and_save(trajs, model_name, 0, cfg, Path(tmp) / model_name,
-                                      progress=False)
+                                      progress=False, vae_clusters=clusters)
+                if model_name == "ours":
+                    ours_checkpoint = ckpt
                 wall = time.perf_counter() - started
                 cpu = time.process_time() - cpu_started
                 t = time_trial(ckpt, trajs)

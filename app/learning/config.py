@@ -41,7 +41,6 @@ class TrainConfig(StrictModel):
     split_seed: int = Field(0, ge=0)
     val_fraction: float = Field(0.15, gt=0, lt=1)
     test_fraction: float = Field(0.15, gt=0, lt=1)
-    vae_clusters: int = Field(3, ge=1)
     min_code_share: float = Field(0.01, ge=0, lt=1)
     # world name -> chosen values; train_and_save applies them on top of the keys above
     selected: dict[str, WorldSelection] = Field(default_factory=dict)

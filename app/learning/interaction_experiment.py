@@ -308,13 +308,16 @@ def run_seed(exp: Experiment, seed: int, train_cfg: TrainConfig, models_dir: Pat
     from app.learning.model_metrics import agreement, code_usage
     from app.learning.train import train_and_save
 
-    out = {"seed": seed}
+    out, ours_codes = {"seed": seed}, None
     for kind in ("ours", "vae"):
         ckpt = train_and_save(exp.train.trajs, kind, seed, train_cfg,
-                           models_dir / f"seed_{seed}" / kind,
-                           data_meta={"scenario": exp.scenario, "layout": exp.layout,
-                                      "inputs": exp.inputs}, progress=False)
+                              models_dir / f"seed_{seed}" / kind,
+                              data_meta={"scenario": exp.scenario, "layout": exp.layout,
+                                         "inputs": exp.inputs}, progress=False,
+                              vae_clusters=ours_codes)
         model = load_model(ckpt)
+        if kind == "ours":
+            ours_codes = model.codes["n_codes_used"]  # the VAE's k-means k
         scores = score_model(model, windows, scored)
         codes = scores["codes"][scored]
         out[kind] = {
@@ -438,11 +441,13 @@ def run_command(data_dir: Path, scenario: str, data_root: Path, config: Path | N
                 train_config: Path | None = None, seeds: int | None = None,
                 max_epochs: int | None = None, out_dir: Path | None = None) -> dict:
     """What `tomstudy interaction` does: returns the summary; outputs under data_root."""
+    from app.layout import Layout
     from app.learning.config import load_train_config
 
     cfg = load_config(config, seeds)
     overrides = {"max_epochs": max_epochs} if max_epochs else None
     base = load_train_config(train_config, overrides)
-    out_dir = Path(out_dir) if out_dir else Path(data_root) / "reports" / "interaction" / scenario
-    models_dir = Path(data_root) / "models" / "interaction" / scenario
+    layout = Layout(data_root)
+    out_dir = Path(out_dir) if out_dir else layout.interaction_report(scenario)
+    models_dir = layout.interaction_models(scenario)
     return run_experiment(Path(data_dir), scenario, out_dir, models_dir, cfg, base)

@@ -51,7 +51,6 @@ from app.learning.train import (
     prepare,
 )
 from app.settings import get_settings
-from app.worlds.simulate import output_paths
 
 VAE_RULE = "lowest validation task loss (prediction + reconstruction MSE, no KL term)"
 
@@ -290,8 +289,8 @@ def main() -> None:
     parser.add_argument("--train-config", type=Path, default=None, help="training.yaml")
     parser.add_argument("--out", type=Path, default=None, help="default var/models/selection")
     args = parser.parse_args()
-    data_dir = get_settings().data_dir
-    npz, _ = output_paths(data_dir, args.world)
+    layout = get_settings().layout
+    npz = layout.trajectories(args.world)
     if not npz.is_file():
         _fail(f"{npz} not found; run `tomstudy simulate {args.world}` first")
     try:
@@ -300,7 +299,7 @@ def main() -> None:
         _fail(str(err))
     result = run_selection(TrajectorySet.load(npz), base, sel)
     result["data_file"] = str(npz)
-    out = (args.out or data_dir / "models" / "selection") / args.world
+    out = args.out / args.world if args.out else layout.selection_dir(args.world)
     write_outputs(result, out)
     print(markdown(result))
     print(f"wrote {out}/selection.json, selection.md, selected.yaml")

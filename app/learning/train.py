@@ -1,4 +1,8 @@
-"""Train Ours or the VAE on a TrajectorySet; write checkpoint.pt, metrics.json and loss.png."""
+"""Train Ours or the VAE on a TrajectorySet; write checkpoint.pt, metrics.json and loss.png.
+
+`train_world` is the pipeline's train stage: `tomstudy train` and `serve --prepare` both run
+it, so the same inputs give the same checkpoint whichever ran it.
+"""
 
 import json
 import time
@@ -13,6 +17,7 @@ from tqdm import tqdm
 from app.data.trajectory import ROBOT, TrajectorySet
 from app.data.windows import Windows, make_windows, segment_features, split_by_trajectory
 from app.fileio import atomic_path, write_json
+from app.layout import CHECKPOINT_FILE, Layout
 from app.learning.checkpoint import (
     load_model,
     model_from_payload,
@@ -168,14 +173,13 @@ def _latents(model, data: SplitTensors) -> np.ndarray:
         return model.infer_latent(data.x).numpy()
 
 
-def vae_cluster_count(out_dir: Path, world: str, cfg: TrainConfig) -> int:
-    """k for the VAE's k-means: codes Ours uses for this world if trained, else the config's."""
-    ours_metrics = Path(out_dir).parent / "ours" / "metrics.json"
-    if ours_metrics.is_file():
-        saved = json.loads(ours_metrics.read_text())
-        if saved.get("world") == world:
-            return int(saved["n_codes_used"])
-    return cfg.vae_clusters
+def ours_code_count(ours_checkpoint: Path, world: str) -> int:
+    """The VAE's k-means k: how many codes Ours uses on the same world (from its checkpoint)."""
+    if not Path(ours_checkpoint).is_file():
+        raise FileNotFoundError(f"{ours_checkpoint}: no Ours checkpoint. The VAE's k-means k is "
+                                f"the number of codes Ours uses, so train Ours first (`tomstudy "
+                                f"train --world {world} --model ours`, or pass --ours-checkpoint)")
+    return int(load_model(ours_checkpoint, world=world).codes["n_codes_used"])
 
 
 def kmeans_centres(latents: np.ndarray, k: int, seed: int) -> np.ndarray:
@@ -237,16 +241,20 @@ def _plot_losses(history: list[dict], path: Path, title: str) -> None:
 
 def train_and_save(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig,
                    out_dir: Path, data_meta: dict | None = None, progress: bool = True,
-                   vae_k: int | None = None) -> Path:
+                   vae_clusters: int | None = None) -> Path:
     """Train one model; write out_dir/checkpoint.pt, metrics.json, loss.png; return the .pt.
 
-    cfg.selected[trajs.world] (the values model selection chose) is applied on top of cfg."""
+    cfg.selected[trajs.world] (the values model selection chose) is applied on top of cfg.
+    The VAE needs `vae_clusters`, the k of its k-means (see `ours_code_count`)."""
     if model_name not in MODELS:
         raise ValueError(f"unknown model {model_name!r}; choose one of {', '.join(MODELS)}")
+    if model_name == "vae" and vae_clusters is None:
+        raise ValueError("training the VAE needs vae_clusters, the k of its k-means (the number "
+                         "of codes Ours uses on the same data: ours_code_count)")
     started = time.perf_counter()
     with one_thread():
-        return _train(trajs, model_name, seed, cfg.for_world(trajs.world), Path(out_dir), data_meta,
-                      progress, vae_k, started)
+        return _train(trajs, model_name, seed, cfg.for_world(trajs.world), Path(out_dir),
+                      data_meta, progress, vae_clusters, started)
 
 
 def build_payload(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig,
@@ -269,17 +277,17 @@ def build_payload(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainCo
 
 
 def _train(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig, out_dir: Path,
-           data_meta: dict | None, progress: bool, vae_k: int | None, started: float) -> Path:
+           data_meta: dict | None, progress: bool, vae_clusters: int | None,
+           started: float) -> Path:
     data = prepare(trajs, cfg)
     model, args, history = fit_network(model_name, seed, cfg, data, progress)
     train_seconds = time.perf_counter() - started
 
     centres = None
     if model_name == "vae":
-        k = vae_k or vae_cluster_count(out_dir, trajs.world, cfg)
-        centres = kmeans_centres(_latents(model, data.val), k, seed)
+        centres = kmeans_centres(_latents(model, data.val), vae_clusters, seed)
     payload = build_payload(trajs, model_name, seed, cfg, model, args, data, centres, data_meta)
-    ckpt_path = out_dir / "checkpoint.pt"
+    ckpt_path = out_dir / CHECKPOINT_FILE
     content = save_checkpoint(ckpt_path, payload)
     loaded = load_model(ckpt_path)
     windows = data.windows
@@ -310,19 +318,23 @@ def _data_meta(trajs: TrajectorySet, windows: dict[str, Windows], extra: dict | 
     return meta
 
 
-def default_model_dir(data_dir: Path, world: str, model_name: str) -> Path:
-    """var/models/<world>/<model_name>/."""
-    return Path(data_dir) / "models" / world / model_name
+def train_world(layout: Layout, world: str, model_name: str, seed: int, cfg: TrainConfig,
+                out_dir: Path | None = None, ours_checkpoint: Path | None = None,
+                progress: bool = True) -> Path:
+    """The train stage: one model on the world's simulated trajectories, its meta.json stored as
+    the checkpoint's data source (nothing that depends on where the data dir is).
 
-
-def train_world(data_dir: Path, world: str, model_name: str, seed: int, cfg: TrainConfig,
-                out_dir: Path | None = None) -> Path:
-    """Train on var/data/<world>/trajectories.npz; FileNotFoundError names the missing file."""
-    npz = Path(data_dir) / "data" / world / "trajectories.npz"
+    Writes into out_dir (default: the layout's model dir). The VAE's k-means k is read from
+    `ours_checkpoint` (default: the layout's Ours checkpoint of the world). FileNotFoundError
+    names a missing input."""
+    npz = layout.trajectories(world)
     if not npz.is_file():
         raise FileNotFoundError(f"{npz} not found; run `tomstudy simulate {world}` first")
-    meta_path = npz.with_name("meta.json")
+    meta_path = layout.trajectories_meta(world)
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-    meta = {"trajectories_file": str(npz), "meta_json": meta}
-    out_dir = Path(out_dir) if out_dir else default_model_dir(data_dir, world, model_name)
-    return train_and_save(TrajectorySet.load(npz), model_name, seed, cfg, out_dir, meta)
+    clusters = None
+    if model_name == "vae":
+        clusters = ours_code_count(ours_checkpoint or layout.checkpoint(world, "ours"), world)
+    out_dir = Path(out_dir) if out_dir else layout.model_dir(world, model_name)
+    return train_and_save(TrajectorySet.load(npz), model_name, seed, cfg, out_dir, meta,
+                          progress, clusters)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.layout import Layout
 from app.study.config import StudyConfig
 from app.study.trials import TrialBank
 
@@ -38,7 +39,8 @@ class ModelAnswers:
     def __init__(self, config: StudyConfig, bank: TrialBank, data_dir: Path) -> None:
         from app.learning.checkpoint import load_model
 
-        self.models = {world: {name: load_model(Path(data_dir) / getattr(paths, name),
+        layout = Layout(data_dir)
+        self.models = {world: {name: load_model(layout.resolve(getattr(paths, name)),
                                                 world=world)
                                for name in ("ours", "vae")}
                        for world, paths in config.models.items()

@@ -47,7 +47,8 @@ def test_vae_latent_size_is_independent_of_levels():
 def test_train_model_applies_only_its_worlds_selection(tiny_trajs, tmp_path):
     cfg = TrainConfig.model_validate({**TINY.model_dump(), "selected": {
         "lanes": {"vae_latent_dim": 4, "beta_kl": 0.5}, "elsewhere": {"vae_latent_dim": 3}}})
-    model = load_model(train_and_save(tiny_trajs, "vae", 0, cfg, tmp_path, progress=False, vae_k=2))
+    model = load_model(train_and_save(tiny_trajs, "vae", 0, cfg, tmp_path, progress=False,
+                                      vae_clusters=2))
     assert model.latent_dim == 4 and model.encode(tiny_trajs.positions[0, :6]).shape == (4,)
     assert model.train_config["beta_kl"] == 0.5 and model.train_config["selected"] == {}
     assert model.train_config["levels"] == [3, 3]  # no `levels` chosen: the default stays
