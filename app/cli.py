@@ -104,6 +104,32 @@ def train(
 
 
 @cli.command()
+def sweep(
+    world: Annotated[str, typer.Option(help="highway or obstacle (reads var/data/<world>/)")],
+    out: Annotated[Path | None, typer.Option(help="folder holding <world>/ (default "
+                                             "var/models/sweep)")] = None,
+    ceiling: Annotated[bool, typer.Option("--ceiling", help="only the supervised ceiling per "
+                                          "robot label")] = False,
+) -> None:
+    """Exploratory sweep of Ours' FSQ levels, segment length and loss weights (test labels:
+    never use it to choose a default; `python -m app.learning.select` does that)."""
+    import json
+
+    from app.data.trajectory import TrajectorySet
+    from app.learning.sweep import label_ceiling, run_sweep
+
+    layout = get_settings().layout
+    npz = layout.trajectories(world)
+    if not npz.is_file():
+        fail(f"{npz} not found; run `tomstudy simulate {world}` first")
+    trajs = TrajectorySet.load(npz)
+    if ceiling:
+        typer.echo(json.dumps({"world": world, "classifier_accuracy": label_ceiling(trajs)}))
+        return
+    run_sweep(trajs, out / world if out else layout.sweep_dir(world), say=typer.echo)
+
+
+@cli.command()
 def fields(
     checkpoint: Annotated[Path, typer.Option(help="a checkpoint.pt from `tomstudy train`")],
     out: Annotated[Path | None, typer.Option(help="output dir (default: <checkpoint dir>/fields)")]

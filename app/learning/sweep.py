@@ -1,6 +1,6 @@
 """A small documented sweep of FSQ levels, segment length and loss weights for one world.
 
-Run: .venv/bin/python -m app.learning.sweep --world highway [--out var/models/sweep]
+Run: tomstudy sweep --world highway [--out DIR]  (default out: var/models/sweep)
 Trains Ours (seed 0) once per setting on var/data/<world>/trajectories.npz and prints one
 row per setting: codes used, perplexity, held-out purity / NMI against the robot's labels
 (raw and derived; "majority" is the purity of putting every window in one cluster), MSE and
@@ -15,15 +15,14 @@ training.yaml plus the keys it names; training.yaml's per-world `selected:` valu
 function of the segment, hence any clustering's purity, can match that label.
 """
 
-import argparse
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from app.data.trajectory import TrajectorySet
 from app.learning.config import load_train_config
 from app.learning.train import train_and_save
-from app.settings import get_settings
 
 SETTINGS = [
     {"levels": [2, 2, 2]},
@@ -91,25 +90,10 @@ def format_row(row: dict) -> str:
             f"ppl {row['perplexity']:5.2f} mse {row['mse']:.3f} | purity/NMI: {scores}")
 
 
-def main() -> None:
-    """Parse arguments and run every setting of the sweep."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--world", required=True)
-    parser.add_argument("--out", type=Path, default=None)
-    parser.add_argument("--ceiling", action="store_true", help="supervised ceiling only")
-    args = parser.parse_args()
-    data_dir = get_settings().data_dir
-    trajs = TrajectorySet.load(data_dir / "data" / args.world / "trajectories.npz")
-    if args.ceiling:
-        print(json.dumps({"world": args.world, "classifier_accuracy": label_ceiling(trajs)}))
-        return
-    out = (args.out or data_dir / "models" / "sweep") / args.world
+def run_sweep(trajs: TrajectorySet, out_dir: Path, say: Callable[[str], None] = print) -> None:
+    """Train every setting into out_dir/setting<i>/, say one line each, append sweep.jsonl."""
     for i, overrides in enumerate(SETTINGS):
-        row = sweep_row(trajs, overrides, out / f"setting{i}")
-        print(format_row(row), flush=True)
-        with open(out / "sweep.jsonl", "a") as fh:
+        row = sweep_row(trajs, overrides, out_dir / f"setting{i}")
+        say(format_row(row))
+        with open(out_dir / "sweep.jsonl", "a") as fh:
             fh.write(json.dumps(row) + "\n")
-
-
-if __name__ == "__main__":
-    main()

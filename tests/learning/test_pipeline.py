@@ -1,5 +1,7 @@
-"""The train stage: `tomstudy train` and `serve --prepare` give identical checkpoints."""
+"""The pipeline's learning stages: `tomstudy train` and `serve --prepare` give identical
+checkpoints; `tomstudy sweep`."""
 
+import json
 import shutil
 
 import pytest
@@ -66,3 +68,14 @@ def test_the_vae_without_an_ours_checkpoint_is_a_clear_error(data_dir):
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert "no Ours checkpoint" in result.output and "--ours-checkpoint" in result.output
     assert not data_dir.checkpoint("lanes", "vae").exists()
+
+
+def test_sweep_is_a_tomstudy_command(data_dir, monkeypatch):
+    monkeypatch.setattr("app.learning.sweep.SETTINGS", [{"levels": [3, 3]}])
+    result = CliRunner().invoke(cli, ["sweep", "--world", "lanes"])
+    assert result.exit_code == 0, result.output
+    assert '{"levels": [3, 3]}' in result.output and "purity/NMI" in result.output
+    rows = (data_dir.sweep_dir("lanes") / "sweep.jsonl").read_text().splitlines()
+    assert [json.loads(row)["settings"] for row in rows] == [{"levels": [3, 3]}]
+    result = CliRunner().invoke(cli, ["sweep", "--world", "highway"])
+    assert result.exit_code == 2 and "run `tomstudy simulate highway` first" in result.output
