@@ -112,21 +112,33 @@ def sweep(
                                           "robot label")] = False,
 ) -> None:
     """Exploratory sweep of Ours' FSQ levels, segment length and loss weights (test labels:
-    never use it to choose a default; `python -m app.learning.select` does that)."""
-    import json
+    never use it to choose a default; `tomstudy select` does that)."""
+    from app.learning.sweep import sweep_world
 
-    from app.data.trajectory import TrajectorySet
-    from app.learning.sweep import label_ceiling, run_sweep
+    try:
+        sweep_world(get_settings().layout, world, out, ceiling, say=typer.echo)
+    except FileNotFoundError as err:
+        fail(str(err))
 
-    layout = get_settings().layout
-    npz = layout.trajectories(world)
-    if not npz.is_file():
-        fail(f"{npz} not found; run `tomstudy simulate {world}` first")
-    trajs = TrajectorySet.load(npz)
-    if ceiling:
-        typer.echo(json.dumps({"world": world, "classifier_accuracy": label_ceiling(trajs)}))
-        return
-    run_sweep(trajs, out / world if out else layout.sweep_dir(world), say=typer.echo)
+
+@cli.command("select")
+def select_cmd(
+    world: Annotated[str, typer.Option(help="highway or obstacle (reads var/data/<world>/)")],
+    config: Annotated[Path | None, typer.Option(help="selection YAML (default: "
+                                                "study_configs/model_selection.yaml)")] = None,
+    train_config: Annotated[Path | None, typer.Option(help="training YAML (default: "
+                                                      "study_configs/training.yaml)")] = None,
+    out: Annotated[Path | None, typer.Option(help="folder holding <world>/ (default "
+                                             "var/models/selection)")] = None,
+) -> None:
+    """Choose the VAE's beta_kl and latent size and Ours' FSQ levels on validation data only;
+    prints the `selected:` block for study_configs/training.yaml."""
+    from app.learning.select import select_world
+
+    try:
+        select_world(get_settings().layout, world, config, train_config, out, say=typer.echo)
+    except FileNotFoundError as err:
+        fail(str(err))
 
 
 @cli.command()

@@ -71,7 +71,7 @@ class Layout:
         return self.model_dir(world, model_name) / CHECKPOINT_FILE
 
     def selection_dir(self, world: str) -> Path:
-        """models/selection/<world>/: `python -m app.learning.select` outputs."""
+        """models/selection/<world>/: `tomstudy select` outputs."""
         return self.root / "models" / "selection" / world
 
     def sweep_dir(self, world: str) -> Path:

@@ -11,7 +11,7 @@ MODELS = ("ours", "vae")
 
 
 class WorldSelection(StrictModel):
-    """Values `python -m app.learning.select` chose for one world; unset keys keep the default."""
+    """Values `tomstudy select` chose for one world; unset keys keep the default."""
 
     levels: list[int] | None = Field(None, min_length=1)
     beta_kl: float | None = Field(None, ge=0)

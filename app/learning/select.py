@@ -1,6 +1,6 @@
 """Choose the VAE's beta_kl and latent size and Ours' FSQ levels on validation data only.
 
-Run: .venv/bin/python -m app.learning.select --world highway [--config FILE] [--out DIR]
+Run: tomstudy select --world highway [--config FILE] [--train-config FILE] [--out DIR]
 
 The grids and rules are in study_configs/model_selection.yaml, fixed before any run. Every
 grid cell trains on the train split of var/data/<world>/trajectories.npz (training.yaml's
@@ -23,10 +23,9 @@ var/models/selection) and prints the lines to paste under `selected:` in
 study_configs/training.yaml, which `tomstudy train` then applies to that world.
 """
 
-import argparse
 import json
-import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -34,9 +33,10 @@ import torch
 from pydantic import Field
 from tqdm import tqdm
 
-from app.configio import ConfigError, StrictModel, load_yaml_model
+from app.configio import StrictModel, load_yaml_model
 from app.data.trajectory import TrajectorySet
 from app.fileio import atomic_path, write_json
+from app.layout import Layout
 from app.learning.checkpoint import model_from_payload, trajectory_hash
 from app.learning.config import TrainConfig, load_train_config
 from app.learning.model_metrics import code_usage, evaluate
@@ -276,36 +276,22 @@ def write_outputs(result: dict, out_dir: Path) -> None:
             tmp.write_text(text)
 
 
-def _fail(message: str) -> None:
-    print(message, file=sys.stderr)
-    sys.exit(2)
+def select_world(layout: Layout, world: str, config: Path | None = None,
+                 train_config: Path | None = None, out: Path | None = None,
+                 say: Callable[[str], None] = print) -> Path:
+    """`tomstudy select`: run the selection for one world, write and say the results.
 
-
-def main() -> None:
-    """Parse arguments, run the selection for one world, write and print the results."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--world", required=True)
-    parser.add_argument("--config", type=Path, default=None, help="model_selection.yaml")
-    parser.add_argument("--train-config", type=Path, default=None, help="training.yaml")
-    parser.add_argument("--out", type=Path, default=None, help="default var/models/selection")
-    args = parser.parse_args()
-    layout = get_settings().layout
-    npz = layout.trajectories(args.world)
+    Writes into out/<world>/ (default: the layout's selection dir); returns that folder."""
+    npz = layout.trajectories(world)
     if not npz.is_file():
-        _fail(f"{npz} not found; run `tomstudy simulate {args.world}` first")
-    try:
-        sel, base = load_selection_config(args.config), load_train_config(args.train_config)
-    except ConfigError as err:
-        _fail(str(err))
+        raise FileNotFoundError(f"{npz} not found; run `tomstudy simulate {world}` first")
+    sel, base = load_selection_config(config), load_train_config(train_config)
     result = run_selection(TrajectorySet.load(npz), base, sel)
     result["data_file"] = str(npz)
-    out = args.out / args.world if args.out else layout.selection_dir(args.world)
-    write_outputs(result, out)
-    print(markdown(result))
-    print(f"wrote {out}/selection.json, selection.md, selected.yaml")
-    print("in study_configs/training.yaml, put this under `selected:` (replacing `{}`; keep "
-          "other worlds' entries):\n" + yaml_lines(result))
-
-
-if __name__ == "__main__":
-    main()
+    out_dir = out / world if out else layout.selection_dir(world)
+    write_outputs(result, out_dir)
+    say(markdown(result))
+    say(f"wrote {out_dir}/selection.json, selection.md, selected.yaml")
+    say("in study_configs/training.yaml, put this under `selected:` (replacing `{}`; keep "
+        "other worlds' entries):\n" + yaml_lines(result))
+    return out_dir

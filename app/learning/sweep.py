@@ -7,7 +7,7 @@ row per setting: codes used, perplexity, held-out purity / NMI against the robot
 wall time. Rows are also appended to <out>/<world>/sweep.jsonl.
 
 Exploratory only: it reports label metrics on the test split, so it must not choose a
-default. Defaults are chosen on validation data by `python -m app.learning.select`. A row is
+default. Defaults are chosen on validation data by `tomstudy select`. A row is
 training.yaml plus the keys it names; training.yaml's per-world `selected:` values are ignored.
 
 --ceiling instead prints, per robot label, the test accuracy of a supervised classifier
@@ -21,6 +21,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from app.data.trajectory import TrajectorySet
+from app.layout import Layout
 from app.learning.config import load_train_config
 from app.learning.train import train_and_save
 
@@ -90,8 +91,18 @@ def format_row(row: dict) -> str:
             f"ppl {row['perplexity']:5.2f} mse {row['mse']:.3f} | purity/NMI: {scores}")
 
 
-def run_sweep(trajs: TrajectorySet, out_dir: Path, say: Callable[[str], None] = print) -> None:
-    """Train every setting into out_dir/setting<i>/, say one line each, append sweep.jsonl."""
+def sweep_world(layout: Layout, world: str, out: Path | None = None, ceiling: bool = False,
+                say: Callable[[str], None] = print) -> None:
+    """`tomstudy sweep`: train every setting into out/<world>/setting<i>/ (default: the layout's
+    sweep dir), say one line each and append it to sweep.jsonl; or only the label ceiling."""
+    npz = layout.trajectories(world)
+    if not npz.is_file():
+        raise FileNotFoundError(f"{npz} not found; run `tomstudy simulate {world}` first")
+    trajs = TrajectorySet.load(npz)
+    if ceiling:
+        say(json.dumps({"world": world, "classifier_accuracy": label_ceiling(trajs)}))
+        return
+    out_dir = out / world if out else layout.sweep_dir(world)
     for i, overrides in enumerate(SETTINGS):
         row = sweep_row(trajs, overrides, out_dir / f"setting{i}")
         say(format_row(row))

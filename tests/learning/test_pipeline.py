@@ -1,5 +1,5 @@
 """The pipeline's learning stages: `tomstudy train` and `serve --prepare` give identical
-checkpoints; `tomstudy sweep`."""
+checkpoints; `tomstudy sweep` and `tomstudy select`."""
 
 import json
 import shutil
@@ -79,3 +79,13 @@ def test_sweep_is_a_tomstudy_command(data_dir, monkeypatch):
     assert [json.loads(row)["settings"] for row in rows] == [{"levels": [3, 3]}]
     result = CliRunner().invoke(cli, ["sweep", "--world", "highway"])
     assert result.exit_code == 2 and "run `tomstudy simulate highway` first" in result.output
+
+
+def test_select_is_a_tomstudy_command(data_dir, tmp_path):
+    grids = tmp_path / "selection.yaml"
+    grids.write_text("vae: {beta_kl: [0.01], latent_dim: [2]}\nours: {levels: [[2, 2]]}\n")
+    result = CliRunner().invoke(cli, ["select", "--world", "lanes", "--config", str(grids)])
+    assert result.exit_code == 0, result.output
+    assert "put this under `selected:`" in result.output and "  lanes:" in result.output
+    saved = json.loads((data_dir.selection_dir("lanes") / "selection.json").read_text())
+    assert saved["chosen"]["ours"] == {"levels": [2, 2]}
