@@ -7,6 +7,7 @@ normalisation, data meta and hash, train config, per-code summaries and a conten
 
 Inference runs in numpy on the same weights (no torch call per request): one study
 trial is a handful of small matrix products, where torch's per-call overhead dominates.
+Ours quantises there with app.learning.fsq's functions, the ones training runs on tensors.
 """
 
 import hashlib
