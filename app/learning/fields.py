@@ -58,8 +58,8 @@ def _title(model: TrainedModel, entry: dict) -> str:
     if name:
         top = entry["majority"][name]
         what = f"{name} = {top['label']} ({top['fraction']:.0%})"
-    kind = "code" if model.name == "ours" else "k-means cluster"
-    return f"{model.world} / {model.name}: {kind} {entry['code']}, {entry['share']:.0%} of " \
+    cluster = "code" if model.name == "ours" else "k-means cluster"
+    return f"{model.world} / {model.name}: {cluster} {entry['code']}, {entry['share']:.0%} of " \
            f"validation windows\nmostly {what}"
 
 
