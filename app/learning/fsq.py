@@ -1,4 +1,4 @@
-"""Finite scalar quantisation with the paper's symmetric level set.
+"""Finite scalar quantisation (the paper's level set) for training and the server's inference.
 
 Shape legend: B batch, d latent channels (= len(levels)).
 - z      [B, d] unbounded encoder output
