@@ -111,8 +111,9 @@ def sweep(
     ceiling: Annotated[bool, typer.Option("--ceiling", help="only the supervised ceiling per "
                                           "robot label")] = False,
 ) -> None:
-    """Exploratory sweep of Ours' FSQ levels, segment length and loss weights (test labels:
-    never use it to choose a default; `tomstudy select` does that)."""
+    """Exploratory sweep of Ours' FSQ levels, segment length and loss weights.
+
+    It scores on test labels, so it never chooses a default: `tomstudy select` does that."""
     from app.learning.sweep import sweep_world
 
     try:
@@ -131,8 +132,9 @@ def select_cmd(
     out: Annotated[Path | None, typer.Option(help="folder holding <world>/ (default "
                                              "var/models/selection)")] = None,
 ) -> None:
-    """Choose the VAE's beta_kl and latent size and Ours' FSQ levels on validation data only;
-    prints the `selected:` block for study_configs/training.yaml."""
+    """Choose the VAE's beta_kl and latent size and Ours' FSQ levels on validation data.
+
+    Prints the `selected:` block for study_configs/training.yaml."""
     from app.learning.select import select_world
 
     try:
