@@ -30,7 +30,7 @@ test: $(STAMP)
 	$(BIN)/pytest -q
 
 # Pilot end to end on a fresh database: serve, KIND bots (coarse|coarse_relative|precise|random),
-# analyze.
+# analyze. The database is app/layout.py's pilot_database(KIND) under the default data dir.
 KIND ?= coarse
 PILOT_PORT ?= 8765
 # random clickers fail the attention checks by design (as they should); their report waives

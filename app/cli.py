@@ -42,16 +42,15 @@ def simulate(
     if_missing: Annotated[bool, typer.Option("--if-missing", help="skip if data exists")] = False,
 ) -> None:
     """Simulate a world's two-agent trajectories into var/data/<world>/."""
-    from app.worlds.simulate import output_paths
     from app.worlds.simulate import simulate as run
 
-    data_dir = get_settings().data_dir
-    npz_path, meta_path = output_paths(data_dir, world)
-    if if_missing and npz_path.exists() and meta_path.exists():
+    layout = get_settings().layout
+    npz_path = layout.trajectories(world)
+    if if_missing and npz_path.exists() and layout.trajectories_meta(world).exists():
         typer.echo(f"{npz_path} exists; skipping")
         return
     try:
-        result = run(world, n, seed, data_dir, config, policy, workers)
+        result = run(world, n, seed, layout.root, config, policy, workers)
     except ConfigError as err:
         fail(str(err))
     meta = result.meta
@@ -64,7 +63,7 @@ def simulate(
 
         label = build_world(world, config, policy).robot_label
         png = plot_trajectories(TrajectorySet.load(result.npz_path),
-                                result.npz_path.with_name("trajectories.png"), label)
+                                layout.trajectories_plot(world), label)
         typer.echo(f"wrote {png}")
 
 
@@ -79,23 +78,69 @@ def train(
     = None,
     if_missing: Annotated[bool, typer.Option("--if-missing", help="skip if checkpoint exists")]
     = False,
+    ours_checkpoint: Annotated[Path | None, typer.Option(
+        help="VAE: the Ours checkpoint whose used codes set the k-means k "
+             "(default var/models/<world>/ours/checkpoint.pt)")] = None,
 ) -> None:
     """Train Ours (FSQ autoencoder) or the VAE; writes checkpoint.pt, metrics.json, loss.png."""
-    from app.learning.config import MODEL_KINDS, load_train_config
-    from app.learning.train import default_model_dir, train_world
+    from app.layout import CHECKPOINT_FILE
+    from app.learning.checkpoint import CheckpointError
+    from app.learning.config import MODELS, load_train_config
+    from app.learning.train import train_world
 
-    if model not in MODEL_KINDS:
-        fail(f"--model: unknown model {model!r}; choose one of {', '.join(MODEL_KINDS)}")
-    data_dir = get_settings().data_dir
-    target = (out or default_model_dir(data_dir, world, model)) / "checkpoint.pt"
+    if model not in MODELS:
+        fail(f"--model: unknown model {model!r}; choose one of {', '.join(MODELS)}")
+    layout = get_settings().layout
+    target = (out or layout.model_dir(world, model)) / CHECKPOINT_FILE
     if if_missing and target.exists():
         typer.echo(f"{target} exists; skipping")
         return
     try:
-        path = train_world(data_dir, world, model, seed, load_train_config(config), out)
-    except FileNotFoundError as err:
+        path = train_world(layout, world, model, seed, load_train_config(config), out,
+                           ours_checkpoint)
+    except (FileNotFoundError, CheckpointError) as err:
         fail(str(err))
     typer.echo(f"wrote {path}")
+
+
+@cli.command()
+def sweep(
+    world: Annotated[str, typer.Option(help="highway or obstacle (reads var/data/<world>/)")],
+    out: Annotated[Path | None, typer.Option(help="folder holding <world>/ (default "
+                                             "var/models/sweep)")] = None,
+    ceiling: Annotated[bool, typer.Option("--ceiling", help="only the supervised ceiling per "
+                                          "robot label")] = False,
+) -> None:
+    """Exploratory sweep of Ours' FSQ levels, segment length and loss weights.
+
+    It scores on test labels, so it never chooses a default: `tomstudy select` does that."""
+    from app.learning.sweep import sweep_world
+
+    try:
+        sweep_world(get_settings().layout, world, out, ceiling, say=typer.echo)
+    except FileNotFoundError as err:
+        fail(str(err))
+
+
+@cli.command("select")
+def select_cmd(
+    world: Annotated[str, typer.Option(help="highway or obstacle (reads var/data/<world>/)")],
+    config: Annotated[Path | None, typer.Option(help="selection YAML (default: "
+                                                "study_configs/model_selection.yaml)")] = None,
+    train_config: Annotated[Path | None, typer.Option(help="training YAML (default: "
+                                                      "study_configs/training.yaml)")] = None,
+    out: Annotated[Path | None, typer.Option(help="folder holding <world>/ (default "
+                                             "var/models/selection)")] = None,
+) -> None:
+    """Choose the VAE's beta_kl and latent size and Ours' FSQ levels on validation data.
+
+    Prints the `selected:` block for study_configs/training.yaml."""
+    from app.learning.select import select_world
+
+    try:
+        select_world(get_settings().layout, world, config, train_config, out, say=typer.echo)
+    except FileNotFoundError as err:
+        fail(str(err))
 
 
 @cli.command()
@@ -132,7 +177,7 @@ def pilot(
 
     if preset not in PRESETS:
         fail(f"kind: unknown bot kind {preset!r}; choose one of {', '.join(PRESETS)}")
-    bank = bank or get_settings().data_dir / "trials" / study / "bank.json"
+    bank = bank or get_settings().layout.bank(study)
     if preset == "precise" and not bank.is_file():
         fail(f"bank: {bank} not found (precise bots read the policy's moves from it)")
     failed = run_pilot(url, study, preset, n, concurrency, seed, bank)
@@ -157,7 +202,7 @@ def analyze(
     if csv is not None and not csv.is_file():
         fail(f"csv: {csv} not found")
     settings = get_settings()
-    out = out or settings.data_dir / "reports" / study
+    out = out or settings.layout.report_dir(study)
     try:
         run_analyze(study, out, csv, database_url or settings.resolved_database_url(),
                     analysis_inputs(study), tuple(waive or ()))
@@ -169,15 +214,14 @@ def analysis_inputs(study: str) -> "StudyInputs":
     """What `analyze` takes from the study config, as plain values and paths."""
     from analysis.report import StudyInputs
     from app.study.config import load_study_config
-    from app.study.trials import BANK_FILE, bank_dir
 
     settings = get_settings()
     config = load_study_config(settings, study)
-    checkpoints = {f"{world}/{model}": settings.data_dir / path
+    checkpoints = {f"{world}/{model}": settings.layout.resolve(path)
                    for world, paths in config.models.items()
                    for model, path in paths.model_dump().items()}
     return StudyInputs(config=config.model_dump(mode="json"), rules=config.exclusions,
-                       checkpoints=checkpoints, bank=bank_dir(settings.data_dir, study) / BANK_FILE)
+                       checkpoints=checkpoints, bank=settings.layout.bank(study))
 
 
 @cli.command()
@@ -200,7 +244,7 @@ def power(
         fail(f"kind: unknown bot kind {preset!r}; choose one of {', '.join(PRESETS)}")
     settings = get_settings()
     bank, observers, trials = simulation_inputs(study, None)
-    out = out or settings.data_dir / "reports" / f"power-{study}-{preset}"
+    out = out or settings.layout.power_report(study, preset)
     summary = run_power(bank, preset, trials, out, n_max, pool, reps, alpha, seed, observers)
     for world, needed in summary["n_for_power_0.8"].items():
         typer.echo(f"{world}: d_z = {summary['d_z'][world]:.3f}, n for power 0.8 = {needed}")
@@ -212,10 +256,9 @@ def simulation_inputs(study: str, observers: Path | None
     """(bank path, observers config, trials per world) for simulated participants of `study`."""
     from app.observers.config import default_observers, load_observers
     from app.study.config import load_study_config
-    from app.study.trials import BANK_FILE, bank_dir
 
     settings = get_settings()
-    bank = bank_dir(settings.data_dir, study) / BANK_FILE
+    bank = settings.layout.bank(study)
     if not bank.is_file():
         fail(f"bank: {bank} not found; run `tomstudy build-trials --study {study}`")
     try:
@@ -262,7 +305,7 @@ def instrument(
     from app.observers.simulated_study import run_instrument
 
     bank, config, trials = simulation_inputs(study, observers)
-    out = out or get_settings().data_dir / "reports" / f"instrument-{study}"
+    out = out or get_settings().layout.instrument_report(study)
     summary = run_instrument(bank, trials, out, n, seed, alpha, config)
     typer.echo(f"{'world':<10}{'reading':<10}{'coarse':>9}{'precise':>9}{'t':>8}{'p':>10}  result")
     for row in summary["rows"]:
@@ -560,7 +603,7 @@ def interaction(
                               seeds, max_epochs)
     except (TrackFileError, InteractionError, MapError, ValueError) as err:
         fail(str(err))
-    out = get_settings().data_dir / "reports" / "interaction" / scenario
+    out = get_settings().layout.interaction_report(scenario)
     typer.echo(verdict(summary))
     typer.echo(f"wrote {out / 'report.html'} and {out / 'summary.json'}")
 

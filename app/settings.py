@@ -7,6 +7,8 @@ from pathlib import Path
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from app.layout import DEFAULT_DATA_DIR, Layout
+
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_ADMIN_TOKEN = "change-me-researcher-token"
 
@@ -16,7 +18,7 @@ class Settings(BaseSettings):
 
     model_config = SettingsConfigDict(env_prefix="TOMSTUDY_", extra="ignore")
 
-    data_dir: Path = Field(default=REPO_ROOT / "var")
+    data_dir: Path = Field(default=DEFAULT_DATA_DIR)
     configs_dir: Path = Field(default=REPO_ROOT / "study_configs")
     database_url: str = Field(default="", validation_alias="DATABASE_URL")
     admin_token: str = DEFAULT_ADMIN_TOKEN
@@ -29,7 +31,12 @@ class Settings(BaseSettings):
 
     def resolved_database_url(self) -> str:
         """The configured URL, or SQLite under the data dir."""
-        return self.database_url or f"sqlite:///{self.data_dir / 'study.db'}"
+        return self.database_url or f"sqlite:///{self.layout.study_database()}"
+
+    @property
+    def layout(self) -> Layout:
+        """Every generated path under the data dir."""
+        return Layout(self.data_dir)
 
     def for_host(self, host: str) -> "Settings":
         """These settings for a server bound to `host`: production unless `host` is loopback."""

@@ -22,7 +22,7 @@ from app.learning.interaction_experiment import (
     load_experiment,
     run_command,
 )
-from app.learning.train import train_model
+from app.learning.train import train_and_save
 
 TARGET_S = 120.0
 
@@ -40,7 +40,7 @@ def main() -> None:
         exp = load_experiment(root / "data", args.scenario, cfg)
         train_cfg = experiment_train_config(load_train_config(), cfg)
         wall, cpu = time.perf_counter(), time.process_time()
-        train_model(exp.train.trajs, "ours", 0, train_cfg, root / "baseline", progress=False)
+        train_and_save(exp.train.trajs, "ours", 0, train_cfg, root / "baseline", progress=False)
         base_wall, base_cpu = time.perf_counter() - wall, time.process_time() - cpu
         wall, cpu = time.perf_counter(), time.process_time()
         summary = run_command(root / "data", args.scenario, root / "var")

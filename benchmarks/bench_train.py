@@ -2,7 +2,8 @@
 
 Run: .venv/bin/python benchmarks/bench_train.py [--worlds highway obstacle] [--models ours vae]
 Needs var/data/<world>/trajectories.npz (`make data`). Prints:
-- wall time of `train_model` (default training.yaml) per model and world; target < 60 s
+- wall time of `train_and_save` (default training.yaml) per model and world; target < 60 s
+  (the VAE's k-means k: the codes of the Ours trained before it, else of var/models' Ours)
   on 2000 trajectories (its CPU time and the load average are printed too: on a machine
   shared with other jobs, wall time overstates the cost);
 - one trial (encode one segment, predict n steps from 5 states) through `TrainedModel.trial`,
@@ -25,7 +26,8 @@ from app.data.trajectory import TrajectorySet
 from app.data.windows import make_windows, segment_features
 from app.learning.checkpoint import load_model, mlp_numpy
 from app.learning.config import load_train_config
-from app.learning.train import train_model
+from app.learning.fsq import quantize
+from app.learning.train import ours_code_count, train_and_save
 from app.settings import get_settings
 
 TRAIN_TARGET_S = 60.0
@@ -39,11 +41,12 @@ def best_per_call(fn, number: int = 2000, repeat: int = 7) -> float:
 
 def bare_numpy_trial(model, x: np.ndarray, states_norm: np.ndarray):
     """The same weights with nothing around them: encoder, quantise/mean, decoder."""
+    levels = np.asarray(model.levels or [], dtype=np.float32)
+
     def run():
         z = mlp_numpy(x, model.encoder_layers)[:, : model.latent_dim]
-        if model.kind == "ours":
-            half = (np.asarray(model.levels, np.float32) - 1) / 2
-            z = np.round(half * (np.tanh(z) + 1)) / half - 1
+        if model.name == "ours":
+            z = quantize(z, levels)
         return mlp_numpy(np.concatenate([np.repeat(z, len(states_norm), 0), states_norm], 1),
                          model.decoder_layers)
     return run
@@ -81,24 +84,29 @@ def main() -> int:
     parser.add_argument("--models", nargs="+", default=["ours", "vae"])
     args = parser.parse_args()
     cfg = load_train_config()
-    data_dir = get_settings().data_dir
+    layout = get_settings().layout
     failed = False
     for world in args.worlds:
-        npz = data_dir / "data" / world / "trajectories.npz"
+        npz = layout.trajectories(world)
         if not npz.is_file():
             print(f"{world}: {npz} missing; run `make data` first")
             failed = True
             continue
         trajs = TrajectorySet.load(npz)
+        ours_checkpoint = layout.checkpoint(world, "ours")  # until this run trains its own
         with tempfile.TemporaryDirectory() as tmp:
-            for kind in args.models:
+            for model_name in args.models:
+                clusters = ours_code_count(ours_checkpoint, world) if model_name == "vae" else None
                 started, cpu_started = time.perf_counter(), time.process_time()
-                ckpt = train_model(trajs, kind, 0, cfg, Path(tmp) / kind, progress=False)
+                ckpt = train_and_save(trajs, model_name, 0, cfg, Path(tmp) / model_name,
+                                      progress=False, vae_clusters=clusters)
+                if model_name == "ours":
+                    ours_checkpoint = ckpt
                 wall = time.perf_counter() - started
                 cpu = time.process_time() - cpu_started
                 t = time_trial(ckpt, trajs)
                 ratio = t["api_us"] / t["bare_us"]
-                print(f"{world:9s} {kind:5s} train {wall:6.1f} s wall ({cpu:5.1f} s CPU) on "
+                print(f"{world:9s} {model_name:5s} train {wall:6.1f} s wall ({cpu:5.1f} s CPU) on "
                       f"{len(trajs)} trajectories (target < {TRAIN_TARGET_S:.0f} s, ratio "
                       f"{wall / TRAIN_TARGET_S:.2f}; load average {os.getloadavg()[0]:.1f}) | "
                       f"trial {t['api_us']:6.1f} us vs bare numpy {t['bare_us']:5.1f} us = "

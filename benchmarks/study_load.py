@@ -34,8 +34,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from app.layout import Layout  # noqa: E402
 from app.study.bots import survey_answers  # noqa: E402
-from app.study.trials import BANK_FILE, bank_dir  # noqa: E402
 from benchmarks._rawhttp import RawClient  # noqa: E402
 from tests.conftest import (  # noqa: E402
     REPO,
@@ -154,7 +154,7 @@ async def run_load(port: int, study_id: str, participants: int, study_param: str
 def choose_study(which: str, data_dir: Path) -> SmallStudy:
     """The paper's study if its bank is built in `data_dir` (or asked for), else the small one."""
     paper = SmallStudy(data_dir, REPO / "study_configs", "paper_study")
-    has_paper = (bank_dir(data_dir, "paper_study") / BANK_FILE).is_file()
+    has_paper = Layout(data_dir).bank("paper_study").is_file()
     if which == "paper" and not has_paper:
         sys.exit(f"no paper_study trial bank in {data_dir} (tomstudy serve --prepare builds it)")
     if which == "paper" or (which == "auto" and has_paper):

@@ -75,24 +75,25 @@ def write_small_configs(configs_dir: Path) -> None:
 def build_small_study(root: Path) -> SmallStudy:
     """Simulate both worlds, train both models per world for 2 epochs, build the bank."""
     from app.configio import load_yaml_model
-    from app.data.trajectory import TrajectorySet
+    from app.layout import Layout
     from app.learning.config import TrainConfig
-    from app.learning.train import train_model
+    from app.learning.train import train_world
     from app.study.config import StudyConfig
     from app.study.trial_builder import build_trials
     from app.worlds.simulate import simulate
 
     data_dir, configs_dir = root / "var", root / "configs"
+    layout = Layout(data_dir)
     write_small_configs(configs_dir)
     config = load_yaml_model(configs_dir / f"{SMALL_STUDY}.yaml", StudyConfig)
     for world in config.worlds:
-        result = simulate(world, SMALL_TRAJECTORIES, 0, data_dir,
-                          configs_dir / "worlds" / f"{world}.yaml", workers=2)
-        trajs = TrajectorySet.load(result.npz_path)
-        for kind in ("ours", "vae"):
-            out = data_dir / getattr(config.models[world], kind)
-            train_model(trajs, kind, 0, TrainConfig(**SMALL_TRAINING), out.parent,
-                        data_meta=result.meta, progress=False)
+        simulate(world, SMALL_TRAJECTORIES, 0, data_dir, configs_dir / "worlds" / f"{world}.yaml",
+                 workers=2)
+        checkpoints = {name: layout.resolve(getattr(config.models[world], name))
+                       for name in ("ours", "vae")}
+        for name, checkpoint in checkpoints.items():
+            train_world(layout, world, name, 0, TrainConfig(**SMALL_TRAINING), checkpoint.parent,
+                        ours_checkpoint=checkpoints["ours"], progress=False)
     build_trials(config, SMALL_STUDY, data_dir)
     return SmallStudy(data_dir, configs_dir)
 

@@ -7,6 +7,7 @@ normalisation, data meta and hash, train config, per-code summaries and a conten
 
 Inference runs in numpy on the same weights (no torch call per request): one study
 trial is a handful of small matrix products, where torch's per-call overhead dominates.
+Ours quantises there with app.learning.fsq's functions, the ones training runs on tensors.
 """
 
 import hashlib
@@ -18,7 +19,7 @@ import numpy as np
 
 from app.data.windows import segment_features
 from app.fileio import atomic_path
-from app.learning.fsq import indices_to_codes_numpy
+from app.learning.fsq import codes_to_indices, indices_to_codes, mixed_radix_basis, quantize
 from app.learning.networks import Normaliser
 
 FORMAT = "tomstudy-model-v1"
@@ -81,7 +82,7 @@ def mlp_numpy(x: np.ndarray, layers: list[tuple[np.ndarray, np.ndarray]]) -> np.
 class TrainedModel:
     """A loaded checkpoint: numpy in, numpy out, for the study server, fields and metrics."""
 
-    kind: str
+    name: str
     world: str
     segment_len: int
     n_actions: int
@@ -103,10 +104,9 @@ class TrainedModel:
 
     def __post_init__(self) -> None:
         # per-call constants of the study server's fast path, computed once
-        levels = self.levels or [2] * self.latent_dim
-        self._levels_arr = np.asarray(levels, dtype=np.float32)
-        self._basis = np.cumprod([1] + levels[:-1]).astype(np.int64)
-        self._half = (self._levels_arr - 1) / 2
+        if self.levels:  # Ours: the quantiser's level set and code-index place values
+            self._levels_arr = np.asarray(self.levels, dtype=np.float32)
+            self._basis = np.asarray(mixed_radix_basis(self.levels), dtype=np.int64)
         # the decoder's first layer split into its latent rows and its state rows, so that
         # one z is applied to K states without tiling it
         first_w, first_b = self.decoder_layers[0]
@@ -135,9 +135,8 @@ class TrainedModel:
                              f"got {segments.shape}")
         x = self.norm.features(segment_features(segments, self.dt_s))
         out = mlp_numpy(x, self.encoder_layers)
-        if self.kind == "ours":
-            k = np.round(self._half * (np.tanh(out) + 1))
-            return (2 * k / (self._levels_arr - 1) - 1).astype(np.float32)
+        if self.name == "ours":
+            return quantize(out, self._levels_arr)
         return out[:, : self.latent_dim].astype(np.float32)  # posterior mean
 
     def code_of(self, z: np.ndarray) -> int:
@@ -146,16 +145,15 @@ class TrainedModel:
 
     def codes_of(self, z: np.ndarray) -> np.ndarray:
         """Vectorised `code_of` for latents [B, d]."""
-        if self.kind == "ours":
-            k = np.round((z + 1) * (self._levels_arr - 1) / 2).astype(np.int64)
-            return (k * self._basis).sum(axis=-1)
+        if self.name == "ours":
+            return codes_to_indices(z, self._levels_arr, self._basis)
         dists = ((z[:, None, :] - self.kmeans_centres[None]) ** 2).sum(-1)
         return dists.argmin(axis=1)
 
     def latent_of_code(self, code: int) -> np.ndarray:
         """The latent vector a code stands for (FSQ code vector or k-means centre)."""
-        if self.kind == "ours":
-            return indices_to_codes_numpy(np.array([code]), np.asarray(self.levels))[0]
+        if self.name == "ours":
+            return indices_to_codes(np.array([code]), self._levels_arr, self._basis)[0]
         return self.kmeans_centres[code].astype(np.float32)
 
     def predict(self, z: np.ndarray, states: np.ndarray) -> np.ndarray:
@@ -180,9 +178,9 @@ class TrainedModel:
 
     def torch_module(self):
         """The torch network with these weights (for tests and further training)."""
-        from app.learning.train import build_model
+        from app.learning.models import build_model
 
-        module = build_model(self.kind, self.model_args)
+        module = build_model(self.name, self.model_args)
         module.load_state_dict(self._state_dict)
         return module.eval()
 
@@ -233,7 +231,7 @@ def model_from_payload(payload: dict, path: Path | None = None) -> TrainedModel:
     state = payload["state_dict"]
     try:
         model = TrainedModel(
-            kind=payload["kind"], world=payload["world"], segment_len=int(args["segment_len"]),
+            name=payload["kind"], world=payload["world"], segment_len=int(args["segment_len"]),
             n_actions=int(args["n_actions"]), dt_s=float(payload["dt_s"]),
             content_hash=payload.get("content_hash", ""), latent_dim=int(args["latent_dim"]),
             levels=list(args["levels"]) if payload["kind"] == "ours" else None,
@@ -248,8 +246,8 @@ def model_from_payload(payload: dict, path: Path | None = None) -> TrainedModel:
         )
     except (KeyError, TypeError, ValueError) as err:
         raise CheckpointError(f"{path}: checkpoint content is inconsistent ({err!r})") from None
-    if model.kind not in ("ours", "vae"):
-        raise CheckpointError(f"{path}: unknown model kind {model.kind!r}")
+    if model.name not in ("ours", "vae"):
+        raise CheckpointError(f"{path}: unknown model kind {model.name!r}")
     expected_in = model.segment_len * 8
     if model.encoder_layers[0][0].shape[0] != expected_in:
         raise CheckpointError(f"{path}: encoder weights do not match segment_len")

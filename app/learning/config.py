@@ -7,11 +7,11 @@ from pydantic import Field, model_validator
 from app.configio import StrictModel, load_yaml_model
 from app.settings import get_settings
 
-MODEL_KINDS = ("ours", "vae")
+MODELS = ("ours", "vae")
 
 
 class WorldSelection(StrictModel):
-    """Values `python -m app.learning.select` chose for one world; unset keys keep the default."""
+    """Values `tomstudy select` chose for one world; unset keys keep the default."""
 
     levels: list[int] | None = Field(None, min_length=1)
     beta_kl: float | None = Field(None, ge=0)
@@ -41,9 +41,8 @@ class TrainConfig(StrictModel):
     split_seed: int = Field(0, ge=0)
     val_fraction: float = Field(0.15, gt=0, lt=1)
     test_fraction: float = Field(0.15, gt=0, lt=1)
-    vae_clusters: int = Field(3, ge=1)
     min_code_share: float = Field(0.01, ge=0, lt=1)
-    # world name -> chosen values; train_model applies them on top of the keys above
+    # world name -> chosen values; train_and_save applies them on top of the keys above
     selected: dict[str, WorldSelection] = Field(default_factory=dict)
 
     @model_validator(mode="after")
@@ -58,9 +57,9 @@ class TrainConfig(StrictModel):
             raise ValueError("val_fraction + test_fraction must leave at least 10% for training")
         return self
 
-    def latent_dim(self, kind: str) -> int:
-        """Latent size of `kind`: one channel per FSQ level entry (Ours), vae_latent_dim (VAE)."""
-        return len(self.levels) if kind == "ours" else self.vae_latent_dim
+    def latent_dim(self, model_name: str) -> int:
+        """Latent size of a model: one channel per FSQ level entry (Ours), vae_latent_dim (VAE)."""
+        return len(self.levels) if model_name == "ours" else self.vae_latent_dim
 
     def for_world(self, world: str) -> "TrainConfig":
         """The config training uses for `world`: selected[world] applied, `selected` emptied."""

@@ -38,7 +38,7 @@ def vector_field(model: TrainedModel, scene: Scene, human_position, grid_n: int)
                        "majority": entry["majority"],
                        "actions": actions[:, 0].round(4).tolist(),
                        "actions_all_steps": actions.round(4).tolist()})
-    return {"kind": model.kind, "world": model.world, "content_hash": model.content_hash,
+    return {"kind": model.name, "world": model.world, "content_hash": model.content_hash,
             "grid_n": grid_n, "xs": xs.tolist(), "ys": ys.tolist(),
             "human_position": [float(v) for v in human_position], "codes": fields}
 
@@ -58,8 +58,8 @@ def _title(model: TrainedModel, entry: dict) -> str:
     if name:
         top = entry["majority"][name]
         what = f"{name} = {top['label']} ({top['fraction']:.0%})"
-    kind = "code" if model.kind == "ours" else "k-means cluster"
-    return f"{model.world} / {model.kind}: {kind} {entry['code']}, {entry['share']:.0%} of " \
+    cluster = "code" if model.name == "ours" else "k-means cluster"
+    return f"{model.world} / {model.name}: {cluster} {entry['code']}, {entry['share']:.0%} of " \
            f"validation windows\nmostly {what}"
 
 

@@ -1,4 +1,4 @@
-"""Finite scalar quantisation with the paper's symmetric level set.
+"""Finite scalar quantisation (the paper's level set) for training and the server's inference.
 
 Shape legend: B batch, d latent channels (= len(levels)).
 - z      [B, d] unbounded encoder output
@@ -22,11 +22,68 @@ different behaviour into different bins. With noise, the decoder must predict we
 anywhere within half a bin of the encoder's value. Behaviours that need different
 predictions therefore end up at least a bin apart, which is what rounding needs at test
 time. Evaluation (model.eval()) always rounds, so codes stay exactly the level set.
+
+The maths is written once, as functions over the operations numpy arrays and torch tensors
+share: training runs them on tensors inside the `FSQ` module (adding the straight-through
+gradient and the noise), the study server's numpy inference (app.learning.checkpoint) runs
+the very same functions on arrays. Both round half to even.
+
+Against the reference `vector_quantize_pytorch.FSQ`: for odd L the codes and indices are
+equal (tests/learning/test_fsq.py). For even L they differ by design: the reference's
+default level set keeps 0 as a level and is therefore lopsided (L=4 gives {-1, -0.5, 0, 0.5};
+L=2 it refuses), while the paper's set is symmetric and reaches both ends ({-1, 1} for L=2,
+{-1, -1/3, 1/3, 1} for L=4). The reference built with `preserve_symmetry=True` equals ours.
 """
 
 import numpy as np
 import torch
 from torch import nn
+
+
+def _namespace(array):
+    """numpy for numpy arrays, torch for tensors: the two libraries these functions serve."""
+    return np if isinstance(array, np.ndarray | np.generic) else torch
+
+
+def _cast(array, dtype: str):
+    """`array` as "int64" or "float32" in its own library (torch's cast drops the gradient
+    of a float tensor turned integer, where torch.asarray would refuse)."""
+    xp = _namespace(array)
+    return array.astype(getattr(np, dtype)) if xp is np else array.to(getattr(torch, dtype))
+
+
+def mixed_radix_basis(levels: list[int]) -> list[int]:
+    """Place value of each channel's level index in a code index: [1, L0, L0*L1, ...]."""
+    return [int(v) for v in np.cumprod([1, *levels[:-1]])]
+
+
+def level_indices(z, levels):
+    """Level index k per channel of unbounded z [.., d], as whole numbers of z's float type."""
+    xp = _namespace(z)
+    return xp.round((levels - 1) / 2 * (xp.tanh(z) + 1))
+
+
+def level_values(k, levels):
+    """Level indices [.., d] (float) -> code values in [-1, 1]."""
+    return 2 * k / (levels - 1) - 1
+
+
+def quantize(z, levels):
+    """Unbounded z [.., d] -> its code vector [.., d], each channel on its level set."""
+    return level_values(level_indices(z, levels), levels)
+
+
+def codes_to_indices(codes, levels, basis):
+    """Code vectors [.., d] -> integer code indices [..] (channel 0 least significant)."""
+    xp = _namespace(codes)
+    k = _cast(xp.round((codes + 1) * (levels - 1) / 2), "int64")
+    return xp.sum(k * basis, axis=-1)
+
+
+def indices_to_codes(indices, levels, basis):
+    """Integer code indices [..] -> code vectors [.., d] (float32)."""
+    k = (_cast(indices, "int64")[..., None] // basis) % _cast(levels, "int64")
+    return level_values(_cast(k, "float32"), levels)
 
 
 class FSQ(nn.Module):
@@ -42,24 +99,18 @@ class FSQ(nn.Module):
         self.levels_list = [int(level) for level in levels]
         self.register_buffer("levels", torch.tensor(self.levels_list, dtype=torch.float32),
                              persistent=False)
-        basis = np.cumprod([1] + self.levels_list[:-1])
-        self.register_buffer("basis", torch.tensor(basis, dtype=torch.int64), persistent=False)
+        self.register_buffer("basis", torch.tensor(mixed_radix_basis(self.levels_list),
+                                                   dtype=torch.int64), persistent=False)
 
     @property
     def codebook_size(self) -> int:
         """Number of distinct codes, the product of the levels."""
         return int(np.prod(self.levels_list))
 
-    def level_indices(self, z: torch.Tensor) -> torch.Tensor:
-        """Integer level index k per channel (no gradient)."""
-        half = (self.levels - 1) / 2
-        return torch.round(half * (torch.tanh(z) + 1)).long()
-
     def forward(self, z: torch.Tensor) -> torch.Tensor:
         """Quantised codes; the gradient passes straight through the rounding to tanh(z)."""
         bounded = torch.tanh(z)
-        z_q = self.level_indices_to_codes(self.level_indices(z))
-        out = bounded + (z_q - bounded).detach()
+        out = bounded + (quantize(z, self.levels) - bounded).detach()
         if self.training and self.noise_fraction > 0:
             out = self._substitute_noise(bounded, out)
         return out
@@ -71,42 +122,14 @@ class FSQ(nn.Module):
         chosen = torch.rand_like(bounded) < self.noise_fraction
         return torch.where(chosen, noisy, rounded)
 
-    def level_indices_to_codes(self, k: torch.Tensor) -> torch.Tensor:
-        """Level indices [.., d] -> code values in [-1, 1]."""
-        return 2 * k.to(torch.float32) / (self.levels - 1) - 1
-
     def codes_to_indices(self, codes: torch.Tensor) -> torch.Tensor:
         """Code vectors [.., d] -> integer indices [..]."""
-        k = torch.round((codes + 1) * (self.levels - 1) / 2).long()
-        return (k * self.basis).sum(dim=-1)
+        return codes_to_indices(codes, self.levels, self.basis)
 
     def indices_to_codes(self, indices: torch.Tensor) -> torch.Tensor:
         """Integer indices [..] -> code vectors [.., d]."""
-        k = (indices.long().unsqueeze(-1) // self.basis) % self.levels.long()
-        return self.level_indices_to_codes(k)
+        return indices_to_codes(indices, self.levels, self.basis)
 
     def all_codes(self) -> torch.Tensor:
         """Every code vector, in index order [codebook_size, d]."""
         return self.indices_to_codes(torch.arange(self.codebook_size))
-
-
-def quantize_numpy(z: np.ndarray, levels: np.ndarray) -> np.ndarray:
-    """The forward pass of `FSQ` in numpy (same rounding: half to even)."""
-    half = (levels - 1) / 2
-    k = np.round(half * (np.tanh(z) + 1))
-    return (2 * k / (levels - 1) - 1).astype(np.float32)
-
-
-def codes_to_indices_numpy(codes: np.ndarray, levels: np.ndarray) -> np.ndarray:
-    """Code vectors [.., d] -> integer indices [..] (numpy twin of `FSQ.codes_to_indices`)."""
-    basis = np.cumprod(np.concatenate([[1], levels[:-1]])).astype(np.int64)
-    k = np.round((codes + 1) * (levels - 1) / 2).astype(np.int64)
-    return (k * basis).sum(axis=-1)
-
-
-def indices_to_codes_numpy(indices: np.ndarray, levels: np.ndarray) -> np.ndarray:
-    """Integer indices [..] -> code vectors [.., d] (numpy twin of `FSQ.indices_to_codes`)."""
-    levels = np.asarray(levels, dtype=np.int64)
-    basis = np.cumprod(np.concatenate([[1], levels[:-1]])).astype(np.int64)
-    k = (np.asarray(indices, dtype=np.int64)[..., None] // basis) % levels
-    return (2 * k / (levels - 1) - 1).astype(np.float32)

@@ -280,7 +280,7 @@ def window_labels(windows: Windows, val: PairData) -> dict[str, np.ndarray]:
 def score_model(model, windows: Windows, scored: np.ndarray) -> dict:
     """Alignment errors [W] of the next action, displacement errors, codes."""
     from analysis.contracts import alignment_error
-    from app.learning.metrics import trajectory_errors
+    from app.learning.model_metrics import trajectory_errors
 
     z = model.encode_batch(windows.segment_positions)
     pred = model.predict_batch(z, windows.end_states)
@@ -293,7 +293,7 @@ def score_model(model, windows: Windows, scored: np.ndarray) -> dict:
 def score_constant_velocity(windows: Windows, scored: np.ndarray) -> dict:
     """The baseline: the last observed robot velocity, kept for all n steps."""
     from analysis.contracts import alignment_error
-    from app.learning.metrics import constant_velocity, trajectory_errors
+    from app.learning.model_metrics import constant_velocity, trajectory_errors
 
     pred = constant_velocity(windows)
     return {"errors": alignment_error(pred[:, 0], windows.pred_targets[:, 0]),
@@ -305,16 +305,19 @@ def run_seed(exp: Experiment, seed: int, train_cfg: TrainConfig, models_dir: Pat
              windows: Windows, scored: np.ndarray, labels: dict) -> dict:
     """Train Ours then the VAE (its k = Ours' used codes) with `seed`; score both on val."""
     from app.learning.checkpoint import load_model
-    from app.learning.metrics import agreement, code_usage
-    from app.learning.train import train_model
+    from app.learning.model_metrics import agreement, code_usage
+    from app.learning.train import train_and_save
 
-    out = {"seed": seed}
+    out, ours_codes = {"seed": seed}, None
     for kind in ("ours", "vae"):
-        ckpt = train_model(exp.train.trajs, kind, seed, train_cfg,
-                           models_dir / f"seed_{seed}" / kind,
-                           data_meta={"scenario": exp.scenario, "layout": exp.layout,
-                                      "inputs": exp.inputs}, progress=False)
+        ckpt = train_and_save(exp.train.trajs, kind, seed, train_cfg,
+                              models_dir / f"seed_{seed}" / kind,
+                              data_meta={"scenario": exp.scenario, "layout": exp.layout,
+                                         "inputs": exp.inputs}, progress=False,
+                              vae_clusters=ours_codes)
         model = load_model(ckpt)
+        if kind == "ours":
+            ours_codes = model.codes["n_codes_used"]  # the VAE's k-means k
         scores = score_model(model, windows, scored)
         codes = scores["codes"][scored]
         out[kind] = {
@@ -438,11 +441,13 @@ def run_command(data_dir: Path, scenario: str, data_root: Path, config: Path | N
                 train_config: Path | None = None, seeds: int | None = None,
                 max_epochs: int | None = None, out_dir: Path | None = None) -> dict:
     """What `tomstudy interaction` does: returns the summary; outputs under data_root."""
+    from app.layout import Layout
     from app.learning.config import load_train_config
 
     cfg = load_config(config, seeds)
     overrides = {"max_epochs": max_epochs} if max_epochs else None
     base = load_train_config(train_config, overrides)
-    out_dir = Path(out_dir) if out_dir else Path(data_root) / "reports" / "interaction" / scenario
-    models_dir = Path(data_root) / "models" / "interaction" / scenario
+    layout = Layout(data_root)
+    out_dir = Path(out_dir) if out_dir else layout.interaction_report(scenario)
+    models_dir = layout.interaction_models(scenario)
     return run_experiment(Path(data_dir), scenario, out_dir, models_dir, cfg, base)

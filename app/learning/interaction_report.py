@@ -150,7 +150,7 @@ def plot_fields(inputs: FigureInputs, model, codes: np.ndarray, path: Path) -> P
         ax.quiver(grid[:, 0], grid[:, 1], *(action / speed).T, angles="xy", color="#333333",
                   width=0.004, scale=inputs.field_grid * 1.3)
         ax.plot(*human, "s", color=HUMAN_COLOR, ms=7, mec="k")
-        ax.set_title(f"{MODEL_NAMES[model.kind]} code {int(code)}: "
+        ax.set_title(f"{MODEL_NAMES[model.name]} code {int(code)}: "
                      f"{in_code.sum() / scored.sum():.0%} of val windows", fontsize=8)
     for ax in list(axes.flat)[len(top):]:
         ax.axis("off")

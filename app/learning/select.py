@@ -1,6 +1,6 @@
 """Choose the VAE's beta_kl and latent size and Ours' FSQ levels on validation data only.
 
-Run: .venv/bin/python -m app.learning.select --world highway [--config FILE] [--out DIR]
+Run: tomstudy select --world highway [--config FILE] [--train-config FILE] [--out DIR]
 
 The grids and rules are in study_configs/model_selection.yaml, fixed before any run. Every
 grid cell trains on the train split of var/data/<world>/trajectories.npz (training.yaml's
@@ -23,10 +23,9 @@ var/models/selection) and prints the lines to paste under `selected:` in
 study_configs/training.yaml, which `tomstudy train` then applies to that world.
 """
 
-import argparse
 import json
-import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -34,24 +33,24 @@ import torch
 from pydantic import Field
 from tqdm import tqdm
 
-from app.configio import ConfigError, StrictModel, load_yaml_model
+from app.configio import StrictModel, load_yaml_model
 from app.data.trajectory import TrajectorySet
 from app.fileio import atomic_path, write_json
+from app.layout import Layout
 from app.learning.checkpoint import model_from_payload, trajectory_hash
 from app.learning.config import TrainConfig, load_train_config
-from app.learning.metrics import code_usage, evaluate
+from app.learning.model_metrics import code_usage, evaluate
+from app.learning.models import model_args
 from app.learning.networks import LatentActionModel
 from app.learning.train import (
     Prepared,
     SplitTensors,
     build_payload,
     fit_network,
-    model_args,
     one_thread,
     prepare,
 )
 from app.settings import get_settings
-from app.worlds.simulate import output_paths
 
 VAE_RULE = "lowest validation task loss (prediction + reconstruction MSE, no KL term)"
 
@@ -94,7 +93,7 @@ def ours_rule(grid: OursGrid) -> str:
 
 
 def grid_cells(sel: SelectionConfig) -> list[tuple[str, dict]]:
-    """(kind, training-config values) of every cell, VAE first."""
+    """(model_name, training-config values) of every cell, VAE first."""
     vae = [("vae", {"beta_kl": beta, "vae_latent_dim": dim})
            for dim in sel.vae.latent_dim for beta in sel.vae.beta_kl]
     return vae + [("ours", {"levels": levels}) for levels in sel.ours.levels]
@@ -130,15 +129,15 @@ def cell_config(base: TrainConfig, values: dict) -> TrainConfig:
     return TrainConfig.model_validate({**base.model_dump(), **values, "selected": {}})
 
 
-def score_cell(kind: str, values: dict, base: TrainConfig, data: Prepared,
+def score_cell(model_name: str, values: dict, base: TrainConfig, data: Prepared,
                seed: int) -> tuple[dict, LatentActionModel]:
     """Train one cell on the train split and score it on validation; (row, model)."""
     started = time.perf_counter()
     cfg = cell_config(base, values)
-    model, _, history = fit_network(kind, seed, cfg, data, progress=False)
-    row = {"model": kind, "settings": values, **task_loss(model, data.val, cfg),
+    model, _, history = fit_network(model_name, seed, cfg, data, progress=False)
+    row = {"model": model_name, "settings": values, **task_loss(model, data.val, cfg),
            "epochs": len(history), "wall_s": round(time.perf_counter() - started, 1)}
-    if kind == "ours":
+    if model_name == "ours":
         row.update(val_code_usage(model, data.val, cfg.min_code_share))
     return row, model
 
@@ -185,9 +184,9 @@ def run_selection(trajs: TrajectorySet, base: TrainConfig, sel: SelectionConfig,
                             disable=not progress) as bar:
         data = prepare(trajs, base)
         rows, models = [], []
-        for kind, values in cells:
-            bar.set_postfix_str(f"{kind} {json.dumps(values)}")
-            row, model = score_cell(kind, values, base, data, sel.seed)
+        for model_name, values in cells:
+            bar.set_postfix_str(f"{model_name} {json.dumps(values)}")
+            row, model = score_cell(model_name, values, base, data, sel.seed)
             rows.append(row)
             models.append(model)
             bar.update()
@@ -277,36 +276,22 @@ def write_outputs(result: dict, out_dir: Path) -> None:
             tmp.write_text(text)
 
 
-def _fail(message: str) -> None:
-    print(message, file=sys.stderr)
-    sys.exit(2)
+def select_world(layout: Layout, world: str, config: Path | None = None,
+                 train_config: Path | None = None, out: Path | None = None,
+                 say: Callable[[str], None] = print) -> Path:
+    """`tomstudy select`: run the selection for one world, write and say the results.
 
-
-def main() -> None:
-    """Parse arguments, run the selection for one world, write and print the results."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--world", required=True)
-    parser.add_argument("--config", type=Path, default=None, help="model_selection.yaml")
-    parser.add_argument("--train-config", type=Path, default=None, help="training.yaml")
-    parser.add_argument("--out", type=Path, default=None, help="default var/models/selection")
-    args = parser.parse_args()
-    data_dir = get_settings().data_dir
-    npz, _ = output_paths(data_dir, args.world)
+    Writes into out/<world>/ (default: the layout's selection dir); returns that folder."""
+    npz = layout.trajectories(world)
     if not npz.is_file():
-        _fail(f"{npz} not found; run `tomstudy simulate {args.world}` first")
-    try:
-        sel, base = load_selection_config(args.config), load_train_config(args.train_config)
-    except ConfigError as err:
-        _fail(str(err))
+        raise FileNotFoundError(f"{npz} not found; run `tomstudy simulate {world}` first")
+    sel, base = load_selection_config(config), load_train_config(train_config)
     result = run_selection(TrajectorySet.load(npz), base, sel)
     result["data_file"] = str(npz)
-    out = (args.out or data_dir / "models" / "selection") / args.world
-    write_outputs(result, out)
-    print(markdown(result))
-    print(f"wrote {out}/selection.json, selection.md, selected.yaml")
-    print("in study_configs/training.yaml, put this under `selected:` (replacing `{}`; keep "
-          "other worlds' entries):\n" + yaml_lines(result))
-
-
-if __name__ == "__main__":
-    main()
+    out_dir = out / world if out else layout.selection_dir(world)
+    write_outputs(result, out_dir)
+    say(markdown(result))
+    say(f"wrote {out_dir}/selection.json, selection.md, selected.yaml")
+    say("in study_configs/training.yaml, put this under `selected:` (replacing `{}`; keep "
+        "other worlds' entries):\n" + yaml_lines(result))
+    return out_dir

@@ -1,13 +1,13 @@
 """A small documented sweep of FSQ levels, segment length and loss weights for one world.
 
-Run: .venv/bin/python -m app.learning.sweep --world highway [--out var/models/sweep]
+Run: tomstudy sweep --world highway [--out DIR]  (default out: var/models/sweep)
 Trains Ours (seed 0) once per setting on var/data/<world>/trajectories.npz and prints one
 row per setting: codes used, perplexity, held-out purity / NMI against the robot's labels
 (raw and derived; "majority" is the purity of putting every window in one cluster), MSE and
 wall time. Rows are also appended to <out>/<world>/sweep.jsonl.
 
 Exploratory only: it reports label metrics on the test split, so it must not choose a
-default. Defaults are chosen on validation data by `python -m app.learning.select`. A row is
+default. Defaults are chosen on validation data by `tomstudy select`. A row is
 training.yaml plus the keys it names; training.yaml's per-world `selected:` values are ignored.
 
 --ceiling instead prints, per robot label, the test accuracy of a supervised classifier
@@ -15,15 +15,15 @@ training.yaml plus the keys it names; training.yaml's per-world `selected:` valu
 function of the segment, hence any clustering's purity, can match that label.
 """
 
-import argparse
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from app.data.trajectory import TrajectorySet
+from app.layout import Layout
 from app.learning.config import load_train_config
-from app.learning.train import train_model
-from app.settings import get_settings
+from app.learning.train import train_and_save
 
 SETTINGS = [
     {"levels": [2, 2, 2]},
@@ -43,7 +43,7 @@ def sweep_row(trajs: TrajectorySet, overrides: dict, out_dir: Path) -> dict:
     """Train one setting and summarise its held-out metrics."""
     started = time.perf_counter()
     cfg = load_train_config(overrides={**overrides, "selected": {}})
-    ckpt = train_model(trajs, "ours", 0, cfg, out_dir, progress=False)
+    ckpt = train_and_save(trajs, "ours", 0, cfg, out_dir, progress=False)
     metrics = json.loads((ckpt.parent / "metrics.json").read_text())
     test = metrics["test"]
     return {"world": trajs.world, "settings": overrides,
@@ -61,7 +61,7 @@ def label_ceiling(trajs: TrajectorySet, overrides: dict | None = None) -> dict:
     from sklearn.ensemble import HistGradientBoostingClassifier
 
     from app.data.windows import segment_features
-    from app.learning.metrics import derived_labels
+    from app.learning.model_metrics import derived_labels
     from app.learning.train import prepare_windows
 
     windows = prepare_windows(trajs, load_train_config(overrides=overrides or {}))
@@ -91,25 +91,20 @@ def format_row(row: dict) -> str:
             f"ppl {row['perplexity']:5.2f} mse {row['mse']:.3f} | purity/NMI: {scores}")
 
 
-def main() -> None:
-    """Parse arguments and run every setting of the sweep."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--world", required=True)
-    parser.add_argument("--out", type=Path, default=None)
-    parser.add_argument("--ceiling", action="store_true", help="supervised ceiling only")
-    args = parser.parse_args()
-    data_dir = get_settings().data_dir
-    trajs = TrajectorySet.load(data_dir / "data" / args.world / "trajectories.npz")
-    if args.ceiling:
-        print(json.dumps({"world": args.world, "classifier_accuracy": label_ceiling(trajs)}))
+def sweep_world(layout: Layout, world: str, out: Path | None = None, ceiling: bool = False,
+                say: Callable[[str], None] = print) -> None:
+    """`tomstudy sweep`: train every setting into out/<world>/setting<i>/ (default: the layout's
+    sweep dir), say one line each and append it to sweep.jsonl; or only the label ceiling."""
+    npz = layout.trajectories(world)
+    if not npz.is_file():
+        raise FileNotFoundError(f"{npz} not found; run `tomstudy simulate {world}` first")
+    trajs = TrajectorySet.load(npz)
+    if ceiling:
+        say(json.dumps({"world": world, "classifier_accuracy": label_ceiling(trajs)}))
         return
-    out = (args.out or data_dir / "models" / "sweep") / args.world
+    out_dir = out / world if out else layout.sweep_dir(world)
     for i, overrides in enumerate(SETTINGS):
-        row = sweep_row(trajs, overrides, out / f"setting{i}")
-        print(format_row(row), flush=True)
-        with open(out / "sweep.jsonl", "a") as fh:
+        row = sweep_row(trajs, overrides, out_dir / f"setting{i}")
+        say(format_row(row))
+        with open(out_dir / "sweep.jsonl", "a") as fh:
             fh.write(json.dumps(row) + "\n")
-
-
-if __name__ == "__main__":
-    main()

@@ -1,4 +1,8 @@
-"""Train Ours or the VAE on a TrajectorySet; write checkpoint.pt, metrics.json and loss.png."""
+"""Train Ours or the VAE on a TrajectorySet; write checkpoint.pt, metrics.json and loss.png.
+
+`train_world` is the pipeline's train stage: `tomstudy train` and `serve --prepare` both run
+it, so the same inputs give the same checkpoint whichever ran it.
+"""
 
 import json
 import time
@@ -13,39 +17,17 @@ from tqdm import tqdm
 from app.data.trajectory import ROBOT, TrajectorySet
 from app.data.windows import Windows, make_windows, segment_features, split_by_trajectory
 from app.fileio import atomic_path, write_json
+from app.layout import CHECKPOINT_FILE, Layout
 from app.learning.checkpoint import (
     load_model,
     model_from_payload,
     save_checkpoint,
     trajectory_hash,
 )
-from app.learning.config import MODEL_KINDS, TrainConfig
-from app.learning.metrics import code_usage, derived_labels, evaluate
+from app.learning.config import MODELS, TrainConfig
+from app.learning.model_metrics import code_usage, derived_labels, evaluate
+from app.learning.models import build_model, model_args
 from app.learning.networks import Batch, LatentActionModel, Normaliser
-from app.learning.ours import OursModel
-from app.learning.vae import VAEModel
-
-
-def build_model(kind: str, args: dict) -> LatentActionModel:
-    """Construct the torch network of `kind` from plain model args."""
-    common = dict(segment_len=args["segment_len"], n_actions=args["n_actions"],
-                  encoder_hidden=list(args["encoder_hidden"]),
-                  decoder_hidden=list(args["decoder_hidden"]))
-    if kind == "ours":
-        # checkpoints written before the option existed trained without noise
-        return OursModel(levels=list(args["levels"]),
-                         fsq_noise_fraction=float(args.get("fsq_noise_fraction", 0.0)), **common)
-    if kind == "vae":
-        return VAEModel(latent_dim=args["latent_dim"], beta_kl=args["beta_kl"], **common)
-    raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
-
-
-def model_args(cfg: TrainConfig, kind: str) -> dict:
-    """The architecture part of the config, stored in the checkpoint."""
-    return {"segment_len": cfg.segment_len, "n_actions": cfg.n_actions, "levels": cfg.levels,
-            "latent_dim": cfg.latent_dim(kind), "encoder_hidden": cfg.encoder_hidden,
-            "decoder_hidden": cfg.decoder_hidden, "beta_kl": cfg.beta_kl,
-            "fsq_noise_fraction": cfg.fsq_noise_fraction}
 
 
 @dataclass
@@ -126,12 +108,13 @@ def one_thread():
         torch.set_num_threads(threads)
 
 
-def fit_network(kind: str, seed: int, cfg: TrainConfig, data: Prepared,
+def fit_network(model_name: str, seed: int, cfg: TrainConfig, data: Prepared,
                 progress: bool = True) -> tuple[LatentActionModel, dict, list[dict]]:
-    """Seed torch, build `kind` from cfg and fit it; returns (model in eval mode, args, history)."""
+    """Seed torch, build `model_name` from cfg and fit it; returns (model in eval mode, args,
+    history)."""
     torch.manual_seed(seed)
-    args = model_args(cfg, kind)
-    model = build_model(kind, args)
+    args = model_args(cfg, model_name)
+    model = build_model(model_name, args)
     return model, args, fit(model, data.train, data.val, cfg, seed, progress)
 
 
@@ -190,14 +173,13 @@ def _latents(model, data: SplitTensors) -> np.ndarray:
         return model.infer_latent(data.x).numpy()
 
 
-def vae_cluster_count(out_dir: Path, world: str, cfg: TrainConfig) -> int:
-    """k for the VAE's k-means: codes Ours uses for this world if trained, else the config's."""
-    ours_metrics = Path(out_dir).parent / "ours" / "metrics.json"
-    if ours_metrics.is_file():
-        saved = json.loads(ours_metrics.read_text())
-        if saved.get("world") == world:
-            return int(saved["n_codes_used"])
-    return cfg.vae_clusters
+def ours_code_count(ours_checkpoint: Path, world: str) -> int:
+    """The VAE's k-means k: how many codes Ours uses on the same world (from its checkpoint)."""
+    if not Path(ours_checkpoint).is_file():
+        raise FileNotFoundError(f"{ours_checkpoint}: no Ours checkpoint. The VAE's k-means k is "
+                                f"the number of codes Ours uses, so train Ours first (`tomstudy "
+                                f"train --world {world} --model ours`, or pass --ours-checkpoint)")
+    return int(load_model(ours_checkpoint, world=world).codes["n_codes_used"])
 
 
 def kmeans_centres(latents: np.ndarray, k: int, seed: int) -> np.ndarray:
@@ -257,26 +239,30 @@ def _plot_losses(history: list[dict], path: Path, title: str) -> None:
     plt.close(fig)
 
 
-def train_model(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir: Path,
-                data_meta: dict | None = None, progress: bool = True,
-                vae_k: int | None = None) -> Path:
+def train_and_save(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig,
+                   out_dir: Path, data_meta: dict | None = None, progress: bool = True,
+                   vae_clusters: int | None = None) -> Path:
     """Train one model; write out_dir/checkpoint.pt, metrics.json, loss.png; return the .pt.
 
-    cfg.selected[trajs.world] (the values model selection chose) is applied on top of cfg."""
-    if kind not in MODEL_KINDS:
-        raise ValueError(f"unknown model kind {kind!r}; choose one of {', '.join(MODEL_KINDS)}")
+    cfg.selected[trajs.world] (the values model selection chose) is applied on top of cfg.
+    The VAE needs `vae_clusters`, the k of its k-means (see `ours_code_count`)."""
+    if model_name not in MODELS:
+        raise ValueError(f"unknown model {model_name!r}; choose one of {', '.join(MODELS)}")
+    if model_name == "vae" and vae_clusters is None:
+        raise ValueError("training the VAE needs vae_clusters, the k of its k-means (the number "
+                         "of codes Ours uses on the same data: ours_code_count)")
     started = time.perf_counter()
     with one_thread():
-        return _train(trajs, kind, seed, cfg.for_world(trajs.world), Path(out_dir), data_meta,
-                      progress, vae_k, started)
+        return _train(trajs, model_name, seed, cfg.for_world(trajs.world), Path(out_dir),
+                      data_meta, progress, vae_clusters, started)
 
 
-def build_payload(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig,
+def build_payload(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig,
                   model: LatentActionModel, args: dict, data: Prepared,
                   centres: np.ndarray | None = None, data_meta: dict | None = None) -> dict:
     """The checkpoint dict of a fitted network (codes summarised on validation windows)."""
     payload = {
-        "kind": kind, "world": trajs.world, "dt_s": float(trajs.dt_s), "model_args": args,
+        "kind": model_name, "world": trajs.world, "dt_s": float(trajs.dt_s), "model_args": args,
         "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
         "norm": data.norm.to_dict(), "data_meta": _data_meta(trajs, data.windows, data_meta),
         "data_hash": trajectory_hash(trajs.positions, trajs.lengths, trajs.labels),
@@ -290,24 +276,24 @@ def build_payload(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig,
     return payload
 
 
-def _train(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir: Path,
-           data_meta: dict | None, progress: bool, vae_k: int | None, started: float) -> Path:
+def _train(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig, out_dir: Path,
+           data_meta: dict | None, progress: bool, vae_clusters: int | None,
+           started: float) -> Path:
     data = prepare(trajs, cfg)
-    model, args, history = fit_network(kind, seed, cfg, data, progress)
+    model, args, history = fit_network(model_name, seed, cfg, data, progress)
     train_seconds = time.perf_counter() - started
 
     centres = None
-    if kind == "vae":
-        k = vae_k or vae_cluster_count(out_dir, trajs.world, cfg)
-        centres = kmeans_centres(_latents(model, data.val), k, seed)
-    payload = build_payload(trajs, kind, seed, cfg, model, args, data, centres, data_meta)
-    ckpt_path = out_dir / "checkpoint.pt"
+    if model_name == "vae":
+        centres = kmeans_centres(_latents(model, data.val), vae_clusters, seed)
+    payload = build_payload(trajs, model_name, seed, cfg, model, args, data, centres, data_meta)
+    ckpt_path = out_dir / CHECKPOINT_FILE
     content = save_checkpoint(ckpt_path, payload)
     loaded = load_model(ckpt_path)
     windows = data.windows
     test = evaluate(loaded, windows["test"], trajs.label_names, cfg.min_code_share)
     metrics = {
-        "kind": kind, "world": trajs.world, "seed": seed, "content_hash": content,
+        "kind": model_name, "world": trajs.world, "seed": seed, "content_hash": content,
         "train_wall_time_s": round(train_seconds, 2), "epochs_run": len(history),
         "best_val": min(h["val_total"] for h in history), "history": history,
         "n_windows": {k: len(w) for k, w in windows.items()},
@@ -315,7 +301,7 @@ def _train(trajs: TrajectorySet, kind: str, seed: int, cfg: TrainConfig, out_dir
         "test": test, "train_config": cfg.model_dump(),
     }
     write_json(out_dir / "metrics.json", metrics)
-    _plot_losses(history, out_dir / "loss.png", f"{trajs.world} / {kind} (seed {seed})")
+    _plot_losses(history, out_dir / "loss.png", f"{trajs.world} / {model_name} (seed {seed})")
     return ckpt_path
 
 
@@ -332,19 +318,23 @@ def _data_meta(trajs: TrajectorySet, windows: dict[str, Windows], extra: dict | 
     return meta
 
 
-def default_model_dir(data_dir: Path, world: str, kind: str) -> Path:
-    """var/models/<world>/<kind>/."""
-    return Path(data_dir) / "models" / world / kind
+def train_world(layout: Layout, world: str, model_name: str, seed: int, cfg: TrainConfig,
+                out_dir: Path | None = None, ours_checkpoint: Path | None = None,
+                progress: bool = True) -> Path:
+    """The train stage: one model on the world's simulated trajectories, its meta.json stored as
+    the checkpoint's data source (nothing that depends on where the data dir is).
 
-
-def train_world(data_dir: Path, world: str, kind: str, seed: int, cfg: TrainConfig,
-                out_dir: Path | None = None) -> Path:
-    """Train on var/data/<world>/trajectories.npz; FileNotFoundError names the missing file."""
-    npz = Path(data_dir) / "data" / world / "trajectories.npz"
+    Writes into out_dir (default: the layout's model dir). The VAE's k-means k is read from
+    `ours_checkpoint` (default: the layout's Ours checkpoint of the world). FileNotFoundError
+    names a missing input."""
+    npz = layout.trajectories(world)
     if not npz.is_file():
         raise FileNotFoundError(f"{npz} not found; run `tomstudy simulate {world}` first")
-    meta_path = npz.with_name("meta.json")
+    meta_path = layout.trajectories_meta(world)
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-    meta = {"trajectories_file": str(npz), "meta_json": meta}
-    out_dir = Path(out_dir) if out_dir else default_model_dir(data_dir, world, kind)
-    return train_model(TrajectorySet.load(npz), kind, seed, cfg, out_dir, meta)
+    clusters = None
+    if model_name == "vae":
+        clusters = ours_code_count(ours_checkpoint or layout.checkpoint(world, "ours"), world)
+    out_dir = Path(out_dir) if out_dir else layout.model_dir(world, model_name)
+    return train_and_save(TrajectorySet.load(npz), model_name, seed, cfg, out_dir, meta,
+                          progress, clusters)

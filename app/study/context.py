@@ -3,7 +3,7 @@
 from dataclasses import dataclass, field
 
 from app.study.config import StudyConfig
-from app.study.predictor import Predictor
+from app.study.model_answers import ModelAnswers
 from app.study.trials import TrialBank
 
 
@@ -14,7 +14,7 @@ class StudyContext:
     study_id: str
     config: StudyConfig
     bank: TrialBank
-    predictor: Predictor
+    model_answers: ModelAnswers
     config_sha256: str = ""  # of the validated config (config.config_sha256)
     preview_key: str = field(default="", repr=False)  # opens pilot sessions (recruitment.py)
     trust_client_clock: bool = False  # pilots with bots only; never in production

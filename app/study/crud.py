@@ -279,7 +279,7 @@ def prediction_rows(ctx: StudyContext, participant: Participant, trial: TrialRec
     """Long rows: one per (start state, step), human action beside each predictor's."""
     dt_s = ctx.bank.world(trial.world).dt_s
     human = human_actions(trial, points, dt_s)
-    answers = ctx.predictor.answers(trial.trial_id)
+    answers = ctx.model_answers.answers(trial.trial_id)
     ours, vae = answers["ours"], answers["vae"]
     cv = np.asarray(trial.cv_actions)
     policy = np.asarray(trial.policy_actions)

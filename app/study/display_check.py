@@ -18,8 +18,7 @@ import numpy as np
 
 from app.data.trajectory import ROBOT, TrajectorySet
 from app.fileio import write_json
-from app.study.trials import BANK_FILE, bank_dir
-from app.worlds.simulate import output_paths
+from app.layout import Layout
 
 MOVING_M = 1e-3  # a step shorter than this has no direction
 
@@ -82,16 +81,17 @@ def world_figures(trajs: TrajectorySet, world_bank: dict) -> dict:
 
 def check_display(data_dir: Path, study_id: str) -> dict:
     """Figures for every world of the study's bank; also written to the bank folder."""
-    bank_path = bank_dir(data_dir, study_id) / BANK_FILE
+    layout = Layout(data_dir)
+    bank_path = layout.bank(study_id)
     if not bank_path.is_file():
         raise FileNotFoundError(f"{bank_path}: no trial bank; run `tomstudy build-trials "
                                 f"--study {study_id}`")
     bank = json.loads(bank_path.read_text())
     result = {}
     for name, world_bank in sorted(bank["worlds"].items()):
-        npz_path, _ = output_paths(data_dir, name)
-        result[name] = world_figures(TrajectorySet.load(npz_path), world_bank)
-    write_json(bank_path.parent / "display_check.json", result)
+        trajs = TrajectorySet.load(layout.trajectories(name))
+        result[name] = world_figures(trajs, world_bank)
+    write_json(layout.display_check(study_id), result)
     return result
 
 

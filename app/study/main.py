@@ -24,8 +24,8 @@ from app.study.context import StudyContext
 from app.study.db import create_tables, make_engine
 from app.study.errors import Refused
 from app.study.headers import MTURK_FRAMERS, SecurityHeaders
+from app.study.model_answers import ModelAnswers
 from app.study.openapi import declare_error_responses
-from app.study.predictor import Predictor
 from app.study.recruitment import preview_key
 from app.study.routes import dashboard, pages, participant, researcher
 from app.study.trials import TrialBank
@@ -70,7 +70,7 @@ def load_study(settings: Settings, study_id: str) -> StudyContext:
     """Config, bank and both models of one study (the models verified against the bank)."""
     config = load_study_config(settings, study_id)
     bank = TrialBank.load(settings.data_dir, study_id)
-    return StudyContext(study_id, config, bank, Predictor(config, bank, settings.data_dir),
+    return StudyContext(study_id, config, bank, ModelAnswers(config, bank, settings.data_dir),
                         config_sha256=config_sha256(config),
                         preview_key=preview_key(settings.admin_token, study_id),
                         trust_client_clock=settings.trust_client_clock)

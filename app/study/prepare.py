@@ -2,7 +2,8 @@
 
 Each step is skipped when its output exists (and, for the bank, still matches the
 checkpoints it was built from), so `make serve` on a fresh clone does everything once
-and later starts in seconds.
+and later starts in seconds. The steps are the ones `tomstudy simulate`, `train` and
+`build-trials` run (`simulate`, `train_world`, `build_trials`), so they write the same files.
 """
 
 import json
@@ -10,68 +11,67 @@ from collections.abc import Callable
 from pathlib import Path
 
 from app.fileio import sha256_file
+from app.layout import Layout
 from app.settings import Settings
 from app.study.config import load_study_config
-from app.study.trials import BANK_FILE, bank_dir
-from app.worlds.simulate import output_paths
 
 
 def prepare_study(settings: Settings, study_id: str, n_trajectories: int = 2000,
                   seed: int = 0, say: Callable[[str], None] = print) -> Path:
     """Simulate, train and build-trials as needed for `study_id`; returns the bank path."""
     config = load_study_config(settings, study_id)
-    data_dir = Path(settings.data_dir)
+    layout = settings.layout
     for world in config.worlds:
-        ensure_trajectories(data_dir, world, n_trajectories, seed, say)
-        for kind in ("ours", "vae"):  # ours first: the VAE's k-means k = codes Ours uses
-            ensure_checkpoint(data_dir, world, kind, data_dir / getattr(config.models[world], kind),
-                              seed, say)
-    bank = bank_dir(data_dir, study_id) / BANK_FILE
+        ensure_trajectories(layout, world, n_trajectories, seed, say)
+        ours = layout.resolve(config.models[world].ours)
+        ensure_checkpoint(layout, world, "ours", ours, seed, say)
+        ensure_checkpoint(layout, world, "vae", layout.resolve(config.models[world].vae), seed,
+                          say, ours_checkpoint=ours)
+    bank = layout.bank(study_id)
     if bank_is_current(bank):
         say(f"{bank} is up to date; skipping build-trials")
         return bank
     from app.study.trial_builder import build_trials
 
     say(f"building the trial bank of {study_id}")
-    return build_trials(config, study_id, data_dir)
+    return build_trials(config, study_id, layout.root)
 
 
 def missing_inputs(settings: Settings, study_id: str) -> list[Path]:
     """The files a server of `study_id` needs that do not exist (config errors raise)."""
     config = load_study_config(settings, study_id)
-    data_dir = Path(settings.data_dir)
-    needed = [bank_dir(data_dir, study_id) / BANK_FILE]
-    needed += [data_dir / getattr(config.models[w], kind)
-               for w in config.worlds for kind in ("ours", "vae")]
+    layout = settings.layout
+    needed = [layout.bank(study_id)]
+    needed += [layout.resolve(getattr(config.models[w], model_name))
+               for w in config.worlds for model_name in ("ours", "vae")]
     return [path for path in needed if not path.is_file()]
 
 
-def ensure_trajectories(data_dir: Path, world: str, n: int, seed: int, say) -> None:
+def ensure_trajectories(layout: Layout, world: str, n: int, seed: int, say) -> None:
     """Simulate a world unless its trajectory file exists."""
-    npz_path, meta_path = output_paths(data_dir, world)
-    if npz_path.is_file() and meta_path.is_file():
+    npz_path = layout.trajectories(world)
+    if npz_path.is_file() and layout.trajectories_meta(world).is_file():
         say(f"{npz_path} exists; skipping simulate")
         return
     from app.worlds.simulate import simulate
 
     say(f"simulating {n} {world} trajectories")
-    simulate(world, n, seed, data_dir)
+    simulate(world, n, seed, layout.root)
 
 
-def ensure_checkpoint(data_dir: Path, world: str, kind: str, checkpoint: Path, seed: int,
-                      say) -> None:
-    """Train one model unless its checkpoint exists (written to checkpoint.parent)."""
+def ensure_checkpoint(layout: Layout, world: str, model_name: str, checkpoint: Path, seed: int,
+                      say, ours_checkpoint: Path | None = None) -> None:
+    """Train one model unless its checkpoint exists (written to checkpoint.parent; the VAE's
+    k-means k comes from `ours_checkpoint`)."""
     if checkpoint.is_file():
         say(f"{checkpoint} exists; skipping train")
         return
-    from app.data.trajectory import TrajectorySet
     from app.learning.config import load_train_config
-    from app.learning.train import train_model
+    from app.learning.train import train_world
 
-    npz_path, meta_path = output_paths(data_dir, world)
-    say(f"training {kind} on {world}")
-    written = train_model(TrajectorySet.load(npz_path), kind, seed, load_train_config(),
-                          checkpoint.parent, data_meta=json.loads(meta_path.read_text()))
+    say(f"training {model_name} on {world}")
+    written = train_world(layout, world, model_name, seed, load_train_config(), checkpoint.parent,
+                          ours_checkpoint)
     if written != checkpoint:
         raise RuntimeError(f"training wrote {written}, the study config expects {checkpoint}")
 

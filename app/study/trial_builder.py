@@ -39,20 +39,18 @@ from tqdm import tqdm
 import app
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 from app.fileio import sha256_file, write_json
+from app.layout import Layout
 from app.study.config import StudyConfig
 from app.study.trials import (
-    BANK_FILE,
     BankFile,
     Clip,
     ModelAnswer,
     StartState,
     TrialRecord,
     WorldBank,
-    bank_dir,
     clip_sha256,
 )
 from app.worlds.registry import World, build_world
-from app.worlds.simulate import output_paths
 
 POS_DECIMALS = 3
 HEADING_DECIMALS = 4
@@ -74,7 +72,7 @@ class WorldInputs:
 
 
 def build_trials(config: StudyConfig, study_id: str, data_dir: Path) -> Path:
-    """Build var/trials/<study_id>/bank.json and meta.json; returns the bank path."""
+    """Build the study's bank.json and its meta.json; returns the bank path."""
     started = time.perf_counter()
     worlds, meta_worlds = {}, {}
     for w_index, name in enumerate(config.worlds):
@@ -82,15 +80,16 @@ def build_trials(config: StudyConfig, study_id: str, data_dir: Path) -> Path:
         rng = np.random.default_rng(np.random.SeedSequence([config.bank_seed, w_index]))
         worlds[name], meta_worlds[name] = build_world_bank(config, inputs, rng)
     bank = BankFile(study_id=study_id, steps_to_predict=config.steps_to_predict, worlds=worlds)
-    out = bank_dir(data_dir, study_id)
-    write_json(out / BANK_FILE, bank.model_dump())
-    write_json(out / "meta.json", {
+    layout = Layout(data_dir)
+    bank_path = layout.bank(study_id)
+    write_json(bank_path, bank.model_dump())
+    write_json(layout.bank_meta(study_id), {
         "study_id": study_id, "config": config.model_dump(mode="json"), "worlds": meta_worlds,
-        "bank_sha256": sha256_file(out / BANK_FILE), "package_version": app.__version__,
+        "bank_sha256": sha256_file(bank_path), "package_version": app.__version__,
         "python": platform.python_version(), "numpy": np.__version__,
         "wall_time_s": round(time.perf_counter() - started, 2),
     })
-    return out / BANK_FILE
+    return bank_path
 
 
 def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
@@ -102,14 +101,15 @@ def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
         trajectory_hash,
     )
 
-    npz_path, _ = output_paths(data_dir, name)
+    layout = Layout(data_dir)
+    npz_path = layout.trajectories(name)
     if not npz_path.is_file():
         raise FileNotFoundError(f"{npz_path}: no trajectories; run `tomstudy simulate {name}`")
     trajs = TrajectorySet.load(npz_path)
     data_hash = trajectory_hash(trajs.positions, trajs.lengths, trajs.labels)
     models, splits = {}, []  # test trajectory sets
     for kind in ("ours", "vae"):
-        path = data_dir / getattr(config.models[name], kind)
+        path = layout.resolve(getattr(config.models[name], kind))
         model = load_model(path, world=name)
         check_matches_data(model, name, trajs.dt_s, data_hash)
         if model.n_actions != config.steps_to_predict:

@@ -1,6 +1,6 @@
 """The trial bank: clips, start states and every predictor's answers, built once per study.
 
-Layout: var/trials/<study>/bank.json (+ meta.json with input hashes). Per world the bank
+Stored at app.layout's `bank` (+ `bank_meta` with input hashes). Per world the bank
 holds the scene, dt, the click limits and a list of trials of three kinds: `main` (the
 pool balanced assignment draws from), `practice` and `attention`.
 
@@ -18,8 +18,7 @@ from pathlib import Path
 
 from app.configio import StrictModel
 from app.fileio import sha256_bytes
-
-BANK_FILE = "bank.json"
+from app.layout import Layout
 
 
 class Clip(StrictModel):
@@ -116,11 +115,6 @@ def clip_sha256(scene: dict, dt_s: float, payload: dict) -> str:
     return sha256_bytes(json.dumps(shown, sort_keys=True, separators=(",", ":")).encode())
 
 
-def bank_dir(data_dir: Path, study_id: str) -> Path:
-    """var/trials/<study_id>/."""
-    return Path(data_dir) / "trials" / study_id
-
-
 @dataclass
 class TrialBank:
     """Read-only lookup over a loaded bank."""
@@ -130,8 +124,8 @@ class TrialBank:
 
     @classmethod
     def load(cls, data_dir: Path, study_id: str) -> "TrialBank":
-        """Read var/trials/<study_id>/bank.json; FileNotFoundError says how to build it."""
-        path = bank_dir(data_dir, study_id) / BANK_FILE
+        """Read the study's bank.json; FileNotFoundError says how to build it."""
+        path = Layout(data_dir).bank(study_id)
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no trial bank; run `tomstudy build-trials "
                                     f"--study {study_id}`")

@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from app.data.trajectory import HUMAN, ROBOT, Rejected
 from app.fileio import atomic_path, sha256_bytes, write_json
+from app.layout import Layout
 from app.settings import get_settings
 from app.worlds.obstacle import ObstacleConfig, ObstacleWorld
 
@@ -115,15 +116,10 @@ def config_key(config: ObstacleConfig) -> str:
     return sha256_bytes(text.encode())
 
 
-def policy_paths(data_dir: Path) -> tuple[Path, Path]:
-    """<data_dir>/policies/obstacle_sac.zip and its meta.json."""
-    folder = Path(data_dir) / "policies"
-    return folder / f"{POLICY_NAME}.zip", folder / f"{POLICY_NAME}.meta.json"
-
-
 def prepare_model(config: ObstacleConfig, data_dir: Path) -> SAC:
     """Load the model trained on this exact config, or train, evaluate and save it."""
-    zip_path, meta_path = policy_paths(data_dir)
+    layout = Layout(data_dir)
+    zip_path, meta_path = layout.policy(POLICY_NAME), layout.policy_meta(POLICY_NAME)
     key = config_key(config)
     if not _is_current(zip_path, meta_path, key):
         model, train_s = train_sac_policy(config)
@@ -155,7 +151,8 @@ def load_prepared_model(config: ObstacleConfig) -> SAC:
     key = config_key(config)
     zip_path = _PREPARED.get(key)
     if zip_path is None:
-        zip_path, meta_path = policy_paths(get_settings().data_dir)
+        layout = get_settings().layout
+        zip_path, meta_path = layout.policy(POLICY_NAME), layout.policy_meta(POLICY_NAME)
         if not _is_current(zip_path, meta_path, key):
             raise RuntimeError(f"no SAC policy trained on this obstacle config at {zip_path}; "
                                "call ObstacleWorld.prepare(data_dir) first")

@@ -14,6 +14,7 @@ from tqdm import tqdm
 import app
 from app.data.trajectory import Episode, Rejected, TrajectorySet
 from app.fileio import sha256_file, write_json
+from app.layout import Layout
 from app.worlds.registry import World, build_world
 
 MAX_ATTEMPTS = 50
@@ -54,12 +55,6 @@ def _roll_one(args: tuple[int, int]) -> tuple[Episode | None, Counter]:
     return None, rejections
 
 
-def output_paths(data_dir: Path, world: str) -> tuple[Path, Path]:
-    """var/data/<world>/trajectories.npz and its meta.json."""
-    folder = Path(data_dir) / "data" / world
-    return folder / "trajectories.npz", folder / "meta.json"
-
-
 def simulate(world: str, n: int, seed: int, data_dir: Path, config_path: Path | None = None,
              policy: str = "mpc", workers: int | None = None) -> SimulationResult:
     """Simulate `n` kept trajectories of `world` and write them with a meta.json."""
@@ -73,7 +68,8 @@ def simulate(world: str, n: int, seed: int, data_dir: Path, config_path: Path | 
                            f"{dict(rejections)}")
     trajs = TrajectorySet.from_episodes(world, built.dt_s, episodes, built.label_names,
                                         built.scene())
-    npz_path, meta_path = output_paths(data_dir, world)
+    layout = Layout(data_dir)
+    npz_path, meta_path = layout.trajectories(world), layout.trajectories_meta(world)
     trajs.save(npz_path)
     meta = _meta(built, trajs, n, seed, policy, workers, rejections,
                  time.perf_counter() - started, npz_path)

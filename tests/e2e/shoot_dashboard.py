@@ -17,6 +17,7 @@ from pathlib import Path
 
 import httpx
 
+from app.layout import DEFAULT_DATA_DIR, Layout
 from app.study.recruitment import preview_key
 from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
 
@@ -80,7 +81,8 @@ def shoot(url: str, token: str, out: Path) -> None:
         browser.close()
 
 
-def main(pilot_db: Path = REPO / "var" / "pilot_coarse.db", port: int = 8766) -> None:
+def main(pilot_db: Path = Layout(DEFAULT_DATA_DIR).pilot_database("coarse"),
+         port: int = 8766) -> None:
     """Copy the pilot database, serve it, add the lifecycle sessions, shoot."""
     if not pilot_db.exists():
         raise SystemExit(f"{pilot_db} not found: run `make pilot` first")

@@ -21,7 +21,7 @@ import httpx
 import pytest
 import yaml
 
-from app.study.trials import BANK_FILE, bank_dir
+from app.layout import Layout
 from tests.conftest import SmallStudy, free_port, start_server
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.test_browser_session import (
@@ -73,7 +73,7 @@ def done_screen(page) -> dict:
 
 def bank_of(study: SmallStudy, study_id: str) -> dict:
     """Bank trials by id."""
-    raw = json.loads((bank_dir(study.data_dir, study_id) / BANK_FILE).read_text())
+    raw = json.loads(Layout(study.data_dir).bank(study_id).read_text())
     return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}
 
 
@@ -172,7 +172,8 @@ def mturk_server(browser_study, turk_submit_to, tmp_path_factory):
     root = tmp_path_factory.mktemp("mturk")
     shutil.copytree(browser_study.configs_dir, root / "configs")
     shutil.copytree(browser_study.data_dir, root / "var")
-    shutil.copytree(bank_dir(root / "var", BROWSER_STUDY), bank_dir(root / "var", MTURK_STUDY))
+    layout = Layout(root / "var")
+    shutil.copytree(layout.bank_dir(BROWSER_STUDY), layout.bank_dir(MTURK_STUDY))
     config = yaml.safe_load((root / "configs" / f"{BROWSER_STUDY}.yaml").read_text())
     config["recruitment"] |= {"platform": "mturk", "mturk_submit_hosts": [turk_submit_to]}
     (root / "configs" / f"{MTURK_STUDY}.yaml").write_text(yaml.safe_dump(config))

@@ -22,13 +22,13 @@ def test_vector_field_has_one_entry_per_used_code(trained):
 
 
 def test_write_fields_draws_every_code_of_both_models(trained, tmp_path):
-    for kind in ("ours", "vae"):
-        paths = write_fields(trained[kind], tmp_path / kind, grid_n=5)
+    for model_name in ("ours", "vae"):
+        paths = write_fields(trained[model_name], tmp_path / model_name, grid_n=5)
         pngs = [p for p in paths if p.suffix == ".png"]
-        assert len(pngs) == load_model(trained[kind]).codes["n_codes_used"] >= 1
+        assert len(pngs) == load_model(trained[model_name]).codes["n_codes_used"] >= 1
         assert all(p.stat().st_size > 1000 for p in pngs)
-        saved = json.loads((tmp_path / kind / "fields.json").read_text())
-        assert saved["kind"] == kind and len(saved["codes"]) == len(pngs)
+        saved = json.loads((tmp_path / model_name / "fields.json").read_text())
+        assert saved["kind"] == model_name and len(saved["codes"]) == len(pngs)
 
 
 def test_cli_fields_and_train_give_clean_errors(tmp_path, monkeypatch):

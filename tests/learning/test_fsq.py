@@ -1,4 +1,7 @@
-"""FSQ: level set, index round trip, straight-through gradients, reference implementation."""
+"""FSQ: level set, index round trip, straight-through gradients, reference implementation.
+
+The same functions quantise torch tensors (training) and numpy arrays (the server's
+inference); every comparison below runs both."""
 
 import numpy as np
 import pytest
@@ -6,10 +9,17 @@ import torch
 
 from app.learning.fsq import (
     FSQ,
-    codes_to_indices_numpy,
-    indices_to_codes_numpy,
-    quantize_numpy,
+    codes_to_indices,
+    indices_to_codes,
+    mixed_radix_basis,
+    quantize,
 )
+
+
+def numpy_levels(levels: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The (levels, basis) arrays the numpy inference passes to the FSQ functions."""
+    return (np.asarray(levels, dtype=np.float32),
+            np.asarray(mixed_radix_basis(levels), dtype=np.int64))
 
 
 def level_set(levels: int) -> np.ndarray:
@@ -52,16 +62,20 @@ def test_codes_to_indices_to_codes_round_trips(levels):
     assert len({tuple(c) for c in codes.tolist()}) == fsq.codebook_size
     quantised = fsq(torch.randn(500, len(levels)))
     assert torch.allclose(fsq.indices_to_codes(fsq.codes_to_indices(quantised)), quantised)
-    lv = np.asarray(levels, dtype=np.float32)
-    assert np.array_equal(codes_to_indices_numpy(codes.numpy(), lv), indices.numpy())
-    assert np.allclose(indices_to_codes_numpy(indices.numpy(), lv), codes.numpy())
+    lv, basis = numpy_levels(levels)
+    assert np.array_equal(codes_to_indices(codes.numpy(), lv, basis), indices.numpy())
+    assert np.array_equal(indices_to_codes(indices.numpy(), lv, basis), codes.numpy())
 
 
-def test_numpy_forward_matches_torch():
+def test_numpy_arrays_and_torch_tensors_give_identical_codes():
     fsq = FSQ([2, 3, 5])
     z = torch.randn(1000, 3) * 2
-    assert np.array_equal(quantize_numpy(z.numpy(), np.array([2, 3, 5], np.float32)),
-                          fsq(z).detach().numpy())
+    lv, basis = numpy_levels([2, 3, 5])
+    codes = quantize(z.numpy(), lv)
+    assert codes.dtype == np.float32
+    assert np.array_equal(codes, fsq(z).detach().numpy())
+    assert np.array_equal(codes_to_indices(codes, lv, basis),
+                          fsq.codes_to_indices(fsq(z)).numpy())
 
 
 def test_gradients_pass_straight_through_the_rounding():
@@ -87,6 +101,11 @@ def test_odd_levels_equal_the_reference_fsq(levels):
     codes = ours(z)
     assert torch.allclose(codes[keep], ref_codes[0][keep], atol=1e-6)
     assert torch.equal(ours.codes_to_indices(codes)[keep], ref_idx[0][keep].long())
+    lv, basis = numpy_levels(levels)  # the server's numpy inference: the same codes
+    numpy_codes = quantize(z.numpy(), lv)
+    assert np.allclose(numpy_codes[keep], ref_codes[0][keep].numpy(), atol=1e-6)
+    assert np.array_equal(codes_to_indices(numpy_codes, lv, basis)[keep],
+                          ref_idx[0][keep].numpy())
 
 
 @pytest.mark.parametrize("levels", [[2], [4], [6], [2, 2, 2], [2, 3, 4]])
@@ -102,6 +121,18 @@ def test_even_levels_equal_the_reference_symmetric_mode(levels):
     assert torch.allclose(codes[keep], ref_codes[0][keep], atol=1e-6)
     assert torch.equal(ours.codes_to_indices(codes)[keep], ref_idx[0][keep].long())
     assert torch.allclose(ours.all_codes(), ref.implicit_codebook, atol=1e-6)
+
+
+def test_even_levels_differ_from_the_reference_default_by_design():
+    """The reference keeps 0 as a level (lopsided for even L); the paper's set is symmetric."""
+    from vector_quantize_pytorch import FSQ as ReferenceFSQ
+
+    reference = ReferenceFSQ([4]).implicit_codebook.flatten().numpy()
+    ours = FSQ([4]).all_codes().flatten().numpy()
+    assert np.allclose(reference, [-1, -0.5, 0, 0.5])
+    assert np.allclose(ours, [-1, -1 / 3, 1 / 3, 1]) and np.allclose(ours, -ours[::-1])
+    with pytest.raises(AssertionError, match="preserve_symmetry"):
+        ReferenceFSQ([2])  # the paper's L=2 example exists only in the symmetric variant
 
 
 @pytest.mark.parametrize("levels", [[], [1], [3, 0]])

@@ -9,29 +9,29 @@ import torch
 from app.data.windows import make_windows, segment_features
 from app.learning.checkpoint import CheckpointError, check_matches_data, load_model
 from app.learning.fsq import FSQ
-from app.learning.train import train_model
+from app.learning.train import train_and_save
 from tests.learning.conftest import FAST
 
 
-@pytest.mark.parametrize("kind", ["ours", "vae"])
-def test_training_writes_checkpoint_metrics_and_loss_curve(trained, kind):
-    path = trained[kind]
+@pytest.mark.parametrize("model_name", ["ours", "vae"])
+def test_training_writes_checkpoint_metrics_and_loss_curve(trained, model_name):
+    path = trained[model_name]
     assert (path.parent / "loss.png").stat().st_size > 1000
     metrics = json.loads((path.parent / "metrics.json").read_text())
-    assert metrics["kind"] == kind and 1 <= metrics["epochs_run"] <= FAST.max_epochs
+    assert metrics["kind"] == model_name and 1 <= metrics["epochs_run"] <= FAST.max_epochs
     test = metrics["test"]
     assert {"usage", "agreement", "prediction", "constant_velocity"} <= set(test)
     assert 0 < test["agreement"]["robot_intent"]["purity"] <= 1
     assert "robot_intent_in_progress" in test["agreement"]
     raw = torch.load(path, weights_only=True)  # plain dict of tensors and plain types
-    assert raw["kind"] == kind and raw["train_config"]["segment_len"] == FAST.segment_len
+    assert raw["kind"] == model_name and raw["train_config"]["segment_len"] == FAST.segment_len
     assert raw["content_hash"] == load_model(path).content_hash
 
 
 def test_checkpoint_attributes(trained):
     ours, vae = load_model(trained["ours"]), load_model(trained["vae"])
-    assert (ours.kind, ours.levels, ours.latent_dim) == ("ours", [3, 3], 2)
-    assert (vae.kind, vae.levels, vae.latent_dim) == ("vae", None, 2)
+    assert (ours.name, ours.levels, ours.latent_dim) == ("ours", [3, 3], 2)
+    assert (vae.name, vae.levels, vae.latent_dim) == ("vae", None, 2)
     for model in (ours, vae):
         assert model.world == "lanes" and model.segment_len == 5 and model.n_actions == 3
         assert model.dt_s == 0.5 and len(model.content_hash) == 64
@@ -39,9 +39,9 @@ def test_checkpoint_attributes(trained):
     assert len(vae.kmeans_centres) == ours.codes["n_codes_used"]
 
 
-@pytest.mark.parametrize("kind", ["ours", "vae"])
-def test_numpy_inference_equals_the_torch_network(trained, lane_trajs, kind):
-    model = load_model(trained[kind])
+@pytest.mark.parametrize("model_name", ["ours", "vae"])
+def test_numpy_inference_equals_the_torch_network(trained, lane_trajs, model_name):
+    model = load_model(trained[model_name])
     net = model.torch_module()
     w = make_windows(lane_trajs, 5, 3, per_trajectory=2)
     z = model.encode_batch(w.segment_positions)
@@ -55,9 +55,9 @@ def test_numpy_inference_equals_the_torch_network(trained, lane_trajs, kind):
     assert np.allclose(model.predict_batch(z, w.end_states), expected, atol=1e-4)
 
 
-@pytest.mark.parametrize("kind", ["ours", "vae"])
-def test_encode_uses_the_latest_segment_len_steps(trained, lane_trajs, kind):
-    model = load_model(trained[kind])
+@pytest.mark.parametrize("model_name", ["ours", "vae"])
+def test_encode_uses_the_latest_segment_len_steps(trained, lane_trajs, model_name):
+    model = load_model(trained[model_name])
     long_segment = lane_trajs.positions[0, :9]  # 8 steps
     assert np.allclose(model.encode(long_segment), model.encode(long_segment[-6:]))
     z = model.encode(long_segment)
@@ -83,7 +83,7 @@ def test_ours_codes_are_fsq_indices(trained, lane_trajs):
 
 
 def test_same_seed_gives_the_same_checkpoint(lane_trajs, tmp_path, trained):
-    again = train_model(lane_trajs, "ours", 0, FAST, tmp_path / "again", progress=False)
+    again = train_and_save(lane_trajs, "ours", 0, FAST, tmp_path / "again", progress=False)
     assert load_model(again).content_hash == load_model(trained["ours"]).content_hash
 
 

@@ -9,6 +9,7 @@ import yaml
 from app.configio import ConfigError
 from app.learning.checkpoint import CheckpointError, load_model, save_checkpoint
 from app.learning.config import TrainConfig
+from app.learning.models import build_model, model_args
 from app.learning.select import (
     OursGrid,
     SelectionConfig,
@@ -21,7 +22,7 @@ from app.learning.select import (
     write_outputs,
     yaml_lines,
 )
-from app.learning.train import build_model, model_args, prepare, train_model
+from app.learning.train import prepare, train_and_save
 from tests.learning.synthetic import make_lane_trajs
 
 TINY = TrainConfig(max_epochs=2, patience_epochs=1, windows_per_trajectory=4,
@@ -46,7 +47,8 @@ def test_vae_latent_size_is_independent_of_levels():
 def test_train_model_applies_only_its_worlds_selection(tiny_trajs, tmp_path):
     cfg = TrainConfig.model_validate({**TINY.model_dump(), "selected": {
         "lanes": {"vae_latent_dim": 4, "beta_kl": 0.5}, "elsewhere": {"vae_latent_dim": 3}}})
-    model = load_model(train_model(tiny_trajs, "vae", 0, cfg, tmp_path, progress=False, vae_k=2))
+    model = load_model(train_and_save(tiny_trajs, "vae", 0, cfg, tmp_path, progress=False,
+                                      vae_clusters=2))
     assert model.latent_dim == 4 and model.encode(tiny_trajs.positions[0, :6]).shape == (4,)
     assert model.train_config["beta_kl"] == 0.5 and model.train_config["selected"] == {}
     assert model.train_config["levels"] == [3, 3]  # no `levels` chosen: the default stays

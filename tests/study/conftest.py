@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from app.study.trials import BANK_FILE, bank_dir
+from app.layout import Layout
 from tests.conftest import fresh_database
 from tests.study.flow import make_client
 
@@ -30,5 +30,5 @@ def client(small_study, db_url):
 @pytest.fixture(scope="module")
 def bank(small_study) -> dict:
     """Bank trials by id (the test reads the true moves for attention checks)."""
-    raw = json.loads((bank_dir(small_study.data_dir, small_study.study_id) / BANK_FILE).read_text())
+    raw = json.loads(Layout(small_study.data_dir).bank(small_study.study_id).read_text())
     return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}

@@ -11,12 +11,12 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.fileio import sha256_file
+from app.layout import Layout
 from app.settings import Settings
 from app.study.bank_guard import BankChanged, banks_run
 from app.study.db import make_engine
 from app.study.main import create_app
 from app.study.recruitment import preview_key
-from app.study.trials import BANK_FILE, bank_dir
 from tests.conftest import SmallStudy, free_port, start_server
 from tests.study.flow import TOKEN, Participant, make_client
 
@@ -27,7 +27,7 @@ def rebuilt(small_study, tmp_path) -> SmallStudy:
     researcher rebuilt it."""
     data_dir = tmp_path / "var"
     shutil.copytree(small_study.data_dir, data_dir)
-    bank = bank_dir(data_dir, small_study.study_id) / BANK_FILE
+    bank = Layout(data_dir).bank(small_study.study_id)
     bank.write_text(json.dumps(json.loads(bank.read_text()), indent=1))
     meta = bank.with_name("meta.json")
     meta.write_text(json.dumps(json.loads(meta.read_text()) | {"bank_sha256": sha256_file(bank)}))
@@ -58,7 +58,7 @@ def test_a_changed_bank_is_refused_naming_the_sessions_and_the_override(small_st
         pass
     message = str(refused.value)
     new = json.loads(
-        (bank_dir(rebuilt.data_dir, rebuilt.study_id) / "meta.json").read_text())["bank_sha256"]
+        Layout(rebuilt.data_dir).bank_meta(rebuilt.study_id).read_text())["bank_sha256"]
     assert message.startswith(f"{rebuilt.study_id}: the trial bank changed")
     assert f"2 ran bank {old[:12]}" in message and f"loaded bank is {new[:12]}" in message
     assert "--allow-bank-change" in message and "TOMSTUDY_ALLOW_BANK_CHANGE=1" in message

@@ -1,5 +1,5 @@
 """The study config, the trial bank (start states on the data, their count and kinds), the
-predictor's check, prepare, production refusal."""
+model answers' check, prepare, production refusal."""
 
 import io
 import json
@@ -18,16 +18,17 @@ from sqlmodel import Session, create_engine, select
 
 from app.configio import ConfigError, load_yaml_model
 from app.fileio import sha256_file
+from app.layout import Layout
 from app.settings import DEFAULT_ADMIN_TOKEN, Settings
 from app.study.config import StudyConfig, load_study_config
 from app.study.db import create_tables
 from app.study.deps import get_db
 from app.study.main import UnsafeSettings, create_app
-from app.study.predictor import BankMismatch, Predictor
+from app.study.model_answers import BankMismatch, ModelAnswers
 from app.study.prepare import bank_is_current, prepare_study
 from app.study.tables import Participant
 from app.study.trial_builder import NoStartStates, build_trials, take_turns
-from app.study.trials import BANK_FILE, TrialBank, bank_dir, clip_sha256
+from app.study.trials import TrialBank, clip_sha256
 from tests.study import flow
 from tests.study.flow import ADMIN, TOKEN, new_id, prediction_body, prolific
 
@@ -106,8 +107,8 @@ def test_bank_trials_have_the_paper_shape(bank, small_study):
             assert t.clip_sha256 == clip_sha256(world.scene, world.dt_s, t.browser_payload())
             assert all("start_kind" not in s for s in t.browser_payload()["start_states"])
         hashes = {t.predictions["ours"].content_hash for t in world.trials}
-        meta = json.loads((bank_dir(small_study.data_dir, small_study.study_id)
-                           / "meta.json").read_text())
+        meta = json.loads(Layout(small_study.data_dir).bank_meta(small_study.study_id)
+                          .read_text())
         assert hashes == {meta["worlds"][name]["checkpoints"]["ours"]["content_hash"]}
 
 
@@ -232,23 +233,22 @@ def test_build_trials_is_reproducible(small_study, tmp_path):
         (data / sub).symlink_to(small_study.data_dir / sub)
     cfg = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml", StudyConfig)
     path = build_trials(cfg, small_study.study_id, data)
-    original = bank_dir(small_study.data_dir, small_study.study_id) / BANK_FILE
+    original = Layout(small_study.data_dir).bank(small_study.study_id)
     assert sha256_file(path) == sha256_file(original)
 
 
-def test_predictor_refuses_a_bank_from_other_checkpoints(small_study, bank, tmp_path):
+def test_model_answers_refuse_a_bank_from_other_checkpoints(small_study, bank, tmp_path):
     data = tmp_path / "var"
     data.mkdir()
     (data / "models").symlink_to(small_study.data_dir / "models")
-    raw = json.loads(bank_dir(small_study.data_dir, small_study.study_id)
-                     .joinpath(BANK_FILE).read_text())
+    raw = json.loads(Layout(small_study.data_dir).bank(small_study.study_id).read_text())
     raw["worlds"]["obstacle"]["trials"][2]["predictions"]["vae"]["actions"][1][2][0] += 0.5
-    out = bank_dir(data, small_study.study_id) / BANK_FILE
+    out = Layout(data).bank(small_study.study_id)
     out.parent.mkdir(parents=True)
     out.write_text(json.dumps(raw))
     cfg = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml", StudyConfig)
     with pytest.raises(BankMismatch, match="vae answers differ"):
-        Predictor(cfg, TrialBank.load(data, small_study.study_id), data)
+        ModelAnswers(cfg, TrialBank.load(data, small_study.study_id), data)
 
 
 def test_prepare_skips_what_exists(small_study):

@@ -11,8 +11,8 @@ import yaml
 from sqlalchemy.engine import make_url
 
 from app.cli import cli
+from app.layout import Layout
 from app.settings import Settings
-from app.study.trials import BANK_FILE, bank_dir
 from tests.conftest import REPO
 
 COMPOSE = yaml.safe_load((REPO / "compose.yaml").read_text())
@@ -128,7 +128,7 @@ def run_entrypoint(tmp_path):
 
 
 def add_bank(data_dir: Path, study: str) -> None:
-    bank = bank_dir(data_dir, study) / BANK_FILE
+    bank = Layout(data_dir).bank(study)
     bank.parent.mkdir(parents=True)
     bank.write_text("{}")
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from app.data.windows import make_windows
-from app.learning.metrics import (
+from app.learning.model_metrics import (
     SKIP,
     agreement,
     code_usage,

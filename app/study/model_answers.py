@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.layout import Layout
 from app.study.config import StudyConfig
 from app.study.trials import TrialBank
 
@@ -32,15 +33,16 @@ class Answer:
     content_hash: str
 
 
-class Predictor:
+class ModelAnswers:
     """Both models of every world of a study, and their answers per trial id."""
 
     def __init__(self, config: StudyConfig, bank: TrialBank, data_dir: Path) -> None:
         from app.learning.checkpoint import load_model
 
-        self.models = {world: {kind: load_model(Path(data_dir) / getattr(paths, kind),
+        layout = Layout(data_dir)
+        self.models = {world: {name: load_model(layout.resolve(getattr(paths, name)),
                                                 world=world)
-                               for kind in ("ours", "vae")}
+                               for name in ("ours", "vae")}
                        for world, paths in config.models.items()
                        if world in bank.data.worlds}
         self._answers = {tid: self._run(trial) for tid, trial in bank.by_id.items()}
@@ -48,18 +50,19 @@ class Predictor:
     def _run(self, trial) -> dict[str, Answer]:
         states = np.array([[s.robot, s.human] for s in trial.start_states], dtype=np.float32)
         answers = {}
-        for kind, model in self.models[trial.world].items():
-            stored = trial.predictions[kind]
+        for model_name, model in self.models[trial.world].items():
+            stored = trial.predictions[model_name]
             if stored.content_hash != model.content_hash:
-                raise BankMismatch(f"{trial.trial_id}: bank holds {kind} {stored.content_hash[:12]}"
-                                   f", server loaded {model.content_hash[:12]}; rebuild the bank "
+                raise BankMismatch(f"{trial.trial_id}: bank holds {model_name} "
+                                   f"{stored.content_hash[:12]}, server loaded "
+                                   f"{model.content_hash[:12]}; rebuild the bank "
                                    f"(tomstudy build-trials)")
             _, code, actions = model.trial(np.asarray(stored.segment_positions), states)
             if code != stored.code or not np.allclose(actions, stored.actions,
                                                       atol=ACTION_TOLERANCE_MPS):
-                raise BankMismatch(f"{trial.trial_id}: {kind} answers differ from the bank")
-            answers[kind] = Answer(code=int(code), actions=actions.astype(np.float64),
-                                   content_hash=model.content_hash)
+                raise BankMismatch(f"{trial.trial_id}: {model_name} answers differ from the bank")
+            answers[model_name] = Answer(code=int(code), actions=actions.astype(np.float64),
+                                         content_hash=model.content_hash)
         return answers
 
     def answers(self, trial_id: str) -> dict[str, Answer]:

@@ -1,0 +1,126 @@
+"""Where every generated file lives under the data dir: the one place that spells those paths.
+
+    <data dir>/                                   var/ unless TOMSTUDY_DATA_DIR moves it
+      data/<world>/trajectories.npz, meta.json, trajectories.png        simulate
+      policies/<policy>.zip, <policy>.meta.json                         simulate --policy sac
+      models/<world>/<model>/checkpoint.pt, metrics.json, loss.png      train
+      models/<world>/<model>/fields/                                    fields
+      models/selection/<world>/, models/sweep/<world>/                  select, sweep
+      models/interaction/<scenario>/                                    interaction
+      trials/<study>/bank.json, meta.json                               build-trials
+      trials/<study>/display_check.json                                 check-display
+      reports/<study>/, power-<study>-<bots>/, instrument-<study>/      analyze, power, instrument
+      reports/interaction/<scenario>/                                   interaction
+      study.db, pilot_<bots>.db                                         serve, make pilot
+
+A study config names its checkpoints relative to the data dir (`resolve`).
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+DEFAULT_DATA_DIR = Path(__file__).resolve().parent.parent / "var"
+CHECKPOINT_FILE = "checkpoint.pt"
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The generated paths under one data dir."""
+
+    root: Path
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "root", Path(self.root))
+
+    def resolve(self, path: Path | str) -> Path:
+        """A path a config gives relative to the data dir (an absolute one stays as it is)."""
+        return self.root / path
+
+    # -- simulate
+    def world_data(self, world: str) -> Path:
+        """data/<world>/: one world's simulated trajectories and what describes them."""
+        return self.root / "data" / world
+
+    def trajectories(self, world: str) -> Path:
+        """data/<world>/trajectories.npz."""
+        return self.world_data(world) / "trajectories.npz"
+
+    def trajectories_meta(self, world: str) -> Path:
+        """data/<world>/meta.json (config, seed, hashes, wall time of the simulation)."""
+        return self.world_data(world) / "meta.json"
+
+    def trajectories_plot(self, world: str) -> Path:
+        """data/<world>/trajectories.png."""
+        return self.world_data(world) / "trajectories.png"
+
+    def policy(self, name: str) -> Path:
+        """policies/<name>.zip: a trained world policy (SAC for Obstacle)."""
+        return self.root / "policies" / f"{name}.zip"
+
+    def policy_meta(self, name: str) -> Path:
+        """policies/<name>.meta.json: the config the policy was trained on."""
+        return self.root / "policies" / f"{name}.meta.json"
+
+    # -- train
+    def model_dir(self, world: str, model_name: str) -> Path:
+        """models/<world>/<model>/: checkpoint.pt, metrics.json, loss.png, fields/."""
+        return self.root / "models" / world / model_name
+
+    def checkpoint(self, world: str, model_name: str) -> Path:
+        """models/<world>/<model>/checkpoint.pt."""
+        return self.model_dir(world, model_name) / CHECKPOINT_FILE
+
+    def selection_dir(self, world: str) -> Path:
+        """models/selection/<world>/: `tomstudy select` outputs."""
+        return self.root / "models" / "selection" / world
+
+    def sweep_dir(self, world: str) -> Path:
+        """models/sweep/<world>/: `tomstudy sweep` settings and sweep.jsonl."""
+        return self.root / "models" / "sweep" / world
+
+    def interaction_models(self, scenario: str) -> Path:
+        """models/interaction/<scenario>/: every seed's Ours and VAE on INTERACTION."""
+        return self.root / "models" / "interaction" / scenario
+
+    # -- build-trials
+    def bank_dir(self, study_id: str) -> Path:
+        """trials/<study>/: bank.json and its meta.json."""
+        return self.root / "trials" / study_id
+
+    def bank(self, study_id: str) -> Path:
+        """trials/<study>/bank.json."""
+        return self.bank_dir(study_id) / "bank.json"
+
+    def bank_meta(self, study_id: str) -> Path:
+        """trials/<study>/meta.json (input hashes of the bank)."""
+        return self.bank_dir(study_id) / "meta.json"
+
+    def display_check(self, study_id: str) -> Path:
+        """trials/<study>/display_check.json: `tomstudy check-display`."""
+        return self.bank_dir(study_id) / "display_check.json"
+
+    # -- reports
+    def report_dir(self, study_id: str) -> Path:
+        """reports/<study>/: `tomstudy analyze`."""
+        return self.root / "reports" / study_id
+
+    def power_report(self, study_id: str, bots: str) -> Path:
+        """reports/power-<study>-<bots>/: `tomstudy power`."""
+        return self.root / "reports" / f"power-{study_id}-{bots}"
+
+    def instrument_report(self, study_id: str) -> Path:
+        """reports/instrument-<study>/: `tomstudy instrument`."""
+        return self.root / "reports" / f"instrument-{study_id}"
+
+    def interaction_report(self, scenario: str) -> Path:
+        """reports/interaction/<scenario>/: `tomstudy interaction`."""
+        return self.root / "reports" / "interaction" / scenario
+
+    # -- databases
+    def study_database(self) -> Path:
+        """study.db: the SQLite database `serve` uses when DATABASE_URL is unset."""
+        return self.root / "study.db"
+
+    def pilot_database(self, bots: str) -> Path:
+        """pilot_<bots>.db: the database `make pilot` runs bots of one preset against."""
+        return self.root / f"pilot_{bots}.db"

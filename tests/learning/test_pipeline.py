@@ -1,0 +1,91 @@
+"""The pipeline's learning stages: `tomstudy train` and `serve --prepare` give identical
+checkpoints; `tomstudy sweep` and `tomstudy select`."""
+
+import json
+import shutil
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from app.cli import cli
+from app.fileio import write_json
+from app.layout import Layout
+from app.learning.checkpoint import load_model
+from app.settings import get_settings
+from app.study.prepare import ensure_checkpoint
+from tests.learning.synthetic import make_lane_trajs
+
+TINY = {"max_epochs": 2, "patience_epochs": 1, "windows_per_trajectory": 4,
+        "encoder_hidden": [16], "decoder_hidden": [16]}
+
+
+@pytest.fixture
+def data_dir(tmp_path, monkeypatch):
+    """A data dir holding one small simulated world ("lanes"), and settings pointing at it."""
+    layout = Layout(tmp_path / "var")
+    trajs = make_lane_trajs(60, seed=1)
+    trajs.save(layout.trajectories("lanes"))
+    write_json(layout.trajectories_meta("lanes"), {"world": "lanes", "seed": 1, "n": 60})
+    configs = tmp_path / "configs"
+    configs.mkdir()
+    (configs / "training.yaml").write_text(yaml.safe_dump(TINY))
+    monkeypatch.setenv("TOMSTUDY_DATA_DIR", str(layout.root))
+    monkeypatch.setenv("TOMSTUDY_CONFIGS_DIR", str(configs))
+    get_settings.cache_clear()
+    yield layout
+    get_settings.cache_clear()
+
+
+def cli_train(model_name: str) -> None:
+    """`tomstudy train --world lanes --model <model_name>` with the tiny training.yaml."""
+    config = get_settings().configs_dir / "training.yaml"
+    result = CliRunner().invoke(cli, ["train", "--world", "lanes", "--model", model_name,
+                                      "--config", str(config)])
+    assert result.exit_code == 0, result.output
+
+
+def test_train_and_prepare_write_the_same_checkpoints(data_dir, tmp_path):
+    for model_name in ("ours", "vae"):
+        cli_train(model_name)
+    moved = Layout(tmp_path / "elsewhere")  # prepare's step, in a copy of the data dir
+    shutil.copytree(data_dir.world_data("lanes"), moved.world_data("lanes"))
+    ours = moved.checkpoint("lanes", "ours")
+    ensure_checkpoint(moved, "lanes", "ours", ours, 0, say=lambda _: None)
+    ensure_checkpoint(moved, "lanes", "vae", moved.checkpoint("lanes", "vae"), 0,
+                      say=lambda _: None, ours_checkpoint=ours)
+    for model_name in ("ours", "vae"):
+        by_cli = load_model(data_dir.checkpoint("lanes", model_name))
+        by_prepare = load_model(moved.checkpoint("lanes", model_name))
+        assert by_cli.content_hash == by_prepare.content_hash
+        assert by_cli.data_meta["source"] == {"world": "lanes", "seed": 1, "n": 60}
+    vae = load_model(data_dir.checkpoint("lanes", "vae"))
+    assert len(vae.kmeans_centres) == load_model(ours).codes["n_codes_used"]
+
+
+def test_the_vae_without_an_ours_checkpoint_is_a_clear_error(data_dir):
+    result = CliRunner().invoke(cli, ["train", "--world", "lanes", "--model", "vae"])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert "no Ours checkpoint" in result.output and "--ours-checkpoint" in result.output
+    assert not data_dir.checkpoint("lanes", "vae").exists()
+
+
+def test_sweep_is_a_tomstudy_command(data_dir, monkeypatch):
+    monkeypatch.setattr("app.learning.sweep.SETTINGS", [{"levels": [3, 3]}])
+    result = CliRunner().invoke(cli, ["sweep", "--world", "lanes"])
+    assert result.exit_code == 0, result.output
+    assert '{"levels": [3, 3]}' in result.output and "purity/NMI" in result.output
+    rows = (data_dir.sweep_dir("lanes") / "sweep.jsonl").read_text().splitlines()
+    assert [json.loads(row)["settings"] for row in rows] == [{"levels": [3, 3]}]
+    result = CliRunner().invoke(cli, ["sweep", "--world", "highway"])
+    assert result.exit_code == 2 and "run `tomstudy simulate highway` first" in result.output
+
+
+def test_select_is_a_tomstudy_command(data_dir, tmp_path):
+    grids = tmp_path / "selection.yaml"
+    grids.write_text("vae: {beta_kl: [0.01], latent_dim: [2]}\nours: {levels: [[2, 2]]}\n")
+    result = CliRunner().invoke(cli, ["select", "--world", "lanes", "--config", str(grids)])
+    assert result.exit_code == 0, result.output
+    assert "put this under `selected:`" in result.output and "  lanes:" in result.output
+    saved = json.loads((data_dir.selection_dir("lanes") / "selection.json").read_text())
+    assert saved["chosen"]["ours"] == {"levels": [2, 2]}
