@@ -1,4 +1,4 @@
-"""A package as a tree, one line per module: its name and the first line of its docstring.
+"""A package as a tree, one line per module: its name and what its docstring says first.
 
     python -m tests.module_tree [app]
 """
@@ -11,9 +11,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def summary(path: Path) -> str:
-    """The first line of a module's docstring ('' if it has none)."""
+    """The first paragraph of a module's docstring on one line ('' if it has none)."""
     doc = ast.get_docstring(ast.parse(path.read_text())) or ""
-    return doc.strip().splitlines()[0] if doc.strip() else ""
+    return " ".join(doc.strip().split("\n\n")[0].split())
 
 
 def tree_lines(folder: Path, depth: int = 0) -> list[str]:

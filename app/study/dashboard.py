@@ -16,8 +16,8 @@ from sqlmodel import Session
 from app import __version__
 from app.study.balance import in_progress_cutoff
 from app.study.context import StudyContext
-from app.study.export import exclusion_rules, progress
 from app.study.exports import checks_answered, predictions_frame
+from app.study.progress import exclusion_rules, progress
 from app.study.sessions import as_utc, session_status
 from app.study.state import progress_of
 from app.study.tables import Participant

@@ -5,7 +5,7 @@ from typing import Literal
 from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
-from app.study import export, exports, withdrawal
+from app.study import exports, progress, withdrawal
 from app.study.deps import AdminDep, SessionDep, study_context
 from app.study.tables import WithdrawalCreate
 
@@ -17,7 +17,7 @@ CSV = {200: {"content": {"text/csv": {}}}}
 @router.get("/summary")
 def read_summary(study_id: str, request: Request, db: SessionDep, _: AdminDep) -> dict:
     """Progress, completions, exclusions and running mean alignment error per model and world."""
-    return export.summary(db, study_context(request, study_id))
+    return progress.summary(db, study_context(request, study_id))
 
 
 @router.get("/export/{what}.csv", response_class=Response, responses=CSV)

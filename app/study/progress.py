@@ -1,4 +1,5 @@
-"""Read side for researchers: the dashboard summary (the exports are in exports.py)."""
+"""Where a study stands, for researchers: progress counts, the exclusion rules in force and the
+live alignment summary (the CSV exports are in exports.py)."""
 
 from collections import Counter
 
