@@ -1,6 +1,6 @@
 """Self-contained HTML reports: jinja2 templates (autoescaped) with figures embedded as data URIs.
 
-Both reports (analysis/report.py, app/learning/interaction_report.py) render through
+Both reports (analysis/report.py, app/interaction/report.py) render through
 `render_page`; their templates are in analysis/templates/ and extend `base.html.j2`.
 """
 

@@ -589,14 +589,15 @@ def interaction(
                                                  "layout (v1.0 or v1.2) into --data")] = None,
 ) -> None:
     """Ours vs VAE vs constant velocity on INTERACTION pairs; report in var/reports/interaction/."""
-    from app.data.interaction import TrackFileError
-    from app.data.lanelet_map import MapError
-    from app.learning.interaction_experiment import InteractionError, run_command
-    from app.learning.interaction_report import verdict
+    from app.interaction.dataset import InteractionError
+    from app.interaction.experiment import run_command
+    from app.interaction.lanelet_map import MapError
+    from app.interaction.report import verdict
+    from app.interaction.tracks import TrackFileError
 
     try:
         if generate:
-            from app.data.interaction_synth import generate as write_generated
+            from app.interaction.synthetic import generate as write_generated
 
             write_generated(data, scenario, generate)
         summary = run_command(data, scenario, get_settings().data_dir, config, train_config,

@@ -14,14 +14,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from app.data.interaction_synth import generate
+from app.interaction.config import InteractionConfig
+from app.interaction.dataset import load_scenario_data
+from app.interaction.experiment import experiment_train_config, run_command
+from app.interaction.synthetic import generate
 from app.learning.config import load_train_config
-from app.learning.interaction_experiment import (
-    InteractionConfig,
-    experiment_train_config,
-    load_experiment,
-    run_command,
-)
 from app.learning.train import train_and_save
 
 TARGET_S = 120.0
@@ -37,7 +34,7 @@ def main() -> None:
         root = Path(tmp)
         generate(root / "data", args.scenario, args.layout)
         cfg = InteractionConfig()
-        exp = load_experiment(root / "data", args.scenario, cfg)
+        exp = load_scenario_data(root / "data", args.scenario, cfg)
         train_cfg = experiment_train_config(load_train_config(), cfg)
         wall, cpu = time.perf_counter(), time.process_time()
         train_and_save(exp.train.trajs, "ours", 0, train_cfg, root / "baseline", progress=False)

@@ -6,9 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.data import interaction as ix
-from app.data.interaction_synth import generate, lane_lines
-from app.data.lanelet_map import OriginProjector, read_lanelet_map, tm_forward
+from app.interaction import pairs as px
+from app.interaction import tracks as ix
+from app.interaction.lanelet_map import OriginProjector, read_lanelet_map
+from app.interaction.synthetic import generate, lane_lines, read_manoeuvre_labels
 
 HEADER = ",".join(ix.VEHICLE_COLUMNS)
 
@@ -129,7 +130,7 @@ def test_both_generated_layouts_load_with_pedestrians_kept_out_of_pairs(generate
         recordings = ix.load_recordings(files["train"])
         kinds = {k for r in recordings for k in r.counts()}
         assert kinds == {"car", "pedestrian/bicycle"}
-        pairs = ix.extract_pairs(recordings, 40, 40, 30.0)
+        pairs = px.extract_pairs(recordings, 40, 40, 30.0)
         assert len(pairs) > 20
         walkers = {(r.name, t.track_id) for r in recordings for t in r.tracks if not t.is_car}
         for pair in pairs:
@@ -146,9 +147,9 @@ def test_pair_rule_picks_nearest_car_present_over_the_whole_window(tmp_path):
     rows.append("9,5,500,pedestrian/bicycle,1.0,1.0,1.0,0.0,,,")  # right on top: never paired
     path = _write(tmp_path / "vehicle_tracks_000.csv", "\n".join([HEADER, *rows]) + "\n")
     (rec,) = ix.read_track_file(path)
-    pairs = {p.robot_id: p.human_id for p in ix.pairs_in_window(rec, 1, 40, 30.0)}
+    pairs = {p.robot_id: p.human_id for p in px.pairs_in_window(rec, 1, 40, 30.0)}
     assert pairs == {1: 2, 2: 1}  # car 3 is not present throughout, car 4 is beyond 30 m
-    pair = ix.pairs_in_window(rec, 1, 40, 30.0)[0]
+    pair = px.pairs_in_window(rec, 1, 40, 30.0)[0]
     np.testing.assert_allclose(pair.positions[:, 1, 1] - pair.positions[:, 0, 1], 10.0)
     np.testing.assert_allclose(pair.speeds, 8.0)
 
@@ -157,9 +158,9 @@ def test_v10_time_split_keeps_windows_apart(generated):
     data = generated / "v1.0"
     recordings = ix.load_recordings(ix.split_files(data, "DR_USA_Intersection_EP0", "v1.0")
                                     ["train"])
-    ranges = ix.time_split(recordings, 0.8)
-    train = ix.extract_pairs(recordings, 40, 40, 30.0, ranges["train"])
-    val = ix.extract_pairs(recordings, 40, 40, 30.0, ranges["val"])
+    ranges = px.time_split(recordings, 0.8)
+    train = px.extract_pairs(recordings, 40, 40, 30.0, ranges["train"])
+    val = px.extract_pairs(recordings, 40, 40, 30.0, ranges["val"])
     assert train and val
     for pair in val:
         assert pair.first_frame >= ranges["val"][pair.recording][0]
@@ -169,12 +170,12 @@ def test_v10_time_split_keeps_windows_apart(generated):
 
 def test_generator_labels_cover_every_car_row(generated):
     data = generated / "v1.2"
-    labels = ix.load_manoeuvres(data / "generator_labels" / "DR_USA_Intersection_EP0_train.csv")
+    labels = read_manoeuvre_labels(data / "generator_labels" / "DR_USA_Intersection_EP0_train.csv")
     assert {name.split(":")[0] for name in labels.values()} == {"straight", "left", "right"}
     with open(data / "train" / "DR_USA_Intersection_EP0_train.csv") as fh:
         cars = [r for r in csv.DictReader(fh) if r["agent_type"] == "car"]
     assert len(cars) == len(labels)
-    round_labels = ix.load_manoeuvres(data / "generator_labels" /
+    round_labels = read_manoeuvre_labels(data / "generator_labels" /
                                       "DR_USA_Roundabout_FT_train.csv")
     assert {n.split(":")[0] for n in round_labels.values()} == {"entering", "circling",
                                                                  "exiting"}
@@ -183,16 +184,17 @@ def test_generator_labels_cover_every_car_row(generated):
 # ---------------------------------------------------------------- maps
 
 
-def test_utm_series_matches_known_values():
-    east, north = tm_forward(0.0, 0.0, 3.0)
-    assert east == pytest.approx(166021.443, abs=0.01) and north == pytest.approx(0.0, abs=1e-6)
-    east, north = tm_forward(45.0, 3.0, 3.0)  # on the central meridian: k0 * meridian arc
-    assert east == pytest.approx(500000.0) and north == pytest.approx(4982950.400, abs=0.01)
+def test_utm_projection_matches_known_values():
+    projector = OriginProjector()  # zone 31; (0, 0) is 166021.443 m east of the false origin
+    assert projector.zone == 31 and projector.x0 == pytest.approx(166021.443, abs=0.01)
+    # on the central meridian: easting 500 km, northing k0 * meridian arc
+    np.testing.assert_allclose(projector.to_xy([45.0], [3.0]),
+                               [[500000.0 - 166021.443, 4982950.400]], atol=0.01)
 
 
 def test_generated_map_round_trips_through_lat_lon(generated):
     lines = read_lanelet_map(generated / "v1.2" / "maps" / "DR_USA_Roundabout_FT.osm",
-                             OriginProjector(use_pyproj=False))
+                             OriginProjector())
     expected = lane_lines("roundabout")
     assert len(lines) == len(expected)
     for got, (kind, subtype, points) in zip(lines, expected, strict=True):
@@ -201,7 +203,7 @@ def test_generated_map_round_trips_through_lat_lon(generated):
 
 
 def test_unreadable_map_is_a_clear_error(tmp_path):
-    from app.data.lanelet_map import MapError
+    from app.interaction.lanelet_map import MapError
 
     bad = _write(tmp_path / "m.osm", "<osm><node id='1' lat='x' lon='0'/></osm>")
     with pytest.raises(MapError, match="node 1 lacks a numeric lat/lon"):
@@ -235,9 +237,9 @@ def test_v10_official_validation_list_splits_whole_recordings(generated, tmp_pat
     assert names == ["vehicle_tracks_001"]
     recordings = ix.load_recordings(ix.split_files(data, "DR_USA_Intersection_EP0", "v1.0")
                                     ["train"])
-    ranges = ix.recording_split(recordings, names)
-    val = ix.extract_pairs(recordings, 40, 40, 30.0, ranges["val"])
-    train = ix.extract_pairs(recordings, 40, 40, 30.0, ranges["train"])
+    ranges = px.recording_split(recordings, names)
+    val = px.extract_pairs(recordings, 40, 40, 30.0, ranges["val"])
+    train = px.extract_pairs(recordings, 40, 40, 30.0, ranges["train"])
     assert {p.recording for p in val} == {"vehicle_tracks_001"}
     assert {p.recording for p in train} == {"vehicle_tracks_000"}
 
@@ -253,7 +255,7 @@ def test_projection_matches_the_devkit_convention(tmp_path):
       <way id="10"><nd ref="1"/><nd ref="2"/><tag k="type" v="road_border"/></way>
       <way id="11"><nd ref="3"/><nd ref="4"/><tag k="type" v="line_thin"/>
         <tag k="subtype" v="dashed"/></way></osm>""")
-    border, thin = read_lanelet_map(osm, OriginProjector(use_pyproj=False))
+    border, thin = read_lanelet_map(osm, OriginProjector())
     np.testing.assert_allclose(border.points, [[1, 1], [101, 1]], atol=1e-3)
     np.testing.assert_allclose(thin.points, [[1, 4], [1, 7]], atol=1e-3)
     assert (thin.kind, thin.subtype) == ("line_thin", "dashed")

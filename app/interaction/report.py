@@ -1,6 +1,6 @@
 """Figures and the HTML report of the INTERACTION experiment.
 
-interaction_experiment.py runs the experiment and hands this module plain results (the
+experiment.py runs the experiment and hands this module plain results (the
 summary, per-seed rows) and `FigureInputs`; nothing here imports the experiment back. The
 page is analysis/templates/interaction_report.html.j2.
 """
@@ -14,11 +14,11 @@ import numpy as np
 
 from analysis.html import render_page
 from analysis.scene_plot import LABEL_COLORS
-from app.data.lanelet_map import LaneLine
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 from app.data.windows import Windows
 from app.fileio import atomic_path, write_json
+from app.interaction.lanelet_map import LaneLine
 
 MODEL_NAMES = {"ours": "Ours", "vae": "VAE", "cv": "constant velocity"}
 
@@ -46,7 +46,7 @@ def models_of(summary: dict) -> list[str]:
 
 
 def _axes_over_scene(ax, inputs: FigureInputs) -> None:
-    from app.data.lanelet_map import draw_lane_lines
+    from app.interaction.lanelet_map import draw_lane_lines
 
     b = inputs.train.scene.bounds
     draw_lane_lines(ax, inputs.lane_lines)

@@ -7,9 +7,11 @@ import numpy as np
 import pytest
 
 from app.configio import ConfigError
-from app.data.interaction_synth import generate
 from app.data.trajectory import ROBOT
-from app.learning import interaction_experiment as ie
+from app.interaction import config as ic
+from app.interaction import dataset as ds
+from app.interaction import experiment as ie
+from app.interaction.synthetic import generate
 
 SCENARIO = "DR_USA_Intersection_EP0"
 
@@ -22,8 +24,8 @@ def small_data(tmp_path_factory) -> Path:
 
 
 def test_pairs_become_downsampled_trajectories_with_labels(small_data):
-    cfg = ie.InteractionConfig()
-    exp = ie.load_experiment(small_data, SCENARIO, cfg)
+    cfg = ic.InteractionConfig()
+    exp = ds.load_scenario_data(small_data, SCENARIO, cfg)
     trajs = exp.train.trajs
     assert trajs.dt_s == pytest.approx(0.2) and cfg.segment_len == 5
     assert trajs.positions.shape[1:] == (20, 2, 2)  # 40 frames every 2nd
@@ -38,7 +40,7 @@ def test_pairs_become_downsampled_trajectories_with_labels(small_data):
     # the turn label derived from motion agrees with the generator's route label for
     # pairs that actually turn by more than 60 degrees
     names = trajs.label_names["robot_manoeuvre"]
-    turn = [ie.TURN_NAMES[k] for k in trajs.labels["robot_turn"]]
+    turn = [ds.TURN_NAMES[k] for k in trajs.labels["robot_turn"]]
     route = [names[k] for k in trajs.labels["robot_manoeuvre"]]
     turned = [(t, r) for t, r in zip(turn, route, strict=True) if t != "straight"]
     assert turned and np.mean([t == r for t, r in turned]) > 0.9
@@ -50,15 +52,15 @@ def test_pairs_become_downsampled_trajectories_with_labels(small_data):
 
 def test_heading_sector_uses_map_frame_with_y_up():
     v = np.array([[5.0, 0.1], [0.0, 3.0], [-2.0, 0.0], [0.2, -4.0]])
-    assert [ie.HEADING_NAMES[k] for k in ie.heading_sector(v)] == ["east", "north", "west",
+    assert [ds.HEADING_NAMES[k] for k in ds.heading_sector(v)] == ["east", "north", "west",
                                                                     "south"]
 
 
 def test_window_labels_take_the_manoeuvre_at_the_segment_end(small_data):
-    cfg = ie.InteractionConfig()
-    exp = ie.load_experiment(small_data, SCENARIO, cfg)
-    windows = ie.eval_windows(exp.val, cfg)
-    labels = ie.window_labels(windows, exp.val)
+    cfg = ic.InteractionConfig()
+    exp = ds.load_scenario_data(small_data, SCENARIO, cfg)
+    windows = ds.eval_windows(exp.val, cfg)
+    labels = ds.window_labels(windows, exp.val)
     assert set(labels) == {"robot_turn", "robot_heading", "robot_manoeuvre",
                            "robot_manoeuvre_arm"}
     row = len(windows) // 2
@@ -68,9 +70,9 @@ def test_window_labels_take_the_manoeuvre_at_the_segment_end(small_data):
 
 
 def test_constant_velocity_scores_zero_on_straight_constant_motion(small_data):
-    cfg = ie.InteractionConfig()
-    exp = ie.load_experiment(small_data, SCENARIO, cfg)
-    windows = ie.eval_windows(exp.val, cfg)
+    cfg = ic.InteractionConfig()
+    exp = ds.load_scenario_data(small_data, SCENARIO, cfg)
+    windows = ds.eval_windows(exp.val, cfg)
     scored = np.ones(len(windows), dtype=bool)
     straight = windows.positions.copy()
     straight[:, :, ROBOT] = np.arange(straight.shape[1])[None, :, None] * np.array([1.6, 0.4])
@@ -84,11 +86,11 @@ def test_config_rejects_misspelt_keys_and_too_few_pairs(tmp_path, small_data):
     bad = tmp_path / "ix.yaml"
     bad.write_text("seed: 3\n")
     with pytest.raises(ConfigError, match="seed"):
-        ie.load_config(bad, None)
-    assert ie.load_config(None, 4).seeds == 4
-    far = ie.InteractionConfig(pair_max_distance_m=0.5)
-    with pytest.raises(ie.InteractionError, match="only 0 train pairs"):
-        ie.load_experiment(small_data, SCENARIO, far)
+        ic.load_config(bad, None)
+    assert ic.load_config(None, 4).seeds == 4
+    far = ic.InteractionConfig(pair_max_distance_m=0.5)
+    with pytest.raises(ds.InteractionError, match="only 0 train pairs"):
+        ds.load_scenario_data(small_data, SCENARIO, far)
 
 
 @pytest.mark.slow
@@ -129,8 +131,8 @@ def test_full_command_end_to_end_on_generated_roundabout(tmp_path, monkeypatch):
 
 
 def test_max_train_pairs_subsamples_evenly(small_data):
-    full = ie.load_experiment(small_data, SCENARIO, ie.InteractionConfig())
-    capped = ie.load_experiment(small_data, SCENARIO, ie.InteractionConfig(max_train_pairs=10))
+    full = ds.load_scenario_data(small_data, SCENARIO, ic.InteractionConfig())
+    capped = ds.load_scenario_data(small_data, SCENARIO, ic.InteractionConfig(max_train_pairs=10))
     assert capped.train.n_pairs == 10 and full.train.n_pairs > 10
     assert capped.val.n_pairs == full.val.n_pairs
     np.testing.assert_array_equal(capped.train.trajs.positions[0], full.train.trajs.positions[0])

@@ -1,0 +1,48 @@
+"""The INTERACTION experiment's settings: how pairs are cut, scored and what is reported."""
+
+from pathlib import Path
+
+from pydantic import Field
+
+from app.configio import StrictModel
+from app.interaction.tracks import FRAME_MS
+
+
+class InteractionConfig(StrictModel):
+    """How pairs are cut and scored; defaults follow the paper (1 s observed, 10 seeds)."""
+
+    window_frames: int = Field(40, ge=8, description="frames per pair window (4 s at 10 Hz)")
+    window_stride_frames: int = Field(40, ge=1, description="v1.0: step between windows")
+    observed_frames: int = Field(10, ge=2, description="observed segment: 10 intervals = 1 s")
+    downsample: int = Field(2, ge=1, description="keep every k-th frame (k=2: dt 0.2 s)")
+    predict_steps: int = Field(3, ge=1, description="n actions predicted (ADE/FDE horizon)")
+    pair_max_distance_m: float = Field(30.0, gt=0)
+    min_speed_mps: float = Field(0.5, ge=0, description="true next speed needed to score")
+    turn_threshold_deg: float = Field(30.0, gt=0, description="heading change = a turn")
+    v10_train_fraction: float = Field(0.8, gt=0, lt=1,
+                                      description="v1.0 time split without a devkit val list")
+    seeds: int = Field(10, ge=2)
+    max_train_pairs: int = Field(0, ge=0, description="0 = all; else an even subsample")
+    eval_windows_per_pair: int = Field(20, ge=1)
+    field_grid: int = Field(25, ge=5, description="grid points per side of a vector field")
+    field_codes: int = Field(6, ge=1, description="most used codes drawn per model")
+
+    @property
+    def segment_len(self) -> int:
+        """Observed steps after downsampling."""
+        return self.observed_frames // self.downsample
+
+    @property
+    def dt_s(self) -> float:
+        """Step of the downsampled pairs."""
+        return FRAME_MS / 1000 * self.downsample
+
+
+def load_config(path: Path | None, seeds: int | None) -> InteractionConfig:
+    """The experiment config: defaults, a YAML file's keys on top, then --seeds."""
+    from app.configio import load_yaml_model
+
+    overrides = {"seeds": seeds} if seeds is not None else {}
+    if path is None:
+        return InteractionConfig(**overrides)
+    return load_yaml_model(Path(path), InteractionConfig, overrides)

@@ -1,0 +1,220 @@
+"""A scenario's pairs as trajectories: splits, labels, the scene box, the map and val windows.
+
+Pairs (pairs.py) are downsampled 10 Hz -> 5 Hz into a TrajectorySet per split; each pair is
+labelled with the robot's turn over the window (from its motion, always) and, when the
+generator's sidecar exists, the robot's manoeuvre at every kept step.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Scene
+from app.data.trajectory import ROBOT, TrajectorySet
+from app.data.windows import Windows, make_windows
+from app.fileio import sha256_file
+from app.interaction import pairs as px
+from app.interaction import tracks as tx
+from app.interaction.config import InteractionConfig
+from app.interaction.lanelet_map import LaneLine, MapError, read_lanelet_map
+from app.interaction.synthetic import read_manoeuvre_labels
+
+TURN_NAMES = ["left", "straight", "right"]
+HEADING_NAMES = ["east", "north", "west", "south"]
+
+
+class InteractionError(ValueError):
+    """The experiment cannot run on this data; the message says why."""
+
+
+@dataclass
+class PairData:
+    """One split's pairs as a TrajectorySet plus per-step manoeuvre indices [N, 2, T+1]
+    (coarse, with arm; -1: unknown)."""
+
+    trajs: TrajectorySet
+    step_manoeuvre: np.ndarray | None
+    n_pairs: int
+    agent_counts: dict[str, int]
+
+
+@dataclass
+class ScenarioData:
+    """Both splits, the map and where everything came from."""
+
+    scenario: str
+    layout: str
+    train: PairData
+    val: PairData
+    manoeuvre_names: list[str] | None
+    lane_lines: list[LaneLine]
+    inputs: dict[str, str]
+
+
+
+def _manoeuvre_lookup(data_dir: Path, scenario: str) -> dict | None:
+    files = sorted((Path(data_dir) / "generator_labels").glob(f"{scenario}_*.csv"))
+    if not files:
+        return None
+    table: dict = {}
+    for path in files:
+        table.update(read_manoeuvre_labels(path))
+    return table
+
+
+def _turn_label(positions: np.ndarray, threshold_deg: float) -> int:
+    """left / straight / right from the robot's travel direction change over the window."""
+    robot = positions[:, ROBOT]
+    moves = np.diff(robot, axis=0)
+    moving = np.linalg.norm(moves, axis=1) > 0.05
+    if moving.sum() < 2:
+        return TURN_NAMES.index("straight")
+    angles = np.unwrap(np.arctan2(moves[moving, 1], moves[moving, 0]))
+    change = np.degrees(angles[-1] - angles[0])
+    if change > threshold_deg:
+        return TURN_NAMES.index("left")
+    if change < -threshold_deg:
+        return TURN_NAMES.index("right")
+    return TURN_NAMES.index("straight")
+
+
+def _pair_manoeuvres(pair: px.Pair, lookup: dict, names: list[str], step: int) -> np.ndarray:
+    """Index into `names` of the robot's manoeuvre at every kept frame (-1: unknown)."""
+    frames = pair.first_frame + np.arange(len(pair.positions))[::step]
+    return np.array([names.index(lookup[(pair.recording, pair.robot_id, int(f))])
+                     if (pair.recording, pair.robot_id, int(f)) in lookup else -1
+                     for f in frames], dtype=np.int64)
+
+
+def coarse_names(detail: list[str]) -> list[str]:
+    """'entering:east' -> 'entering': the manoeuvre without its arm."""
+    return sorted({name.split(":")[0] for name in detail})
+
+
+def _majority(steps: np.ndarray) -> int:
+    known = steps[steps >= 0]
+    return int(np.bincount(known).argmax()) if len(known) else -1
+
+
+def _to_pair_data(world: str, pairs: list[px.Pair], cfg: InteractionConfig, scene: Scene,
+                  lookup: dict | None, names: list[str] | None,
+                  agent_counts: dict[str, int]) -> PairData:
+    label_names = {"robot_turn": TURN_NAMES}
+    if names is not None:
+        coarse = coarse_names(names)
+        to_coarse = np.array([coarse.index(n.split(":")[0]) for n in names] + [-1])
+        label_names.update(robot_manoeuvre=coarse, robot_manoeuvre_arm=names)
+    episodes, per_step = [], []
+    for pair in pairs:
+        labels = {"robot_turn": _turn_label(pair.positions, cfg.turn_threshold_deg)}
+        if names is not None:
+            detail = _pair_manoeuvres(pair, lookup, names, cfg.downsample)
+            steps = np.stack([to_coarse[detail], detail])  # -1 indexes the trailing -1
+            labels.update(robot_manoeuvre=_majority(steps[0]),
+                          robot_manoeuvre_arm=_majority(steps[1]))
+            per_step.append(steps)
+        episodes.append(pair.episode(cfg.downsample, labels))
+    trajs = TrajectorySet.from_episodes(world, cfg.dt_s, episodes, label_names, scene)
+    return PairData(trajs, np.stack(per_step) if per_step else None, len(pairs), agent_counts)
+
+
+def _scene(world: str, pairs: list[px.Pair], dt_s: float) -> Scene:
+    xy = np.concatenate([p.positions.reshape(-1, 2) for p in pairs])
+    lo, hi = xy.min(axis=0) - 5, xy.max(axis=0) + 5
+    car = dict(kind="car", length_m=4.6, width_m=1.9)
+    return Scene(world=world, dt_s=dt_s,
+                 frame="INTERACTION map frame: x, y [m] as in the track files (y up)",
+                 bounds=Bounds(x_min_m=float(lo[0]), x_max_m=float(hi[0]),
+                               y_min_m=float(lo[1]), y_max_m=float(hi[1])),
+                 agents=[AgentShape(name="robot", color=ROBOT_COLOR, **car),
+                         AgentShape(name="human", color=HUMAN_COLOR, **car)])
+
+
+def _split_pairs(data_dir: Path, scenario: str, cfg: InteractionConfig):
+    layout = tx.detect_layout(data_dir, scenario)
+    files = tx.split_files(data_dir, scenario, layout)
+    out, counts = {}, {}
+    if layout == "v1.2":
+        for split in tx.SPLITS:
+            recs = tx.load_recordings(files[split])
+            counts[split] = _agent_counts(recs)
+            out[split] = px.extract_pairs(recs, cfg.window_frames, cfg.window_stride_frames,
+                                          cfg.pair_max_distance_m)
+    else:
+        recs = tx.load_recordings(files["train"])
+        val_names = tx.official_val_recordings(data_dir, scenario)
+        if val_names and {r.name for r in recs} - set(val_names):
+            ranges = px.recording_split(recs, val_names)
+        else:
+            ranges = px.time_split(recs, cfg.v10_train_fraction)
+        for split in tx.SPLITS:
+            counts[split] = _agent_counts([r for r in recs if r.name in ranges[split]
+                                           and ranges[split][r.name][1] >= 0])
+            out[split] = px.extract_pairs(recs, cfg.window_frames, cfg.window_stride_frames,
+                                          cfg.pair_max_distance_m, ranges[split])
+    inputs = {str(p): sha256_file(p) for p in sorted({f for fs in files.values() for f in fs})}
+    return layout, out, counts, inputs
+
+
+def _agent_counts(recordings: list[tx.Recording]) -> dict[str, int]:
+    total: dict[str, int] = {}
+    for rec in recordings:
+        for kind, n in rec.counts().items():
+            total[kind] = total.get(kind, 0) + n
+    return total
+
+
+def load_scenario_data(data_dir: Path, scenario: str, cfg: InteractionConfig) -> ScenarioData:
+    """Read, validate and pair the scenario's files (TrackFileError on bad files)."""
+    layout, pairs, counts, inputs = _split_pairs(data_dir, scenario, cfg)
+    need = cfg.observed_frames + cfg.predict_steps * cfg.downsample + 1
+    if cfg.window_frames < need:
+        raise InteractionError(f"window_frames={cfg.window_frames} is shorter than the "
+                               f"{need} frames one observed segment + prediction needs")
+    for split in tx.SPLITS:
+        if len(pairs[split]) < 3:
+            raise InteractionError(f"{scenario}: only {len(pairs[split])} {split} pairs (cars "
+                                   f"present for {cfg.window_frames} frames with another car "
+                                   f"within {cfg.pair_max_distance_m} m); need at least 3")
+    if 0 < cfg.max_train_pairs < len(pairs["train"]):
+        keep = np.linspace(0, len(pairs["train"]) - 1, cfg.max_train_pairs).round().astype(int)
+        pairs["train"] = [pairs["train"][k] for k in keep]
+    world = f"interaction_{scenario}"
+    scene = _scene(world, pairs["train"] + pairs["val"], cfg.dt_s)
+    lookup = _manoeuvre_lookup(data_dir, scenario)
+    names = sorted(set(lookup.values())) if lookup else None
+    data = {s: _to_pair_data(world, pairs[s], cfg, scene, lookup, names, counts[s])
+            for s in tx.SPLITS}
+    map_path = Path(data_dir) / "maps" / f"{scenario}.osm"
+    lines = []
+    if map_path.is_file():
+        try:
+            lines = read_lanelet_map(map_path)
+        except MapError as err:
+            tqdm.write(f"warning: {err}; plots drawn without lane lines")
+        inputs[str(map_path)] = sha256_file(map_path)
+    return ScenarioData(scenario, layout, data["train"], data["val"], names, lines, inputs)
+
+
+def heading_sector(velocity: np.ndarray) -> np.ndarray:
+    """Travel direction [W] as the nearest of east/north/west/south (map frame, y up)."""
+    angle = np.arctan2(velocity[:, 1], velocity[:, 0])
+    return (np.round(angle / (np.pi / 2)).astype(np.int64) % 4)
+
+
+def eval_windows(val: PairData, cfg: InteractionConfig) -> Windows:
+    """Val windows: 1 s observed + n future steps, evenly spaced in each pair."""
+    return make_windows(val.trajs, cfg.segment_len, cfg.predict_steps, cfg.eval_windows_per_pair)
+
+
+def window_labels(windows: Windows, val: PairData) -> dict[str, np.ndarray]:
+    """Per-window labels: manoeuvre at the segment end (if known), the pair's turn label and
+    the robot's last observed travel direction."""
+    labels = {"robot_turn": windows.labels["robot_turn"].astype(np.int64),
+              "robot_heading": heading_sector(windows.actions[:, windows.segment_len - 1, ROBOT])}
+    if val.step_manoeuvre is not None:
+        for k, name in enumerate(("robot_manoeuvre", "robot_manoeuvre_arm")):
+            labels[name] = val.step_manoeuvre[windows.traj_index, k, windows.end_step]
+    return labels

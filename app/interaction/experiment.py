@@ -1,0 +1,213 @@
+"""The paper's real-data test: Ours vs VAE vs constant velocity on INTERACTION pairs.
+
+Procedure (one command, `tomstudy interaction`):
+1. Load the scenario's train and val track files (tracks.py), cut 4 s windows,
+   pair each car with its nearest interacting car (rule in pairs.py).
+2. Downsample 10 Hz -> 5 Hz (every 2nd frame): the observed 1 s (10 frame intervals) is a
+   segment of 5 steps of 0.2 s, the study's segment length; the models predict the robot's
+   next 3 actions (0.6 s).
+3. For each seed (a "trial"), train Ours and the VAE on the train pairs (the trainer splits
+   them by pair into fit/early-stopping/test), then on every val window predict the robot's
+   next action; alignment error = 1 - cos against the true next action. Windows whose true
+   next speed is below `min_speed_mps` are not scored (a standing car has no direction).
+4. Per seed mean errors -> paired t-tests (Ours vs VAE, each vs constant velocity), ADE/FDE
+   over the n steps, purity/NMI of codes against the manoeuvre labels when the data carry
+   them (the generator's sidecar) and against a turn label derived from the robot's heading
+   change (always), vector fields per code over the scenario area, HTML + JSON report.
+"""
+
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+import app
+from app.data.windows import Windows
+from app.fileio import write_json
+from app.interaction.config import InteractionConfig, load_config
+from app.interaction.dataset import (
+    HEADING_NAMES,
+    InteractionError,
+    ScenarioData,
+    eval_windows,
+    load_scenario_data,
+    window_labels,
+)
+from app.interaction.report import FigureInputs, write_figures, write_report
+from app.learning.config import TrainConfig
+
+MODELS = ("ours", "vae", "cv")
+
+
+def experiment_train_config(base: TrainConfig, cfg: InteractionConfig) -> TrainConfig:
+    """The training config with the experiment's segment length and horizon."""
+    return TrainConfig(**{**base.model_dump(), "segment_len": cfg.segment_len,
+                          "n_actions": cfg.predict_steps})
+
+
+def score_model(model, windows: Windows, scored: np.ndarray) -> dict:
+    """Alignment errors [W] of the next action, displacement errors, codes."""
+    from analysis.contracts import alignment_error
+    from app.learning.model_metrics import trajectory_errors
+
+    z = model.encode_batch(windows.segment_positions)
+    pred = model.predict_batch(z, windows.end_states)
+    errors = alignment_error(pred[:, 0], windows.pred_targets[:, 0])
+    return {"errors": errors, "codes": model.codes_of(z),
+            "displacement": trajectory_errors(pred[scored], windows.pred_targets[scored],
+                                              windows.dt_s)}
+
+
+def score_constant_velocity(windows: Windows, scored: np.ndarray) -> dict:
+    """The baseline: the last observed robot velocity, kept for all n steps."""
+    from analysis.contracts import alignment_error
+    from app.learning.model_metrics import constant_velocity, trajectory_errors
+
+    pred = constant_velocity(windows)
+    return {"errors": alignment_error(pred[:, 0], windows.pred_targets[:, 0]),
+            "displacement": trajectory_errors(pred[scored], windows.pred_targets[scored],
+                                              windows.dt_s)}
+
+
+def run_seed(exp: ScenarioData, seed: int, train_cfg: TrainConfig, models_dir: Path,
+             windows: Windows, scored: np.ndarray, labels: dict) -> dict:
+    """Train Ours then the VAE (its k = Ours' used codes) with `seed`; score both on val."""
+    from app.learning.checkpoint import load_model
+    from app.learning.model_metrics import agreement, code_usage
+    from app.learning.train import train_and_save
+
+    out, ours_codes = {"seed": seed}, None
+    for kind in ("ours", "vae"):
+        ckpt = train_and_save(exp.train.trajs, kind, seed, train_cfg,
+                              models_dir / f"seed_{seed}" / kind,
+                              data_meta={"scenario": exp.scenario, "layout": exp.layout,
+                                         "inputs": exp.inputs}, progress=False,
+                              vae_clusters=ours_codes)
+        model = load_model(ckpt)
+        if kind == "ours":
+            ours_codes = model.codes["n_codes_used"]  # the VAE's k-means k
+        scores = score_model(model, windows, scored)
+        codes = scores["codes"][scored]
+        out[kind] = {
+            "alignment_error": float(scores["errors"][scored].mean()),
+            **scores["displacement"],
+            "usage": code_usage(codes, train_cfg.min_code_share),
+            "agreement": agreement(codes, {k: v[scored] for k, v in labels.items()}),
+            "checkpoint": str(ckpt), "content_hash": model.content_hash,
+        }
+    return out
+
+
+# ---------------------------------------------------------------- the whole run
+
+
+def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Path,
+                   cfg: InteractionConfig, base_train_cfg: TrainConfig) -> dict:
+    """Everything: load, train 2 x seeds models, score, test, plot, write the report."""
+    started = time.perf_counter()
+    exp = load_scenario_data(data_dir, scenario, cfg)
+    train_cfg = experiment_train_config(base_train_cfg, cfg)
+    windows = eval_windows(exp.val, cfg)
+    true_next = windows.pred_targets[:, 0]
+    scored = np.hypot(true_next[:, 0], true_next[:, 1]) >= cfg.min_speed_mps
+    if scored.sum() < 2:
+        raise InteractionError(f"{scenario}: fewer than 2 val windows with a moving robot")
+    labels = window_labels(windows, exp.val)
+    cv = score_constant_velocity(windows, scored)
+    per_seed = []
+    bar = tqdm(range(cfg.seeds), desc=f"interaction {scenario}: seeds", unit="seed")
+    for seed in bar:
+        per_seed.append(run_seed(exp, seed, train_cfg, models_dir, windows, scored, labels))
+        bar.set_postfix(ours=f"{per_seed[-1]['ours']['alignment_error']:.3f}",
+                        vae=f"{per_seed[-1]['vae']['alignment_error']:.3f}")
+    summary = summarise(exp, cfg, windows, scored, labels, per_seed, cv)
+    out_dir = Path(out_dir)
+    inputs = FigureInputs(exp.scenario, exp.train.trajs, exp.lane_lines, windows, scored,
+                          cfg.field_grid, cfg.field_codes)
+    figures = write_figures(inputs, per_seed, summary, out_dir)
+    write_report(out_dir, summary, per_seed, figures)
+    write_json(out_dir / "meta.json", {
+        "scenario": scenario, "layout": exp.layout, "config": cfg.model_dump(),
+        "train_config": train_cfg.model_dump(), "inputs_sha256": exp.inputs,
+        "checkpoints": {f"seed_{r['seed']}/{k}": r[k]["content_hash"]
+                        for r in per_seed for k in ("ours", "vae")},
+        "wall_time_s": round(time.perf_counter() - started, 2),
+        "package_version": app.__version__, "python": platform.python_version(),
+        "numpy": np.__version__})
+    return summary
+
+
+def summarise(exp: ScenarioData, cfg: InteractionConfig, windows: Windows, scored: np.ndarray,
+              labels: dict, per_seed: list[dict], cv: dict) -> dict:
+    """Every headline number, JSON-able."""
+    from analysis.stats import paired_comparison
+
+    seed_means = {m: np.array([r[m]["alignment_error"] for r in per_seed])
+                  for m in ("ours", "vae")}
+    seed_means["cv"] = np.full(len(per_seed), float(cv["errors"][scored].mean()))
+    tests = {f"{a}_vs_{b}": paired_comparison(seed_means[a], seed_means[b]).as_dict()
+             for a, b in (("ours", "vae"), ("ours", "cv"), ("vae", "cv"))}
+    means = {m: float(seed_means[m].mean()) for m in MODELS}
+    winner = min(means, key=means.get)
+    runner_up = sorted(means, key=means.get)[1]
+    models = {}
+    for m in ("ours", "vae"):
+        models[m] = {key: _mean_sd([r[m][key] for r in per_seed])
+                     for key in ("alignment_error", "ade_m", "fde_m", "mse")}
+        models[m]["codes_used"] = _mean_sd([r[m]["usage"]["n_codes_used"] for r in per_seed])
+        models[m]["perplexity"] = _mean_sd([r[m]["usage"]["perplexity"] for r in per_seed])
+        for name in per_seed[0][m]["agreement"]:
+            for key in ("purity", "nmi"):
+                models[m][f"{key}_{name}"] = _mean_sd(
+                    [r[m]["agreement"][name][key] for r in per_seed])
+    models["cv"] = {"alignment_error": {"mean": means["cv"], "sd": 0.0},
+                    **{k: {"mean": v, "sd": 0.0} for k, v in cv["displacement"].items()}}
+    return {
+        "scenario": exp.scenario, "layout": exp.layout, "seeds": len(per_seed),
+        "dt_s": cfg.dt_s, "segment_steps": cfg.segment_len, "observed_s":
+            cfg.segment_len * cfg.dt_s, "predict_steps": cfg.predict_steps,
+        "pairs": {"train": exp.train.n_pairs, "val": exp.val.n_pairs},
+        "agents": {"train": exp.train.agent_counts, "val": exp.val.agent_counts},
+        "val_windows": int(len(windows)), "val_windows_scored": int(scored.sum()),
+        "label_counts": (counts := _label_counts(exp, labels, scored)),
+        "purity_chance": {k: max(v.values()) / max(1, sum(v.values()))
+                          for k, v in counts.items()},
+        "mean_alignment_error": means, "per_seed_alignment_error":
+            {m: seed_means[m].tolist() for m in MODELS},
+        "tests": tests, "models": models, "winner": winner,
+        "winner_margin": means[runner_up] - means[winner], "runner_up": runner_up,
+        "map_lines": len(exp.lane_lines),
+    }
+
+
+def _label_counts(exp: ScenarioData, labels: dict, scored: np.ndarray) -> dict:
+    names = {**exp.train.trajs.label_names, "robot_heading": HEADING_NAMES}
+    return {k: {names[k][c]: int((v[scored] == c).sum()) for c in range(len(names[k]))}
+            for k, v in labels.items()}
+
+
+def _mean_sd(values) -> dict:
+    values = np.asarray(values, dtype=np.float64)
+    return {"mean": float(values.mean()), "sd": float(values.std(ddof=1)) if len(values) > 1
+            else 0.0}
+
+
+# ---------------------------------------------------------------- command line
+
+
+def run_command(data_dir: Path, scenario: str, data_root: Path, config: Path | None = None,
+                train_config: Path | None = None, seeds: int | None = None,
+                max_epochs: int | None = None, out_dir: Path | None = None) -> dict:
+    """What `tomstudy interaction` does: returns the summary; outputs under data_root."""
+    from app.layout import Layout
+    from app.learning.config import load_train_config
+
+    cfg = load_config(config, seeds)
+    overrides = {"max_epochs": max_epochs} if max_epochs else None
+    base = load_train_config(train_config, overrides)
+    layout = Layout(data_root)
+    out_dir = Path(out_dir) if out_dir else layout.interaction_report(scenario)
+    models_dir = layout.interaction_models(scenario)
+    return run_experiment(Path(data_dir), scenario, out_dir, models_dir, cfg, base)
