@@ -8,6 +8,19 @@ from app.configio import StrictModel
 from app.interaction.tracks import FRAME_MS
 
 
+class SecondaryConfig(StrictModel):
+    """The secondary analyses, fixed before they are run (study_configs/interaction.yaml)."""
+
+    horizons_s: list[float] = Field([1.0, 2.0, 3.0], min_length=1,
+                                    description="displacement horizons after the 1 s observed")
+    decision_heading_deg: float = Field(30.0, gt=0, description="a turn within the horizon "
+                                        "larger than this makes a decision moment")
+    windows_per_pair: int = Field(10, ge=1, description="val windows per pair and horizon")
+    v10_window_frames: int = Field(42, ge=8, description="v1.0 val pairs for the horizons: "
+                                   "1 s + 3 s at 0.2 s steps needs 41 frames")
+    alpha: float = Field(0.05, gt=0, lt=1, description="family-wise, Holm-corrected")
+
+
 class InteractionConfig(StrictModel):
     """How pairs are cut and scored; defaults follow the paper (1 s observed, 10 seeds)."""
 
@@ -26,6 +39,7 @@ class InteractionConfig(StrictModel):
     eval_windows_per_pair: int = Field(20, ge=1)
     field_grid: int = Field(25, ge=5, description="grid points per side of a vector field")
     field_codes: int = Field(6, ge=1, description="most used codes drawn per model")
+    secondary: SecondaryConfig = Field(default_factory=SecondaryConfig)
 
     @property
     def segment_len(self) -> int:
@@ -38,11 +52,19 @@ class InteractionConfig(StrictModel):
         return FRAME_MS / 1000 * self.downsample
 
 
+def default_config_path() -> Path:
+    """study_configs/interaction.yaml under the configured configs dir."""
+    from app.settings import get_settings
+
+    return get_settings().configs_dir / "interaction.yaml"
+
+
 def load_config(path: Path | None, seeds: int | None) -> InteractionConfig:
-    """The experiment config: defaults, a YAML file's keys on top, then --seeds."""
+    """The experiment config (default study_configs/interaction.yaml), then --seeds."""
     from app.configio import load_yaml_model
 
     overrides = {"seeds": seeds} if seeds is not None else {}
-    if path is None:
+    path = Path(path) if path else default_config_path()
+    if not path.exists() and path == default_config_path():
         return InteractionConfig(**overrides)
-    return load_yaml_model(Path(path), InteractionConfig, overrides)
+    return load_yaml_model(path, InteractionConfig, overrides)

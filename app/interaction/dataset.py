@@ -51,6 +51,7 @@ class ScenarioData:
     manoeuvre_names: list[str] | None
     lane_lines: list[LaneLine]
     inputs: dict[str, str]
+    horizon_val: PairData  # val pairs long enough for the secondary horizons (v1.0), else val
 
 
 
@@ -154,6 +155,9 @@ def _split_pairs(data_dir: Path, scenario: str, cfg: InteractionConfig):
                                            and ranges[split][r.name][1] >= 0])
             out[split] = px.extract_pairs(recs, cfg.window_frames, cfg.window_stride_frames,
                                           cfg.pair_max_distance_m, ranges[split])
+        out["horizon_val"] = px.extract_pairs(recs, cfg.secondary.v10_window_frames,
+                                              cfg.window_stride_frames, cfg.pair_max_distance_m,
+                                              ranges["val"])
     inputs = {str(p): sha256_file(p) for p in sorted({f for fs in files.values() for f in fs})}
     return layout, out, counts, inputs
 
@@ -187,6 +191,9 @@ def load_scenario_data(data_dir: Path, scenario: str, cfg: InteractionConfig) ->
     names = sorted(set(lookup.values())) if lookup else None
     data = {s: _to_pair_data(world, pairs[s], cfg, scene, lookup, names, counts[s])
             for s in tx.SPLITS}
+    long_val = pairs.get("horizon_val") or []
+    horizon_val = _to_pair_data(world, long_val, cfg, scene, lookup, names, counts["val"]) \
+        if len(long_val) >= 3 else data["val"]
     map_path = Path(data_dir) / "maps" / f"{scenario}.osm"
     lines = []
     if map_path.is_file():
@@ -195,7 +202,8 @@ def load_scenario_data(data_dir: Path, scenario: str, cfg: InteractionConfig) ->
         except MapError as err:
             tqdm.write(f"warning: {err}; plots drawn without lane lines")
         inputs[str(map_path)] = sha256_file(map_path)
-    return ScenarioData(scenario, layout, data["train"], data["val"], names, lines, inputs)
+    return ScenarioData(scenario, layout, data["train"], data["val"], names, lines, inputs,
+                        horizon_val)
 
 
 def heading_sector(velocity: np.ndarray) -> np.ndarray:

@@ -35,6 +35,15 @@ from app.interaction.dataset import (
     load_scenario_data,
     window_labels,
 )
+from app.interaction.horizons import (
+    HorizonWindows,
+    constant_velocity_rollout,
+    horizon_key,
+    horizon_scores,
+    horizon_windows,
+    model_rollout,
+    summarise_by_horizon,
+)
 from app.interaction.report import FigureInputs, write_figures, write_report
 from app.learning.config import TrainConfig
 
@@ -72,8 +81,10 @@ def score_constant_velocity(windows: Windows, scored: np.ndarray) -> dict:
 
 
 def run_seed(exp: ScenarioData, seed: int, train_cfg: TrainConfig, models_dir: Path,
-             windows: Windows, scored: np.ndarray, labels: dict) -> dict:
-    """Train Ours then the VAE (its k = Ours' used codes) with `seed`; score both on val."""
+             windows: Windows, scored: np.ndarray, labels: dict,
+             horizons: list[HorizonWindows]) -> dict:
+    """Train Ours then the VAE (its k = Ours' used codes) with `seed`; score both on val:
+    the paper's next action, then each secondary horizon."""
     from app.learning.checkpoint import load_model
     from app.learning.model_metrics import agreement, code_usage
     from app.learning.train import train_and_save
@@ -96,6 +107,8 @@ def run_seed(exp: ScenarioData, seed: int, train_cfg: TrainConfig, models_dir: P
             "usage": code_usage(codes, train_cfg.min_code_share),
             "agreement": agreement(codes, {k: v[scored] for k, v in labels.items()}),
             "checkpoint": str(ckpt), "content_hash": model.content_hash,
+            "by_horizon": {horizon_key(hw.horizon_s): horizon_scores(
+                model_rollout(model, hw.windows, hw.steps), hw) for hw in horizons},
         }
     return out
 
@@ -116,13 +129,17 @@ def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Pat
         raise InteractionError(f"{scenario}: fewer than 2 val windows with a moving robot")
     labels = window_labels(windows, exp.val)
     cv = score_constant_velocity(windows, scored)
+    horizons = horizon_windows(exp.horizon_val, cfg.segment_len, cfg.secondary,
+                               cfg.min_speed_mps)
     per_seed = []
     bar = tqdm(range(cfg.seeds), desc=f"interaction {scenario}: seeds", unit="seed")
     for seed in bar:
-        per_seed.append(run_seed(exp, seed, train_cfg, models_dir, windows, scored, labels))
+        per_seed.append(run_seed(exp, seed, train_cfg, models_dir, windows, scored, labels,
+                                 horizons))
         bar.set_postfix(ours=f"{per_seed[-1]['ours']['alignment_error']:.3f}",
                         vae=f"{per_seed[-1]['vae']['alignment_error']:.3f}")
     summary = summarise(exp, cfg, windows, scored, labels, per_seed, cv)
+    summary.update(secondary_results(exp, cfg, horizons, per_seed))
     out_dir = Path(out_dir)
     inputs = FigureInputs(exp.scenario, exp.train.trajs, exp.lane_lines, windows, scored,
                           cfg.field_grid, cfg.field_codes)
@@ -164,22 +181,43 @@ def summarise(exp: ScenarioData, cfg: InteractionConfig, windows: Windows, score
                     [r[m]["agreement"][name][key] for r in per_seed])
     models["cv"] = {"alignment_error": {"mean": means["cv"], "sd": 0.0},
                     **{k: {"mean": v, "sd": 0.0} for k, v in cv["displacement"].items()}}
+    counts = _label_counts(exp, labels, scored)
     return {
         "scenario": exp.scenario, "layout": exp.layout, "seeds": len(per_seed),
         "dt_s": cfg.dt_s, "segment_steps": cfg.segment_len, "observed_s":
             cfg.segment_len * cfg.dt_s, "predict_steps": cfg.predict_steps,
         "pairs": {"train": exp.train.n_pairs, "val": exp.val.n_pairs},
         "agents": {"train": exp.train.agent_counts, "val": exp.val.agent_counts},
-        "val_windows": int(len(windows)), "val_windows_scored": int(scored.sum()),
-        "label_counts": (counts := _label_counts(exp, labels, scored)),
+        "label_counts": counts,
         "purity_chance": {k: max(v.values()) / max(1, sum(v.values()))
                           for k, v in counts.items()},
-        "mean_alignment_error": means, "per_seed_alignment_error":
-            {m: seed_means[m].tolist() for m in MODELS},
-        "tests": tests, "models": models, "winner": winner,
-        "winner_margin": means[runner_up] - means[winner], "runner_up": runner_up,
         "map_lines": len(exp.lane_lines),
+        "paper_protocol": {
+            "val_windows": int(len(windows)), "val_windows_scored": int(scored.sum()),
+            "mean_alignment_error": means, "per_seed_alignment_error":
+                {m: seed_means[m].tolist() for m in MODELS},
+            "tests": tests, "models": models, "winner": winner,
+            "winner_margin": means[runner_up] - means[winner], "runner_up": runner_up,
+        },
     }
+
+
+def secondary_results(exp: ScenarioData, cfg: InteractionConfig,
+                      horizons: list[HorizonWindows], per_seed: list[dict]) -> dict:
+    """`by_horizon` and `secondary` (tests, winners, what could not be measured)."""
+    cv = {horizon_key(hw.horizon_s): horizon_scores(
+        constant_velocity_rollout(hw.windows, hw.steps), hw) for hw in horizons}
+    seeds = [{h: {st: {m: r[m]["by_horizon"][h][st] for m in ("ours", "vae")}
+                  for st in r["ours"]["by_horizon"][h]} for h in cv} for r in per_seed]
+    by_horizon, secondary = summarise_by_horizon(horizons, seeds, cv, cfg.secondary.alpha)
+    measured = {hw.horizon_s for hw in horizons}
+    secondary["not_measurable"] = {
+        horizon_key(h): f"val pairs span {exp.horizon_val.trajs.positions.shape[1] - 1} steps "
+                        f"of {cfg.dt_s:g} s: 1 s observed + {h:g} s does not fit"
+        for h in cfg.secondary.horizons_s if h not in measured}
+    secondary["pairs"] = exp.horizon_val.n_pairs
+    secondary["config"] = cfg.secondary.model_dump()
+    return {"by_horizon": by_horizon, "secondary": secondary}
 
 
 def _label_counts(exp: ScenarioData, labels: dict, scored: np.ndarray) -> dict:

@@ -39,7 +39,7 @@ class FigureInputs:
 
 def models_of(summary: dict) -> list[str]:
     """The compared models, in the summary's order (Ours, VAE, constant velocity)."""
-    return list(summary["mean_alignment_error"])
+    return list(summary["paper_protocol"]["mean_alignment_error"])
 
 
 # ---------------------------------------------------------------- figures
@@ -73,14 +73,14 @@ def plot_errors(summary: dict, path: Path) -> Path:
     colors = {"ours": "#0072B2", "vae": "#D55E00", "cv": "#999999"}
     models = models_of(summary)
     for k, m in enumerate(models):
-        values = np.asarray(summary["per_seed_alignment_error"][m])
+        values = np.asarray(summary["paper_protocol"]["per_seed_alignment_error"][m])
         ax.bar(k, values.mean(), color=colors[m], alpha=0.75)
         if m != "cv":
             ax.errorbar(k, values.mean(), yerr=values.std(ddof=1), color="k", capsize=4)
             jitter = np.linspace(-0.2, 0.2, len(values))
             ax.plot(k + jitter, values, "o", color="k", ms=3)
     ax.set_xticks(range(len(models)), [MODEL_NAMES[m] for m in models])
-    p = summary["tests"]["ours_vs_vae"]["p_two_sided"]
+    p = summary["paper_protocol"]["tests"]["ours_vs_vae"]["p_two_sided"]
     ax.set_ylabel("alignment error 1 - cos (next action)")
     ax.set_title(f"{summary['scenario']}: {summary['seeds']} seeds; Ours vs VAE p = {p:.2g}",
                  fontsize=9)
@@ -202,16 +202,18 @@ def fixed(value: float | None, digits: int = 3) -> str:
 
 def verdict(summary: dict) -> str:
     """One honest sentence: who wins on next-action alignment error and by how much."""
-    means = summary["mean_alignment_error"]
-    w, r = summary["winner"], summary["runner_up"]
-    test = summary["tests"].get(f"{w}_vs_{r}") or summary["tests"].get(f"{r}_vs_{w}")
+    primary = summary["paper_protocol"]
+    means = primary["mean_alignment_error"]
+    w, r = primary["winner"], primary["runner_up"]
+    test = primary["tests"].get(f"{w}_vs_{r}") or primary["tests"].get(f"{r}_vs_{w}")
     return (f"{MODEL_NAMES[w]} has the lowest mean next-action alignment error "
-            f"({means[w]:.4f}), {summary['winner_margin']:.4f} below {MODEL_NAMES[r]} "
+            f"({means[w]:.4f}), {primary['winner_margin']:.4f} below {MODEL_NAMES[r]} "
             f"({means[r]:.4f}; paired t-test over seeds p = {test['p_two_sided']:.2g}).")
 
 
 def render_html(summary: dict, figures: list[Path]) -> str:
     """The report page."""
     return render_page("interaction_report.html.j2", filters={"fixed": fixed, "json": json.dumps},
-                       s=summary, verdict=verdict(summary), models=models_of(summary),
+                       s=summary, p=summary["paper_protocol"], verdict=verdict(summary),
+                       models=models_of(summary),
                        names=MODEL_NAMES, figures=figures, page_width_px=1100)

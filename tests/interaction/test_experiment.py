@@ -114,14 +114,21 @@ def test_full_command_end_to_end_on_generated_roundabout(tmp_path, monkeypatch):
     out = tmp_path / "var" / "reports" / "interaction" / scenario
     summary = json.loads((out / "summary.json").read_text())
     assert summary["seeds"] == 10
-    assert all(len(v) == 10 for v in summary["per_seed_alignment_error"].values())
-    assert all(0 <= v <= 2 for v in summary["mean_alignment_error"].values())
-    test = summary["tests"]["ours_vs_vae"]
+    primary = summary["paper_protocol"]
+    assert all(len(v) == 10 for v in primary["per_seed_alignment_error"].values())
+    assert all(0 <= v <= 2 for v in primary["mean_alignment_error"].values())
+    test = primary["tests"]["ours_vs_vae"]
     assert test["n"] == 10 and 0 <= test["p_two_sided"] <= 1
-    ours = summary["models"]["ours"]
+    ours = primary["models"]["ours"]
     assert {"purity_robot_manoeuvre", "purity_robot_manoeuvre_arm", "nmi_robot_heading"} <= set(
         ours)
-    assert summary["winner"] in ie.MODELS
+    assert primary["winner"] in ie.MODELS
+    # secondary: 1 and 2 s fit in the 4 s v1.2 cases, 3 s is reported as not measurable
+    assert set(summary["by_horizon"]) == {"1", "2"} and "3" in summary["secondary"][
+        "not_measurable"]
+    cell = summary["by_horizon"]["2"]["all"]
+    assert set(cell) == set(ie.MODELS) and len(cell["ours"]["alignment_error"]["per_seed"]) == 10
+    assert summary["secondary"]["family_size"] == 3 * sum(map(len, summary["by_horizon"].values()))
     html = (out / "report.html").read_text()
     assert html.count("data:image/png;base64,") == 4
     assert "Ours" in html and "constant velocity" in html
@@ -136,3 +143,41 @@ def test_max_train_pairs_subsamples_evenly(small_data):
     assert capped.train.n_pairs == 10 and full.train.n_pairs > 10
     assert capped.val.n_pairs == full.val.n_pairs
     np.testing.assert_array_equal(capped.train.trajs.positions[0], full.train.trajs.positions[0])
+
+
+def test_study_config_file_is_the_pre_specified_default():
+    from app.interaction.config import InteractionConfig, default_config_path
+
+    assert default_config_path().is_file()
+    assert ic.load_config(None, None) == InteractionConfig()
+    assert ic.load_config(None, None).secondary.horizons_s == [1.0, 2.0, 3.0]
+
+
+def test_holm_adjusts_in_order_and_caps_at_one():
+    from app.interaction.horizons import holm
+
+    np.testing.assert_allclose(holm([0.01, 0.04, 0.03, 0.5]), [0.04, 0.09, 0.09, 0.5])
+    assert holm([0.6, float("nan")]) == [1.0, 1.0]
+
+
+def test_horizon_windows_strata_and_constant_velocity_rollout(small_data):
+    from app.interaction import horizons as hz
+
+    cfg = ic.InteractionConfig()
+    exp = ds.load_scenario_data(small_data, SCENARIO, cfg)
+    hws = hz.horizon_windows(exp.horizon_val, cfg.segment_len, cfg.secondary, cfg.min_speed_mps)
+    assert [hw.horizon_s for hw in hws] == [1.0, 2.0]  # 3 s does not fit a 4 s case
+    hw = hws[1]
+    assert hw.steps == 10 and hw.windows.pred_targets.shape[1] == 10
+    assert (hw.strata["decision"] | hw.strata["steady"] == hw.scored).all()
+    assert hw.strata["decision"].any() and hw.strata["steady"].any()
+    # a left or right route turns within 2 s more often than a straight one
+    names = exp.val.trajs.label_names["robot_manoeuvre"]
+    route = np.array(names)[hw.windows.labels["robot_manoeuvre"]]
+    decision = hw.strata["decision"][hw.scored]
+    turning = np.isin(route[hw.scored], ["left", "right"])
+    assert decision[turning].mean() > decision[~turning].mean()
+    pred = hz.constant_velocity_rollout(hw.windows, hw.steps)
+    assert pred.shape == hw.windows.pred_targets.shape
+    scores = hz.horizon_scores(hw.windows.pred_targets.astype(np.float64), hw)
+    assert scores["all"]["alignment_error"] == pytest.approx(0.0, abs=1e-9)
