@@ -15,11 +15,12 @@ def test_analysis_imports_nothing_from_app():
     assert {src: t for src, t in upward.items() if t} == {}
 
 
-def test_learning_data_and_worlds_stay_out_of_the_web_room():
+def test_simulation_learning_and_observers_stay_out_of_the_web_room():
     web = ("fastapi", "sqlmodel", "sqlalchemy", "app.study")
     offenders = {}
     for name, path in project_modules().items():
-        if name.split(".")[:2] in (["app", "worlds"], ["app", "data"], ["app", "learning"]):
+        if name.split(".")[:2] in (["app", "worlds"], ["app", "data"], ["app", "learning"],
+                                   ["app", "interaction"], ["app", "observers"]):
             bad = sorted(n for n in imported_names(path, name) if n.startswith(web))
             if bad:
                 offenders[str(path.relative_to(ROOT))] = bad
