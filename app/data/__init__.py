@@ -1,0 +1,1 @@
+"""Data every stage shares: the scene description, two-agent trajectories, training windows."""

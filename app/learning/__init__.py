@@ -1,0 +1,1 @@
+"""Ours (FSQ autoencoder) and the VAE: networks, training, checkpoints, fields, selection."""

@@ -1,0 +1,1 @@
+"""The study server: trial bank, participant flow, storage, researcher side, pilot bots."""

@@ -1,0 +1,1 @@
+"""The two simulated worlds (Highway, Obstacle) behind one `World` protocol."""

@@ -1,0 +1,1 @@
+"""HTTP routes: participant API, researcher API and dashboard, HTML pages."""
