@@ -21,6 +21,19 @@ class SecondaryConfig(StrictModel):
     alpha: float = Field(0.05, gt=0, lt=1, description="family-wise, Holm-corrected")
 
 
+class CodeLevelsConfig(StrictModel):
+    """Ours' FSQ levels grid and the rule that picks one cell on validation loss alone
+    (the rule of study_configs/model_selection.yaml), fixed before any purity is computed."""
+
+    levels: list[list[int]] = Field([[2, 2], [2, 2, 2], [3, 3], [4, 4], [5, 3], [3, 3, 3],
+                                     [5, 5]], min_length=1)
+    min_used_fraction: float = Field(0.5, ge=0, le=1, description="eligible: used codes at "
+                                     "least this share of the codebook")
+    loss_tolerance: float = Field(0.05, ge=0, description="relative; of the cells this close "
+                                  "to the lowest eligible loss, the fewest used codes")
+    seed: int = Field(0, ge=0)
+
+
 class InteractionConfig(StrictModel):
     """How pairs are cut and scored; defaults follow the paper (1 s observed, 10 seeds)."""
 
@@ -40,6 +53,7 @@ class InteractionConfig(StrictModel):
     field_grid: int = Field(25, ge=5, description="grid points per side of a vector field")
     field_codes: int = Field(6, ge=1, description="most used codes drawn per model")
     secondary: SecondaryConfig = Field(default_factory=SecondaryConfig)
+    code_levels: CodeLevelsConfig = Field(default_factory=CodeLevelsConfig)
 
     @property
     def segment_len(self) -> int:

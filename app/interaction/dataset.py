@@ -1,8 +1,9 @@
 """A scenario's pairs as trajectories: splits, labels, the scene box, the map and val windows.
 
 Pairs (pairs.py) are downsampled 10 Hz -> 5 Hz into a TrajectorySet per split; each pair is
-labelled with the robot's turn over the window (from its motion, always) and, when the
-generator's sidecar exists, the robot's manoeuvre at every kept step.
+labelled with the robot's turn over the window (`robot_turn`, from its motion, always) and,
+when the generator's sidecar exists, the robot's manoeuvre labels at every kept step
+(`entry_arm`, `exit_arm`, `turn`, and `phase` on a roundabout; synthetic.LABEL_VALUES).
 """
 
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ from app.interaction import pairs as px
 from app.interaction import tracks as tx
 from app.interaction.config import InteractionConfig
 from app.interaction.lanelet_map import LaneLine, MapError, read_lanelet_map
-from app.interaction.synthetic import read_manoeuvre_labels
+from app.interaction.synthetic import LABEL_VALUES, read_manoeuvre_labels
 
 TURN_NAMES = ["left", "straight", "right"]
 HEADING_NAMES = ["east", "north", "west", "south"]
@@ -31,11 +32,11 @@ class InteractionError(ValueError):
 
 @dataclass
 class PairData:
-    """One split's pairs as a TrajectorySet plus per-step manoeuvre indices [N, 2, T+1]
-    (coarse, with arm; -1: unknown)."""
+    """One split's pairs as a TrajectorySet plus, per generator label, the robot's value
+    index at every kept step [N, T+1] (-1: unknown; empty without a sidecar)."""
 
     trajs: TrajectorySet
-    step_manoeuvre: np.ndarray | None
+    step_labels: dict[str, np.ndarray]
     n_pairs: int
     agent_counts: dict[str, int]
 
@@ -48,7 +49,6 @@ class ScenarioData:
     layout: str
     train: PairData
     val: PairData
-    manoeuvre_names: list[str] | None
     lane_lines: list[LaneLine]
     inputs: dict[str, str]
     horizon_val: PairData  # val pairs long enough for the secondary horizons (v1.0), else val
@@ -81,17 +81,21 @@ def _turn_label(positions: np.ndarray, threshold_deg: float) -> int:
     return TURN_NAMES.index("straight")
 
 
-def _pair_manoeuvres(pair: px.Pair, lookup: dict, names: list[str], step: int) -> np.ndarray:
-    """Index into `names` of the robot's manoeuvre at every kept frame (-1: unknown)."""
+def _pair_step_labels(pair: px.Pair, lookup: dict, names: list[str], step: int) -> np.ndarray:
+    """Index into LABEL_VALUES of each label in `names` at every kept frame [L, T+1]
+    (-1: unknown)."""
     frames = pair.first_frame + np.arange(len(pair.positions))[::step]
-    return np.array([names.index(lookup[(pair.recording, pair.robot_id, int(f))])
-                     if (pair.recording, pair.robot_id, int(f)) in lookup else -1
-                     for f in frames], dtype=np.int64)
+    rows = [lookup.get((pair.recording, pair.robot_id, int(f)), {}) for f in frames]
+    out = np.full((len(names), len(frames)), -1, dtype=np.int64)
+    for k, name in enumerate(names):
+        out[k] = [LABEL_VALUES[name].index(row[name]) if name in row else -1 for row in rows]
+    return out
 
 
-def coarse_names(detail: list[str]) -> list[str]:
-    """'entering:east' -> 'entering': the manoeuvre without its arm."""
-    return sorted({name.split(":")[0] for name in detail})
+def generator_label_names(lookup: dict | None) -> list[str]:
+    """The sidecar's labels that some row carries (`phase` only on a roundabout)."""
+    seen = {name for row in (lookup or {}).values() for name in row}
+    return [name for name in LABEL_VALUES if name in seen]
 
 
 def _majority(steps: np.ndarray) -> int:
@@ -100,25 +104,20 @@ def _majority(steps: np.ndarray) -> int:
 
 
 def _to_pair_data(world: str, pairs: list[px.Pair], cfg: InteractionConfig, scene: Scene,
-                  lookup: dict | None, names: list[str] | None,
-                  agent_counts: dict[str, int]) -> PairData:
-    label_names = {"robot_turn": TURN_NAMES}
-    if names is not None:
-        coarse = coarse_names(names)
-        to_coarse = np.array([coarse.index(n.split(":")[0]) for n in names] + [-1])
-        label_names.update(robot_manoeuvre=coarse, robot_manoeuvre_arm=names)
+                  lookup: dict | None, agent_counts: dict[str, int]) -> PairData:
+    names = generator_label_names(lookup)
+    label_names = {"robot_turn": TURN_NAMES, **{n: list(LABEL_VALUES[n]) for n in names}}
     episodes, per_step = [], []
     for pair in pairs:
         labels = {"robot_turn": _turn_label(pair.positions, cfg.turn_threshold_deg)}
-        if names is not None:
-            detail = _pair_manoeuvres(pair, lookup, names, cfg.downsample)
-            steps = np.stack([to_coarse[detail], detail])  # -1 indexes the trailing -1
-            labels.update(robot_manoeuvre=_majority(steps[0]),
-                          robot_manoeuvre_arm=_majority(steps[1]))
-            per_step.append(steps)
+        steps = _pair_step_labels(pair, lookup or {}, names, cfg.downsample)
+        labels.update({name: _majority(row) for name, row in zip(names, steps, strict=True)})
+        per_step.append(steps)
         episodes.append(pair.episode(cfg.downsample, labels))
     trajs = TrajectorySet.from_episodes(world, cfg.dt_s, episodes, label_names, scene)
-    return PairData(trajs, np.stack(per_step) if per_step else None, len(pairs), agent_counts)
+    step_labels = {name: np.stack([steps[k] for steps in per_step])
+                   for k, name in enumerate(names)}
+    return PairData(trajs, step_labels, len(pairs), agent_counts)
 
 
 def _scene(world: str, pairs: list[px.Pair], dt_s: float) -> Scene:
@@ -188,11 +187,10 @@ def load_scenario_data(data_dir: Path, scenario: str, cfg: InteractionConfig) ->
     world = f"interaction_{scenario}"
     scene = _scene(world, pairs["train"] + pairs["val"], cfg.dt_s)
     lookup = _manoeuvre_lookup(data_dir, scenario)
-    names = sorted(set(lookup.values())) if lookup else None
-    data = {s: _to_pair_data(world, pairs[s], cfg, scene, lookup, names, counts[s])
+    data = {s: _to_pair_data(world, pairs[s], cfg, scene, lookup, counts[s])
             for s in tx.SPLITS}
     long_val = pairs.get("horizon_val") or []
-    horizon_val = _to_pair_data(world, long_val, cfg, scene, lookup, names, counts["val"]) \
+    horizon_val = _to_pair_data(world, long_val, cfg, scene, lookup, counts["val"]) \
         if len(long_val) >= 3 else data["val"]
     map_path = Path(data_dir) / "maps" / f"{scenario}.osm"
     lines = []
@@ -202,7 +200,7 @@ def load_scenario_data(data_dir: Path, scenario: str, cfg: InteractionConfig) ->
         except MapError as err:
             tqdm.write(f"warning: {err}; plots drawn without lane lines")
         inputs[str(map_path)] = sha256_file(map_path)
-    return ScenarioData(scenario, layout, data["train"], data["val"], names, lines, inputs,
+    return ScenarioData(scenario, layout, data["train"], data["val"], lines, inputs,
                         horizon_val)
 
 
@@ -217,12 +215,11 @@ def eval_windows(val: PairData, cfg: InteractionConfig) -> Windows:
     return make_windows(val.trajs, cfg.segment_len, cfg.predict_steps, cfg.eval_windows_per_pair)
 
 
-def window_labels(windows: Windows, val: PairData) -> dict[str, np.ndarray]:
-    """Per-window labels: manoeuvre at the segment end (if known), the pair's turn label and
-    the robot's last observed travel direction."""
-    labels = {"robot_turn": windows.labels["robot_turn"].astype(np.int64),
-              "robot_heading": heading_sector(windows.actions[:, windows.segment_len - 1, ROBOT])}
-    if val.step_manoeuvre is not None:
-        for k, name in enumerate(("robot_manoeuvre", "robot_manoeuvre_arm")):
-            labels[name] = val.step_manoeuvre[windows.traj_index, k, windows.end_step]
+def window_labels(windows: Windows, data: PairData) -> dict[str, np.ndarray]:
+    """Per-window labels: the generator's labels at the segment end (if known), the pair's
+    turn from motion and the robot's last observed travel direction (-1: unknown)."""
+    labels = {name: steps[windows.traj_index, windows.end_step]
+              for name, steps in data.step_labels.items()}
+    labels["robot_turn"] = windows.labels["robot_turn"].astype(np.int64)
+    labels["robot_heading"] = heading_sector(windows.actions[:, windows.segment_len - 1, ROBOT])
     return labels

@@ -2,7 +2,8 @@
 
 Procedure (one command, `tomstudy interaction`):
 1. Load the scenario's train and val track files (tracks.py), cut 4 s windows,
-   pair each car with its nearest interacting car (rule in pairs.py).
+   pair each car with its nearest interacting car (rule in pairs.py). Choose Ours' FSQ
+   levels on validation loss of the train pairs (codes.py), before anything is scored.
 2. Downsample 10 Hz -> 5 Hz (every 2nd frame): the observed 1 s (10 frame intervals) is a
    segment of 5 steps of 0.2 s, the study's segment length; the models predict the robot's
    next 3 actions (0.6 s).
@@ -13,11 +14,13 @@ Procedure (one command, `tomstudy interaction`):
 4. Per seed mean errors -> paired t-tests (Ours vs VAE, each vs constant velocity), ADE/FDE
    over the n steps, purity/NMI of codes against the manoeuvre labels when the data carry
    them (the generator's sidecar) and against a turn label derived from the robot's heading
-   change (always), vector fields per code over the scenario area, HTML + JSON report.
+   change (always), each beside a supervised ceiling and chance (codes.py), vector fields
+   per code over the scenario area, HTML + JSON report.
 """
 
 import platform
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +29,13 @@ from tqdm import tqdm
 import app
 from app.data.windows import Windows
 from app.fileio import write_json
+from app.interaction.codes import (
+    CEILING,
+    ceiling_scores,
+    choose_levels,
+    code_purity,
+    held_out_purity,
+)
 from app.interaction.config import InteractionConfig, load_config
 from app.interaction.dataset import (
     HEADING_NAMES,
@@ -56,6 +66,27 @@ def experiment_train_config(base: TrainConfig, cfg: InteractionConfig) -> TrainC
                           "n_actions": cfg.predict_steps})
 
 
+def with_levels(train_cfg: TrainConfig, levels: list[int]) -> TrainConfig:
+    """The training config with Ours' chosen FSQ levels."""
+    return TrainConfig(**{**train_cfg.model_dump(), "levels": levels})
+
+
+@dataclass(frozen=True)
+class TrainerWindows:
+    """The trainer's split windows of the train pairs ('train', 'val', 'test') and labels."""
+
+    windows: dict[str, Windows]
+    labels: dict[str, dict[str, np.ndarray]]
+
+
+def trainer_windows(exp: ScenarioData, train_cfg: TrainConfig) -> TrainerWindows:
+    """The windows Ours fits on and stops early on, as the trainer cuts them."""
+    from app.learning.train import prepare_windows
+
+    windows = prepare_windows(exp.train.trajs, train_cfg)
+    return TrainerWindows(windows, {k: window_labels(w, exp.train) for k, w in windows.items()})
+
+
 def score_model(model, windows: Windows, scored: np.ndarray) -> dict:
     """Alignment errors [W] of the next action, displacement errors, codes."""
     from analysis.contracts import alignment_error
@@ -80,9 +111,29 @@ def score_constant_velocity(windows: Windows, scored: np.ndarray) -> dict:
                                               windows.dt_s)}
 
 
+@dataclass(frozen=True)
+class Scoring:
+    """What every seed's models are scored on: the val windows (which are scored, their
+    labels), the secondary horizons, and the trainer's windows for held-out purity."""
+
+    windows: Windows
+    scored: np.ndarray
+    labels: dict[str, np.ndarray]
+    horizons: list[HorizonWindows]
+    trainer: TrainerWindows
+
+
+def held_out(model, codes: np.ndarray, on: Scoring) -> dict[str, float]:
+    """Per label: each code's majority label on the train windows, accuracy on val."""
+    train = on.trainer.windows["train"]
+    train_codes = model.codes_of(model.encode_batch(train.segment_positions))
+    return {name: held_out_purity(train_codes, on.trainer.labels["train"][name], codes,
+                                  values[on.scored])
+            for name, values in on.labels.items()}
+
+
 def run_seed(exp: ScenarioData, seed: int, train_cfg: TrainConfig, models_dir: Path,
-             windows: Windows, scored: np.ndarray, labels: dict,
-             horizons: list[HorizonWindows]) -> dict:
+             on: Scoring) -> dict:
     """Train Ours then the VAE (its k = Ours' used codes) with `seed`; score both on val:
     the paper's next action, then each secondary horizon."""
     from app.learning.checkpoint import load_model
@@ -99,16 +150,17 @@ def run_seed(exp: ScenarioData, seed: int, train_cfg: TrainConfig, models_dir: P
         model = load_model(ckpt)
         if kind == "ours":
             ours_codes = model.codes["n_codes_used"]  # the VAE's k-means k
-        scores = score_model(model, windows, scored)
-        codes = scores["codes"][scored]
+        scores = score_model(model, on.windows, on.scored)
+        codes = scores["codes"][on.scored]
         out[kind] = {
-            "alignment_error": float(scores["errors"][scored].mean()),
+            "alignment_error": float(scores["errors"][on.scored].mean()),
             **scores["displacement"],
             "usage": code_usage(codes, train_cfg.min_code_share),
-            "agreement": agreement(codes, {k: v[scored] for k, v in labels.items()}),
+            "agreement": agreement(codes, {k: v[on.scored] for k, v in on.labels.items()}),
+            "held_out": held_out(model, codes, on),
             "checkpoint": str(ckpt), "content_hash": model.content_hash,
             "by_horizon": {horizon_key(hw.horizon_s): horizon_scores(
-                model_rollout(model, hw.windows, hw.steps), hw) for hw in horizons},
+                model_rollout(model, hw.windows, hw.steps), hw) for hw in on.horizons},
         }
     return out
 
@@ -116,35 +168,54 @@ def run_seed(exp: ScenarioData, seed: int, train_cfg: TrainConfig, models_dir: P
 # ---------------------------------------------------------------- the whole run
 
 
-def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Path,
-                   cfg: InteractionConfig, base_train_cfg: TrainConfig) -> dict:
-    """Everything: load, train 2 x seeds models, score, test, plot, write the report."""
-    started = time.perf_counter()
-    exp = load_scenario_data(data_dir, scenario, cfg)
-    train_cfg = experiment_train_config(base_train_cfg, cfg)
+def scoring_set(exp: ScenarioData, cfg: InteractionConfig, train_cfg: TrainConfig) -> Scoring:
+    """Val windows of the paper's protocol (scored where the robot moves), their labels, the
+    secondary horizons and the trainer's windows."""
     windows = eval_windows(exp.val, cfg)
     true_next = windows.pred_targets[:, 0]
     scored = np.hypot(true_next[:, 0], true_next[:, 1]) >= cfg.min_speed_mps
     if scored.sum() < 2:
-        raise InteractionError(f"{scenario}: fewer than 2 val windows with a moving robot")
-    labels = window_labels(windows, exp.val)
-    cv = score_constant_velocity(windows, scored)
+        raise InteractionError(f"{exp.scenario}: fewer than 2 val windows with a moving robot")
     horizons = horizon_windows(exp.horizon_val, cfg.segment_len, cfg.secondary,
                                cfg.min_speed_mps)
+    return Scoring(windows, scored, window_labels(windows, exp.val), horizons,
+                   trainer_windows(exp, train_cfg))
+
+
+def train_seeds(exp: ScenarioData, cfg: InteractionConfig, train_cfg: TrainConfig,
+                models_dir: Path, on: Scoring) -> list[dict]:
+    """run_seed for every seed, with a progress bar."""
     per_seed = []
-    bar = tqdm(range(cfg.seeds), desc=f"interaction {scenario}: seeds", unit="seed")
+    bar = tqdm(range(cfg.seeds), desc=f"interaction {exp.scenario}: seeds", unit="seed")
     for seed in bar:
-        per_seed.append(run_seed(exp, seed, train_cfg, models_dir, windows, scored, labels,
-                                 horizons))
+        per_seed.append(run_seed(exp, seed, train_cfg, models_dir, on))
         bar.set_postfix(ours=f"{per_seed[-1]['ours']['alignment_error']:.3f}",
                         vae=f"{per_seed[-1]['vae']['alignment_error']:.3f}")
-    summary = summarise(exp, cfg, windows, scored, labels, per_seed, cv)
-    summary.update(secondary_results(exp, cfg, horizons, per_seed))
+    return per_seed
+
+
+def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Path,
+                   cfg: InteractionConfig, base_train_cfg: TrainConfig) -> dict:
+    """Everything: load, choose Ours' levels, train 2 x seeds models, score, test, plot,
+    write the report."""
+    started = time.perf_counter()
+    exp = load_scenario_data(data_dir, scenario, cfg)
+    train_cfg = experiment_train_config(base_train_cfg, cfg)
+    levels = choose_levels(exp.train.trajs, train_cfg, cfg.code_levels)  # before any purity
+    train_cfg = with_levels(train_cfg, levels["levels"])
+    on = scoring_set(exp, cfg, train_cfg)
+    per_seed = train_seeds(exp, cfg, train_cfg, models_dir, on)
+    cv = score_constant_velocity(on.windows, on.scored)
+    summary = summarise(exp, cfg, on.windows, on.scored, on.labels, per_seed, cv)
+    summary.update(secondary_results(exp, cfg, on.horizons, per_seed))
+    ceiling = ceiling_scores(on.trainer.windows, on.trainer.labels, on.windows, on.labels,
+                             on.scored)
+    summary.update(fsq_levels=levels, ceiling_model=CEILING,
+                   code_purity=code_purity(per_seed, ceiling))
     out_dir = Path(out_dir)
-    inputs = FigureInputs(exp.scenario, exp.train.trajs, exp.lane_lines, windows, scored,
+    inputs = FigureInputs(exp.scenario, exp.train.trajs, exp.lane_lines, on.windows, on.scored,
                           cfg.field_grid, cfg.field_codes)
-    figures = write_figures(inputs, per_seed, summary, out_dir)
-    write_report(out_dir, summary, per_seed, figures)
+    write_report(out_dir, summary, per_seed, write_figures(inputs, per_seed, summary, out_dir))
     write_json(out_dir / "meta.json", {
         "scenario": scenario, "layout": exp.layout, "config": cfg.model_dump(),
         "train_config": train_cfg.model_dump(), "inputs_sha256": exp.inputs,
@@ -175,10 +246,6 @@ def summarise(exp: ScenarioData, cfg: InteractionConfig, windows: Windows, score
                      for key in ("alignment_error", "ade_m", "fde_m", "mse")}
         models[m]["codes_used"] = _mean_sd([r[m]["usage"]["n_codes_used"] for r in per_seed])
         models[m]["perplexity"] = _mean_sd([r[m]["usage"]["perplexity"] for r in per_seed])
-        for name in per_seed[0][m]["agreement"]:
-            for key in ("purity", "nmi"):
-                models[m][f"{key}_{name}"] = _mean_sd(
-                    [r[m]["agreement"][name][key] for r in per_seed])
     models["cv"] = {"alignment_error": {"mean": means["cv"], "sd": 0.0},
                     **{k: {"mean": v, "sd": 0.0} for k, v in cv["displacement"].items()}}
     counts = _label_counts(exp, labels, scored)
@@ -189,8 +256,6 @@ def summarise(exp: ScenarioData, cfg: InteractionConfig, windows: Windows, score
         "pairs": {"train": exp.train.n_pairs, "val": exp.val.n_pairs},
         "agents": {"train": exp.train.agent_counts, "val": exp.val.agent_counts},
         "label_counts": counts,
-        "purity_chance": {k: max(v.values()) / max(1, sum(v.values()))
-                          for k, v in counts.items()},
         "map_lines": len(exp.lane_lines),
         "paper_protocol": {
             "val_windows": int(len(windows)), "val_windows_scored": int(scored.sum()),

@@ -60,10 +60,11 @@ def _travel_turn_deg(windows: Windows, steps: int, min_speed: float) -> np.ndarr
 
 
 def _manoeuvre_changes(windows: Windows, data: PairData, steps: int) -> np.ndarray:
-    """Whether the robot's generator manoeuvre (coarse) changes within the horizon [W]."""
-    if data.step_manoeuvre is None:
+    """Whether the robot's generator phase (roundabout enter/circle/exit) changes within the
+    horizon [W]; a car's route labels never change, so only the phase can."""
+    if "phase" not in data.step_labels:
         return np.zeros(len(windows), dtype=bool)
-    coarse = data.step_manoeuvre[:, 0]
+    coarse = data.step_labels["phase"]
     rows = windows.traj_index[:, None]
     span = windows.end_step[:, None] + np.arange(steps + 1)[None, :]
     labels = coarse[rows, span]

@@ -93,7 +93,7 @@ def plot_pairs(inputs: FigureInputs, path: Path, count: int = 80) -> Path:
     import matplotlib.pyplot as plt
 
     trajs = inputs.train
-    name = "robot_manoeuvre" if "robot_manoeuvre" in trajs.labels else "robot_turn"
+    name = "turn" if "turn" in trajs.labels else "robot_turn"
     names = trajs.label_names[name]
     fig, ax = plt.subplots(figsize=(6.5, 6.5))
     _axes_over_scene(ax, inputs)

@@ -5,9 +5,10 @@ or a four-arm intersection, both centred at ORIGIN_M. Cars arrive on each arm at
 follow a route (roundabout: exit after 1, 2 or 3 quarter turns; intersection: right,
 straight or left), slow down for curvature and for any car just ahead of them, and leave.
 A few pedestrians cross the arms. Every car's manoeuvre per frame goes to a sidecar CSV
-(generator_labels/), since the dataset's own columns have no place for it, as
-'<manoeuvre>:<arm>': roundabout entering:<arm entered from> / circling / exiting:<arm left
-by>; intersection straight|left|right:<arm entered from>.
+(generator_labels/), since the dataset's own columns have no place for it: the arm it
+entered from and the arm it leaves by (east/north/west/south), its turn (left / straight /
+right: roundabout exit after 3 / 2 / 1 quarter turns) and, on a roundabout, its phase
+(enter / circle / exit; empty at the intersection).
 
 Output layouts: v1.2 (train/<s>_train.csv, val/<s>_val.csv cut into 4 s cases) or v1.0
 (recorded_trackfiles/<s>/vehicle_tracks_000.csv + pedestrian_tracks_000.csv), plus a
@@ -35,8 +36,14 @@ CASE_FRAMES = 40
 CAR_LENGTH_M, CAR_WIDTH_M = 4.6, 1.9
 ARM_ANGLES = (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)
 ARM_NAMES = ("east", "north", "west", "south")
-ROUNDABOUT_MANOEUVRES = ["entering", "circling", "exiting"]
-INTERSECTION_MANOEUVRES = ["straight", "left", "right"]
+TURNS = ("left", "straight", "right")
+ROUNDABOUT_PHASES = ("enter", "circle", "exit")
+NO_PHASE = -1
+# the sidecar's label columns and the values each can take, in display order
+LABEL_VALUES = {"entry_arm": ARM_NAMES, "exit_arm": ARM_NAMES, "turn": TURNS,
+                "phase": ROUNDABOUT_PHASES}
+INTERSECTION_TURNS = ("straight", "left", "right")  # intersection_route's manoeuvre index
+ROUNDABOUT_TURNS = {1: "right", 2: "straight", 3: "left"}  # quarter turns counter-clockwise
 
 
 def geometry_of(scenario: str) -> str:
@@ -71,12 +78,13 @@ def _line(p0, p1, count: int = 20) -> np.ndarray:
 
 @dataclass
 class Route:
-    """A path polyline [K, 2] (local metres), its arc length [K] and per-point manoeuvre index."""
+    """A path polyline [K, 2] (local metres), its arc length [K], per-point phase index
+    (NO_PHASE off a roundabout) and the route's turn, entry and exit arms."""
 
     points: np.ndarray
     s: np.ndarray
     phase: np.ndarray
-    label: int
+    turn: str
     arm: int = 0
     exit_arm: int = 0
     box_m: tuple[float, float] | None = None  # arc-length span inside an intersection box
@@ -89,7 +97,7 @@ class Route:
         self.curvature = np.concatenate([[0.0], turn, [0.0]])
 
     def at(self, s: float) -> tuple[np.ndarray, float, int, float]:
-        """(point, heading, manoeuvre index, curvature) at arc length s."""
+        """(point, heading, phase index, curvature) at arc length s."""
         k = int(np.clip(np.searchsorted(self.s, s) - 1, 0, len(self.s) - 2))
         frac = (s - self.s[k]) / max(self.s[k + 1] - self.s[k], 1e-9)
         d = self.points[k + 1] - self.points[k]
@@ -97,7 +105,7 @@ class Route:
             float(self.curvature[k])
 
 
-def _route(pieces: list[tuple[np.ndarray, int]], label: int, arm: int, exit_arm: int,
+def _route(pieces: list[tuple[np.ndarray, int]], turn: str, arm: int, exit_arm: int,
            box_piece: int | None = None) -> Route:
     points = np.concatenate([p if k == 0 else p[1:] for k, (p, _) in enumerate(pieces)])
     phase = np.concatenate([np.full(len(p) - (k > 0), ph) for k, (p, ph) in enumerate(pieces)])
@@ -108,7 +116,7 @@ def _route(pieces: list[tuple[np.ndarray, int]], label: int, arm: int, exit_arm:
         lengths = [float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) for p, _ in pieces]
         start = sum(lengths[:box_piece])
         box = (start, start + lengths[box_piece])
-    return Route(points[keep], s[keep], phase[keep], label, arm, exit_arm, box)
+    return Route(points[keep], s[keep], phase[keep], turn, arm, exit_arm, box)
 
 
 def roundabout_route(arm: int, quarter_turns: int) -> Route:
@@ -133,7 +141,8 @@ def roundabout_route(arm: int, quarter_turns: int) -> Route:
         (_bezier(arc[-1], tangent(arc_b), exit_start, _unit(phi)), 2),
         (_line(exit_start, end), 2),
     ]
-    return _route(pieces, label=-1, arm=arm, exit_arm=(arm + quarter_turns) % 4)
+    return _route(pieces, turn=ROUNDABOUT_TURNS[quarter_turns], arm=arm,
+                  exit_arm=(arm + quarter_turns) % 4)
 
 
 def intersection_route(arm: int, manoeuvre: int) -> Route:
@@ -145,11 +154,12 @@ def intersection_route(arm: int, manoeuvre: int) -> Route:
     stop = _unit(theta) * box + _left_of_inbound(theta) * LANE_OFFSET_M
     leave = _unit(phi) * box - _left_of_inbound(phi) * LANE_OFFSET_M
     end = _unit(phi) * ARM_LENGTH_M - _left_of_inbound(phi) * LANE_OFFSET_M
-    pieces = [(_line(start, stop), manoeuvre),
-              (_bezier(stop, -_unit(theta), leave, _unit(phi)), manoeuvre),
-              (_line(leave, end), manoeuvre)]
+    pieces = [(_line(start, stop), NO_PHASE),
+              (_bezier(stop, -_unit(theta), leave, _unit(phi)), NO_PHASE),
+              (_line(leave, end), NO_PHASE)]
     exit_arm = (arm + (2, 3, 1)[manoeuvre]) % 4
-    return _route(pieces, label=manoeuvre, arm=arm, exit_arm=exit_arm, box_piece=1)
+    return _route(pieces, turn=INTERSECTION_TURNS[manoeuvre], arm=arm, exit_arm=exit_arm,
+                  box_piece=1)
 
 
 @dataclass
@@ -281,26 +291,21 @@ def _car_rows(car: _Car, rng: np.random.Generator, offset: np.ndarray):
         yield frame, [x + offset[0] + noise[0], y + offset[1] + noise[1], vx, vy, psi], phase
 
 
-def _manoeuvre_name(kind: str, car: _Car, phase: int) -> str:
-    """'<manoeuvre>:<arm>' (arm entered from, or exited to); plain 'circling' on the ring."""
-    if kind == "roundabout":
-        name = ROUNDABOUT_MANOEUVRES[phase]
-        if name == "entering":
-            return f"{name}:{ARM_NAMES[car.route.arm]}"
-        if name == "exiting":
-            return f"{name}:{ARM_NAMES[car.route.exit_arm]}"
-        return name
-    return f"{INTERSECTION_MANOEUVRES[car.route.label]}:{ARM_NAMES[car.route.arm]}"
+def _manoeuvre(car: _Car, phase: int) -> tuple[str, str, str, str]:
+    """The sidecar's label values (LABEL_VALUES order) of `car` at a point with `phase`."""
+    route = car.route
+    phase_name = "" if phase == NO_PHASE else ROUNDABOUT_PHASES[phase]
+    return ARM_NAMES[route.arm], ARM_NAMES[route.exit_arm], route.turn, phase_name
 
 
-def _collect(kind: str, cars: list[_Car], walkers: list[dict], seed: int):
+def _collect(cars: list[_Car], walkers: list[dict], seed: int):
     """Per frame: list of (track_id, type, [x, y, vx, vy, psi|None], manoeuvre|None)."""
     rng = np.random.default_rng(seed + 7919)
     by_frame: dict[int, list] = {}
     for car in cars:
         for frame, values, phase in _car_rows(car, rng, ORIGIN_M):
             by_frame.setdefault(frame, []).append(
-                (car.track_id, "car", values, _manoeuvre_name(kind, car, phase)))
+                (car.track_id, "car", values, _manoeuvre(car, phase)))
     for walker in walkers:
         for frame, xy, v in zip(walker["frames"], walker["xy"], walker["v"], strict=True):
             values = [*(xy + ORIGIN_M), *v, None]
@@ -340,7 +345,7 @@ def write_cases(path: Path, scenario: str, split: str, by_frame: dict,
                 per_track.setdefault(new_id, []).append(
                     [f"{case:.1f}", *_row(new_id, local, local, agent_type, values)])
                 if manoeuvre is not None:
-                    labels.append((recording, new_id, local, manoeuvre))
+                    labels.append((recording, new_id, local, *manoeuvre))
         for new_id in sorted(per_track):
             rows.extend(per_track[new_id])
     _write_csv(path, CASE_COLUMNS, rows)
@@ -357,7 +362,7 @@ def write_recording(folder: Path, index: int, by_frame: dict, labels: list) -> N
             if agent_type == "car":
                 vehicles.setdefault(track_id, []).append(
                     _row(track_id, frame, frame, agent_type, values))
-                labels.append((name, track_id, frame, manoeuvre))
+                labels.append((name, track_id, frame, *manoeuvre))
             else:
                 walkers.setdefault(track_id, []).append(
                     _row(track_id, frame, frame, agent_type, values, with_shape=False))
@@ -375,19 +380,21 @@ def _write_csv(path: Path, header, rows) -> None:
         writer.writerows(rows)
 
 
-LABEL_COLUMNS = ("recording", "track_id", "frame", "manoeuvre")
+LABEL_COLUMNS = ("recording", "track_id", "frame", *LABEL_VALUES)
 
 
 def _write_labels(path: Path, labels: list) -> None:
     _write_csv(path, LABEL_COLUMNS, labels)
 
 
-def read_manoeuvre_labels(path: Path) -> dict[tuple[str, int, int], str]:
-    """(recording, track_id, frame) -> manoeuvre, from a generator's sidecar CSV."""
+def read_manoeuvre_labels(path: Path) -> dict[tuple[str, int, int], dict[str, str]]:
+    """(recording, track_id, frame) -> {label: value} (empty values left out), from a
+    generator's sidecar CSV."""
     out = {}
     with open(path, newline="", encoding="utf-8") as fh:
         for row in csv.DictReader(fh):
-            out[(row["recording"], int(row["track_id"]), int(row["frame"]))] = row["manoeuvre"]
+            key = (row["recording"], int(row["track_id"]), int(row["frame"]))
+            out[key] = {name: row[name] for name in LABEL_VALUES if row[name]}
     return out
 
 
@@ -403,7 +410,7 @@ def generate(out_dir: Path, scenario: str, layout: str = "v1.2", train_s: float 
     for index, (split, (seconds, stream_seed)) in enumerate(
             tqdm(streams.items(), desc=f"generate {scenario}", unit="split")):
         cars, walkers = simulate_stream(kind, seconds, stream_seed)
-        by_frame = _collect(kind, cars, walkers, stream_seed)
+        by_frame = _collect(cars, walkers, stream_seed)
         labels: list = []
         if layout == "v1.2":
             summary[f"{split}_cases"] = write_cases(

@@ -29,19 +29,21 @@ def test_pairs_become_downsampled_trajectories_with_labels(small_data):
     trajs = exp.train.trajs
     assert trajs.dt_s == pytest.approx(0.2) and cfg.segment_len == 5
     assert trajs.positions.shape[1:] == (20, 2, 2)  # 40 frames every 2nd
-    assert trajs.label_names["robot_manoeuvre"] == ["left", "right", "straight"]
-    assert all(":" in name for name in trajs.label_names["robot_manoeuvre_arm"])
-    # an intersection car keeps its route for the whole window: one label per pair
-    steps = exp.train.step_manoeuvre[:, 0]
-    known = steps >= 0
-    assert known.mean() > 0.99
-    rows = np.where(known.all(axis=1))[0]
-    assert (steps[rows] == steps[rows, :1]).all()
+    assert trajs.label_names["turn"] == ["left", "straight", "right"]
+    assert trajs.label_names["entry_arm"] == ["east", "north", "west", "south"]
+    assert "phase" not in trajs.label_names, "an intersection has no roundabout phase"
+    # a car keeps its route for the whole window: one value per pair
+    for name in ("turn", "entry_arm", "exit_arm"):
+        steps = exp.train.step_labels[name]
+        known = steps >= 0
+        assert known.mean() > 0.99
+        rows = np.where(known.all(axis=1))[0]
+        assert (steps[rows] == steps[rows, :1]).all()
     # the turn label derived from motion agrees with the generator's route label for
     # pairs that actually turn by more than 60 degrees
-    names = trajs.label_names["robot_manoeuvre"]
+    names = trajs.label_names["turn"]
     turn = [ds.TURN_NAMES[k] for k in trajs.labels["robot_turn"]]
-    route = [names[k] for k in trajs.labels["robot_manoeuvre"]]
+    route = [names[k] for k in trajs.labels["turn"]]
     turned = [(t, r) for t, r in zip(turn, route, strict=True) if t != "straight"]
     assert turned and np.mean([t == r for t, r in turned]) > 0.9
     assert exp.lane_lines, "the generated map is read and projected"
@@ -61,11 +63,10 @@ def test_window_labels_take_the_manoeuvre_at_the_segment_end(small_data):
     exp = ds.load_scenario_data(small_data, SCENARIO, cfg)
     windows = ds.eval_windows(exp.val, cfg)
     labels = ds.window_labels(windows, exp.val)
-    assert set(labels) == {"robot_turn", "robot_heading", "robot_manoeuvre",
-                           "robot_manoeuvre_arm"}
+    assert set(labels) == {"robot_turn", "robot_heading", "entry_arm", "exit_arm", "turn"}
     row = len(windows) // 2
     traj, end = windows.traj_index[row], windows.end_step[row]
-    assert labels["robot_manoeuvre_arm"][row] == exp.val.step_manoeuvre[traj, 1, end]
+    assert labels["exit_arm"][row] == exp.val.step_labels["exit_arm"][traj, end]
     np.testing.assert_allclose(windows.end_states[row], exp.val.trajs.positions[traj, end])
 
 
@@ -119,9 +120,16 @@ def test_full_command_end_to_end_on_generated_roundabout(tmp_path, monkeypatch):
     assert all(0 <= v <= 2 for v in primary["mean_alignment_error"].values())
     test = primary["tests"]["ours_vs_vae"]
     assert test["n"] == 10 and 0 <= test["p_two_sided"] <= 1
-    ours = primary["models"]["ours"]
-    assert {"purity_robot_manoeuvre", "purity_robot_manoeuvre_arm", "nmi_robot_heading"} <= set(
-        ours)
+    # codes against manoeuvres: levels chosen from the grid on validation loss, then purity
+    chosen = summary["fsq_levels"]
+    assert chosen["levels"] in ic.CodeLevelsConfig().levels
+    assert sum(row["chosen"] for row in chosen["rows"]) == 1
+    purity = summary["code_purity"]
+    assert {"entry_arm", "exit_arm", "turn", "phase", "robot_turn", "robot_heading"} == set(
+        purity)
+    for row in purity.values():
+        assert row["chance"] <= row["ours"] <= 1 and 0 <= row["ceiling"] <= 1
+        assert row["share_of_ceiling"] == pytest.approx(row["ours"] / row["ceiling"])
     assert primary["winner"] in ie.MODELS
     # secondary: 1 and 2 s fit in the 4 s v1.2 cases, 3 s is reported as not measurable
     assert set(summary["by_horizon"]) == {"1", "2"} and "3" in summary["secondary"][
@@ -172,8 +180,8 @@ def test_horizon_windows_strata_and_constant_velocity_rollout(small_data):
     assert (hw.strata["decision"] | hw.strata["steady"] == hw.scored).all()
     assert hw.strata["decision"].any() and hw.strata["steady"].any()
     # a left or right route turns within 2 s more often than a straight one
-    names = exp.val.trajs.label_names["robot_manoeuvre"]
-    route = np.array(names)[hw.windows.labels["robot_manoeuvre"]]
+    names = exp.val.trajs.label_names["turn"]
+    route = np.array(names)[hw.windows.labels["turn"]]
     decision = hw.strata["decision"][hw.scored]
     turning = np.isin(route[hw.scored], ["left", "right"])
     assert decision[turning].mean() > decision[~turning].mean()
@@ -181,3 +189,49 @@ def test_horizon_windows_strata_and_constant_velocity_rollout(small_data):
     assert pred.shape == hw.windows.pred_targets.shape
     scores = hz.horizon_scores(hw.windows.pred_targets.astype(np.float64), hw)
     assert scores["all"]["alignment_error"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_held_out_purity_maps_codes_by_their_train_majority():
+    from app.interaction.codes import held_out_purity
+
+    train_codes = np.array([0, 0, 0, 1, 1, 2])
+    train_labels = np.array([1, 1, 0, 2, 2, -1])  # code 2 has no known label: fallback 1
+    val_codes = np.array([0, 1, 1, 2, 3, 0])
+    val_labels = np.array([1, 2, 0, 1, 1, -1])
+    # predictions 1, 2, 2, 1 (code 2 and unseen code 3: train majority 1), 1; last unknown
+    assert held_out_purity(train_codes, train_labels, val_codes, val_labels) == pytest.approx(0.8)
+
+
+def test_levels_are_chosen_on_validation_loss_without_labels(small_data):
+    from app.interaction.codes import choose_levels
+    from app.learning.config import TrainConfig
+
+    cfg = ic.InteractionConfig()
+    exp = ds.load_scenario_data(small_data, SCENARIO, cfg)
+    train_cfg = ie.experiment_train_config(TrainConfig(max_epochs=3), cfg)
+    grid = ic.CodeLevelsConfig(levels=[[2, 2], [5, 5]])
+    chosen = choose_levels(exp.train.trajs, train_cfg, grid)
+    assert chosen["levels"] in grid.levels
+    assert [r["chosen"] for r in chosen["rows"]].count(True) == 1
+    assert all(r["val_task_loss"] > 0 for r in chosen["rows"])
+    # the labels never enter: scrambling them leaves the choice and the losses unchanged
+    trajs = exp.train.trajs
+    trajs.labels = {k: np.random.default_rng(0).permutation(v) for k, v in trajs.labels.items()}
+    again = choose_levels(trajs, train_cfg, grid)
+    assert [r["val_task_loss"] for r in again["rows"]] == [r["val_task_loss"]
+                                                           for r in chosen["rows"]]
+
+
+def test_ceiling_learns_the_entry_arm_from_the_observed_second(small_data):
+    from app.interaction.codes import ceiling_scores
+    from app.learning.config import TrainConfig
+
+    cfg = ic.InteractionConfig()
+    exp = ds.load_scenario_data(small_data, SCENARIO, cfg)
+    trainer = ie.trainer_windows(exp, ie.experiment_train_config(TrainConfig(), cfg))
+    windows = ds.eval_windows(exp.val, cfg)
+    labels = ds.window_labels(windows, exp.val)
+    scored = np.ones(len(windows), dtype=bool)
+    ceiling = ceiling_scores(trainer.windows, trainer.labels, windows, labels, scored)
+    chance = np.bincount(labels["entry_arm"]).max() / len(windows)
+    assert set(ceiling) == set(labels) and ceiling["entry_arm"] > chance + 0.2

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from app.interaction import pairs as px
+from app.interaction import synthetic as syn
 from app.interaction import tracks as ix
 from app.interaction.lanelet_map import OriginProjector, read_lanelet_map
 from app.interaction.synthetic import generate, lane_lines, read_manoeuvre_labels
@@ -171,14 +172,38 @@ def test_v10_time_split_keeps_windows_apart(generated):
 def test_generator_labels_cover_every_car_row(generated):
     data = generated / "v1.2"
     labels = read_manoeuvre_labels(data / "generator_labels" / "DR_USA_Intersection_EP0_train.csv")
-    assert {name.split(":")[0] for name in labels.values()} == {"straight", "left", "right"}
+    assert {row["turn"] for row in labels.values()} == {"straight", "left", "right"}
+    assert all(set(row) == {"entry_arm", "exit_arm", "turn"} for row in labels.values())
     with open(data / "train" / "DR_USA_Intersection_EP0_train.csv") as fh:
         cars = [r for r in csv.DictReader(fh) if r["agent_type"] == "car"]
     assert len(cars) == len(labels)
     round_labels = read_manoeuvre_labels(data / "generator_labels" /
                                       "DR_USA_Roundabout_FT_train.csv")
-    assert {n.split(":")[0] for n in round_labels.values()} == {"entering", "circling",
-                                                                 "exiting"}
+    assert {row["phase"] for row in round_labels.values()} == {"enter", "circle", "exit"}
+    # a car's route labels stay the same over its whole track
+    routes: dict = {}
+    for (recording, track, _), row in round_labels.items():
+        routes.setdefault((recording, track), set()).add((row["entry_arm"], row["exit_arm"],
+                                                          row["turn"]))
+    assert all(len(r) == 1 for r in routes.values())
+
+
+@pytest.mark.parametrize("kind", ["roundabout", "intersection"])
+def test_turn_label_matches_the_route_geometry(kind):
+    """left / right is the sign of the heading change from entry to exit (y up); the exit
+    arm is where the route ends."""
+    for arm in range(4):
+        for option in ((1, 2, 3) if kind == "roundabout" else (0, 1, 2)):
+            route = (syn.roundabout_route(arm, option) if kind == "roundabout"
+                     else syn.intersection_route(arm, option))
+            moves = np.diff(route.points, axis=0)
+            turn = np.degrees(np.unwrap(np.arctan2(moves[:, 1], moves[:, 0])))
+            change = (turn[-1] - turn[0] + 180) % 360 - 180
+            expected = "left" if change > 45 else "right" if change < -45 else "straight"
+            assert route.turn == expected
+            end_angle = np.arctan2(route.points[-1, 1], route.points[-1, 0])
+            off = (end_angle - syn.ARM_ANGLES[route.exit_arm] + np.pi) % (2 * np.pi) - np.pi
+            assert abs(off) < 0.1
 
 
 # ---------------------------------------------------------------- maps
