@@ -2,7 +2,8 @@
 
 Generates the default synthetic scenario (v1.2 layout) in a temporary folder, then times
 (a) one Ours training on its train pairs (baseline) and (b) the whole command: load and
-validate, 2 x 10 trainings, scoring, tests, figures, report. Prints both wall times, the
+validate, the FSQ levels grid (7 Ours trainings), 2 x 10 trainings, scoring, tests, the
+supervised ceilings, figures, report. Prints both wall times, the
 CPU time, their ratio and whether the whole command stays under the 2-minute target.
 CPU time is printed too because the machine is shared: wall time depends on the load.
 

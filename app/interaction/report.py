@@ -65,25 +65,46 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def plot_errors(summary: dict, path: Path) -> Path:
-    """Mean next-action alignment error per model with the 10 per-seed means as dots."""
-    import matplotlib.pyplot as plt
+MODEL_COLORS = {"ours": "#0072B2", "vae": "#D55E00", "cv": "#999999"}
 
-    fig, ax = plt.subplots(figsize=(5, 3.6))
-    colors = {"ours": "#0072B2", "vae": "#D55E00", "cv": "#999999"}
-    models = models_of(summary)
+
+def error_panels(summary: dict) -> list[tuple[str, dict[str, list[float]]]]:
+    """(title, model -> per-seed alignment errors): the next action, then every horizon's
+    'all' stratum."""
+    primary = summary["paper_protocol"]
+    panels = [(f"next action ({summary['dt_s']:g} s, primary)",
+               primary["per_seed_alignment_error"])]
+    for h, strata in summary.get("by_horizon", {}).items():
+        panels.append((f"{h} s displacement", {m: cell["alignment_error"]["per_seed"]
+                                                 for m, cell in strata["all"].items()}))
+    return panels
+
+
+def _bars_with_seeds(ax, per_seed: dict[str, list[float]], models: list[str]) -> None:
     for k, m in enumerate(models):
-        values = np.asarray(summary["paper_protocol"]["per_seed_alignment_error"][m])
-        ax.bar(k, values.mean(), color=colors[m], alpha=0.75)
+        values = np.asarray(per_seed[m])
+        ax.bar(k, values.mean(), color=MODEL_COLORS[m], alpha=0.75)
         if m != "cv":
             ax.errorbar(k, values.mean(), yerr=values.std(ddof=1), color="k", capsize=4)
             jitter = np.linspace(-0.2, 0.2, len(values))
             ax.plot(k + jitter, values, "o", color="k", ms=3)
-    ax.set_xticks(range(len(models)), [MODEL_NAMES[m] for m in models])
+    ax.set_xticks(range(len(models)), [MODEL_NAMES[m] for m in models], fontsize=7)
+
+
+def plot_errors(summary: dict, path: Path) -> Path:
+    """Mean alignment error per model and horizon with the per-seed means as dots."""
+    import matplotlib.pyplot as plt
+
+    panels = error_panels(summary)
+    models = models_of(summary)
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.6 * len(panels), 3.6), squeeze=False)
+    for ax, (title, per_seed) in zip(axes[0], panels, strict=True):
+        _bars_with_seeds(ax, per_seed, models)
+        ax.set_title(title, fontsize=8)
+    axes[0, 0].set_ylabel("alignment error 1 - cos")
     p = summary["paper_protocol"]["tests"]["ours_vs_vae"]["p_two_sided"]
-    ax.set_ylabel("alignment error 1 - cos (next action)")
-    ax.set_title(f"{summary['scenario']}: {summary['seeds']} seeds; Ours vs VAE p = {p:.2g}",
-                 fontsize=9)
+    fig.suptitle(f"{summary['scenario']}: {summary['seeds']} seeds (dots), all val windows; "
+                 f"next action Ours vs VAE p = {p:.2g}", fontsize=9)
     fig.tight_layout()
     return _save(fig, path)
 
