@@ -587,6 +587,8 @@ def interaction(
     train_config: Annotated[Path | None, typer.Option(help="training YAML")] = None,
     generate: Annotated[str | None, typer.Option(help="first write GENERATED files in this "
                                                  "layout (v1.0 or v1.2) into --data")] = None,
+    frame_seeds: Annotated[int | None, typer.Option(min=0, help="seeds of the human-relative "
+                                                    "frame row (0 skips it; default 5)")] = None,
 ) -> None:
     """Ours vs VAE vs constant velocity on INTERACTION pairs; report in var/reports/interaction/."""
     from app.interaction.dataset import InteractionError
@@ -601,7 +603,7 @@ def interaction(
 
             write_generated(data, scenario, generate)
         summary = run_command(data, scenario, get_settings().data_dir, config, train_config,
-                              seeds, max_epochs)
+                              seeds, max_epochs, frame_seeds=frame_seeds)
     except (TrackFileError, InteractionError, MapError, ValueError) as err:
         fail(str(err))
     out = get_settings().layout.interaction_report(scenario)

@@ -1,8 +1,9 @@
 """The INTERACTION experiment's settings: how pairs are cut, scored and what is reported."""
 
 from pathlib import Path
+from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from app.configio import StrictModel
 from app.interaction.tracks import FRAME_MS
@@ -34,6 +35,22 @@ class CodeLevelsConfig(StrictModel):
     seed: int = Field(0, ge=0)
 
 
+class FrameSensitivityConfig(StrictModel):
+    """The sensitivity row: the paper's protocol re-run with the models' positions in another
+    frame than the primary's map frame (app/interaction/frames.py)."""
+
+    frame: Literal["human_relative"] = Field("human_relative", description="positions minus "
+                                             "the human car's at the last observed step")
+    seeds: int = Field(5, ge=0, description="seeds 0..k-1 of the primary's; 0 = not run")
+
+    @field_validator("seeds")
+    @classmethod
+    def _none_or_a_pair(cls, seeds: int) -> int:
+        if seeds == 1:
+            raise ValueError("a paired t-test over seeds needs at least 2 (0 skips the row)")
+        return seeds
+
+
 class InteractionConfig(StrictModel):
     """How pairs are cut and scored; defaults follow the paper (1 s observed, 10 seeds)."""
 
@@ -54,6 +71,7 @@ class InteractionConfig(StrictModel):
     field_codes: int = Field(6, ge=1, description="most used codes drawn per model")
     secondary: SecondaryConfig = Field(default_factory=SecondaryConfig)
     code_levels: CodeLevelsConfig = Field(default_factory=CodeLevelsConfig)
+    frame_sensitivity: FrameSensitivityConfig = Field(default_factory=FrameSensitivityConfig)
 
     @property
     def segment_len(self) -> int:
@@ -73,12 +91,19 @@ def default_config_path() -> Path:
     return get_settings().configs_dir / "interaction.yaml"
 
 
-def load_config(path: Path | None, seeds: int | None) -> InteractionConfig:
-    """The experiment config (default study_configs/interaction.yaml), then --seeds."""
+def load_config(path: Path | None, seeds: int | None,
+                frame_seeds: int | None = None) -> InteractionConfig:
+    """The experiment config (default study_configs/interaction.yaml), then --seeds and
+    --frame-seeds."""
     from app.configio import load_yaml_model
 
     overrides = {"seeds": seeds} if seeds is not None else {}
     path = Path(path) if path else default_config_path()
     if not path.exists() and path == default_config_path():
-        return InteractionConfig(**overrides)
-    return load_yaml_model(path, InteractionConfig, overrides)
+        cfg = InteractionConfig(**overrides)
+    else:
+        cfg = load_yaml_model(path, InteractionConfig, overrides)
+    if frame_seeds is None:
+        return cfg
+    row = FrameSensitivityConfig(**{**cfg.frame_sensitivity.model_dump(), "seeds": frame_seeds})
+    return cfg.model_copy(update={"frame_sensitivity": row})

@@ -16,6 +16,9 @@ Procedure (one command, `tomstudy interaction`):
    them (the generator's sidecar) and against a turn label derived from the robot's heading
    change (always), each beside a supervised ceiling and chance (codes.py), vector fields
    per code over the scenario area, HTML + JSON report.
+5. The sensitivity row (frames.py): steps 3-4's next action and paired tests again, with
+   both models trained and scored on positions relative to the human car ("from the other
+   car's point of view"), on fewer seeds (study_configs/interaction.yaml).
 """
 
 import platform
@@ -45,6 +48,7 @@ from app.interaction.dataset import (
     load_scenario_data,
     window_labels,
 )
+from app.interaction.frames import Frame, in_frame, train_in_frame
 from app.interaction.horizons import (
     HorizonWindows,
     constant_velocity_rollout,
@@ -87,13 +91,16 @@ def trainer_windows(exp: ScenarioData, train_cfg: TrainConfig) -> TrainerWindows
     return TrainerWindows(windows, {k: window_labels(w, exp.train) for k, w in windows.items()})
 
 
-def score_model(model, windows: Windows, scored: np.ndarray) -> dict:
-    """Alignment errors [W] of the next action, displacement errors, codes."""
+def score_model(model, windows: Windows, scored: np.ndarray,
+                frame: Frame = "absolute") -> dict:
+    """Alignment errors [W] of the next action, displacement errors, codes; the model sees
+    the windows in its `frame` and is scored against the same true actions in every frame."""
     from analysis.contracts import alignment_error
     from app.learning.model_metrics import trajectory_errors
 
-    z = model.encode_batch(windows.segment_positions)
-    pred = model.predict_batch(z, windows.end_states)
+    seen = in_frame(windows, frame)
+    z = model.encode_batch(seen.segment_positions)
+    pred = model.predict_batch(z, seen.end_states)
     errors = alignment_error(pred[:, 0], windows.pred_targets[:, 0])
     return {"errors": errors, "codes": model.codes_of(z),
             "displacement": trajectory_errors(pred[scored], windows.pred_targets[scored],
@@ -132,24 +139,31 @@ def held_out(model, codes: np.ndarray, on: Scoring) -> dict[str, float]:
             for name, values in on.labels.items()}
 
 
+def train_pair(exp: ScenarioData, seed: int, train_cfg: TrainConfig, models_dir: Path,
+               frame: Frame):
+    """Train Ours, then the VAE with k = Ours' used codes, in `frame`; yields (kind, checkpoint
+    path, loaded model) as each is trained."""
+    from app.learning.checkpoint import load_model
+
+    meta = {"scenario": exp.scenario, "layout": exp.layout, "inputs": exp.inputs}
+    ours_codes = None
+    for kind in ("ours", "vae"):
+        ckpt = train_in_frame(exp.train.trajs, kind, seed, train_cfg,
+                              models_dir / f"seed_{seed}" / kind, frame, meta, ours_codes)
+        model = load_model(ckpt)
+        if kind == "ours":
+            ours_codes = model.codes["n_codes_used"]  # the VAE's k-means k
+        yield kind, ckpt, model
+
+
 def run_seed(exp: ScenarioData, seed: int, train_cfg: TrainConfig, models_dir: Path,
              on: Scoring) -> dict:
     """Train Ours then the VAE (its k = Ours' used codes) with `seed`; score both on val:
     the paper's next action, then each secondary horizon."""
-    from app.learning.checkpoint import load_model
     from app.learning.model_metrics import agreement, code_usage
-    from app.learning.train import train_and_save
 
-    out, ours_codes = {"seed": seed}, None
-    for kind in ("ours", "vae"):
-        ckpt = train_and_save(exp.train.trajs, kind, seed, train_cfg,
-                              models_dir / f"seed_{seed}" / kind,
-                              data_meta={"scenario": exp.scenario, "layout": exp.layout,
-                                         "inputs": exp.inputs}, progress=False,
-                              vae_clusters=ours_codes)
-        model = load_model(ckpt)
-        if kind == "ours":
-            ours_codes = model.codes["n_codes_used"]  # the VAE's k-means k
+    out = {"seed": seed}
+    for kind, ckpt, model in train_pair(exp, seed, train_cfg, models_dir, "absolute"):
         scores = score_model(model, on.windows, on.scored)
         codes = scores["codes"][on.scored]
         out[kind] = {
@@ -208,6 +222,7 @@ def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Pat
     cv = score_constant_velocity(on.windows, on.scored)
     summary = summarise(exp, cfg, on.windows, on.scored, on.labels, per_seed, cv)
     summary.update(secondary_results(exp, cfg, on.horizons, per_seed))
+    summary.update(frame_sensitivity(exp, cfg, train_cfg, models_dir, on, cv))
     ceiling = ceiling_scores(on.trainer.windows, on.trainer.labels, on.windows, on.labels,
                              on.scored)
     summary.update(fsq_levels=levels, ceiling_model=CEILING,
@@ -230,6 +245,21 @@ def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Pat
 def summarise(exp: ScenarioData, cfg: InteractionConfig, windows: Windows, scored: np.ndarray,
               labels: dict, per_seed: list[dict], cv: dict) -> dict:
     """Every headline number, JSON-able."""
+    counts = _label_counts(exp, labels, scored)
+    return {
+        "scenario": exp.scenario, "layout": exp.layout, "seeds": len(per_seed),
+        "dt_s": cfg.dt_s, "segment_steps": cfg.segment_len, "observed_s":
+            cfg.segment_len * cfg.dt_s, "predict_steps": cfg.predict_steps,
+        "pairs": {"train": exp.train.n_pairs, "val": exp.val.n_pairs},
+        "agents": {"train": exp.train.agent_counts, "val": exp.val.agent_counts},
+        "label_counts": counts,
+        "map_lines": len(exp.lane_lines),
+        "paper_protocol": paper_protocol(windows, scored, per_seed, cv),
+    }
+
+
+def paper_protocol(windows: Windows, scored: np.ndarray, per_seed: list[dict], cv: dict) -> dict:
+    """The paper's protocol from per-seed scores: means, paired tests, the winner."""
     from analysis.stats import paired_comparison
 
     seed_means = {m: np.array([r[m]["alignment_error"] for r in per_seed])
@@ -248,23 +278,40 @@ def summarise(exp: ScenarioData, cfg: InteractionConfig, windows: Windows, score
         models[m]["perplexity"] = _mean_sd([r[m]["usage"]["perplexity"] for r in per_seed])
     models["cv"] = {"alignment_error": {"mean": means["cv"], "sd": 0.0},
                     **{k: {"mean": v, "sd": 0.0} for k, v in cv["displacement"].items()}}
-    counts = _label_counts(exp, labels, scored)
     return {
-        "scenario": exp.scenario, "layout": exp.layout, "seeds": len(per_seed),
-        "dt_s": cfg.dt_s, "segment_steps": cfg.segment_len, "observed_s":
-            cfg.segment_len * cfg.dt_s, "predict_steps": cfg.predict_steps,
-        "pairs": {"train": exp.train.n_pairs, "val": exp.val.n_pairs},
-        "agents": {"train": exp.train.agent_counts, "val": exp.val.agent_counts},
-        "label_counts": counts,
-        "map_lines": len(exp.lane_lines),
-        "paper_protocol": {
-            "val_windows": int(len(windows)), "val_windows_scored": int(scored.sum()),
-            "mean_alignment_error": means, "per_seed_alignment_error":
-                {m: seed_means[m].tolist() for m in MODELS},
-            "tests": tests, "models": models, "winner": winner,
-            "winner_margin": means[runner_up] - means[winner], "runner_up": runner_up,
-        },
+        "val_windows": int(len(windows)), "val_windows_scored": int(scored.sum()),
+        "mean_alignment_error": means, "per_seed_alignment_error":
+            {m: seed_means[m].tolist() for m in MODELS},
+        "tests": tests, "models": models, "winner": winner,
+        "winner_margin": means[runner_up] - means[winner], "runner_up": runner_up,
     }
+
+
+def frame_sensitivity(exp: ScenarioData, cfg: InteractionConfig, train_cfg: TrainConfig,
+                      models_dir: Path, on: Scoring, cv: dict) -> dict:
+    """`sensitivity`: the paper's protocol with both models trained and scored in the
+    configured frame (seeds 0..k-1, Ours' levels as chosen for the primary); {} when off.
+    Constant velocity does not depend on the frame (a translation keeps every velocity)."""
+    from app.learning.model_metrics import code_usage
+
+    row = cfg.frame_sensitivity
+    if row.seeds == 0:
+        return {}
+    per_seed = []
+    for seed in tqdm(range(row.seeds), desc=f"interaction {exp.scenario}: {row.frame} frame",
+                     unit="seed"):
+        out = {"seed": seed}
+        for kind, _, model in train_pair(exp, seed, train_cfg, models_dir / row.frame,
+                                         row.frame):
+            scores = score_model(model, on.windows, on.scored, row.frame)
+            out[kind] = {"alignment_error": float(scores["errors"][on.scored].mean()),
+                         **scores["displacement"],
+                         "usage": code_usage(scores["codes"][on.scored],
+                                             train_cfg.min_code_share)}
+        per_seed.append(out)
+    result = paper_protocol(on.windows, on.scored, per_seed, cv)
+    return {"sensitivity": {f"{row.frame}_frame": {**result, "frame": row.frame,
+                                                    "seeds": row.seeds}}}
 
 
 def secondary_results(exp: ScenarioData, cfg: InteractionConfig,
@@ -302,12 +349,13 @@ def _mean_sd(values) -> dict:
 
 def run_command(data_dir: Path, scenario: str, data_root: Path, config: Path | None = None,
                 train_config: Path | None = None, seeds: int | None = None,
-                max_epochs: int | None = None, out_dir: Path | None = None) -> dict:
+                max_epochs: int | None = None, out_dir: Path | None = None,
+                frame_seeds: int | None = None) -> dict:
     """What `tomstudy interaction` does: returns the summary; outputs under data_root."""
     from app.layout import Layout
     from app.learning.config import load_train_config
 
-    cfg = load_config(config, seeds)
+    cfg = load_config(config, seeds, frame_seeds)
     overrides = {"max_epochs": max_epochs} if max_epochs else None
     base = load_train_config(train_config, overrides)
     layout = Layout(data_root)

@@ -236,5 +236,6 @@ def render_html(summary: dict, figures: list[Path]) -> str:
     """The report page."""
     return render_page("interaction_report.html.j2", filters={"fixed": fixed, "json": json.dumps},
                        s=summary, p=summary["paper_protocol"], verdict=verdict(summary),
+                       r=summary.get("sensitivity", {}).get("human_relative_frame"),
                        models=models_of(summary),
                        names=MODEL_NAMES, figures=figures, page_width_px=1100)
