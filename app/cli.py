@@ -594,7 +594,7 @@ def interaction(
     from app.interaction.dataset import InteractionError
     from app.interaction.experiment import run_command
     from app.interaction.lanelet_map import MapError
-    from app.interaction.report import verdict
+    from app.interaction.report import frame_verdict, verdict
     from app.interaction.tracks import TrackFileError
 
     try:
@@ -608,6 +608,8 @@ def interaction(
         fail(str(err))
     out = get_settings().layout.interaction_report(scenario)
     typer.echo(verdict(summary))
+    if frame_verdict(summary):
+        typer.echo(frame_verdict(summary))
     typer.echo(f"wrote {out / 'report.html'} and {out / 'summary.json'}")
 
 

@@ -232,6 +232,18 @@ def verdict(summary: dict) -> str:
             f"({means[r]:.4f}; paired t-test over seeds p = {test['p_two_sided']:.2g}).")
 
 
+def frame_verdict(summary: dict) -> str | None:
+    """The sensitivity row in one sentence (None when it was not run)."""
+    row = summary.get("sensitivity", {}).get("human_relative_frame")
+    if row is None:
+        return None
+    means = row["mean_alignment_error"]
+    p = row["tests"]["ours_vs_vae"]["p_two_sided"]
+    return (f"Human-relative frame ({row['seeds']} seeds): Ours {means['ours']:.4f}, VAE "
+            f"{means['vae']:.4f}, constant velocity {means['cv']:.4f}; lowest "
+            f"{MODEL_NAMES[row['winner']]} (Ours vs VAE p = {p:.2g}).")
+
+
 def render_html(summary: dict, figures: list[Path]) -> str:
     """The report page."""
     return render_page("interaction_report.html.j2", filters={"fixed": fixed, "json": json.dumps},

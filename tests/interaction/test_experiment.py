@@ -131,6 +131,10 @@ def test_full_command_end_to_end_on_generated_roundabout(tmp_path, monkeypatch):
         assert row["chance"] <= row["ours"] <= 1 and 0 <= row["ceiling"] <= 1
         assert row["share_of_ceiling"] == pytest.approx(row["ours"] / row["ceiling"])
     assert primary["winner"] in ie.MODELS
+    # the pre-specified sensitivity row: the same protocol in the human-relative frame, 5 seeds
+    row = summary["sensitivity"]["human_relative_frame"]
+    assert row["seeds"] == 5 and row["tests"]["ours_vs_vae"]["n"] == 5
+    assert row["mean_alignment_error"]["cv"] == primary["mean_alignment_error"]["cv"]
     # secondary: 1 and 2 s fit in the 4 s v1.2 cases, 3 s is reported as not measurable
     assert set(summary["by_horizon"]) == {"1", "2"} and "3" in summary["secondary"][
         "not_measurable"]

@@ -58,6 +58,7 @@ def test_frame_row_config_is_pre_specified_and_overridable():
 
 def test_sensitivity_row_appears_in_summary_and_report(tmp_path):
     from app.interaction.experiment import run_command
+    from app.interaction.report import frame_verdict
 
     data = tmp_path / "data"
     generate(data, SCENARIO, "v1.2", train_s=60.0, val_s=24.0, seed=5)
@@ -75,5 +76,7 @@ def test_sensitivity_row_appears_in_summary_and_report(tmp_path):
     assert written["sensitivity"]["human_relative_frame"]["seeds"] == 2
     html = (tmp_path / "out" / "report.html").read_text()
     assert "other car&#39;s point of view" in html or "other car's point of view" in html
+    assert frame_verdict(summary).startswith("Human-relative frame (2 seeds): Ours ")
+    assert frame_verdict({"paper_protocol": primary}) is None
     models = tmp_path / "var" / "models" / "interaction" / SCENARIO / "human_relative"
     assert (models / "seed_1" / "vae" / "checkpoint.pt").is_file()
