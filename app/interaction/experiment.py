@@ -24,6 +24,7 @@ Procedure (one command, `tomstudy interaction`):
 import platform
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +49,7 @@ from app.interaction.dataset import (
     load_scenario_data,
     window_labels,
 )
-from app.interaction.frames import Frame, in_frame, train_in_frame
+from app.interaction.frames import Frame, in_frame
 from app.interaction.horizons import (
     HorizonWindows,
     constant_velocity_rollout,
@@ -60,6 +61,7 @@ from app.interaction.horizons import (
 )
 from app.interaction.report import FigureInputs, write_figures, write_report
 from app.learning.config import TrainConfig
+from app.learning.train import train_and_save
 
 MODELS = ("ours", "vae", "cv")
 
@@ -146,10 +148,15 @@ def train_pair(exp: ScenarioData, seed: int, train_cfg: TrainConfig, models_dir:
     from app.learning.checkpoint import load_model
 
     meta = {"scenario": exp.scenario, "layout": exp.layout, "inputs": exp.inputs}
+    moved = frame != "absolute"  # the primary's checkpoints stay exactly as they were
+    if moved:
+        meta["frame"] = frame
+    transform = partial(in_frame, frame=frame) if moved else None
     ours_codes = None
     for kind in ("ours", "vae"):
-        ckpt = train_in_frame(exp.train.trajs, kind, seed, train_cfg,
-                              models_dir / f"seed_{seed}" / kind, frame, meta, ours_codes)
+        ckpt = train_and_save(exp.train.trajs, kind, seed, train_cfg,
+                              models_dir / f"seed_{seed}" / kind, data_meta=meta, progress=False,
+                              vae_clusters=ours_codes, transform=transform)
         model = load_model(ckpt)
         if kind == "ours":
             ours_codes = model.codes["n_codes_used"]  # the VAE's k-means k

@@ -6,6 +6,7 @@ it, so the same inputs give the same checkpoint whichever ran it.
 
 import json
 import time
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -89,9 +90,13 @@ class Prepared:
     val: SplitTensors
 
 
-def prepare(trajs: TrajectorySet, cfg: TrainConfig) -> Prepared:
-    """Split, cut windows, fit the normaliser and build the train/val tensors."""
+def prepare(trajs: TrajectorySet, cfg: TrainConfig,
+            transform: Callable[[Windows], Windows] | None = None) -> Prepared:
+    """Split, cut windows (each moved by `transform` if given, e.g. into another frame), fit
+    the normaliser and build the train/val tensors."""
     windows = prepare_windows(trajs, cfg)
+    if transform is not None:
+        windows = {split: transform(w) for split, w in windows.items()}
     norm = fit_normaliser(windows["train"], cfg)
     return Prepared(windows, norm, split_tensors(windows["train"], norm),
                     split_tensors(windows["val"], norm))
@@ -241,11 +246,13 @@ def _plot_losses(history: list[dict], path: Path, title: str) -> None:
 
 def train_and_save(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig,
                    out_dir: Path, data_meta: dict | None = None, progress: bool = True,
-                   vae_clusters: int | None = None) -> Path:
+                   vae_clusters: int | None = None,
+                   transform: Callable[[Windows], Windows] | None = None) -> Path:
     """Train one model; write out_dir/checkpoint.pt, metrics.json, loss.png; return the .pt.
 
     cfg.selected[trajs.world] (the values model selection chose) is applied on top of cfg.
-    The VAE needs `vae_clusters`, the k of its k-means (see `ours_code_count`)."""
+    The VAE needs `vae_clusters`, the k of its k-means (see `ours_code_count`). `transform`
+    moves every window before training and testing (INTERACTION's frame sensitivity row)."""
     if model_name not in MODELS:
         raise ValueError(f"unknown model {model_name!r}; choose one of {', '.join(MODELS)}")
     if model_name == "vae" and vae_clusters is None:
@@ -253,8 +260,9 @@ def train_and_save(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainC
                          "of codes Ours uses on the same data: ours_code_count)")
     started = time.perf_counter()
     with one_thread():
+        data = prepare(trajs, cfg.for_world(trajs.world), transform)
         return _train(trajs, model_name, seed, cfg.for_world(trajs.world), Path(out_dir),
-                      data_meta, progress, vae_clusters, started)
+                      data_meta, progress, vae_clusters, started, data)
 
 
 def build_payload(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig,
@@ -278,8 +286,7 @@ def build_payload(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainCo
 
 def _train(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig, out_dir: Path,
            data_meta: dict | None, progress: bool, vae_clusters: int | None,
-           started: float) -> Path:
-    data = prepare(trajs, cfg)
+           started: float, data: Prepared) -> Path:
     model, args, history = fit_network(model_name, seed, cfg, data, progress)
     train_seconds = time.perf_counter() - started
 
