@@ -315,9 +315,23 @@ def instrument(
                    f"{row['p_one_sided']:>10.2g}  {verdict}")
     typer.echo("coarse/precise = mean err_ours - err_vae per population; "
                f"pass = Welch one-sided p < {alpha}")
+    echo_separation(summary["separation"])
     typer.echo(f"wrote {out}")
     if not all(summary["passed"].values()):
         raise typer.Exit(1)
+
+
+def echo_separation(rows: list[dict]) -> None:
+    """Print what the metric can tell apart, per world and start kind."""
+    typer.echo(f"\n{'world':<10}{'start kind':<15}{'starts':>7}{'ours-vae':>10}"
+               f"{'obs gap':>9}{'coarse':>9}{'precise':>9}")
+    for row in rows:
+        typer.echo(f"{row['world']:<10}{row['start_kind']:<15}{row['n_starts']:>7}"
+                   f"{row['ours_vs_vae']:>10.3f}{row['coarse_vs_precise']:>9.3f}"
+                   f"{row['coarse_diff']:>+9.4f}{row['precise_diff']:>+9.4f}")
+    typer.echo("ours-vae / obs gap = mean 1-cos between the two models' answers / the two "
+               "observers' clicks\nat the same start states; coarse/precise = each observer's "
+               "err_ours - err_vae there")
 
 
 @cli.command("build-trials")

@@ -22,7 +22,7 @@ import pandas as pd
 from scipy import stats
 from tqdm import tqdm
 
-from analysis.contracts import EXPORT_COLUMNS
+from analysis.contracts import EXPORT_COLUMNS, alignment_error
 from analysis.load import normalise
 from analysis.metrics import participant_means
 from analysis.plots import plot_power
@@ -219,22 +219,70 @@ def instrument_check(bank: dict, trials_per_world: int, n: int = 22, seed: int =
     return pd.DataFrame(rows)
 
 
+def start_state_answers(bank: dict, seed: int, observers: ObserversConfig) -> pd.DataFrame:
+    """Per main-trial start state: each model's and each observer preset's actions [n, 2]."""
+    rows = []
+    for world in sorted(bank["worlds"]):
+        world_bank = bank["worlds"][world]
+        for trial in (t for t in world_bank["trials"] if t["kind"] == "main"):
+            payload = trial_payload(world_bank, trial, bank["steps_to_predict"])
+            clicks = {preset: inverse_planning.predict(
+                preset, payload, np.random.default_rng(seed), trial["policy_actions"], observers)
+                for preset in ("coarse", "precise")}
+            acts = {p: inverse_planning.clicks_to_actions(payload, c) for p, c in clicks.items()}
+            acts |= {m: np.asarray(trial["predictions"][m]["actions"], dtype=np.float64)
+                     for m in ("ours", "vae")}
+            for k, state in enumerate(trial["start_states"]):
+                rows.append({"world": world, "start_kind": state["start_kind"],
+                             **{name: a[k] for name, a in acts.items()}})
+    return pd.DataFrame(rows)
+
+
+def separation(bank: dict, seed: int = 0, observers: ObserversConfig | None = None
+               ) -> pd.DataFrame:
+    """What the metric can tell apart, per world and start kind (and `all`): how far apart the
+    two models' answers are, how far apart the two observers' clicks are (mean 1-cos), and each
+    observer's err_ours - err_vae. The check can only separate observers where both gaps exist."""
+    answers = start_state_answers(bank, seed, observers or default_observers())
+
+    def gap(a: str, b: str, frame: pd.DataFrame) -> np.ndarray:
+        return alignment_error(np.stack(frame[a].to_list()), np.stack(frame[b].to_list())
+                               ).mean(axis=1)
+
+    out = []
+    for world, frame in answers.groupby("world", sort=True):
+        groups = [*frame.groupby("start_kind", sort=True), ("all", frame)]
+        for kind, part in groups:
+            diffs = {obs: gap(obs, "ours", part) - gap(obs, "vae", part)
+                     for obs in ("coarse", "precise")}
+            out.append({"world": world, "start_kind": kind, "n_starts": len(part),
+                        "ours_vs_vae": float(gap("ours", "vae", part).mean()),
+                        "coarse_vs_precise": float(gap("coarse", "precise", part).mean()),
+                        "coarse_diff": float(diffs["coarse"].mean()),
+                        "precise_diff": float(diffs["precise"].mean())})
+    return pd.DataFrame(out)
+
+
 def run_instrument(bank_path: Path, trials_per_world: int, out_dir: Path, n: int = 22,
                    seed: int = 0, alpha: float = 0.01,
                    observers: ObserversConfig | None = None) -> dict:
     """Run the instrument check on a bank; write instrument.json and instrument.csv."""
     observers = observers or default_observers()
     bank_path = Path(bank_path)
-    table = instrument_check(load_bank(bank_path), trials_per_world, n, seed, alpha, observers)
+    bank = load_bank(bank_path)
+    table = instrument_check(bank, trials_per_world, n, seed, alpha, observers)
+    gaps = separation(bank, seed, observers)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     table.to_csv(out_dir / "instrument.csv", index=False)
+    gaps.to_csv(out_dir / "separation.csv", index=False)
     main = table[table["reading"] == "absolute"]
     summary = {"n_per_population": n, "seed": seed, "alpha": alpha,
                "trials_per_world": trials_per_world, "bank": str(bank_path),
                "bank_sha256": sha256_bytes(bank_path.read_bytes()),
                "test": "Welch t, one-sided: coarse err_ours-err_vae < precise err_ours-err_vae",
                "passed": {row["world"]: row["passed"] for _, row in main.iterrows()},
-               "rows": table.to_dict(orient="records"), "observers": observers.model_dump()}
+               "rows": table.to_dict(orient="records"),
+               "separation": gaps.to_dict(orient="records"), "observers": observers.model_dump()}
     write_json(out_dir / "instrument.json", summary)
     return summary

@@ -16,6 +16,7 @@ from app.observers.simulated_study import (
     instrument_check,
     power_curve,
     run_instrument,
+    separation,
     simulate_participants,
     trial_payload,
 )
@@ -284,6 +285,17 @@ def test_instrument_check_runs_and_writes_its_files(tmp_path):
     assert written["passed"] == summary["passed"] and set(written["passed"]) == {
         "highway", "obstacle"}
     assert written["observers"]["inference"]["beta"]["source"].startswith("Baker")
+    assert (tmp_path / "out" / "separation.csv").is_file()
+
+
+def test_separation_says_where_models_and_observers_differ():
+    gaps = separation(bank_with_examples(), seed=0).set_index(["world", "start_kind"])
+    for world in ("highway", "obstacle"):
+        kinds = gaps.loc[world]
+        assert kinds.loc["all", "n_starts"] == kinds.drop(index="all")["n_starts"].sum()
+        assert kinds[["ours_vs_vae", "coarse_vs_precise"]].stack().between(0, 2).all()
+        # each observer's err_ours - err_vae is a difference of two errors in [0, 2]
+        assert kinds[["coarse_diff", "precise_diff"]].stack().between(-2, 2).all()
 
 
 def test_instrument_command_prints_the_table(tmp_path, monkeypatch):
@@ -304,3 +316,4 @@ def test_instrument_command_prints_the_table(tmp_path, monkeypatch):
     written = json.loads((tmp_path / "o" / "instrument.json").read_text())
     assert result.exit_code == (0 if all(written["passed"].values()) else 1), result.output
     assert "highway   absolute" in result.output and "obstacle  relative" in result.output
+    assert "start kind" in result.output and "obstacle  all" in result.output
