@@ -259,10 +259,11 @@ def train_and_save(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainC
         raise ValueError("training the VAE needs vae_clusters, the k of its k-means (the number "
                          "of codes Ours uses on the same data: ours_code_count)")
     started = time.perf_counter()
+    cfg = cfg.for_world(trajs.world)
     with one_thread():
-        data = prepare(trajs, cfg.for_world(trajs.world), transform)
-        return _train(trajs, model_name, seed, cfg.for_world(trajs.world), Path(out_dir),
-                      data_meta, progress, vae_clusters, started, data)
+        data = prepare(trajs, cfg, transform)
+        return _train(trajs, model_name, seed, cfg, Path(out_dir), data_meta, progress,
+                      vae_clusters, started, data)
 
 
 def build_payload(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig,
