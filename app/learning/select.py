@@ -49,6 +49,7 @@ from app.learning.train import (
     fit_network,
     one_thread,
     prepare,
+    simulated_trajectories,
 )
 from app.settings import get_settings
 
@@ -282,12 +283,10 @@ def select_world(layout: Layout, world: str, config: Path | None = None,
     """`tomstudy select`: run the selection for one world, write and say the results.
 
     Writes into out/<world>/ (default: the layout's selection dir); returns that folder."""
-    npz = layout.trajectories(world)
-    if not npz.is_file():
-        raise FileNotFoundError(f"{npz} not found; run `tomstudy simulate {world}` first")
+    trajs = simulated_trajectories(layout, world)
     sel, base = load_selection_config(config), load_train_config(train_config)
-    result = run_selection(TrajectorySet.load(npz), base, sel)
-    result["data_file"] = str(npz)
+    result = run_selection(trajs, base, sel)
+    result["data_file"] = str(layout.trajectories(world))
     out_dir = out / world if out else layout.selection_dir(world)
     write_outputs(result, out_dir)
     say(markdown(result))

@@ -23,7 +23,7 @@ from pathlib import Path
 from app.data.trajectory import TrajectorySet
 from app.layout import Layout
 from app.learning.config import load_train_config
-from app.learning.train import train_and_save
+from app.learning.train import simulated_trajectories, train_and_save
 
 SETTINGS = [
     {"levels": [2, 2, 2]},
@@ -95,10 +95,7 @@ def sweep_world(layout: Layout, world: str, out: Path | None = None, ceiling: bo
                 say: Callable[[str], None] = print) -> None:
     """`tomstudy sweep`: train every setting into out/<world>/setting<i>/ (default: the layout's
     sweep dir), say one line each and append it to sweep.jsonl; or only the label ceiling."""
-    npz = layout.trajectories(world)
-    if not npz.is_file():
-        raise FileNotFoundError(f"{npz} not found; run `tomstudy simulate {world}` first")
-    trajs = TrajectorySet.load(npz)
+    trajs = simulated_trajectories(layout, world)
     if ceiling:
         say(json.dumps({"world": world, "classifier_accuracy": label_ceiling(trajs)}))
         return

@@ -326,6 +326,14 @@ def _data_meta(trajs: TrajectorySet, windows: dict[str, Windows], extra: dict | 
     return meta
 
 
+def simulated_trajectories(layout: Layout, world: str) -> TrajectorySet:
+    """The world's simulated trajectories; FileNotFoundError says to simulate them first."""
+    npz = layout.trajectories(world)
+    if not npz.is_file():
+        raise FileNotFoundError(f"{npz} not found; run `tomstudy simulate {world}` first")
+    return TrajectorySet.load(npz)
+
+
 def train_world(layout: Layout, world: str, model_name: str, seed: int, cfg: TrainConfig,
                 out_dir: Path | None = None, ours_checkpoint: Path | None = None,
                 progress: bool = True) -> Path:
@@ -335,14 +343,12 @@ def train_world(layout: Layout, world: str, model_name: str, seed: int, cfg: Tra
     Writes into out_dir (default: the layout's model dir). The VAE's k-means k is read from
     `ours_checkpoint` (default: the layout's Ours checkpoint of the world). FileNotFoundError
     names a missing input."""
-    npz = layout.trajectories(world)
-    if not npz.is_file():
-        raise FileNotFoundError(f"{npz} not found; run `tomstudy simulate {world}` first")
+    trajs = simulated_trajectories(layout, world)
     meta_path = layout.trajectories_meta(world)
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
     clusters = None
     if model_name == "vae":
         clusters = ours_code_count(ours_checkpoint or layout.checkpoint(world, "ours"), world)
     out_dir = Path(out_dir) if out_dir else layout.model_dir(world, model_name)
-    return train_and_save(TrajectorySet.load(npz), model_name, seed, cfg, out_dir, meta,
+    return train_and_save(trajs, model_name, seed, cfg, out_dir, meta,
                           progress, clusters)
