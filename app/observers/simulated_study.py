@@ -93,18 +93,20 @@ def simulate_participants(bank: dict, preset: str, n: int, trials_per_world: int
     """Rows of `n` simulated participants of one observer preset, in the export CSV's columns."""
     observers = observers or default_observers()
     rng = np.random.default_rng(seed)
-    steps = bank["steps_to_predict"]
     worlds = sorted(bank["worlds"])
+    # (trial, payload) of every main trial, built once: participants only draw among them
+    main = {world: [(t, trial_payload(bank["worlds"][world], t, bank["steps_to_predict"]))
+                    for t in bank["worlds"][world]["trials"] if t["kind"] == "main"]
+            for world in worlds}
     parts: list[dict[str, np.ndarray]] = []
     for p in tqdm(range(n), desc=f"{preset} participants", disable=not show_progress):
         order = worlds if p % 2 == 0 else worlds[::-1]
         for position, world in enumerate(order):
-            world_bank = bank["worlds"][world]
-            main = [t for t in world_bank["trials"] if t["kind"] == "main"]
-            chosen = rng.choice(len(main), size=min(trials_per_world, len(main)), replace=False)
+            trials = main[world]
+            chosen = rng.choice(len(trials), size=min(trials_per_world, len(trials)),
+                                replace=False)
             for index, t in enumerate(chosen):
-                trial = main[int(t)]
-                payload = trial_payload(world_bank, trial, steps)
+                trial, payload = trials[int(t)]
                 clicks = inverse_planning.predict(preset, payload, rng, trial["policy_actions"],
                                                   observers)
                 parts.append(trial_rows(f"sim-{p:05d}", position, index, payload, trial, clicks))
