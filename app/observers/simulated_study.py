@@ -271,7 +271,8 @@ def run_instrument(bank_path: Path, trials_per_world: int, out_dir: Path, n: int
     """Run the instrument check on a bank; write instrument.json and instrument.csv."""
     observers = observers or default_observers()
     bank_path = Path(bank_path)
-    bank = load_bank(bank_path)
+    bank_bytes = bank_path.read_bytes()
+    bank = json.loads(bank_bytes)
     table = instrument_check(bank, trials_per_world, n, seed, alpha, observers)
     gaps = separation(bank, seed, observers)
     out_dir = Path(out_dir)
@@ -281,7 +282,7 @@ def run_instrument(bank_path: Path, trials_per_world: int, out_dir: Path, n: int
     main = table[table["reading"] == "absolute"]
     summary = {"n_per_population": n, "seed": seed, "alpha": alpha,
                "trials_per_world": trials_per_world, "bank": str(bank_path),
-               "bank_sha256": sha256_bytes(bank_path.read_bytes()),
+               "bank_sha256": sha256_bytes(bank_bytes),
                "test": "Welch t, one-sided: coarse err_ours-err_vae < precise err_ours-err_vae",
                "passed": {row["world"]: row["passed"] for _, row in main.iterrows()},
                "rows": table.to_dict(orient="records"),
