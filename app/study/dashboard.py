@@ -17,7 +17,7 @@ from app import __version__
 from app.study.balance import in_progress_cutoff
 from app.study.context import StudyContext
 from app.study.exports import checks_answered, predictions_frame
-from app.study.progress import exclusion_rules, progress
+from app.study.progress import exclusion_rules, progress_counts, study_sessions
 from app.study.sessions import as_utc, session_status
 from app.study.state import progress_of
 from app.study.tables import Participant
@@ -58,12 +58,12 @@ def participant_row(p: Participant, ctx: StudyContext, cutoff: datetime, checks_
     return row
 
 
-def participant_rows(db: Session, ctx: StudyContext, external_ids: bool = False) -> list[dict]:
-    """Every session of the study, pilots and replaced ones included, in order of start."""
+def participant_rows(db: Session, ctx: StudyContext, people: list[Participant],
+                     external_ids: bool = False) -> list[dict]:
+    """Every session of the study (progress.study_sessions: pilots and replaced ones
+    included, in order of start) as the table shows it."""
     cutoff = in_progress_cutoff(ctx.config)
     seen = checks_answered(db, ctx.study_id)
-    people = db.execute(select(Participant).where(Participant.study_id == ctx.study_id)
-                        .order_by(Participant.created_at, Participant.id)).scalars().all()
     return [participant_row(p, ctx, cutoff, seen.get(p.id, 0), external_ids) for p in people]
 
 
@@ -173,6 +173,7 @@ def alignment(db: Session, ctx: StudyContext, rule_set: str) -> dict:
 def dashboard(db: Session, ctx: StudyContext, rule_set: str = "kept",
               external_ids: bool = False) -> dict:
     """Everything the dashboard's live part shows, in one answer."""
-    return {"study_id": ctx.study_id, "progress": progress(db, ctx),
-            "participants": participant_rows(db, ctx, external_ids),
+    people = study_sessions(db, ctx.study_id)  # loaded once for both
+    return {"study_id": ctx.study_id, "progress": progress_counts(ctx, people),
+            "participants": participant_rows(db, ctx, people, external_ids),
             "versions": versions(db, ctx), "alignment": alignment(db, ctx, rule_set)}

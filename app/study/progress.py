@@ -12,11 +12,22 @@ from app.study.balance import in_progress_cutoff
 from app.study.context import StudyContext
 from app.study.exports import predictions_frame
 from app.study.recruitment import preview_path
-from app.study.sessions import has_ended, is_in_progress
+from app.study.sessions import session_status
 from app.study.tables import Participant
 
 
 def progress(db: Session, ctx: StudyContext) -> dict:
+    """progress_counts of the study's stored sessions."""
+    return progress_counts(ctx, study_sessions(db, ctx.study_id))
+
+
+def study_sessions(db: Session, study_id: str) -> list[Participant]:
+    """Every session of the study, pilots and replaced ones included, in order of start."""
+    return list(db.execute(select(Participant).where(Participant.study_id == study_id)
+                           .order_by(Participant.created_at, Participant.id)).scalars().all())
+
+
+def progress_counts(ctx: StudyContext, everyone: list[Participant]) -> dict:
     """Session counts: started, completed, in progress, ended early (declined, screened
     out), stale, by outcome and per world order.
 
@@ -24,23 +35,20 @@ def progress(db: Session, ctx: StudyContext) -> dict:
     and never in the study's progress.
     """
     cutoff = in_progress_cutoff(ctx.config)
-    everyone = db.execute(select(Participant).where(
-        Participant.study_id == ctx.study_id)).scalars().all()
     people = [p for p in everyone if not p.pilot and p.replaced_at is None]
+    status = {p.id: session_status(p, cutoff) for p in people}  # ended, in_progress, stale
     completed = [p for p in people if p.completed]
-    active = [p for p in people if is_in_progress(p, cutoff)]
-    ended_early = [p for p in people if has_ended(p) and not p.completed]
     orders: dict[str, dict[str, int]] = {}
     for p in people:
         entry = orders.setdefault(p.world_order, {"completed": 0, "in_progress": 0})
         if p.completed:
             entry["completed"] += 1
-        elif is_in_progress(p, cutoff):
+        elif status[p.id] == "in_progress":
             entry["in_progress"] += 1
+    counts = Counter(status.values())
     return {"target_sample_size": ctx.config.target_sample_size, "started": len(people),
-            "completed": len(completed), "in_progress": len(active),
-            "ended_early": len(ended_early),
-            "stale": len(people) - len(completed) - len(active) - len(ended_early),
+            "completed": len(completed), "in_progress": counts["in_progress"],
+            "ended_early": counts["ended"] - len(completed), "stale": counts["stale"],
             "outcomes": dict(Counter(p.outcome for p in people if p.outcome)),
             "failed_attention_check": sum(p.attention_failed > 0 for p in completed),
             "pilot_sessions": sum(p.pilot for p in everyone),

@@ -7,7 +7,7 @@ export const MODEL_LABELS = { ours: "Ours", vae: "VAE", cv: "Const. vel.", polic
 const PLOT_MODELS = ["ours", "vae", "cv", "policy"];
 const SVG = "http://www.w3.org/2000/svg";
 
-function el(tag, props = {}, ...children) {
+export function el(tag, props = {}, ...children) {
   const node = Object.assign(document.createElement(tag), props);
   node.append(...children);
   return node;

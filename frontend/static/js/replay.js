@@ -1,6 +1,6 @@
 // Replay of one answered trial: the clip through the participant page's own player, then the
 // clicks up to a time in the trial, with Ours', the VAE's and the policy's moves over them.
-import { MODEL_COLORS, MODEL_LABELS } from "./dashboard.js";
+import { MODEL_COLORS, MODEL_LABELS, el } from "./dashboard.js";
 import { ClipPlayer, trialClips } from "./player.js";
 import { agentStyle, drawAgent, drawBackground, drawClickMarker, drawTrace, prepareCanvas } from "./scene.js";
 
@@ -8,12 +8,6 @@ export const REPLAY_MODELS = ["ours", "vae", "policy"];
 const CLICK_PLAYBACK_SPEED = 8; // trial milliseconds per wall-clock millisecond
 const MODEL_DASH = { ours: [], vae: [7, 4], policy: [2, 3] };
 const $ = (id) => document.getElementById(id);
-
-function el(tag, props = {}, ...children) {
-  const node = Object.assign(document.createElement(tag), props);
-  node.append(...children);
-  return node;
-}
 
 function seconds(ms) {
   return `${(ms / 1000).toFixed(1)} s`;
