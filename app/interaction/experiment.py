@@ -109,6 +109,18 @@ def score_model(model, windows: Windows, scored: np.ndarray,
                                               windows.dt_s)}
 
 
+def protocol_scores(model, on: "Scoring", min_code_share: float,
+                    frame: Frame = "absolute") -> tuple[dict, np.ndarray]:
+    """One model's row of the paper's protocol (mean next-action alignment error over the
+    scored windows, displacement errors, code usage) and its codes on the scored windows."""
+    from app.learning.model_metrics import code_usage
+
+    scores = score_model(model, on.windows, on.scored, frame)
+    codes = scores["codes"][on.scored]
+    return {"alignment_error": float(scores["errors"][on.scored].mean()),
+            **scores["displacement"], "usage": code_usage(codes, min_code_share)}, codes
+
+
 def score_constant_velocity(windows: Windows, scored: np.ndarray) -> dict:
     """The baseline: the last observed robot velocity, kept for all n steps."""
     from analysis.contracts import alignment_error
@@ -167,16 +179,13 @@ def run_seed(exp: ScenarioData, seed: int, train_cfg: TrainConfig, models_dir: P
              on: Scoring) -> dict:
     """Train Ours then the VAE (its k = Ours' used codes) with `seed`; score both on val:
     the paper's next action, then each secondary horizon."""
-    from app.learning.model_metrics import agreement, code_usage
+    from app.learning.model_metrics import agreement
 
     out = {"seed": seed}
     for kind, ckpt, model in train_pair(exp, seed, train_cfg, models_dir, "absolute"):
-        scores = score_model(model, on.windows, on.scored)
-        codes = scores["codes"][on.scored]
+        row, codes = protocol_scores(model, on, train_cfg.min_code_share)
         out[kind] = {
-            "alignment_error": float(scores["errors"][on.scored].mean()),
-            **scores["displacement"],
-            "usage": code_usage(codes, train_cfg.min_code_share),
+            **row,
             "agreement": agreement(codes, {k: v[on.scored] for k, v in on.labels.items()}),
             "held_out": held_out(model, codes, on),
             "checkpoint": str(ckpt), "content_hash": model.content_hash,
@@ -299,8 +308,6 @@ def frame_sensitivity(exp: ScenarioData, cfg: InteractionConfig, train_cfg: Trai
     """`sensitivity`: the paper's protocol with both models trained and scored in the
     configured frame (seeds 0..k-1, Ours' levels as chosen for the primary); {} when off.
     Constant velocity does not depend on the frame (a translation keeps every velocity)."""
-    from app.learning.model_metrics import code_usage
-
     row = cfg.frame_sensitivity
     if row.seeds == 0:
         return {}
@@ -310,11 +317,7 @@ def frame_sensitivity(exp: ScenarioData, cfg: InteractionConfig, train_cfg: Trai
         out = {"seed": seed}
         for kind, _, model in train_pair(exp, seed, train_cfg, models_dir / row.frame,
                                          row.frame):
-            scores = score_model(model, on.windows, on.scored, row.frame)
-            out[kind] = {"alignment_error": float(scores["errors"][on.scored].mean()),
-                         **scores["displacement"],
-                         "usage": code_usage(scores["codes"][on.scored],
-                                             train_cfg.min_code_share)}
+            out[kind] = protocol_scores(model, on, train_cfg.min_code_share, row.frame)[0]
         per_seed.append(out)
     result = paper_protocol(on.windows, on.scored, per_seed, cv)
     return {"sensitivity": {f"{row.frame}_frame": {**result, "frame": row.frame,
