@@ -134,15 +134,20 @@ class Participant:
         assert r.status_code == 201, r.text
         return r.json()
 
-    def finish(self, bank: dict | None = None, duration_ms: float = 8000) -> dict:
+    def survey(self, strategy: str = "followed the lanes") -> dict:
+        """POST the closing survey (`strategy` as the free-text answer); the answered state."""
+        r = self.post("survey", {"submission_id": new_id(),
+                                 "answers": {"difficulty": 4, "confidence": 5, "driving": "yes",
+                                             "strategy": strategy}})
+        assert r.status_code == 200, r.text
+        return r.json()
+
+    def finish(self, bank: dict | None = None, duration_ms: float = 8000,
+               strategy: str = "followed the lanes") -> dict:
         """Answer every remaining trial and the survey."""
         while self.state()["phase"] in TRIAL_PHASES:
             self.answer_trial(bank, duration_ms)
-        r = self.post("survey", {"submission_id": new_id(),
-                                 "answers": {"difficulty": 4, "confidence": 5, "driving": "yes",
-                                             "strategy": "followed the lanes"}})
-        assert r.status_code == 200, r.text
-        return r.json()
+        return self.survey(strategy)
 
 
 def at_first_trial(client, study_id: str, **recruitment) -> Participant:

@@ -40,14 +40,6 @@ def fail_attention_checks(p: Client, bank: dict) -> None:
         assert p.post("predictions", prediction_body(trial, points)).status_code == 201
 
 
-def survey(p: Client) -> dict:
-    """POST the closing survey; the answered state."""
-    r = p.post("survey", {"submission_id": new_id(), "answers": {
-        "difficulty": 4, "confidence": 5, "driving": "yes", "strategy": "lanes"}})
-    assert r.status_code == 200, r.text
-    return r.json()
-
-
 def test_a_completed_session_stores_its_receipt_before_the_redirect(client, small_study, bank):
     p = Client(client, small_study.study_id)
     p.start()
@@ -70,7 +62,7 @@ def test_failing_two_attention_checks_ends_for_review_with_its_own_code(client, 
     p.start()
     p.pass_intro()
     fail_attention_checks(p, bank)
-    done = survey(p)["step"]
+    done = p.survey()["step"]
     row = stored(client, p.token)
     assert row.attention_failed == 2  # one check per world
     assert (done["outcome"], done["completion_code"]) == ("failed_checks", "C2TOMREVIEW")
@@ -83,7 +75,7 @@ def test_failing_two_attention_checks_ends_for_review_with_its_own_code(client, 
     q.start()
     q.pass_intro()
     fail_attention_checks(q, bank)
-    assert survey(q)["step"]["outcome"] == "completed"  # 2 failed < min_failed 3
+    assert q.survey()["step"]["outcome"] == "completed"  # 2 failed < min_failed 3
 
 
 def test_declining_consent_ends_the_session_and_keeps_only_the_receipt(client, small_study):

@@ -20,7 +20,6 @@ from analysis.load import load_csv, load_database
 from app.cli import cli
 from app.settings import get_settings
 from app.study.exports import export_table
-from app.study.plan import TRIAL_PHASES
 from app.study.tables import Participant, TrialResponse, utcnow
 from tests.study.flow import ADMIN, at_first_trial, new_id, prolific
 
@@ -37,15 +36,6 @@ def export(client, study_id: str, what: str) -> str:
     return r.text
 
 
-def finish_with(p, bank, strategy: str) -> None:
-    """Answer every trial, then the survey with `strategy` as the free-text answer."""
-    while p.state()["phase"] in TRIAL_PHASES:
-        p.answer_trial(bank)
-    r = p.post("survey", {"submission_id": new_id(), "answers": {
-        "difficulty": 4, "confidence": 5, "driving": "yes", "strategy": strategy}})
-    assert r.status_code == 200, r.text
-
-
 @pytest.fixture
 def study(client, small_study, bank):
     """Three completed sessions (one with a formula survey answer, undo history and a
@@ -60,7 +50,7 @@ def study(client, small_study, bank):
                       {"submission_id": new_id(), "kind": "resize", "t_client_ms": 7.0,
                        "data": {"w": 800, "h": 600}}]
             assert p.post("events", {"events": events}).status_code == 202
-        finish_with(p, bank, FORMULA if i == 0 else "followed the lanes")
+        p.finish(bank, strategy=FORMULA if i == 0 else "followed the lanes")
         done.append(p)
     running = at_first_trial(client, small_study.study_id, **prolific("running"))
     engine = client.app.state.engine
