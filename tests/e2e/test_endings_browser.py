@@ -32,7 +32,7 @@ from tests.e2e.test_browser_session import (
     visible,
 )
 from tests.study.flow import Participant as ApiParticipant
-from tests.study.test_endings import fail_attention_checks
+from tests.study.flow import fail_attention_checks
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 

@@ -1,5 +1,6 @@
 """A participant driven through the real HTTP API (any httpx-like client)."""
 
+import dataclasses
 import hashlib
 import uuid
 from dataclasses import dataclass
@@ -148,6 +149,36 @@ class Participant:
         while self.state()["phase"] in TRIAL_PHASES:
             self.answer_trial(bank, duration_ms)
         return self.survey(strategy)
+
+
+def fail_attention_checks(p: Participant, bank: dict) -> None:
+    """Answer every trial; attention checks against the robot's plain move."""
+    while p.state()["phase"] in TRIAL_PHASES:
+        trial = p.state()["step"]
+        record = bank_trial(bank, trial)
+        points = straight_clicks(trial)
+        if record["kind"] == "attention":
+            points = [straight_clicks(dict(trial, start_states=[s]),
+                                      float(np.arctan2(-t[0][1], -t[0][0])))[0]
+                      for s, t in zip(trial["start_states"], record["policy_actions"],
+                                      strict=True)]
+        assert p.post("predictions", prediction_body(trial, points)).status_code == 201
+
+
+def start(client, study_id: str, preview: str | None = None, **params):
+    """POST /api/sessions with exactly these recruitment `params`; returns the response."""
+    body = {"study_id": study_id, "recruitment": params}
+    if preview is not None:
+        body["preview"] = preview
+    return client.post("/api/sessions", json=body)
+
+
+def with_recruitment(client, study_id: str, **changes) -> None:
+    """Serve `study_id` with its recruitment section changed (the app's loaded context)."""
+    ctx = client.app.state.studies[study_id]
+    recruitment = ctx.config.recruitment.model_copy(update=changes)
+    config = ctx.config.model_copy(update={"recruitment": recruitment})
+    client.app.state.studies[study_id] = dataclasses.replace(ctx, config=config)
 
 
 def at_first_trial(client, study_id: str, **recruitment) -> Participant:

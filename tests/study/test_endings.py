@@ -2,14 +2,19 @@
 told where to go: completed, failed checks, declined consent, screened out; MTurk's preview
 and hand-in; each trial's undo/reset history (SQLite and PostgreSQL, same tests)."""
 
-import numpy as np
 from sqlmodel import Session, select
 
-from app.study.plan import TRIAL_PHASES, Phase
+from app.study.plan import Phase
 from app.study.tables import Event, Participant, Submission, TrialResponse
-from tests.study.flow import ADMIN, bank_trial, new_id, prediction_body, straight_clicks
+from tests.study.flow import (
+    ADMIN,
+    fail_attention_checks,
+    new_id,
+    prediction_body,
+    start,
+    with_recruitment,
+)
 from tests.study.flow import Participant as Client
-from tests.study.test_public_server import start, with_recruitment
 
 MTURK = {"workerId": "A1B2C3", "assignmentId": "3XYZ", "hitId": "H1"}
 
@@ -24,20 +29,6 @@ def rows_of(client, table, participant_id: int) -> list:
     """Every row of `table` that belongs to one participant."""
     with Session(client.app.state.engine) as db:
         return db.exec(select(table).where(table.participant_id == participant_id)).all()
-
-
-def fail_attention_checks(p: Client, bank: dict) -> None:
-    """Answer every trial; attention checks against the robot's plain move."""
-    while p.state()["phase"] in TRIAL_PHASES:
-        trial = p.state()["step"]
-        record = bank_trial(bank, trial)
-        points = straight_clicks(trial)
-        if record["kind"] == "attention":
-            points = [straight_clicks(dict(trial, start_states=[s]),
-                                      float(np.arctan2(-t[0][1], -t[0][0])))[0]
-                      for s, t in zip(trial["start_states"], record["policy_actions"],
-                                      strict=True)]
-        assert p.post("predictions", prediction_body(trial, points)).status_code == 201
 
 
 def test_a_completed_session_stores_its_receipt_before_the_redirect(client, small_study, bank):

@@ -1,7 +1,6 @@
 """A public server fails closed: only the study's own traffic, opaque trials, server clocks,
 balance kept exactly in the database (SQLite and PostgreSQL, same tests)."""
 
-import dataclasses
 import json
 from datetime import timedelta
 
@@ -13,26 +12,19 @@ from app.study import balance
 from app.study.plan import TRIAL_PHASES
 from app.study.recruitment import preview_key
 from app.study.tables import BalanceCount, Participant, TrialResponse, utcnow
-from tests.study.flow import ADMIN, TOKEN, make_client, new_id, prediction_body, prolific
+from tests.study.flow import (
+    ADMIN,
+    TOKEN,
+    make_client,
+    new_id,
+    prediction_body,
+    prolific,
+    start,
+    with_recruitment,
+)
 from tests.study.flow import Participant as Client
 
 HEX = "0123456789abcdef01234567"
-
-
-def with_recruitment(client, study_id: str, **changes) -> None:
-    """Serve `study_id` with its recruitment section changed (the app's loaded context)."""
-    ctx = client.app.state.studies[study_id]
-    recruitment = ctx.config.recruitment.model_copy(update=changes)
-    config = ctx.config.model_copy(update={"recruitment": recruitment})
-    client.app.state.studies[study_id] = dataclasses.replace(ctx, config=config)
-
-
-def start(client, study_id: str, preview: str | None = None, **params):
-    """POST /api/sessions; returns the response."""
-    body = {"study_id": study_id, "recruitment": params}
-    if preview is not None:
-        body["preview"] = preview
-    return client.post("/api/sessions", json=body)
 
 
 PROLIFIC_REFUSALS = {
