@@ -9,7 +9,6 @@ import io
 import json
 import math
 import sqlite3
-import uuid
 from contextlib import closing
 from pathlib import Path
 
@@ -19,26 +18,22 @@ import yaml
 from app.study.plan import Phase
 from tests.conftest import REPO
 from tests.e2e.conftest import ADMIN_TOKEN, BROWSER_STUDY
+from tests.e2e.pages import (
+    VIEWPORT,
+    answer_survey,
+    fresh_recruitment,
+    through_instructions,
+    visible,
+)
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 SCREENSHOTS = REPO / "var" / "screenshots"
-VIEWPORT = {"width": 1280, "height": 900}
 CLIP_JUMP_MS = 2000  # fake-clock jump per poll while clips play
 THINK_MS = 1500  # fake-clock time between two clicks
 RESIZED = {"width": 1300, "height": 880}
 PID = "e2e0000000000000000000a1"  # 24 hex characters, as Prolific sends
 RECRUITMENT = f"PROLIFIC_PID={PID}&STUDY_ID={'5' * 24}&SESSION_ID=e2e-session"
-
-
-def fresh_recruitment() -> str:
-    """URL parameters of a new Prolific participant (each visit a new session)."""
-    return f"PROLIFIC_PID={uuid.uuid4().hex[:24]}&STUDY_ID={'5' * 24}&SESSION_ID=s1"
-
-
-def visible(page, screen: str) -> None:
-    """Wait until the participant app shows `screen`."""
-    page.wait_for_selector(f"#screen-{screen}:not([hidden])", timeout=15000)
 
 
 def current_state(page) -> dict:
@@ -206,25 +201,6 @@ def complete_session(page, base_url: str) -> dict:
     visible(page, "done")
     return {"clicks": clicks, "code": page.inner_text("#completion-code"),
             "redirect": page.get_attribute("#redirect-link", "href")}
-
-
-def through_instructions(page) -> None:
-    """Consent and instructions, by clicking."""
-    visible(page, "consent")
-    page.check("#consent-check")
-    page.click("#consent-agree")
-    visible(page, "instructions")
-    page.click("#instructions-done")
-    visible(page, "trial")
-
-
-def answer_survey(page) -> None:
-    """Pick the first option of each closing question and finish."""
-    visible(page, "survey")
-    for name in sorted(set(page.eval_on_selector_all("#survey-form input[type=radio]",
-                                                     "els => els.map(e => e.name)"))):
-        page.check(f"#survey-form input[name={name}] >> nth=0")
-    page.click("#survey-form button[type=submit]")
 
 
 def open_dashboard(page, base_url: str) -> None:

@@ -24,7 +24,7 @@ import yaml
 from app.layout import Layout
 from tests.conftest import SmallStudy, free_port, start_server
 from tests.e2e.conftest import BROWSER_STUDY
-from tests.e2e.test_browser_session import (
+from tests.e2e.pages import (
     VIEWPORT,
     answer_survey,
     fresh_recruitment,
