@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks._rawhttp import RawClient  # noqa: E402
 from tests.conftest import cached_small_study, free_port, start_server  # noqa: E402
-from tests.study.flow import prediction_body, prolific  # noqa: E402
+from tests.study.flow import new_id, prediction_body, prolific  # noqa: E402
 
 
 async def request_json(client: RawClient, method: str, path: str, body: dict | None = None):
@@ -63,8 +63,8 @@ async def run(port: int, study_id: str, participants: int, concurrency: int) -> 
         tokens.append(body["session_token"])
         for step in ("consent", "instructions"):
             await request_json(clients[0], "POST", f"/api/sessions/{body['session_token']}/{step}",
-                                     {"submission_id": _uuid(), "agree": True}
-                                     if step == "consent" else {"submission_id": _uuid()})
+                                     {"submission_id": new_id(), "agree": True}
+                                     if step == "consent" else {"submission_id": new_id()})
     gets, posts, states = [], [], {}
     for _ in range(3):
         wall, lat = await timed_batch(clients, [get_job(t, states) for t in tokens])
@@ -88,12 +88,6 @@ def post_job(token: str, states: dict):
     body = prediction_body(states[token]["step"])
     return lambda client: request_json(client, "POST", f"/api/sessions/{token}/predictions",
                                        body)
-
-
-def _uuid() -> str:
-    import uuid
-
-    return str(uuid.uuid4())
 
 
 def summarise(rounds) -> tuple[float, float]:
