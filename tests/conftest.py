@@ -17,6 +17,7 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 SMALL_STUDY = "small_study"
 PG_BIN = Path("/usr/lib/postgresql/15/bin")
+TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")  # the installed CLI, for subprocesses
 
 # The paper's study, shrunk: the same trial shape (4 examples, 5-7 step segment, 5 start
 # states x 3 steps), fewer trials, so the whole pipeline runs in well under a minute.
@@ -146,7 +147,7 @@ def start_server(study: SmallStudy, db_url: str, port: int, workers: int = 1,
     it answers."""
     out = open(log, "ab") if log else subprocess.DEVNULL  # noqa: SIM115 (the child keeps it)
     proc = subprocess.Popen(
-        [str(Path(sys.executable).parent / "tomstudy"), "serve", "--host", "127.0.0.1",
+        [TOMSTUDY, "serve", "--host", "127.0.0.1",
          "--port", str(port), "--workers", str(workers), "--study", study.study_id, *args],
         env=study.env(db_url, **env), stdout=out, stderr=subprocess.STDOUT, cwd=REPO)
     deadline = time.monotonic() + 60

@@ -10,7 +10,6 @@ import os
 import secrets
 import shutil
 import subprocess
-import sys
 import time
 import uuid
 from pathlib import Path
@@ -19,16 +18,16 @@ import httpx
 
 from app.layout import DEFAULT_DATA_DIR, Layout
 from app.study.recruitment import preview_key
+from tests.conftest import REPO, TOMSTUDY
 from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
 
-REPO = Path(__file__).resolve().parents[2]
 STUDY = "paper_study"
 
 
 def serve(db: Path, port: int, token: str) -> subprocess.Popen:
     """`tomstudy serve` of the paper study on `db`; returns once it answers."""
     env = {"DATABASE_URL": f"sqlite:///{db}", "TOMSTUDY_ADMIN_TOKEN": token}
-    proc = subprocess.Popen([str(Path(sys.executable).parent / "tomstudy"), "serve", "--port",
+    proc = subprocess.Popen([TOMSTUDY, "serve", "--port",
                              str(port)], env={**_env(), **env}, cwd=REPO)
     for _ in range(120):
         try:

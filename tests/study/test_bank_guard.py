@@ -3,8 +3,6 @@
 import json
 import shutil
 import subprocess
-import sys
-from pathlib import Path
 
 import httpx
 import pytest
@@ -17,7 +15,7 @@ from app.study.bank_guard import BankChanged, banks_run
 from app.study.db import make_engine
 from app.study.main import create_app
 from app.study.recruitment import preview_key
-from tests.conftest import SmallStudy, free_port, start_server
+from tests.conftest import TOMSTUDY, SmallStudy, free_port, start_server
 from tests.study.flow import TOKEN, Participant, make_client
 
 
@@ -91,7 +89,7 @@ def test_pilots_and_the_same_bank_never_block(small_study, rebuilt, db_url):
 def test_serve_refuses_a_changed_bank_unless_allowed(small_study, rebuilt, tmp_path):
     db_url = f"sqlite:///{tmp_path / 'study.db'}"
     old = run_sessions(small_study, db_url, n=3)
-    run = subprocess.run([str(Path(sys.executable).parent / "tomstudy"), "serve", "--port", "1",
+    run = subprocess.run([TOMSTUDY, "serve", "--port", "1",
                           "--study", rebuilt.study_id], env=rebuilt.env(db_url),
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 2 and "Traceback" not in run.stderr

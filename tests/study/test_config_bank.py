@@ -5,7 +5,6 @@ import io
 import json
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,10 +28,9 @@ from app.study.prepare import bank_is_current, prepare_study
 from app.study.tables import Participant
 from app.study.trial_builder import NoStartStates, build_trials, take_turns
 from app.study.trials import TrialBank, clip_sha256
+from tests.conftest import REPO, TOMSTUDY
 from tests.study import flow
 from tests.study.flow import ADMIN, TOKEN, new_id, prediction_body, prolific
-
-REPO = Path(__file__).resolve().parents[2]
 
 
 def test_paper_study_config_matches_the_paper():
@@ -266,7 +264,7 @@ def test_production_mode_refuses_the_default_token(small_study, tmp_path):
         create_app(settings, [small_study.study_id])
     env = small_study.env(f"sqlite:///{tmp_path / 'x.db'}", TOMSTUDY_PRODUCTION="1",
                           TOMSTUDY_ADMIN_TOKEN=DEFAULT_ADMIN_TOKEN)
-    run = subprocess.run([str(Path(sys.executable).parent / "tomstudy"), "serve", "--port", "1"],
+    run = subprocess.run([TOMSTUDY, "serve", "--port", "1"],
                          env=env, capture_output=True, text=True, timeout=60)
     assert run.returncode == 2 and "refusing to start" in run.stderr
 
@@ -299,7 +297,7 @@ def test_in_memory_database_through_dependency_override(small_study, tmp_path):
 
 def test_serve_without_a_bank_says_what_is_missing(small_study, tmp_path):
     env = small_study.env(f"sqlite:///{tmp_path / 'x.db'}", TOMSTUDY_DATA_DIR=str(tmp_path))
-    run = subprocess.run([str(Path(sys.executable).parent / "tomstudy"), "serve", "--port", "1",
+    run = subprocess.run([TOMSTUDY, "serve", "--port", "1",
                           "--study", small_study.study_id],
                          env=env, capture_output=True, text=True, timeout=60)
     assert run.returncode == 2

@@ -4,8 +4,6 @@ predictions export read by `tomstudy analyze` as it is."""
 import io
 import json
 import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -21,6 +19,7 @@ from app.cli import cli
 from app.settings import get_settings
 from app.study.exports import export_table
 from app.study.tables import Participant, TrialResponse, utcnow
+from tests.conftest import TOMSTUDY
 from tests.study.flow import ADMIN, at_first_trial, new_id, prolific
 
 FORMULA = '=HYPERLINK("http://x","y")'
@@ -172,7 +171,7 @@ def test_tomstudy_analyze_reads_the_predictions_export_unchanged(client, small_s
     pd.testing.assert_frame_equal(load_csv(path), load_database(db_url, small_study.study_id))
     out = tmp_path / "report"
     done = subprocess.run(
-        [str(Path(sys.executable).parent / "tomstudy"), "analyze", "--study",
+        [TOMSTUDY, "analyze", "--study",
          small_study.study_id, "--csv", str(path), "--out", str(out)],
         env=small_study.env(db_url), capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr

@@ -3,10 +3,8 @@
 import re
 import socket
 import subprocess
-import sys
 import time
 from contextlib import contextmanager
-from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
@@ -23,11 +21,10 @@ from app.study.main import (
     check_production,
     create_app,
 )
-from tests.conftest import REPO, free_port
+from tests.conftest import REPO, TOMSTUDY, free_port
 from tests.study.flow import Participant
 
 STRONG_TOKEN = "x" * 40
-TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")
 
 
 def study_settings(small_study, tmp_path, **overrides) -> Settings:
@@ -284,7 +281,7 @@ def test_a_database_of_an_older_schema_is_refused_with_what_to_do(small_study, t
     db = tmp_path / "old.db"
     with sqlite3.connect(db) as conn:  # the participant table before issue 10
         conn.execute("CREATE TABLE participant (id INTEGER PRIMARY KEY, study_id VARCHAR)")
-    run = subprocess.run([str(Path(sys.executable).parent / "tomstudy"), "serve", "--port", "1",
+    run = subprocess.run([TOMSTUDY, "serve", "--port", "1",
                           "--study", small_study.study_id],
                          env=small_study.env(f"sqlite:///{db}"), capture_output=True, text=True,
                          timeout=120)

@@ -4,7 +4,6 @@ migrations, upgrading keeps every row, and the server refuses what needs `db upg
 import os
 import sqlite3
 import subprocess
-import sys
 import threading
 from pathlib import Path
 
@@ -17,7 +16,7 @@ from sqlmodel import SQLModel
 
 from app.study import migrate
 from app.study.db import create_tables, make_engine
-from tests.conftest import fresh_database
+from tests.conftest import TOMSTUDY, fresh_database
 from tests.study.flow import Participant, make_client
 
 FIXTURE = Path(__file__).parent / "fixtures" / "db_9c39751.sql"
@@ -26,7 +25,6 @@ FIXTURE_ROWS = {"participant": 5, "balancecount": 5, "submission": 20, "trialres
                 "predictionrow": 27, "event": 18}
 PARENTS_FIRST = ["participant", "balancecount", "submission", "trialresponse",
                  "predictionrow", "event"]
-TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")
 
 
 def load_fixture(path: Path) -> str:

@@ -6,7 +6,6 @@ import os
 import re
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -17,9 +16,9 @@ from typer.testing import CliRunner
 from app.cli import cli
 from app.fileio import sha256_file
 from app.settings import REPO_ROOT, get_settings
+from tests.conftest import TOMSTUDY
 
 CONFIG = REPO_ROOT / "study_configs" / "worlds" / "obstacle.yaml"
-TOMSTUDY = Path(sys.executable).parent / "tomstudy"
 
 
 @pytest.fixture
@@ -100,7 +99,7 @@ def test_interrupted_run_leaves_no_trajectories(data_dir, tmp_path):
     env = dict(os.environ, TOMSTUDY_DATA_DIR=str(data_dir))
     log = tmp_path / "stderr.log"
     with open(log, "wb") as err:  # a file, not a pipe: a full pipe would block the child
-        proc = subprocess.Popen([str(TOMSTUDY), "simulate", "obstacle", "--n", "2000"],
+        proc = subprocess.Popen([TOMSTUDY, "simulate", "obstacle", "--n", "2000"],
                                 env=env, stdout=subprocess.DEVNULL, stderr=err, cwd=REPO_ROOT)
     try:
         _wait_for_progress(proc, log)
