@@ -94,8 +94,9 @@ def test_declining_consent_ends_the_session_and_keeps_only_the_receipt(client, s
     again = start(client, sid, **dict(params, SESSION_ID="second"))
     assert again.status_code == 409 and "already ended" in again.json()["detail"]
     progress = client.get(f"/api/researcher/summary?study_id={sid}", headers=ADMIN).json()
+    target = client.app.state.studies[sid].config.target_sample_size  # the study's own
     assert progress["progress"] | {"world_orders": None} == {
-        "target_sample_size": 22, "started": 1, "completed": 0, "in_progress": 0,
+        "target_sample_size": target, "started": 1, "completed": 0, "in_progress": 0,
         "ended_early": 1, "stale": 0, "outcomes": {"declined_consent": 1},
         "failed_attention_check": 0, "pilot_sessions": 0, "replaced_sessions": 0,
         "world_orders": None}
