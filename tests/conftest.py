@@ -17,6 +17,7 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 SMALL_STUDY = "small_study"
 PG_BIN = Path("/usr/lib/postgresql/15/bin")
+ADMIN_TOKEN = "test-token"  # the researcher token of every test server and app
 TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")  # the installed CLI, for subprocesses
 
 # The paper's study, shrunk: the same trial shape (4 examples, 5-7 step segment, 5 start
@@ -45,9 +46,16 @@ class SmallStudy:
         """Environment for a `tomstudy` subprocess using this study and database."""
         env = dict(os.environ, TOMSTUDY_DATA_DIR=str(self.data_dir),
                    TOMSTUDY_CONFIGS_DIR=str(self.configs_dir), DATABASE_URL=db_url,
-                   TOMSTUDY_ADMIN_TOKEN="test-token")
+                   TOMSTUDY_ADMIN_TOKEN=ADMIN_TOKEN)
         env.pop("TOMSTUDY_PRODUCTION", None)
         return env | extra
+
+    def settings(self, db_url: str, **extra):
+        """In-process `Settings` using this study and database (`extra` fields override)."""
+        from app.settings import Settings
+
+        return Settings(**dict(data_dir=self.data_dir, configs_dir=self.configs_dir,
+                               database_url=db_url, admin_token=ADMIN_TOKEN) | extra)
 
 
 def _sources_hash() -> str:

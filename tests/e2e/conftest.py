@@ -10,7 +10,6 @@ import yaml
 from tests.conftest import REPO, SmallStudy, free_port, start_server
 
 BROWSER_STUDY = "browser_study"
-ADMIN_TOKEN = "test-token"  # SmallStudy.env sets it for the server process
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]

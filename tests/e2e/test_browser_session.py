@@ -16,8 +16,8 @@ import pytest
 import yaml
 
 from app.study.plan import Phase
-from tests.conftest import REPO
-from tests.e2e.conftest import ADMIN_TOKEN, BROWSER_STUDY
+from tests.conftest import ADMIN_TOKEN, REPO
+from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
     VIEWPORT,
     answer_survey,

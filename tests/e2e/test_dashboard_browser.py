@@ -5,8 +5,8 @@ import asyncio
 import pytest
 
 from app.study.bots import run_bots
-from tests.conftest import REPO
-from tests.e2e.conftest import ADMIN_TOKEN, BROWSER_STUDY
+from tests.conftest import ADMIN_TOKEN, REPO
+from tests.e2e.conftest import BROWSER_STUDY
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 

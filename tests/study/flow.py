@@ -8,12 +8,12 @@ from dataclasses import dataclass
 import numpy as np
 from fastapi.testclient import TestClient
 
-from app.settings import Settings
 from app.study.bots import segment_key
 from app.study.main import create_app
 from app.study.plan import TRIAL_PHASES
+from tests.conftest import ADMIN_TOKEN
 
-TOKEN = "test-token"
+TOKEN = ADMIN_TOKEN
 ADMIN = {"Authorization": f"Bearer {TOKEN}"}
 
 
@@ -199,7 +199,5 @@ def make_client(small_study, db_url: str, trust_client_clock: bool = True) -> Te
     It trusts the client's clock by default: these tests answer in milliseconds while
     claiming human durations (test_public_server checks the server's own clock).
     """
-    settings = Settings(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir,
-                        database_url=db_url, admin_token=TOKEN,
-                        trust_client_clock=trust_client_clock)
+    settings = small_study.settings(db_url, trust_client_clock=trust_client_clock)
     return TestClient(create_app(settings, [small_study.study_id]))

@@ -10,7 +10,6 @@ from fastapi.testclient import TestClient
 
 from app.fileio import sha256_file
 from app.layout import Layout
-from app.settings import Settings
 from app.study.bank_guard import BankChanged, banks_run
 from app.study.db import make_engine
 from app.study.main import create_app
@@ -42,16 +41,10 @@ def run_sessions(study: SmallStudy, db_url: str, n: int, pilots: int = 0) -> str
         return client.app.state.studies[study.study_id].bank.sha256
 
 
-def settings_of(study: SmallStudy, db_url: str, **extra) -> Settings:
-    """Server settings for `study` on `db_url`."""
-    return Settings(data_dir=study.data_dir, configs_dir=study.configs_dir, database_url=db_url,
-                    admin_token=TOKEN, **extra)
-
-
 def test_a_changed_bank_is_refused_naming_the_sessions_and_the_override(small_study, rebuilt,
                                                                          db_url):
     old = run_sessions(small_study, db_url, n=2, pilots=1)
-    app = create_app(settings_of(rebuilt, db_url), [rebuilt.study_id])
+    app = create_app(rebuilt.settings(db_url), [rebuilt.study_id])
     with pytest.raises(BankChanged) as refused, TestClient(app):
         pass
     message = str(refused.value)
@@ -68,7 +61,7 @@ def test_a_changed_bank_is_refused_naming_the_sessions_and_the_override(small_st
 def test_the_override_serves_the_changed_bank(small_study, rebuilt, db_url, monkeypatch):
     old = run_sessions(small_study, db_url, n=1)
     monkeypatch.setenv("TOMSTUDY_ALLOW_BANK_CHANGE", "1")
-    settings = settings_of(rebuilt, db_url)
+    settings = rebuilt.settings(db_url)
     assert settings.allow_bank_change
     with TestClient(create_app(settings, [rebuilt.study_id])) as client:
         Participant(client, rebuilt.study_id).start()

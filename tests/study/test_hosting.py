@@ -29,9 +29,7 @@ STRONG_TOKEN = "x" * 40
 
 def study_settings(small_study, tmp_path, **overrides) -> Settings:
     """Settings of the small study on a fresh SQLite file."""
-    values = dict(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir,
-                  database_url=f"sqlite:///{tmp_path / 'study.db'}", admin_token="test-token")
-    return Settings(**values | overrides)
+    return small_study.settings(f"sqlite:///{tmp_path / 'study.db'}", **overrides)
 
 
 def run_serve(small_study, tmp_path, *args: str, **env: str) -> subprocess.CompletedProcess:

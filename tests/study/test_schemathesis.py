@@ -49,9 +49,8 @@ cases_run: list[str] = []
 def study_app(small_study, tmp_path_factory) -> FastAPI:
     """The small study's app on a fresh SQLite file."""
     root = tmp_path_factory.mktemp("schemathesis")
-    return create_app(Settings(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir,
-                               database_url=f"sqlite:///{root / 'study.db'}", admin_token=TOKEN,
-                               production=False), [small_study.study_id])
+    return create_app(small_study.settings(f"sqlite:///{root / 'study.db'}", production=False),
+                      [small_study.study_id])
 
 
 @pytest.fixture(scope="module")
