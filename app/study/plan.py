@@ -15,6 +15,7 @@ from itertools import permutations
 import numpy as np
 from pydantic import field_validator
 
+from app.assignment import least_used
 from app.configio import StrictModel
 from app.study.config import StudyConfig
 from app.study.errors import Refused
@@ -126,13 +127,6 @@ def world_orders(config: StudyConfig) -> list[tuple[str, ...]]:
     if config.counterbalance_world_order:
         return list(permutations(config.worlds))
     return [tuple(config.worlds)]
-
-
-def least_used(candidates: list, counts: dict, k: int, rng: np.random.Generator) -> list:
-    """The k candidates with the lowest counts, ties broken at random."""
-    noise = rng.random(len(candidates))
-    keys = np.lexsort((noise, [counts.get(c, 0) for c in candidates]))
-    return [candidates[i] for i in keys[:k]]
 
 
 def assign_plan(config: StudyConfig, bank: TrialBank, usage: Usage,
