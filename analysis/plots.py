@@ -166,3 +166,32 @@ def plot_power(curve: pd.DataFrame, alpha: float, preset: str, base: Path) -> li
     ax.grid(alpha=0.3)
     fig.tight_layout()
     return save(fig, base)
+
+
+def plot_trial_contrast(by_trial: pd.DataFrame, base: Path) -> list[Path]:
+    """Per world, each main trial's err_ours - err_vae for the precise (x) and the coarse (y)
+    population: below the diagonal the coarse observers favour Ours more, as the check asks."""
+    worlds = sorted(by_trial["world"].unique())
+    fig, axes = plt.subplots(1, len(worlds), figsize=(4.6 * len(worlds), 4.2), squeeze=False)
+    for ax, world in zip(axes[0], worlds, strict=True):
+        rows = by_trial[by_trial["world"] == world]
+        x, y = rows["precise_diff"].to_numpy(), rows["coarse_diff"].to_numpy()
+        limit = 1.05 * max(np.nanmax(np.abs(np.r_[x, y])), 1e-3)
+        ax.plot([-limit, limit], [-limit, limit], color="grey", lw=0.8, ls="--")
+        ax.axhline(0, color="grey", lw=0.5)
+        ax.axvline(0, color="grey", lw=0.5)
+        below = y < x
+        ax.scatter(x[below], y[below], s=18, color="#0072B2",
+                   label=f"coarse favours Ours more ({below.sum()})")
+        ax.scatter(x[~below], y[~below], s=18, color="#D55E00",
+                   label=f"precise favours Ours more ({(~below).sum()})")
+        ax.set_xlim(-limit, limit)
+        ax.set_ylim(-limit, limit)
+        ax.set_aspect("equal")
+        ax.set_xlabel("precise observers: err_ours - err_vae")
+        ax.set_ylabel("coarse observers: err_ours - err_vae")
+        ax.set_title(f"{world}: one point per main trial", fontsize=9)
+        ax.legend(fontsize=7, loc="upper left")
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return save(fig, base)

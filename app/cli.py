@@ -293,28 +293,33 @@ def instrument(
     observers: Annotated[Path | None, typer.Option(help="observers YAML (default: "
                                                    "study_configs/observers.yaml)")] = None,
     out: Annotated[Path | None, typer.Option(help="output folder")] = None,
+    replications: Annotated[int, typer.Option(min=0, help="reruns with fresh simulated "
+                                              "participants, for the pass rate")] = 50,
 ) -> None:
     """Instrument check: can err_ours - err_vae tell coarse from precise simulated observers?
 
     Simulates n coarse and n precise participants in process on the study's trial bank and,
     per world, runs Welch's one-sided t-test that the coarse population's per-participant
     err_ours - err_vae is lower than the precise one's (pass at p < alpha); the relative lane
-    reading (coarse_relative) is a sensitivity row. Writes instrument.json and
-    instrument.csv; exits 1 if a world fails.
+    reading (coarse_relative) is a sensitivity row. The pass rate is the share of
+    `replications` reruns (fresh participants) that pass: the check's power. Writes
+    instrument.json and CSVs (by_trial: where the contrast is); exits 1 if a world fails.
     """
     from app.observers.simulated_study import run_instrument
 
     bank, config, trials = simulation_inputs(study, observers)
     out = out or get_settings().layout.instrument_report(study)
-    summary = run_instrument(bank, trials, out, n, seed, alpha, config)
-    typer.echo(f"{'world':<10}{'reading':<10}{'coarse':>9}{'precise':>9}{'t':>8}{'p':>10}  result")
+    summary = run_instrument(bank, trials, out, n, seed, alpha, config, replications)
+    typer.echo(f"{'world':<10}{'reading':<10}{'coarse':>9}{'precise':>9}{'t':>8}{'p':>10}"
+               f"  result  pass rate")
     for row in summary["rows"]:
         verdict = "pass" if row["passed"] else "FAIL"
         typer.echo(f"{row['world']:<10}{row['reading']:<10}{row['coarse_mean_diff']:>+9.3f}"
                    f"{row['precise_mean_diff']:>+9.3f}{row['welch_t']:>8.2f}"
-                   f"{row['p_one_sided']:>10.2g}  {verdict}")
+                   f"{row['p_one_sided']:>10.2g}  {verdict:<6}  {row['pass_rate']:>9.2f}")
     typer.echo("coarse/precise = mean err_ours - err_vae per population; "
-               f"pass = Welch one-sided p < {alpha}")
+               f"pass = Welch one-sided p < {alpha};\npass rate = share of {replications} "
+               "reruns with fresh simulated participants that pass")
     echo_separation(summary["separation"])
     typer.echo(f"wrote {out}")
     if not all(summary["passed"].values()):

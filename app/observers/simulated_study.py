@@ -15,6 +15,8 @@ relative lane reading (`coarse_relative`) as a sensitivity row.
 """
 
 import json
+from collections import Counter
+from itertools import permutations
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +26,9 @@ from tqdm import tqdm
 
 from analysis.contracts import EXPORT_COLUMNS, alignment_error
 from analysis.load import normalise
-from analysis.metrics import participant_means
-from analysis.plots import plot_power
+from analysis.metrics import add_alignment_errors, participant_means
+from analysis.plots import plot_power, plot_trial_contrast
+from app.assignment import least_used
 from app.fileio import sha256_bytes, write_json
 from app.observers import inverse_planning
 from app.observers.config import ObserversConfig, default_observers
@@ -90,23 +93,29 @@ def trial_rows(participant: str, world_position: int, trial_index: int, payload:
 def simulate_participants(bank: dict, preset: str, n: int, trials_per_world: int, seed: int = 0,
                           show_progress: bool = True,
                           observers: ObserversConfig | None = None) -> pd.DataFrame:
-    """Rows of `n` simulated participants of one observer preset, in the export CSV's columns."""
+    """Rows of `n` simulated participants of one observer preset, in the export CSV's columns.
+
+    World orders and trials are assigned as the server assigns them (least used first), so
+    every trial is seen about equally often, as in the real study."""
     observers = observers or default_observers()
     rng = np.random.default_rng(seed)
     worlds = sorted(bank["worlds"])
-    # (trial, payload) of every main trial, built once: participants only draw among them
-    main = {world: [(t, trial_payload(bank["worlds"][world], t, bank["steps_to_predict"]))
-                    for t in bank["worlds"][world]["trials"] if t["kind"] == "main"]
+    # trial id -> (trial, payload) of every main trial, built once
+    main = {world: {t["trial_id"]: (t, trial_payload(bank["worlds"][world], t,
+                                                    bank["steps_to_predict"]))
+                    for t in bank["worlds"][world]["trials"] if t["kind"] == "main"}
             for world in worlds}
+    orders, order_use, exposure = list(permutations(worlds)), Counter(), Counter()
     parts: list[dict[str, np.ndarray]] = []
     for p in tqdm(range(n), desc=f"{preset} participants", disable=not show_progress):
-        order = worlds if p % 2 == 0 else worlds[::-1]
+        order = least_used(orders, order_use, 1, rng)[0]
+        order_use[order] += 1
         for position, world in enumerate(order):
-            trials = main[world]
-            chosen = rng.choice(len(trials), size=min(trials_per_world, len(trials)),
-                                replace=False)
-            for index, t in enumerate(chosen):
-                trial, payload = trials[int(t)]
+            chosen = least_used(list(main[world]), exposure, trials_per_world, rng)
+            rng.shuffle(chosen)
+            exposure.update(chosen)
+            for index, trial_id in enumerate(chosen):
+                trial, payload = main[world][trial_id]
                 clicks = inverse_planning.predict(preset, payload, rng, trial["policy_actions"],
                                                   observers)
                 parts.append(trial_rows(f"sim-{p:05d}", position, index, payload, trial, clicks))
@@ -179,13 +188,19 @@ def _smallest_n(group: pd.DataFrame, target: float) -> int | None:
     return int(reached["n"].min()) if len(reached) else None
 
 
-def population_diffs(bank: dict, preset: str, n: int, trials_per_world: int, seed: int,
-                     observers: ObserversConfig, show_progress: bool = True) -> pd.DataFrame:
-    """Per participant and world: err_ours, err_vae and their difference, for one preset."""
-    frame = simulate_participants(bank, preset, n, trials_per_world, seed, show_progress,
-                                  observers)
+def population_frames(bank: dict, n: int, trials_per_world: int, seed: int,
+                      observers: ObserversConfig, show_progress: bool = True
+                      ) -> dict[str, pd.DataFrame]:
+    """Rows, with each model's alignment error, of n simulated participants per population."""
+    return {preset: add_alignment_errors(simulate_participants(
+                bank, preset, n, trials_per_world, seed + offset, show_progress, observers))
+            for offset, preset in enumerate(INSTRUMENT_POPULATIONS)}
+
+
+def participant_diffs(frame: pd.DataFrame) -> pd.DataFrame:
+    """Per participant and world: err_ours, err_vae and their difference."""
     means = participant_means(frame)[["participant_id", "world", "err_ours", "err_vae"]]
-    return means.assign(diff=means["err_ours"] - means["err_vae"], preset=preset)
+    return means.assign(diff=means["err_ours"] - means["err_vae"])
 
 
 def welch_row(world: str, reading: str, coarse: pd.DataFrame, precise: pd.DataFrame,
@@ -204,21 +219,52 @@ def welch_row(world: str, reading: str, coarse: pd.DataFrame, precise: pd.DataFr
             "p_one_sided": float(test.pvalue), "passed": bool(test.pvalue < alpha)}
 
 
-def instrument_check(bank: dict, trials_per_world: int, n: int = 22, seed: int = 0,
-                     alpha: float = 0.01, observers: ObserversConfig | None = None,
-                     show_progress: bool = True) -> pd.DataFrame:
-    """Per world and lane reading: can err_ours - err_vae tell coarse from precise observers?"""
-    observers = observers or default_observers()
-    diffs = {preset: population_diffs(bank, preset, n, trials_per_world, seed + offset,
-                                      observers, show_progress)
-             for offset, preset in enumerate(INSTRUMENT_POPULATIONS)}
+def welch_table(frames: dict[str, pd.DataFrame], alpha: float) -> pd.DataFrame:
+    """Per world and lane reading, the check on the populations' simulated rows."""
+    diffs = {preset: participant_diffs(frame) for preset, frame in frames.items()}
     rows = []
-    for world in sorted(bank["worlds"]):
+    for world in sorted(diffs["precise"]["world"].unique()):
         precise = diffs["precise"][diffs["precise"]["world"] == world]
         for reading, preset in INSTRUMENT_ROWS:
             coarse = diffs[preset][diffs[preset]["world"] == world]
             rows.append(welch_row(world, reading, coarse, precise, alpha))
     return pd.DataFrame(rows)
+
+
+def instrument_check(bank: dict, trials_per_world: int, n: int = 22, seed: int = 0,
+                     alpha: float = 0.01, observers: ObserversConfig | None = None,
+                     show_progress: bool = True) -> pd.DataFrame:
+    """Per world and lane reading: can err_ours - err_vae tell coarse from precise observers?"""
+    frames = population_frames(bank, n, trials_per_world, seed, observers or default_observers(),
+                               show_progress)
+    return welch_table(frames, alpha)
+
+
+def replicate_check(bank: dict, trials_per_world: int, n: int, seed: int, alpha: float,
+                    observers: ObserversConfig, replications: int) -> pd.DataFrame:
+    """The check rerun on `replications` fresh sets of simulated participants (new seeds):
+    one row per replication, world and reading. Its pass rate is the check's power."""
+    tables = []
+    for r in tqdm(range(replications), desc="replications", disable=replications == 0):
+        frames = population_frames(bank, n, trials_per_world,
+                                   seed + len(INSTRUMENT_POPULATIONS) * (r + 1), observers, False)
+        tables.append(welch_table(frames, alpha).assign(replication=r))
+    columns = ["replication", "world", "reading", "welch_t", "p_one_sided", "passed"]
+    return pd.concat(tables)[columns] if tables else pd.DataFrame(columns=columns)
+
+
+def trial_contrast(frames: dict[str, pd.DataFrame]) -> pd.DataFrame:
+    """Per world and main trial: the coarse and the precise population's mean err_ours - err_vae
+    over the participants who saw it, and their difference (where the check's contrast is)."""
+    per_trial = {}
+    for preset in ("coarse", "precise"):
+        frame = frames[preset].assign(diff=frames[preset]["err_ours"] - frames[preset]["err_vae"])
+        grouped = frame.groupby(["world", "trial_id"], sort=True)
+        per_trial[preset] = pd.DataFrame({f"{preset}_diff": grouped["diff"].mean(),
+                                          f"{preset}_participants":
+                                              grouped["participant_id"].nunique()})
+    table = per_trial["coarse"].join(per_trial["precise"], how="outer").reset_index()
+    return table.assign(contrast=table["coarse_diff"] - table["precise_diff"])
 
 
 def start_state_answers(bank: dict, seed: int, observers: ObserversConfig) -> pd.DataFrame:
@@ -267,25 +313,38 @@ def separation(bank: dict, seed: int = 0, observers: ObserversConfig | None = No
 
 def run_instrument(bank_path: Path, trials_per_world: int, out_dir: Path, n: int = 22,
                    seed: int = 0, alpha: float = 0.01,
-                   observers: ObserversConfig | None = None) -> dict:
-    """Run the instrument check on a bank; write instrument.json and instrument.csv."""
+                   observers: ObserversConfig | None = None, replications: int = 0) -> dict:
+    """Run the instrument check on a bank (and `replications` reruns for its pass rate); write
+    instrument.json, instrument.csv, separation.csv, by_trial.csv, replications.csv and a
+    figure of where the contrast is."""
     observers = observers or default_observers()
     bank_path = Path(bank_path)
     bank_bytes = bank_path.read_bytes()
     bank = json.loads(bank_bytes)
-    table = instrument_check(bank, trials_per_world, n, seed, alpha, observers)
+    frames = population_frames(bank, n, trials_per_world, seed, observers)
+    table = welch_table(frames, alpha)
+    by_trial = trial_contrast(frames)
+    reruns = replicate_check(bank, trials_per_world, n, seed, alpha, observers, replications)
+    rates = reruns.groupby(["world", "reading"])["passed"].mean()
+    table["pass_rate"] = [rates.get(key, np.nan) for key in
+                          table[["world", "reading"]].itertuples(index=False, name=None)]
     gaps = separation(bank, seed, observers)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    table.to_csv(out_dir / "instrument.csv", index=False)
-    gaps.to_csv(out_dir / "separation.csv", index=False)
+    for name, frame in (("instrument", table), ("separation", gaps), ("by_trial", by_trial),
+                        ("replications", reruns)):
+        frame.to_csv(out_dir / f"{name}.csv", index=False)
+    figures = plot_trial_contrast(by_trial, out_dir / "by_trial")
     main = table[table["reading"] == "absolute"]
     summary = {"n_per_population": n, "seed": seed, "alpha": alpha,
                "trials_per_world": trials_per_world, "bank": str(bank_path),
                "bank_sha256": sha256_bytes(bank_bytes),
                "test": "Welch t, one-sided: coarse err_ours-err_vae < precise err_ours-err_vae",
                "passed": {row["world"]: row["passed"] for _, row in main.iterrows()},
+               "replications": replications,
+               "pass_rate": {row["world"]: row["pass_rate"] for _, row in main.iterrows()},
                "rows": table.to_dict(orient="records"),
-               "separation": gaps.to_dict(orient="records"), "observers": observers.model_dump()}
+               "separation": gaps.to_dict(orient="records"),
+               "figures": [str(f) for f in figures], "observers": observers.model_dump()}
     write_json(out_dir / "instrument.json", summary)
     return summary

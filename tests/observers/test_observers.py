@@ -14,10 +14,12 @@ from app.observers import inverse_planning
 from app.observers.config import ObserversConfig, default_observers, load_observers
 from app.observers.simulated_study import (
     instrument_check,
+    population_frames,
     power_curve,
     run_instrument,
     separation,
     simulate_participants,
+    trial_contrast,
     trial_payload,
 )
 from app.settings import REPO_ROOT
@@ -279,13 +281,38 @@ def test_instrument_check_runs_and_writes_its_files(tmp_path):
     assert table["p_one_sided"].between(0, 1).all() and table["n_coarse"].eq(6).all()
     bank_path = tmp_path / "bank.json"
     bank_path.write_text(json.dumps(bank_with_examples()))
-    summary = run_instrument(bank_path, 5, tmp_path / "out", n=4, seed=0)
-    assert (tmp_path / "out" / "instrument.csv").is_file()
+    summary = run_instrument(bank_path, 5, tmp_path / "out", n=4, seed=0, replications=3)
+    for name in ("instrument.csv", "by_trial.csv", "replications.csv", "by_trial.png"):
+        assert (tmp_path / "out" / name).is_file()
+    assert all(0 <= rate <= 1 for rate in summary["pass_rate"].values())
     written = json.loads((tmp_path / "out" / "instrument.json").read_text())
     assert written["passed"] == summary["passed"] and set(written["passed"]) == {
         "highway", "obstacle"}
     assert written["observers"]["inference"]["beta"]["source"].startswith("Baker")
     assert (tmp_path / "out" / "separation.csv").is_file()
+
+
+def test_simulated_participants_are_assigned_trials_as_the_server_assigns_them():
+    bank = bank_with_examples()
+    frame = simulate_participants(bank, "random", 7, 2, seed=3, show_progress=False)
+    for world, rows in frame.groupby("world"):
+        seen = rows.groupby("trial_id")["participant_id"].nunique()
+        mains = [t["trial_id"] for t in bank["worlds"][world]["trials"] if t["kind"] == "main"]
+        exposure = seen.reindex(mains, fill_value=0)
+        # least used first: exposure never differs by more than one between trials
+        assert exposure.sum() == 7 * 2 and exposure.max() - exposure.min() <= 1
+    firsts = frame[frame["world_position"] == 0].groupby("participant_id")["world"].first()
+    assert abs((firsts == "highway").sum() - (firsts == "obstacle").sum()) <= 1
+
+
+def test_trial_contrast_counts_every_participant_who_saw_a_trial():
+    frames = population_frames(bank_with_examples(), 6, 5, seed=2, observers=CONFIG,
+                               show_progress=False)
+    table = trial_contrast(frames)
+    for world, rows in table.groupby("world"):
+        assert rows["coarse_participants"].sum() == rows["precise_participants"].sum() == 6 * 5
+    assert np.allclose(table["contrast"], table["coarse_diff"] - table["precise_diff"])
+    assert table[["coarse_diff", "precise_diff"]].stack().between(-2, 2).all()
 
 
 def test_separation_says_where_models_and_observers_differ():
@@ -310,10 +337,12 @@ def test_instrument_command_prints_the_table(tmp_path, monkeypatch):
     monkeypatch.setenv("TOMSTUDY_DATA_DIR", str(tmp_path / "var"))
     get_settings.cache_clear()
     try:
-        result = CliRunner().invoke(cli, ["instrument", "--n", "4", "--out", str(tmp_path / "o")])
+        result = CliRunner().invoke(cli, ["instrument", "--n", "4", "--replications", "4",
+                                          "--out", str(tmp_path / "o")])
     finally:
         get_settings.cache_clear()
     written = json.loads((tmp_path / "o" / "instrument.json").read_text())
     assert result.exit_code == (0 if all(written["passed"].values()) else 1), result.output
     assert "highway   absolute" in result.output and "obstacle  relative" in result.output
     assert "start kind" in result.output and "obstacle  all" in result.output
+    assert "pass rate" in result.output and written["replications"] == 4
