@@ -163,6 +163,21 @@ class ModelPaths(StrictModel):
     vae: Path
 
 
+class MainTrialSelection(StrictModel):
+    """Which held-out segments become main trials (app/study/trial_builder.py).
+
+    `random`: the first usable segments, robot labels taking turns. `models_disagree`: build
+    `candidates_per_trial` x bank_trials_per_world usable segments the same way and keep, per
+    robot label, those where Ours' and the VAE's answers differ most (mean 1-cos over the start
+    states): where the two models agree, no prediction can favour either (controversial
+    stimuli: Golan, Raju & Kriegeskorte 2020, PNAS 117:29330-29337). It reads the models'
+    answers only, never a participant's or a simulated observer's, and favours neither model.
+    """
+
+    rule: Literal["random", "models_disagree"] = "random"
+    candidates_per_trial: int = Field(default=1, ge=1, le=8)
+
+
 class StudyConfig(StrictModel):
     """Everything that defines one online study."""
 
@@ -180,6 +195,7 @@ class StudyConfig(StrictModel):
     practice_trials: int = Field(default=1, ge=0)
     bank_trials_per_world: int = Field(ge=1)
     bank_seed: int = Field(default=0, ge=0)
+    main_trial_selection: MainTrialSelection = MainTrialSelection()
     attention_checks: AttentionChecks = AttentionChecks()
     prediction_input: PredictionInput = PredictionInput()
     survey: list[SurveyQuestion] = []

@@ -13,7 +13,7 @@ from pathlib import Path
 from app.fileio import sha256_file
 from app.layout import Layout
 from app.settings import Settings
-from app.study.config import load_study_config
+from app.study.config import StudyConfig, load_study_config
 
 
 def prepare_study(settings: Settings, study_id: str, n_trajectories: int = 2000,
@@ -28,7 +28,7 @@ def prepare_study(settings: Settings, study_id: str, n_trajectories: int = 2000,
         ensure_checkpoint(layout, world, "vae", layout.resolve(config.models[world].vae), seed,
                           say, ours_checkpoint=ours)
     bank = layout.bank(study_id)
-    if bank_is_current(bank):
+    if bank_is_current(bank, config):
         say(f"{bank} is up to date; skipping build-trials")
         return bank
     from app.study.trial_builder import build_trials
@@ -76,12 +76,26 @@ def ensure_checkpoint(layout: Layout, world: str, model_name: str, checkpoint: P
         raise RuntimeError(f"training wrote {written}, the study config expects {checkpoint}")
 
 
-def bank_is_current(bank: Path) -> bool:
-    """True if the bank exists and its checkpoints and trajectories are unchanged."""
+# the study config's keys that shape the trial bank: a change to any of them rebuilds it
+BANK_DESIGN_KEYS = ("worlds", "examples_per_trial", "segment_steps", "start_states",
+                    "steps_to_predict", "practice_trials", "bank_trials_per_world", "bank_seed",
+                    "main_trial_selection", "attention_checks", "prediction_input", "models")
+
+
+def bank_design(config: dict) -> dict:
+    """The bank-shaping part of a study config (as JSON), absent keys as None."""
+    return {key: config.get(key) for key in BANK_DESIGN_KEYS}
+
+
+def bank_is_current(bank: Path, config: StudyConfig) -> bool:
+    """True if the bank exists, was built with this config's bank design, and its checkpoints
+    and trajectories are unchanged."""
     meta_path = bank.with_name("meta.json")
     if not bank.is_file() or not meta_path.is_file():
         return False
     meta = json.loads(meta_path.read_text())
+    if bank_design(meta.get("config", {})) != bank_design(config.model_dump(mode="json")):
+        return False
     for world in meta.get("worlds", {}).values():
         inputs = [(world["trajectories"], world["trajectories_sha256"])]
         inputs += [(c["path"], c["file_sha256"]) for c in world["checkpoints"].values()]

@@ -2,7 +2,9 @@
 
 Per world: the test split both checkpoints held out; segments cut where the world says the
 robot's behaviour is still visible (`World.visible_ends`: before a Highway lane change
-completes, well before an Obstacle goal is reached); `start_states` start states on the
+completes, well before an Obstacle goal is reached); main trials kept by the config's
+`main_trial_selection` (the first usable ones, or those where the two models disagree
+most, robot labels taking turns); `start_states` start states on the
 data near the robot; both models, a constant-velocity baseline and the world's own policy
 (`World.robot_policy_actions`) answered for every start state. Everything is computed from
 the rounded numbers the participant is shown. Nothing here depends on which world it is.
@@ -37,6 +39,7 @@ import numpy as np
 from tqdm import tqdm
 
 import app
+from analysis.contracts import alignment_error
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 from app.fileio import sha256_file, write_json
 from app.layout import Layout
@@ -147,13 +150,19 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
         raise ValueError(f"{world.name}: only {len(candidates)} held-out trajectories give a "
                          f"usable segment, the bank needs {needed}; simulate more")
     scene = trajs.scene.model_dump()
-    regular = config.bank_trials_per_world + config.practice_trials
-    built, used = regular_trials(config, inputs, candidates, regular, max_step, scene, rng)
-    kinds = ["practice"] * config.practice_trials + ["main"] * config.bank_trials_per_world
+    practice, used = regular_trials(config, inputs, candidates, config.practice_trials,
+                                    max_step, scene, rng)
+    selection = config.main_trial_selection
+    pool, tried = regular_trials(config, inputs, candidates[used:],
+                                 config.bank_trials_per_world * selection.candidates_per_trial,
+                                 max_step, scene, rng)
+    main = select_main_trials(pool, config.bank_trials_per_world, selection.rule)
+    used += tried
     checks, straightness = attention_trials(config, inputs, candidates[used:], max_step,
                                             scene, rng)
-    built += checks
-    kinds += ["attention"] * len(checks)
+    built = practice + main + checks
+    kinds = (["practice"] * len(practice) + ["main"] * len(main)
+             + ["attention"] * len(checks))
     trials = [t.model_copy(update={"kind": kind, "trial_id": f"{world.name}-{kind}-{i:03d}"})
               for kind in ("main", "practice", "attention")
               for i, t in enumerate(t for t, k in zip(built, kinds, strict=True) if k == kind)]
@@ -163,8 +172,31 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
                      min_step_m=round(config.prediction_input.min_step_fraction * max_step, 4),
                      trials=trials)
     meta = world_meta(inputs, trials, straightness)
-    meta["segments_skipped_no_data_starts"] = used - regular
+    meta["segments_skipped_no_data_starts"] = used - len(practice) - len(pool)
+    meta["main_trial_selection"] = {
+        "rule": selection.rule, "candidates": len(pool),
+        "ours_vs_vae_candidates": round(float(np.mean([models_disagree(t) for t in pool])), 4),
+        "ours_vs_vae_kept": round(float(np.mean([models_disagree(t) for t in main])), 4)}
     return bank, meta
+
+
+def models_disagree(trial: TrialRecord) -> float:
+    """Mean 1-cos between Ours' and the VAE's answers over a trial's start states and steps."""
+    return float(alignment_error(np.asarray(trial.predictions["ours"].actions),
+                                 np.asarray(trial.predictions["vae"].actions)).mean())
+
+
+def select_main_trials(pool: list[TrialRecord], count: int, rule: str) -> list[TrialRecord]:
+    """`count` main trials of the pool: its first ones (`random`), or per robot label those
+    where the two models disagree most (`models_disagree`); robot labels take turns."""
+    if rule == "random":
+        return pool[:count]
+    by_label: dict[int, list[TrialRecord]] = {}
+    for trial in pool:
+        by_label.setdefault(trial.robot_label, []).append(trial)
+    ranked = {label: sorted(trials, key=models_disagree, reverse=True)
+              for label, trials in by_label.items()}
+    return interleave(ranked)[:count]
 
 
 def regular_trials(config: StudyConfig, inputs: WorldInputs, candidates: list, count: int,

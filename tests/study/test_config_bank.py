@@ -19,14 +19,20 @@ from app.configio import ConfigError, load_yaml_model
 from app.fileio import sha256_file
 from app.layout import Layout
 from app.settings import DEFAULT_ADMIN_TOKEN, Settings
-from app.study.config import StudyConfig, load_study_config
+from app.study.config import MainTrialSelection, StudyConfig, load_study_config
 from app.study.db import create_tables
 from app.study.deps import get_db
 from app.study.main import UnsafeSettings, create_app
 from app.study.model_answers import BankMismatch, ModelAnswers
 from app.study.prepare import bank_is_current, prepare_study
 from app.study.tables import Participant
-from app.study.trial_builder import NoStartStates, build_trials, take_turns
+from app.study.trial_builder import (
+    NoStartStates,
+    build_trials,
+    models_disagree,
+    select_main_trials,
+    take_turns,
+)
 from app.study.trials import TrialBank, clip_sha256
 from tests.conftest import REPO, TOMSTUDY
 from tests.study import flow
@@ -253,8 +259,28 @@ def test_prepare_skips_what_exists(small_study):
     settings = Settings(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir)
     said = []
     bank = prepare_study(settings, small_study.study_id, say=said.append)
-    assert bank_is_current(bank)
+    config = load_study_config(settings, small_study.study_id)
+    assert bank_is_current(bank, config)
     assert sum("skipping" in s for s in said) == 2 + 4 + 1, said
+    # a change to the bank's design (not just its inputs) makes it stale
+    redesigned = config.model_copy(update={"main_trial_selection": MainTrialSelection(
+        rule="models_disagree", candidates_per_trial=2)})
+    assert not bank_is_current(bank, redesigned)
+    assert bank_is_current(bank, config.model_copy(update={"title": "renamed"}))
+
+
+def test_models_disagree_keeps_the_most_controversial_trials_per_label(small_study):
+    bank = TrialBank.load(small_study.data_dir, small_study.study_id)
+    pool = bank.trials_of("obstacle", "main")
+    kept = select_main_trials(pool, 4, "models_disagree")
+    assert select_main_trials(pool, 4, "random") == pool[:4]
+    labels = sorted({t.robot_label for t in pool})
+    for label in labels:
+        mine = sorted((models_disagree(t) for t in pool if t.robot_label == label), reverse=True)
+        taken = [models_disagree(t) for t in kept if t.robot_label == label]
+        assert taken == mine[:len(taken)]  # within a label, the most controversial first
+    counts = [sum(t.robot_label == label for t in kept) for label in labels]
+    assert max(counts) - min(counts) <= 1  # labels take turns
 
 
 def test_production_mode_refuses_the_default_token(small_study, tmp_path):
