@@ -13,3 +13,10 @@ def least_used(candidates: list, counts: dict, k: int, rng: np.random.Generator)
     noise = rng.random(len(candidates))
     keys = np.lexsort((noise, [counts.get(c, 0) for c in candidates]))
     return [candidates[i] for i in keys[:k]]
+
+
+def pick_trials(trial_ids: list, exposure: dict, k: int, rng: np.random.Generator) -> list:
+    """One participant's k main trials of a world: the least seen, in random order."""
+    chosen = least_used(trial_ids, exposure, k, rng)
+    rng.shuffle(chosen)
+    return chosen

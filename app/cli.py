@@ -303,7 +303,7 @@ def instrument(
     err_ours - err_vae is lower than the precise one's (pass at p < alpha); the relative lane
     reading (coarse_relative) is a sensitivity row. The pass rate is the share of
     `replications` reruns (fresh participants) that pass: the check's power. Writes
-    instrument.json and CSVs (by_trial: where the contrast is); exits 1 if a world fails.
+    instrument.json, CSVs and by_trial.png (where the contrast is); exits 1 if a world fails.
     """
     from app.observers.simulated_study import run_instrument
 
@@ -316,7 +316,7 @@ def instrument(
         verdict = "pass" if row["passed"] else "FAIL"
         typer.echo(f"{row['world']:<10}{row['reading']:<10}{row['coarse_mean_diff']:>+9.3f}"
                    f"{row['precise_mean_diff']:>+9.3f}{row['welch_t']:>8.2f}"
-                   f"{row['p_one_sided']:>10.2g}  {verdict:<6}  {row['pass_rate']:>9.2f}")
+                   f"{row['p_one_sided']:>10.2g}  {verdict:<6}  {pass_rate(row['pass_rate'])}")
     typer.echo("coarse/precise = mean err_ours - err_vae per population; "
                f"pass = Welch one-sided p < {alpha};\npass rate = share of {replications} "
                "reruns with fresh simulated participants that pass")
@@ -324,6 +324,11 @@ def instrument(
     typer.echo(f"wrote {out}")
     if not all(summary["passed"].values()):
         raise typer.Exit(1)
+
+
+def pass_rate(rate: float | None) -> str:
+    """A pass rate for the instrument table ("-" without replications)."""
+    return f"{rate:>9.2f}" if rate is not None else f"{'-':>9}"
 
 
 def echo_separation(rows: list[dict]) -> None:

@@ -28,7 +28,7 @@ from analysis.contracts import EXPORT_COLUMNS, alignment_error
 from analysis.load import normalise
 from analysis.metrics import add_alignment_errors, participant_means
 from analysis.plots import plot_power, plot_trial_contrast
-from app.assignment import least_used
+from app.assignment import least_used, pick_trials
 from app.fileio import sha256_bytes, write_json
 from app.observers import inverse_planning
 from app.observers.config import ObserversConfig, default_observers
@@ -95,8 +95,9 @@ def simulate_participants(bank: dict, preset: str, n: int, trials_per_world: int
                           observers: ObserversConfig | None = None) -> pd.DataFrame:
     """Rows of `n` simulated participants of one observer preset, in the export CSV's columns.
 
-    World orders and trials are assigned as the server assigns them (least used first), so
-    every trial is seen about equally often, as in the real study."""
+    Trials are assigned as the server assigns them (least seen first), so every trial is seen
+    about equally often, as in the real study; world orders are counterbalanced the same way
+    (the server's `counterbalance_world_order: true`, as in the paper's study)."""
     observers = observers or default_observers()
     rng = np.random.default_rng(seed)
     worlds = sorted(bank["worlds"])
@@ -111,8 +112,7 @@ def simulate_participants(bank: dict, preset: str, n: int, trials_per_world: int
         order = least_used(orders, order_use, 1, rng)[0]
         order_use[order] += 1
         for position, world in enumerate(order):
-            chosen = least_used(list(main[world]), exposure, trials_per_world, rng)
-            rng.shuffle(chosen)
+            chosen = pick_trials(list(main[world]), exposure, trials_per_world, rng)
             exposure.update(chosen)
             for index, trial_id in enumerate(chosen):
                 trial, payload = main[world][trial_id]
@@ -254,8 +254,9 @@ def replicate_check(bank: dict, trials_per_world: int, n: int, seed: int, alpha:
 
 
 def trial_contrast(frames: dict[str, pd.DataFrame]) -> pd.DataFrame:
-    """Per world and main trial: the coarse and the precise population's mean err_ours - err_vae
-    over the participants who saw it, and their difference (where the check's contrast is)."""
+    """Per world and main trial both populations saw: the coarse and the precise population's
+    mean err_ours - err_vae over the participants who saw it, and their difference (where the
+    check's contrast is)."""
     per_trial = {}
     for preset in ("coarse", "precise"):
         frame = frames[preset].assign(diff=frames[preset]["err_ours"] - frames[preset]["err_vae"])
@@ -263,7 +264,7 @@ def trial_contrast(frames: dict[str, pd.DataFrame]) -> pd.DataFrame:
         per_trial[preset] = pd.DataFrame({f"{preset}_diff": grouped["diff"].mean(),
                                           f"{preset}_participants":
                                               grouped["participant_id"].nunique()})
-    table = per_trial["coarse"].join(per_trial["precise"], how="outer").reset_index()
+    table = per_trial["coarse"].join(per_trial["precise"], how="inner").reset_index()
     return table.assign(contrast=table["coarse_diff"] - table["precise_diff"])
 
 
@@ -313,7 +314,7 @@ def separation(bank: dict, seed: int = 0, observers: ObserversConfig | None = No
 
 def run_instrument(bank_path: Path, trials_per_world: int, out_dir: Path, n: int = 22,
                    seed: int = 0, alpha: float = 0.01,
-                   observers: ObserversConfig | None = None, replications: int = 0) -> dict:
+                   observers: ObserversConfig | None = None, replications: int = 50) -> dict:
     """Run the instrument check on a bank (and `replications` reruns for its pass rate); write
     instrument.json, instrument.csv, separation.csv, by_trial.csv, replications.csv and a
     figure of where the contrast is."""
@@ -326,7 +327,7 @@ def run_instrument(bank_path: Path, trials_per_world: int, out_dir: Path, n: int
     by_trial = trial_contrast(frames)
     reruns = replicate_check(bank, trials_per_world, n, seed, alpha, observers, replications)
     rates = reruns.groupby(["world", "reading"])["passed"].mean()
-    table["pass_rate"] = [rates.get(key, np.nan) for key in
+    table["pass_rate"] = [rates.get(key) for key in  # None without replications
                           table[["world", "reading"]].itertuples(index=False, name=None)]
     gaps = separation(bank, seed, observers)
     out_dir = Path(out_dir)

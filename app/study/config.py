@@ -169,13 +169,20 @@ class MainTrialSelection(StrictModel):
     `random`: the first usable segments, robot labels taking turns. `models_disagree`: build
     `candidates_per_trial` x bank_trials_per_world usable segments the same way and keep, per
     robot label, those where Ours' and the VAE's answers differ most (mean 1-cos over the start
-    states): where the two models agree, no prediction can favour either (controversial
+    states and steps): where the two models agree, no prediction can favour either (controversial
     stimuli: Golan, Raju & Kriegeskorte 2020, PNAS 117:29330-29337). It reads the models'
     answers only, never a participant's or a simulated observer's, and favours neither model.
     """
 
     rule: Literal["random", "models_disagree"] = "random"
     candidates_per_trial: int = Field(default=1, ge=1, le=8)
+
+    @model_validator(mode="after")
+    def _one_candidate_when_random(self) -> "MainTrialSelection":
+        if self.rule == "random" and self.candidates_per_trial != 1:
+            raise ValueError("candidates_per_trial: must be 1 with rule random "
+                             "(it would only move the attention checks to other segments)")
+        return self
 
 
 class StudyConfig(StrictModel):

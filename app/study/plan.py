@@ -15,7 +15,7 @@ from itertools import permutations
 import numpy as np
 from pydantic import field_validator
 
-from app.assignment import least_used
+from app.assignment import least_used, pick_trials
 from app.configio import StrictModel
 from app.study.config import StudyConfig
 from app.study.errors import Refused
@@ -154,8 +154,7 @@ def _world_block(config: StudyConfig, bank: TrialBank, world: str, exposure: dic
                  rng: np.random.Generator) -> list[tuple[str, bool]]:
     """One world's (trial id, is attention check): main trials shuffled, checks not first."""
     main = [t.trial_id for t in bank.trials_of(world, "main")]
-    chosen = least_used(main, exposure, config.trials_per_world, rng)
-    rng.shuffle(chosen)
+    chosen = pick_trials(main, exposure, config.trials_per_world, rng)
     checks = [t.trial_id for t in bank.trials_of(world, "attention")]
     block = [(tid, False) for tid in chosen]
     for tid in least_used(checks, exposure, config.attention_checks.per_world, rng):

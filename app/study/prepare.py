@@ -10,6 +10,8 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
+from pydantic import ValidationError
+
 from app.fileio import sha256_file
 from app.layout import Layout
 from app.settings import Settings
@@ -79,12 +81,20 @@ def ensure_checkpoint(layout: Layout, world: str, model_name: str, checkpoint: P
 # the study config's keys that shape the trial bank: a change to any of them rebuilds it
 BANK_DESIGN_KEYS = ("worlds", "examples_per_trial", "segment_steps", "start_states",
                     "steps_to_predict", "practice_trials", "bank_trials_per_world", "bank_seed",
-                    "main_trial_selection", "attention_checks", "prediction_input", "models")
+                    "main_trial_selection", "prediction_input", "models")
+BANK_ATTENTION_KEYS = ("per_world", "candidate_max_angle_deg")  # the rest only score answers
 
 
-def bank_design(config: dict) -> dict:
-    """The bank-shaping part of a study config (as JSON), absent keys as None."""
-    return {key: config.get(key) for key in BANK_DESIGN_KEYS}
+def bank_design(config: dict) -> dict | None:
+    """The bank-shaping part of a study config (validated, so defaults count), or None if the
+    config no longer validates."""
+    try:
+        valid = StudyConfig.model_validate(config).model_dump(mode="json")
+    except ValidationError:
+        return None
+    design = {key: valid[key] for key in BANK_DESIGN_KEYS}
+    return design | {"attention_checks": {k: valid["attention_checks"][k]
+                                          for k in BANK_ATTENTION_KEYS}}
 
 
 def bank_is_current(bank: Path, config: StudyConfig) -> bool:
@@ -94,7 +104,8 @@ def bank_is_current(bank: Path, config: StudyConfig) -> bool:
     if not bank.is_file() or not meta_path.is_file():
         return False
     meta = json.loads(meta_path.read_text())
-    if bank_design(meta.get("config", {})) != bank_design(config.model_dump(mode="json")):
+    stored = bank_design(meta.get("config", {}))
+    if stored is None or stored != bank_design(config.model_dump(mode="json")):
         return False
     for world in meta.get("worlds", {}).values():
         inputs = [(world["trajectories"], world["trajectories_sha256"])]

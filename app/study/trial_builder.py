@@ -144,15 +144,15 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
         trajs, inputs.held_out)
     need_segment = max(m.segment_len for m in inputs.models.values())
     candidates = segment_candidates(config, world, trajs, inputs.held_out, need_segment, rng)
-    needed = (config.bank_trials_per_world + config.practice_trials
-              + config.attention_checks.per_world)
+    selection = config.main_trial_selection
+    needed = (config.bank_trials_per_world * selection.candidates_per_trial
+              + config.practice_trials + config.attention_checks.per_world)
     if len(candidates) < needed:
         raise ValueError(f"{world.name}: only {len(candidates)} held-out trajectories give a "
                          f"usable segment, the bank needs {needed}; simulate more")
     scene = trajs.scene.model_dump()
     practice, used = regular_trials(config, inputs, candidates, config.practice_trials,
                                     max_step, scene, rng)
-    selection = config.main_trial_selection
     pool, tried = regular_trials(config, inputs, candidates[used:],
                                  config.bank_trials_per_world * selection.candidates_per_trial,
                                  max_step, scene, rng)
@@ -175,12 +175,12 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
     meta["segments_skipped_no_data_starts"] = used - len(practice) - len(pool)
     meta["main_trial_selection"] = {
         "rule": selection.rule, "candidates": len(pool),
-        "ours_vs_vae_candidates": round(float(np.mean([models_disagree(t) for t in pool])), 4),
-        "ours_vs_vae_kept": round(float(np.mean([models_disagree(t) for t in main])), 4)}
+        "ours_vs_vae_candidates": round(float(np.mean([model_disagreement(t) for t in pool])), 4),
+        "ours_vs_vae_kept": round(float(np.mean([model_disagreement(t) for t in main])), 4)}
     return bank, meta
 
 
-def models_disagree(trial: TrialRecord) -> float:
+def model_disagreement(trial: TrialRecord) -> float:
     """Mean 1-cos between Ours' and the VAE's answers over a trial's start states and steps."""
     return float(alignment_error(np.asarray(trial.predictions["ours"].actions),
                                  np.asarray(trial.predictions["vae"].actions)).mean())
@@ -194,7 +194,7 @@ def select_main_trials(pool: list[TrialRecord], count: int, rule: str) -> list[T
     by_label: dict[int, list[TrialRecord]] = {}
     for trial in pool:
         by_label.setdefault(trial.robot_label, []).append(trial)
-    ranked = {label: sorted(trials, key=models_disagree, reverse=True)
+    ranked = {label: sorted(trials, key=model_disagreement, reverse=True)
               for label, trials in by_label.items()}
     return interleave(ranked)[:count]
 

@@ -29,7 +29,7 @@ from app.study.tables import Participant
 from app.study.trial_builder import (
     NoStartStates,
     build_trials,
-    models_disagree,
+    model_disagreement,
     select_main_trials,
     take_turns,
 )
@@ -201,6 +201,32 @@ def three_starts(small_study, tmp_path_factory):
     return data, configs
 
 
+def test_a_models_disagree_bank_keeps_the_most_controversial_of_its_candidates(small_study,
+                                                                             tmp_path):
+    data = tmp_path / "var"
+    data.mkdir()
+    for sub in ("data", "models"):
+        (data / sub).symlink_to(small_study.data_dir / sub)
+    config = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml",
+                             StudyConfig)
+    config = config.model_copy(update={"main_trial_selection": MainTrialSelection(
+        rule="models_disagree", candidates_per_trial=2)})
+    build_trials(config, "controversial", data)
+    meta = json.loads(Layout(data).bank_meta("controversial").read_text())
+    bank = TrialBank.load(data, "controversial")
+    for name, world_meta in meta["worlds"].items():
+        selection = world_meta["main_trial_selection"]
+        assert selection["candidates"] == 2 * config.bank_trials_per_world
+        assert selection["ours_vs_vae_kept"] >= selection["ours_vs_vae_candidates"]
+        assert len(bank.trials_of(name, "main")) == config.bank_trials_per_world
+        assert world_meta["trials"]["attention"] == config.attention_checks.per_world
+
+
+def test_random_selection_takes_one_candidate_per_trial():
+    with pytest.raises(ValueError, match="candidates_per_trial: must be 1 with rule random"):
+        MainTrialSelection(rule="random", candidates_per_trial=2)
+
+
 def test_start_states_config_sets_the_count_and_the_api_follows(three_starts, tmp_path):
     data, configs = three_starts
     bank = TrialBank.load(data, "three_starts")
@@ -267,17 +293,18 @@ def test_prepare_skips_what_exists(small_study):
         rule="models_disagree", candidates_per_trial=2)})
     assert not bank_is_current(bank, redesigned)
     assert bank_is_current(bank, config.model_copy(update={"title": "renamed"}))
+    rescored = config.attention_checks.model_copy(update={"max_angle_deg": 30.0})
+    assert bank_is_current(bank, config.model_copy(update={"attention_checks": rescored}))
 
 
 def test_models_disagree_keeps_the_most_controversial_trials_per_label(small_study):
     bank = TrialBank.load(small_study.data_dir, small_study.study_id)
     pool = bank.trials_of("obstacle", "main")
     kept = select_main_trials(pool, 4, "models_disagree")
-    assert select_main_trials(pool, 4, "random") == pool[:4]
     labels = sorted({t.robot_label for t in pool})
     for label in labels:
-        mine = sorted((models_disagree(t) for t in pool if t.robot_label == label), reverse=True)
-        taken = [models_disagree(t) for t in kept if t.robot_label == label]
+        mine = sorted((model_disagreement(t) for t in pool if t.robot_label == label), reverse=True)
+        taken = [model_disagreement(t) for t in kept if t.robot_label == label]
         assert taken == mine[:len(taken)]  # within a label, the most controversial first
     counts = [sum(t.robot_label == label for t in kept) for label in labels]
     assert max(counts) - min(counts) <= 1  # labels take turns
