@@ -14,7 +14,8 @@ CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
 # The paper's study as written (2 worlds x 10 trials, 1 attention check per world, 1 practice),
-# with a bank just large enough for one participant, so the small pipeline's data suffice.
+# with a bank just large enough for one participant, so the small pipeline's data suffice
+# (its main trials the first usable segments: the small data hold too few for 3 candidates each).
 BANK_TRIALS_PER_WORLD = 10
 
 
@@ -31,6 +32,7 @@ def browser_study(small_study: SmallStudy, tmp_path_factory) -> SmallStudy:
     shutil.copytree(small_study.data_dir, data_dir, ignore=shutil.ignore_patterns("trials"))
     study = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
     study["bank_trials_per_world"] = BANK_TRIALS_PER_WORLD
+    study["main_trial_selection"] = {"rule": "random", "candidates_per_trial": 1}
     (configs_dir / f"{BROWSER_STUDY}.yaml").write_text(yaml.safe_dump(study))
     config = load_yaml_model(configs_dir / f"{BROWSER_STUDY}.yaml", StudyConfig)
     build_trials(config, BROWSER_STUDY, data_dir)
