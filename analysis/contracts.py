@@ -80,7 +80,7 @@ def alignment_error(a: np.ndarray, b: np.ndarray, zero_speed: float = ZERO_SPEED
     b = np.asarray(b, dtype=np.float64)
     norm_a = np.hypot(a[..., 0], a[..., 1])
     norm_b = np.hypot(b[..., 0], b[..., 1])
-    defined = has_direction(a, zero_speed) & has_direction(b, zero_speed)
+    defined = (norm_a > zero_speed) & (norm_b > zero_speed)  # has_direction, norms reused
     dot = a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         cos = np.where(defined, dot / (norm_a * norm_b), 0.0)

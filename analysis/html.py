@@ -5,7 +5,6 @@ Both reports (analysis/report.py, app/interaction/report.py) render through
 """
 
 import base64
-import io
 import mimetypes
 from pathlib import Path
 
@@ -14,17 +13,11 @@ import jinja2
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 
 
-def figure_data_uri(figure) -> str:
-    """A PNG or SVG file (path), or a matplotlib figure (as PNG), as a `data:` URI."""
-    if isinstance(figure, (str, Path)):
-        path = Path(figure)
-        mime = mimetypes.types_map.get(path.suffix.lower(), "application/octet-stream")
-        data = path.read_bytes()
-    else:
-        buffer = io.BytesIO()
-        figure.savefig(buffer, format="png")
-        mime, data = "image/png", buffer.getvalue()
-    return f"data:{mime};base64,{base64.b64encode(data).decode()}"
+def figure_data_uri(figure: str | Path) -> str:
+    """A PNG or SVG file as a `data:` URI."""
+    path = Path(figure)
+    mime = mimetypes.types_map.get(path.suffix.lower(), "application/octet-stream")
+    return f"data:{mime};base64,{base64.b64encode(path.read_bytes()).decode()}"
 
 
 def render_page(template: str, filters: dict | None = None, **context) -> str:

@@ -407,7 +407,7 @@ def check_database(settings: "Settings", studies: list[str]) -> None:
     from app.study.bank_guard import BankChanged, check_bank_unchanged
     from app.study.db import create_tables, make_engine
     from app.study.migrate import SchemaError
-    from app.study.trials import TrialBank
+    from app.study.trials import TrialBank  # loading it also validates it before workers start
 
     engine = make_engine(settings.resolved_database_url())
     try:
@@ -456,7 +456,7 @@ cli.add_typer(db_cli, name="db")
 def db_upgrade() -> None:
     """Bring the database to this tomstudy's schema revision, keeping every row."""
     from app.study.db import make_engine
-    from app.study.migrate import SchemaError, upgrade
+    from app.study.migrate import SchemaError, upgrade, where
 
     engine = make_engine(get_settings().resolved_database_url())
     try:
@@ -465,7 +465,7 @@ def db_upgrade() -> None:
         fail(str(err))
     finally:
         engine.dispose()
-    for line in upgrade_lines(report, engine.url.render_as_string(hide_password=True)):
+    for line in upgrade_lines(report, where(engine)):
         typer.echo(line)
 
 

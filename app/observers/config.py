@@ -69,18 +69,6 @@ class ObserversConfig(StrictModel):
     coarse_noise: NoiseConfig
     precise_noise: NoiseConfig
 
-    def values(self) -> dict:
-        """The config as plain values (no sources), for output files."""
-        return _strip_sources(self.model_dump())
-
-
-def _strip_sources(node):
-    if isinstance(node, dict):
-        if set(node) == {"value", "source"}:
-            return node["value"]
-        return {key: _strip_sources(value) for key, value in node.items()}
-    return node
-
 
 def load_observers(path: Path) -> ObserversConfig:
     """Read an observers YAML file; ConfigError names the file and any bad key."""

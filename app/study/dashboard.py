@@ -22,7 +22,6 @@ from app.study.sessions import as_utc, session_status
 from app.study.state import progress_of
 from app.study.tables import Participant
 
-RULE_SETS = ("kept", "live")  # every exclusion rule / the same with `incomplete` waived
 FIELD_CODES = 3  # most common codes per model, as the report's figures
 
 
