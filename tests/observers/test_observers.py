@@ -314,17 +314,28 @@ def test_trial_contrast_counts_every_participant_who_saw_a_trial():
         assert len(rows) == 6
         assert rows["coarse_participants"].sum() == rows["precise_participants"].sum() == 6 * 5
     assert table[["coarse_diff", "precise_diff"]].notna().all().all()
-    assert np.allclose(table["contrast"], table["coarse_diff"] - table["precise_diff"])
+    first = table.iloc[0]
+    rows = frames["coarse"][frames["coarse"]["trial_id"] == first["trial_id"]]
+    assert first["coarse_diff"] == pytest.approx((rows["err_ours"] - rows["err_vae"]).mean())
 
 
 def test_separation_says_where_models_and_observers_differ():
     gaps = separation(bank_with_examples(), seed=0).set_index(["world", "start_kind"])
     for world in ("highway", "obstacle"):
         kinds = gaps.loc[world]
-        assert kinds.loc["all", "n_starts"] == kinds.drop(index="all")["n_starts"].sum()
-        assert kinds[["ours_vs_vae", "coarse_vs_precise"]].stack().between(0, 2).all()
-        # each observer's err_ours - err_vae is a difference of two errors in [0, 2]
-        assert kinds[["coarse_diff", "precise_diff"]].stack().between(-2, 2).all()
+        parts = kinds.drop(index="all")
+        assert kinds.loc["all", "n_starts"] == parts["n_starts"].sum()
+        for col in ("ours_vs_vae", "coarse_vs_precise", "coarse_diff", "precise_diff"):
+            weighted = (parts[col] * parts["n_starts"]).sum() / parts["n_starts"].sum()
+            assert kinds.loc["all", col] == pytest.approx(weighted)
+        assert (kinds["ours_vs_vae"] > 0).all()  # the fixture's VAE drifts off Ours' answer
+    # where the two models answer alike, no observer can favour either
+    same = bank_with_examples()
+    for world in same["worlds"].values():
+        for trial in world["trials"]:
+            trial["predictions"]["vae"]["actions"] = trial["predictions"]["ours"]["actions"]
+    alike = separation(same, seed=0)
+    assert np.allclose(alike[["ours_vs_vae", "coarse_diff", "precise_diff"]], 0.0)
 
 
 def test_instrument_command_prints_the_table(tmp_path, monkeypatch):
