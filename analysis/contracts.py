@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 # Export contract, in order. Types: the reader casts to these, so CSV and DB agree.
 STRING_COLUMNS = ("study_id", "participant_id", "recruitment", "outcome", "world",
-                  "trial_id", "clip_sha256", "start_kind", "ours_sha256", "vae_sha256",
+                  "trial_id", "arm", "clip_sha256", "start_kind", "ours_sha256", "vae_sha256",
                   "submission_id", "submitted_at", "config_sha256", "bank_sha256")
 BOOL_COLUMNS = ("completed", "attention_passed", "is_practice", "attention_check")
 INT_COLUMNS = ("world_position", "trial_index", "start_index", "step", "ours_code",
@@ -31,12 +31,14 @@ FLOAT_COLUMNS = ("start_x", "start_y", "human_x", "human_y", "click_x", "click_y
 EXPORT_COLUMNS = (
     "study_id", "participant_id", "recruitment", "completed", "outcome",
     "attention_passed", "world", "world_position", "trial_id", "trial_index", "is_practice",
-    "attention_check", "clip_sha256", "start_index", "start_kind", "step", "start_x",
+    "attention_check", "arm", "clip_sha256", "start_index", "start_kind", "step", "start_x",
     "start_y", "human_x", "human_y", "click_x", "click_y", "human_vx", "human_vy", "ours_vx",
     "ours_vy", "vae_vx", "vae_vy", "cv_vx", "cv_vy", "policy_vx", "policy_vy", "ours_code",
     "vae_code", "ours_sha256", "vae_sha256", "click_time_ms", "trial_duration_ms", "replays",
     "submission_id", "submitted_at", "config_sha256", "bank_sha256",
 )
+# columns added after the first export, with the value an older export's rows read as
+ADDED_COLUMNS = {"arm": ""}
 SORT_KEYS = ["participant_id", "trial_index", "trial_id", "start_index", "step"]
 
 # Every export except predictions (whose rows carry each model's hash already) names

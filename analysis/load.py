@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.contracts import (
+    ADDED_COLUMNS,
     BOOL_COLUMNS,
     EXPORT_COLUMNS,
     FLOAT_COLUMNS,
@@ -41,7 +42,9 @@ def _as_bool(values: pd.Series) -> pd.Series:
 
 
 def normalise(frame: pd.DataFrame) -> pd.DataFrame:
-    """Cast the export columns to fixed dtypes and sort; extra columns are dropped."""
+    """Cast the export columns to fixed dtypes and sort; extra columns are dropped, and
+    columns newer than the export (ADDED_COLUMNS) get the value older rows read as."""
+    frame = frame.assign(**{c: v for c, v in ADDED_COLUMNS.items() if c not in frame.columns})
     missing = [c for c in EXPORT_COLUMNS if c not in frame.columns]
     if missing:
         raise DataError(f"missing columns: {', '.join(missing)}")

@@ -66,7 +66,7 @@ def trial_rows(participant: str, world_position: int, trial_index: int, payload:
         "participant_id": np.full(k * n, participant),
         "world": np.full(k * n, payload["world"]),
         "world_position": np.full(k * n, world_position),
-        "trial_id": np.full(k * n, trial["trial_id"]),
+        "trial_id": np.full(k * n, trial["trial_id"]), "arm": np.full(k * n, trial.get("arm", "")),
         "trial_index": np.full(k * n, trial_index), "start_index": np.repeat(np.arange(k), n),
         "start_kind": np.repeat([s["start_kind"] for s in trial["start_states"]], n),
         "step": np.tile(np.arange(n), k), "start_x": np.repeat(starts[:, 0], n),

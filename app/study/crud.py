@@ -254,7 +254,7 @@ def trial_response(ctx: StudyContext, participant: Participant, step: TrialStep,
         "is_practice": step.phase == Phase.PRACTICE, "attention_check": step.attention_check,
         "attention_ok": attention_ok, "shown_at_ms": body.shown_at_ms,
         "submitted_at_ms": body.submitted_at_ms, "replays": body.replays,
-        "clip_sha256": trial.clip_sha256, "received_at": utcnow(),
+        "clip_sha256": trial.clip_sha256, "arm": trial.arm, "received_at": utcnow(),
         "history": [entry.model_dump() for entry in body.history],
         **trial_durations(ctx, participant, body),
     }

@@ -65,7 +65,7 @@ def predictions_frame(db: Session, study_id: str) -> pd.DataFrame:
                part.c.completed, part.c.outcome,
                (part.c.attention_failed == 0).label("attention_passed"), trial.c.world,
                trial.c.world_position, trial.c.trial_index, trial.c.is_practice,
-               trial.c.attention_check, trial.c.clip_sha256,
+               trial.c.attention_check, trial.c.arm, trial.c.clip_sha256,
                trial.c.duration_ms.label("trial_duration_ms"), trial.c.replays,
                trial.c.received_at.label("submitted_at"), part.c.config_sha256,
                part.c.bank_sha256, *[pred.c[c] for c in _FROM_ROWS])

@@ -134,6 +134,7 @@ class TrialResponse(SQLModel, table=True):
     server_duration_ms: float  # from the server's receipt of the previous step
     replays: int
     clip_sha256: str = Field(max_length=64)
+    arm: str = Field(default="", max_length=16, sa_column_kwargs=_EMPTY)  # TrialRecord.arm
     # the participant's undo and reset presses on this trial, in order (HistoryEntry)
     history: list = Field(default_factory=list,
                           sa_column=Column(JSON, server_default=text("'[]'")))

@@ -66,6 +66,7 @@ class TrialRecord(StrictModel):
     trial_id: str
     world: str
     kind: str  # main, practice or attention
+    arm: str = ""  # main trials: how they were chosen, random or models_disagree
     source_index: int
     segment_start: int
     robot_label: int

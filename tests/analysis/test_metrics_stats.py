@@ -107,3 +107,11 @@ def test_csv_round_trip_is_identical(tmp_path):
     frame.to_csv(tmp_path / "export.csv", index=False)
     back = load_csv(tmp_path / "export.csv")
     assert back.equals(frame)
+
+
+def test_an_export_older_than_the_arm_column_reads_with_an_empty_arm(tmp_path):
+    frame = fixed_predictions()
+    frame.drop(columns="arm").to_csv(tmp_path / "old.csv", index=False)
+    back = load_csv(tmp_path / "old.csv")
+    assert (back["arm"] == "").all()
+    assert back.drop(columns="arm").equals(frame.drop(columns="arm"))
