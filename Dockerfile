@@ -18,10 +18,11 @@
 # DATABASE_URL (psycopg 3), e.g. a line
 # DATABASE_URL=postgresql+psycopg://tomstudy:<password>@db-host:5432/tomstudy in the env
 # file, it can run several workers: append `--workers 4` to the run command (arguments are
-# serve options, see app/study/entrypoint.sh). On first start, when var/ holds no trial bank,
-# the entrypoint builds the paper's study (simulate, train, build-trials; minutes, see the
-# README) before serving; or copy an existing var/ in. HEALTHCHECK asks /healthz, which
-# checks the database; its start period covers that first build.
+# serve options, see app/study/entrypoint.sh). The paper's study is served from the frozen
+# bundle in study_configs/bundles/ (copied in below), so the first start trains nothing; a
+# study of your own with `bundle: built` is built into var/ on its first start (minutes, see
+# the README). HEALTHCHECK asks /healthz, which checks the database; its start period covers
+# such a first build.
 FROM python:3.11-slim
 
 ENV PYTHONDONTWRITEBYTECODE=1 \

@@ -168,6 +168,31 @@ def plot_power(curve: pd.DataFrame, alpha: float, preset: str, base: Path) -> li
     return save(fig, base)
 
 
+def plot_grid_pass_rates(summary: pd.DataFrame, target: float, base: Path) -> list[Path]:
+    """Per world, the instrument check's pass rate at each click-noise level, one line per seed
+    pair (absolute lane reading): where the study can tell the observers apart, and how far
+    that depends on the training run and on how precisely people click."""
+    rows = summary[summary["reading"] == "absolute"]
+    levels = list(dict.fromkeys(rows["noise"]))  # in the order they were run
+    worlds = sorted(rows["world"].unique())
+    fig, axes = plt.subplots(1, len(worlds), figsize=(4.8 * len(worlds), 3.6), squeeze=False)
+    for ax, world in zip(axes[0], worlds, strict=True):
+        for pair, group in rows[rows["world"] == world].groupby("pair"):
+            rates = group.set_index("noise")["pass_rate"].reindex(levels)
+            ax.plot(range(len(levels)), rates.to_numpy(), marker="o", lw=1.2,
+                    label=f"seed pair {pair}")
+        ax.axhline(target, color="grey", lw=0.8, ls="--")
+        ax.set_xticks(range(len(levels)), levels, rotation=30, ha="right", fontsize=8)
+        ax.set_ylim(-0.03, 1.03)
+        ax.set_xlabel("click direction noise")
+        ax.set_ylabel("pass rate (share of reruns)")
+        ax.set_title(f"{world}: coarse vs precise told apart", fontsize=9)
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return save(fig, base)
+
+
 def plot_trial_contrast(by_trial: pd.DataFrame, base: Path) -> list[Path]:
     """Per world, each main trial's err_ours - err_vae for the precise (x) and the coarse (y)
     population: below the diagonal the coarse observers favour Ours more, as the check asks."""

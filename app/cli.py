@@ -13,6 +13,8 @@ if TYPE_CHECKING:
     from analysis.report import StudyInputs
     from app.observers.config import ObserversConfig
     from app.settings import Settings
+    from app.study.bundle import Bundle
+    from app.study.context import StudyContext
     from app.study.migrate import UpgradeReport
 
 cli = typer.Typer(add_completion=False, no_args_is_help=True,
@@ -74,13 +76,13 @@ def train(
     seed: Annotated[int, typer.Option(min=0)] = 0,
     config: Annotated[Path | None, typer.Option(help="training YAML (default: study_configs)")]
     = None,
-    out: Annotated[Path | None, typer.Option(help="default var/models/<world>/<model>/")]
+    out: Annotated[Path | None, typer.Option(help="default var/models/<world>/<model>/seed<k>/")]
     = None,
     if_missing: Annotated[bool, typer.Option("--if-missing", help="skip if checkpoint exists")]
     = False,
     ours_checkpoint: Annotated[Path | None, typer.Option(
         help="VAE: the Ours checkpoint whose used codes set the k-means k "
-             "(default var/models/<world>/ours/checkpoint.pt)")] = None,
+             "(default var/models/<world>/ours/seed<k>/checkpoint.pt)")] = None,
 ) -> None:
     """Train Ours (FSQ autoencoder) or the VAE; writes checkpoint.pt, metrics.json, loss.png."""
     from app.layout import CHECKPOINT_FILE
@@ -91,7 +93,7 @@ def train(
     if model not in MODELS:
         fail(f"--model: unknown model {model!r}; choose one of {', '.join(MODELS)}")
     layout = get_settings().layout
-    target = (out or layout.model_dir(world, model)) / CHECKPOINT_FILE
+    target = (out or layout.model_dir(world, model, seed)) / CHECKPOINT_FILE
     if if_missing and target.exists():
         typer.echo(f"{target} exists; skipping")
         return
@@ -177,7 +179,7 @@ def pilot(
 
     if preset not in PRESETS:
         fail(f"kind: unknown bot kind {preset!r}; choose one of {', '.join(PRESETS)}")
-    bank = bank or get_settings().layout.bank(study)
+    bank = bank or served_bank(study)
     if preset == "precise" and not bank.is_file():
         fail(f"bank: {bank} not found (precise bots read the policy's moves from it)")
     failed = run_pilot(url, study, preset, n, concurrency, seed, bank)
@@ -213,15 +215,16 @@ def analyze(
 def analysis_inputs(study: str) -> "StudyInputs":
     """What `analyze` takes from the study config, as plain values and paths."""
     from analysis.report import StudyInputs
+    from app.study.bundle import checkpoint_file
     from app.study.config import load_study_config
 
     settings = get_settings()
     config = load_study_config(settings, study)
-    checkpoints = {f"{world}/{model}": settings.layout.resolve(path)
-                   for world, paths in config.models.items()
-                   for model, path in paths.model_dump().items()}
+    bundle = served_bundle(study)
+    checkpoints = {f"{world}/{model}": bundle.root / checkpoint_file(world, model, bundle.seeds[0])
+                   for world in config.worlds for model in ("ours", "vae")}
     return StudyInputs(config=config.model_dump(mode="json"), rules=config.exclusions,
-                       checkpoints=checkpoints, bank=settings.layout.bank(study))
+                       checkpoints=checkpoints, bank=bundle.root / "bank.json.gz")
 
 
 @cli.command()
@@ -251,16 +254,17 @@ def power(
     typer.echo(f"wrote {out}")
 
 
-def simulation_inputs(study: str, observers: Path | None
+def simulation_inputs(study: str, observers: Path | None, bank: Path | None = None
                       ) -> tuple[Path, "ObserversConfig", int]:
-    """(bank path, observers config, trials per world) for simulated participants of `study`."""
+    """(bank path, observers config, trials per world) for simulated participants of `study`
+    (its served bank unless `bank` names another)."""
     from app.observers.config import default_observers, load_observers
     from app.study.config import load_study_config
 
     settings = get_settings()
-    bank = settings.layout.bank(study)
-    if not bank.is_file():
-        fail(f"bank: {bank} not found; run `tomstudy build-trials --study {study}`")
+    if bank is not None and not bank.is_file():
+        fail(f"--bank: {bank} not found")
+    bank = bank or served_bank(study)
     try:
         config = load_observers(observers) if observers else default_observers(settings.configs_dir)
     except ConfigError as err:
@@ -278,7 +282,7 @@ def check_display_cmd(
     from app.study.display_check import check_display, format_table
 
     try:
-        result = check_display(get_settings().data_dir, study)
+        result = check_display(get_settings().data_dir, study, served_bank(study))
     except FileNotFoundError as err:
         fail(str(err))
     typer.echo(format_table(result))
@@ -295,6 +299,10 @@ def instrument(
     out: Annotated[Path | None, typer.Option(help="output folder")] = None,
     replications: Annotated[int, typer.Option(min=0, help="reruns with fresh simulated "
                                               "participants, for the pass rate")] = 50,
+    grid: Annotated[bool, typer.Option(help="also run every seed pair x click-noise level "
+                                       "(app/observers/instrument_grid.py)")] = True,
+    bank: Annotated[Path | None, typer.Option(help="a bank file (default: the bank of the "
+                                              "bundle the study is served from)")] = None,
 ) -> None:
     """Instrument check: can err_ours - err_vae tell coarse from precise simulated observers?
 
@@ -307,7 +315,7 @@ def instrument(
     """
     from app.observers.simulated_study import run_instrument
 
-    bank, config, trials = simulation_inputs(study, observers)
+    bank, config, trials = simulation_inputs(study, observers, bank)
     out = out or get_settings().layout.instrument_report(study)
     summary = run_instrument(bank, trials, out, n, seed, alpha, config, replications)
     typer.echo(f"{'world':<10}{'reading':<10}{'coarse':>9}{'precise':>9}{'t':>8}{'p':>10}"
@@ -321,9 +329,48 @@ def instrument(
                f"pass = Welch one-sided p < {alpha};\npass rate = share of {replications} "
                "reruns with fresh simulated participants that pass")
     echo_separation(summary["separation"])
+    if grid:
+        from app.observers.instrument_grid import run_instrument_grid
+
+        echo_grid(run_instrument_grid(bank, trials, out, config, n, seed, alpha, replications))
     typer.echo(f"wrote {out}")
     if not all(summary["passed"].values()):
         raise typer.Exit(1)
+
+
+def echo_grid(result: dict) -> None:
+    """Print the grid per world and noise level: each seed pair's pass rate and n for 80%
+    power, and which model each population favours on its own."""
+    import pandas as pd
+
+    cells = pd.DataFrame(result["cells"])
+    cells = cells[cells["reading"] == "absolute"]
+    alpha = result["alpha"]
+    typer.echo(f"\n{'world':<10}{'noise':<16}{'pass rate per seed pair':<32}{'n for 80%':<18}"
+               f"coarse favours   precise favours")
+    for (world, noise), group in cells.groupby(["world", "noise"], sort=False):
+        group = group.sort_values("pair")
+        rates = " ".join(f"{r:.2f}" for r in group["pass_rate"])
+        needed = " ".join("-" if pd.isna(v) else f"{v:.0f}" for v in group["n_for_power_0.8"])
+        typer.echo(f"{world:<10}{noise:<16}{rates:<32}{needed:<18}"
+                   f"{favours(group, 'coarse', alpha):<17}{favours(group, 'precise', alpha)}")
+    goal = result["goal"]
+    met = all(w["met"] for w in goal["worlds"].values())
+    shares = ", ".join(f"{world} {w['share_passing']:.0%}" for world, w in goal["worlds"].items())
+    typer.echo(f"pass rate = share of {result['replications']} reruns where Welch p < {alpha}; "
+               f"n for 80% = participants per population for 80% power at the observed effect;"
+               f"\nfavours = seed pairs whose population alone prefers Ours / the VAE / neither "
+               f"(p < {alpha}, first run)\ngoal (pass rate >= {goal['pass_rate']} for >= "
+               f"{goal['share_of_pairs']:.0%} of seed pairs in every world, at noise "
+               f"{goal['noise']}): {'met' if met else 'NOT met'} ({shares})")
+
+
+def favours(group, population: str, alpha: float) -> str:
+    """'Ours/VAE/neither' counts of seed pairs by a population's own Ours-vs-VAE test."""
+    significant = group[f"{population}_own_p"] < alpha
+    ours = int((significant & (group[f"{population}_mean_diff"] < 0)).sum())
+    vae = int((significant & (group[f"{population}_mean_diff"] > 0)).sum())
+    return f"{ours}/{vae}/{len(group) - ours - vae}"
 
 
 def pass_rate(rate: float | None) -> str:
@@ -342,6 +389,136 @@ def echo_separation(rows: list[dict]) -> None:
     typer.echo("ours-vae / obs gap = mean 1-cos between the two models' answers / the two "
                "observers' clicks\nat the same start states; coarse/precise = each observer's "
                "err_ours - err_vae there")
+
+
+def served_bundle(study: str) -> "Bundle":
+    """The bundle `study` is served from (every file checked); exit 2 if it cannot be."""
+    from app.study.bundle import BundleError, load_bundle
+    from app.study.config import load_study_config
+
+    settings = get_settings()
+    try:
+        return load_bundle(load_study_config(settings, study), study, settings.configs_dir,
+                           settings.data_dir)
+    except BundleError as err:
+        fail(str(err))
+
+
+def served_bank(study: str) -> Path:
+    """The trial bank file of the bundle `study` is served from."""
+    from app.study.bundle import BANK
+
+    return served_bundle(study).root / BANK
+
+
+bundle_cli = typer.Typer(no_args_is_help=True,
+                         help="A study's frozen bundle: its bank, checkpoints and configs.")
+cli.add_typer(bundle_cli, name="bundle")
+
+
+@bundle_cli.command("build")
+def bundle_build(
+    study: Annotated[str, typer.Option(help="study_configs/<study>.yaml")] = "paper_study",
+    workers: Annotated[int, typer.Option(min=1, help="training processes")] = 2,
+    replace_shipped: Annotated[bool, typer.Option(
+        "--replace-shipped", help="then copy it over the bundle that ships in the configs "
+        "dir (maintainers: commit it with the numbers it changes)")] = False,
+    replications: Annotated[int, typer.Option(min=0, help="instrument reruns per bank when "
+                                              "comparing with the shipped bundle")] = 20,
+) -> None:
+    """Simulate, train every seed and build the bank where missing, freeze the bundle into
+    var/bundles/<study>/, and report how it differs from the shipped one."""
+    import shutil
+
+    from app.study.bundle import BundleError, open_bundle, shipped_dir
+    from app.study.prepare import build_bundle
+
+    settings = get_settings()
+    try:
+        built = build_bundle(settings, study, workers, say=typer.echo)
+    except (FileNotFoundError, ValueError, BundleError) as err:
+        fail(str(err))
+    shipped = shipped_dir(settings.configs_dir, study)
+    if (shipped / "manifest.json").is_file():
+        try:
+            echo_bundle_diff(open_bundle(shipped), built, study, replications)
+        except BundleError as err:
+            typer.echo(f"the shipped bundle cannot be compared: {err}")
+    if replace_shipped:
+        shutil.rmtree(shipped, ignore_errors=True)
+        shutil.copytree(built.root, shipped)
+        open_bundle(shipped)
+        typer.echo(f"replaced {shipped}")
+
+
+def echo_bundle_diff(shipped: "Bundle", built: "Bundle", study: str, replications: int) -> None:
+    """Print how the built bundle differs from the shipped one, and both instrument verdicts."""
+    from app.study.bundle_diff import compare_bundles
+
+    diff = compare_bundles(shipped, built)
+    files = diff["files"]
+    typer.echo(f"\nagainst the shipped bundle {shipped.root}:\n"
+               f"content {'identical' if diff['content_same'] else 'differs'}; files: "
+               f"{len(files['same'])} same, {len(files['changed'])} changed, "
+               f"{len(files['only_old'])} only shipped, {len(files['only_new'])} only built")
+    same = sum(row["same"] for row in diff["checkpoints"])
+    typer.echo(f"checkpoints: {same} of {len(diff['checkpoints'])} identical")
+    for world, part in diff["worlds"].items():
+        typer.echo(f"{world}: {part['main_same_clip']} of {part['main_trials'][0]} shipped main "
+                   f"trials kept with the same clip; {part['trials_same_clip']} trials compared")
+        for row in part["answers"]:
+            typer.echo(f"  {row['model']:<5} seed {row['seed']}: largest angle "
+                       f"{row['max_degrees']:.3g} deg, {row['max_metres']:.3g} m per step, "
+                       f"{row['codes_differ']} of {row['trials']} codes differ")
+    echo_verdicts({"shipped": shipped, "built": built}, study, replications)
+
+
+def echo_verdicts(bundles: dict, study: str, replications: int) -> None:
+    """The instrument check's verdict and pass rate per world on each bundle's bank."""
+    from app.observers.simulated_study import run_instrument
+    from app.study.bundle import BANK
+
+    _, observers, trials = simulation_inputs(study, None)
+    out = get_settings().layout.instrument_report(study)
+    for name, bundle in bundles.items():
+        summary = run_instrument(bundle.root / BANK, trials, out / f"bundle-{name}",
+                                 observers=observers, replications=replications)
+        verdicts = ", ".join(f"{world} {'pass' if ok else 'FAIL'} (pass rate "
+                             f"{pass_rate(summary['pass_rate'][world]).strip()})"
+                             for world, ok in summary["passed"].items())
+        typer.echo(f"instrument on the {name} bank: {verdicts}")
+
+
+@bundle_cli.command("verify")
+def bundle_verify(
+    study: Annotated[str, typer.Option(help="study_configs/<study>.yaml")] = "paper_study",
+    bundle: Annotated[Path | None, typer.Option(help="a bundle folder (default: the one the "
+                                                "study is served from)")] = None,
+) -> None:
+    """Check every file against the manifest and recompute every stored model answer on this
+    machine; print the largest differences; exit 1 if any is beyond tolerance."""
+    from app.study.bundle import BundleError, open_bundle
+    from app.study.model_answers import ACTION_TOLERANCE_MPS, recompute
+
+    try:
+        opened = open_bundle(bundle) if bundle else served_bundle(study)
+    except BundleError as err:
+        fail(str(err))
+    files = opened.manifest["files"]
+    typer.echo(f"{opened.root}: {len(files)} files, {sum(f['bytes'] for f in files.values())} "
+               f"bytes, every SHA-256 as in the manifest; bank {opened.bank.sha256[:12]}")
+    _, checks = recompute(opened.bank, opened.model)
+    typer.echo(f"{'world':<10}{'model':<7}{'seed':>5}{'answers':>9}{'max m':>11}{'max deg':>10}"
+               f"{'codes':>7}  verdict")
+    for c in checks:
+        typer.echo(f"{c.world:<10}{c.model:<7}{c.seed:>5}{c.answers:>9}{c.max_metres:>11.2e}"
+                   f"{c.max_degrees:>10.2e}{len(c.codes_changed):>7}  "
+                   f"{'ok' if c.ok else 'MISMATCH'}")
+    typer.echo(f"max m = largest |stored - recomputed| action x dt (one step's position); codes "
+               f"= trials encoded to another code; ok = same checkpoint, same codes, actions "
+               f"within {ACTION_TOLERANCE_MPS} m/s")
+    if not all(c.ok for c in checks):
+        raise typer.Exit(1)
 
 
 @cli.command("build-trials")
@@ -385,14 +562,7 @@ def serve(
 
         for study_id in study.split(","):
             prepare_study(settings, study_id, say=typer.echo)
-    from app.study.prepare import missing_inputs
-
-    for study_id in study.split(","):
-        missing = missing_inputs(settings, study_id)
-        if missing:
-            fail(f"{study_id}: missing {', '.join(map(str, missing))}; run "
-                 f"`tomstudy serve --prepare` (or simulate, train and build-trials)")
-    check_database(settings, study.split(","))
+    check_database(settings, [loadable_study(settings, sid) for sid in study.split(",")])
     os.environ[STUDY_ENV] = study
     docs = "off in production" if settings.production else "/docs"
     typer.echo(f"serving http://{host}:{port}/s/{study.split(',')[0]}  "
@@ -401,21 +571,32 @@ def serve(
                 workers=workers, log_level="warning")
 
 
-def check_database(settings: "Settings", studies: list[str]) -> None:
+def loadable_study(settings: "Settings", study_id: str) -> "StudyContext":
+    """The study as a server loads it (bundle verified, answers recomputed); exit 2 if it
+    cannot be served, before any worker starts."""
+    from app.study.bundle import BundleError
+    from app.study.main import load_study
+    from app.study.model_answers import BankMismatch
+
+    try:
+        return load_study(settings, study_id)
+    except (BundleError, BankMismatch) as err:
+        fail(str(err))
+
+
+def check_database(settings: "Settings", studies: list["StudyContext"]) -> None:
     """Before any worker starts: make an empty database, and exit 2 on one that needs
     `tomstudy db upgrade` or whose sessions ran another trial bank (unless allowed)."""
     from app.study.bank_guard import BankChanged, check_bank_unchanged
     from app.study.db import create_tables, make_engine
     from app.study.migrate import SchemaError
-    from app.study.trials import TrialBank  # loading it also validates it before workers start
 
     engine = make_engine(settings.resolved_database_url())
     try:
         create_tables(engine)  # once, before workers race to create them
         if not settings.allow_bank_change:
-            for study_id in studies:
-                bank = TrialBank.load(settings.data_dir, study_id)
-                check_bank_unchanged(engine, study_id, bank.sha256)
+            for ctx in studies:
+                check_bank_unchanged(engine, ctx.study_id, ctx.bank.sha256)
     except (SchemaError, BankChanged) as err:
         fail(str(err))
     finally:

@@ -1,5 +1,6 @@
 """Atomic, reproducible file output shared by every pipeline step."""
 
+import gzip
 import hashlib
 import io
 import json
@@ -66,3 +67,15 @@ def sha256_file(path: Path) -> str:
 def sha256_bytes(data: bytes) -> str:
     """Hex SHA-256 of bytes."""
     return hashlib.sha256(data).hexdigest()
+
+
+def write_gzip(path: Path, data: bytes) -> None:
+    """Gzip `data` into `path` atomically and byte-reproducibly (no name, mtime 0)."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(gzip.compress(data, compresslevel=9, mtime=0))
+
+
+def read_bytes(path: Path) -> bytes:
+    """A file's bytes, gunzipped if its name ends in .gz."""
+    raw = Path(path).read_bytes()
+    return gzip.decompress(raw) if Path(path).suffix == ".gz" else raw

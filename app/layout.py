@@ -3,17 +3,19 @@
     <data dir>/                                   var/ unless TOMSTUDY_DATA_DIR moves it
       data/<world>/trajectories.npz, meta.json, trajectories.png        simulate
       policies/<policy>.zip, <policy>.meta.json                         simulate --policy sac
-      models/<world>/<model>/checkpoint.pt, metrics.json, loss.png      train
-      models/<world>/<model>/fields/                                    fields
+      models/<world>/<model>/seed<k>/checkpoint.pt, metrics.json, loss.png   train
+      models/<world>/<model>/seed<k>/fields/                            fields
       models/selection/<world>/, models/sweep/<world>/                  select, sweep
       models/interaction/<scenario>/                                    interaction
       trials/<study>/bank.json, meta.json                               build-trials
       trials/<study>/display_check.json                                 check-display
+      bundles/<study>/manifest.json, bank.json.gz, models/, configs/    bundle build
       reports/<study>/, power-<study>-<bots>/, instrument-<study>/      analyze, power, instrument
       reports/interaction/<scenario>/                                   interaction
       study.db, pilot_<bots>.db                                         serve, make pilot
 
-A study config names its checkpoints relative to the data dir (`resolve`).
+A study's model family (its config's `models.seeds`) lives at `checkpoint(world, model, seed)`;
+the bundle a study is served from is frozen from those files (app/study/bundle.py).
 """
 
 from dataclasses import dataclass
@@ -62,13 +64,13 @@ class Layout:
         return self.root / "policies" / f"{name}.meta.json"
 
     # -- train
-    def model_dir(self, world: str, model_name: str) -> Path:
-        """models/<world>/<model>/: checkpoint.pt, metrics.json, loss.png, fields/."""
-        return self.root / "models" / world / model_name
+    def model_dir(self, world: str, model_name: str, seed: int = 0) -> Path:
+        """models/<world>/<model>/seed<k>/: checkpoint.pt, metrics.json, loss.png, fields/."""
+        return self.root / "models" / world / model_name / f"seed{seed}"
 
-    def checkpoint(self, world: str, model_name: str) -> Path:
-        """models/<world>/<model>/checkpoint.pt."""
-        return self.model_dir(world, model_name) / CHECKPOINT_FILE
+    def checkpoint(self, world: str, model_name: str, seed: int = 0) -> Path:
+        """models/<world>/<model>/seed<k>/checkpoint.pt."""
+        return self.model_dir(world, model_name, seed) / CHECKPOINT_FILE
 
     def selection_dir(self, world: str) -> Path:
         """models/selection/<world>/: `tomstudy select` outputs."""
@@ -98,6 +100,11 @@ class Layout:
     def display_check(self, study_id: str) -> Path:
         """trials/<study>/display_check.json: `tomstudy check-display`."""
         return self.bank_dir(study_id) / "display_check.json"
+
+    # -- bundle build
+    def bundle_dir(self, study_id: str) -> Path:
+        """bundles/<study>/: the frozen bundle `tomstudy bundle build` makes."""
+        return self.root / "bundles" / study_id
 
     # -- reports
     def report_dir(self, study_id: str) -> Path:

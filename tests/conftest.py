@@ -21,17 +21,22 @@ ADMIN_TOKEN = "test-token"  # the researcher token of every test server and app
 TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")  # the installed CLI, for subprocesses
 
 # The paper's study, shrunk: the same trial shape (4 examples, 5-7 step segment, 5 start
-# states x 3 steps), fewer trials, so the whole pipeline runs in well under a minute.
+# states x 3 steps) and both selection arms, fewer trials and a family of two seeds, built into
+# its own bundle, so the whole pipeline runs in well under a minute.
+SMALL_SEEDS = [0, 1]
 SMALL_STUDY_OVERRIDES = {
     "trials_per_world": 3, "bank_trials_per_world": 5, "practice_trials": 1,
-    "in_progress_timeout_min": 90,
+    "in_progress_timeout_min": 90, "models": {"seeds": SMALL_SEEDS}, "bundle": "built",
+    "main_trial_selection": {"rule": "models_disagree", "candidates_per_trial": 2,
+                             "random_arm_trials": 2},
 }
 SMALL_TRAINING = {"max_epochs": 2, "patience_epochs": 2, "encoder_hidden": [32, 32],
                   "decoder_hidden": [32, 32], "windows_per_trajectory": 5,
                   "val_fraction": 0.15, "test_fraction": 0.45}
 SMALL_TRAJECTORIES = 70
 PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/study/trial_builder.py",
-                    "app/study/trials.py", "app/study/config.py", "study_configs"]
+                    "app/study/trials.py", "app/study/config.py", "app/study/bundle.py",
+                    "app/fileio.py", "study_configs"]
 
 
 @dataclass(frozen=True)
@@ -74,7 +79,8 @@ def write_small_configs(configs_dir: Path) -> None:
     """study_configs copy with a small study and a tiny training config."""
     import yaml
 
-    shutil.copytree(REPO / "study_configs", configs_dir, dirs_exist_ok=True)
+    shutil.copytree(REPO / "study_configs", configs_dir, dirs_exist_ok=True,
+                    ignore=shutil.ignore_patterns("bundles"))  # the small study builds its own
     study = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
     study.update(SMALL_STUDY_OVERRIDES)
     (configs_dir / f"{SMALL_STUDY}.yaml").write_text(yaml.safe_dump(study))
@@ -82,29 +88,37 @@ def write_small_configs(configs_dir: Path) -> None:
 
 
 def build_small_study(root: Path) -> SmallStudy:
-    """Simulate both worlds, train both models per world for 2 epochs, build the bank."""
-    from app.configio import load_yaml_model
+    """Simulate both worlds, train both models' seeds per world for 2 epochs, build the bank
+    and freeze the bundle."""
     from app.layout import Layout
     from app.learning.config import TrainConfig
-    from app.learning.train import train_world
-    from app.study.config import StudyConfig
-    from app.study.trial_builder import build_trials
+    from app.learning.family import train_family
     from app.worlds.simulate import simulate
 
     data_dir, configs_dir = root / "var", root / "configs"
-    layout = Layout(data_dir)
     write_small_configs(configs_dir)
-    config = load_yaml_model(configs_dir / f"{SMALL_STUDY}.yaml", StudyConfig)
-    for world in config.worlds:
+    for world in ("highway", "obstacle"):
         simulate(world, SMALL_TRAJECTORIES, 0, data_dir, configs_dir / "worlds" / f"{world}.yaml",
                  workers=2)
-        checkpoints = {name: layout.resolve(getattr(config.models[world], name))
-                       for name in ("ours", "vae")}
-        for name, checkpoint in checkpoints.items():
-            train_world(layout, world, name, 0, TrainConfig(**SMALL_TRAINING), checkpoint.parent,
-                        ours_checkpoint=checkpoints["ours"], progress=False)
-    build_trials(config, SMALL_STUDY, data_dir)
-    return SmallStudy(data_dir, configs_dir)
+    train_family(Layout(data_dir), ["highway", "obstacle"], SMALL_SEEDS,
+                 TrainConfig(**SMALL_TRAINING), workers=1, say=lambda _: None)
+    study = SmallStudy(data_dir, configs_dir)
+    build_bundle_of(study)
+    return study
+
+
+def build_bundle_of(study: SmallStudy) -> None:
+    """Build the study's bank from its data dir's checkpoints and freeze its bundle."""
+    from app.configio import load_yaml_model
+    from app.layout import Layout
+    from app.study.bundle import freeze
+    from app.study.config import StudyConfig
+    from app.study.trial_builder import build_trials
+
+    config = load_yaml_model(study.configs_dir / f"{study.study_id}.yaml", StudyConfig)
+    build_trials(config, study.study_id, study.data_dir)
+    freeze(config, study.study_id, study.configs_dir, study.data_dir,
+           Layout(study.data_dir).bundle_dir(study.study_id))
 
 
 @pytest.fixture(scope="session")

@@ -11,6 +11,7 @@ Ours quantises there with app.learning.fsq's functions, the ones training runs o
 """
 
 import hashlib
+import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from app.data.windows import segment_features
-from app.fileio import atomic_path
+from app.fileio import atomic_path, read_bytes
 from app.learning.fsq import codes_to_indices, indices_to_codes, mixed_radix_basis, quantize
 from app.learning.networks import Normaliser
 
@@ -210,8 +211,9 @@ def _read_payload(path: Path) -> dict:
 
     if not path.is_file():
         raise CheckpointError(f"{path}: checkpoint file not found")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
+    try:  # a bundle's checkpoints are gzipped (app/study/bundle.py)
+        source = io.BytesIO(read_bytes(path)) if path.suffix == ".gz" else path
+        payload = torch.load(source, map_location="cpu", weights_only=True)
     except Exception as err:  # torch raises many types for a damaged file
         raise CheckpointError(f"{path}: not a readable checkpoint "
                               f"({type(err).__name__}: {str(err).splitlines()[0][:120]})") from None

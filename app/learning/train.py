@@ -340,15 +340,16 @@ def train_world(layout: Layout, world: str, model_name: str, seed: int, cfg: Tra
     """The train stage: one model on the world's simulated trajectories, its meta.json stored as
     the checkpoint's data source (nothing that depends on where the data dir is).
 
-    Writes into out_dir (default: the layout's model dir). The VAE's k-means k is read from
-    `ours_checkpoint` (default: the layout's Ours checkpoint of the world). FileNotFoundError
-    names a missing input."""
+    Writes into out_dir (default: the layout's model dir of this seed). The VAE's k-means k is
+    read from `ours_checkpoint` (default: the layout's Ours checkpoint of the world and seed).
+    FileNotFoundError names a missing input."""
     trajs = simulated_trajectories(layout, world)
     meta_path = layout.trajectories_meta(world)
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
     clusters = None
     if model_name == "vae":
-        clusters = ours_code_count(ours_checkpoint or layout.checkpoint(world, "ours"), world)
-    out_dir = Path(out_dir) if out_dir else layout.model_dir(world, model_name)
+        clusters = ours_code_count(ours_checkpoint or layout.checkpoint(world, "ours", seed),
+                                   world)
+    out_dir = Path(out_dir) if out_dir else layout.model_dir(world, model_name, seed)
     return train_and_save(trajs, model_name, seed, cfg, out_dir, meta,
                           progress, clusters)

@@ -177,15 +177,23 @@ def walk(payload: dict, next_move) -> np.ndarray:
     return clicks
 
 
+def trial_reading(payload: dict, config: ObserversConfig,
+                  relative: bool) -> tuple[Intents, Reading]:
+    """The intents of a trial and the observer's posterior over them (no randomness: a simulated
+    study may compute it once per trial and pass it to `predict`)."""
+    intents = payload_intents(payload, config, relative)
+    return intents, read_intents(payload, intents, config)
+
+
 def predict_coarse(payload: dict, rng: np.random.Generator, config: ObserversConfig,
-                   relative: bool | None = None, noise: NoiseConfig | None = None) -> np.ndarray:
+                   relative: bool | None = None, noise: NoiseConfig | None = None,
+                   reading: tuple[Intents, Reading] | None = None) -> np.ndarray:
     """Clicks of the coarse observer: infer an intent, then move the way that intent moves."""
     if relative is None:
         relative = config.inference.lane_reading.value == "relative"
     noise = config.coarse_noise if noise is None else noise
-    intents = payload_intents(payload, config, relative)
-    intent = choose_intent(read_intents(payload, intents, config),
-                           config.inference.intent_choice.value, rng)
+    intents, posterior = reading or trial_reading(payload, config, relative)
+    intent = choose_intent(posterior, config.inference.intent_choice.value, rng)
     move = intents.course(intent, start_positions(payload), speed_factor(noise, rng))
 
     def next_move(i: int, k: int, position: np.ndarray) -> tuple[np.ndarray, float]:
@@ -219,18 +227,24 @@ def predict_random(payload: dict, rng: np.random.Generator) -> np.ndarray:
     return walk(payload, next_move)
 
 
+def reads_relative(preset: str, config: ObserversConfig) -> bool:
+    """Whether a coarse preset reads Highway lanes relative to the robot's."""
+    return preset == "coarse_relative" or config.inference.lane_reading.value == "relative"
+
+
 def predict(preset: str, payload: dict, rng: np.random.Generator,
             policy_actions: np.ndarray | None = None,
-            config: ObserversConfig | None = None) -> np.ndarray:
-    """Clicks [S, K, 2] of an observer `preset`; `precise` follows `policy_actions` [S, K, 2]."""
+            config: ObserversConfig | None = None,
+            reading: tuple[Intents, Reading] | None = None) -> np.ndarray:
+    """Clicks [S, K, 2] of an observer `preset`; `precise` follows `policy_actions` [S, K, 2];
+    a coarse preset may be given its `trial_reading` of the payload."""
     if preset not in PRESETS:
         raise ValueError(f"preset: unknown observer preset {preset!r}; "
                          f"choose one of {', '.join(PRESETS)}")
     config = config or default_observers()
-    if preset == "coarse":
-        return predict_coarse(payload, rng, config)
-    if preset == "coarse_relative":
-        return predict_coarse(payload, rng, config, relative=True)
+    if preset in ("coarse", "coarse_relative"):
+        return predict_coarse(payload, rng, config, reads_relative(preset, config),
+                              reading=reading)
     if preset == "precise":
         if policy_actions is None:
             raise ValueError(f"precise bot: no policy actions for trial {payload['trial_id']}")

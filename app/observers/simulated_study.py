@@ -16,6 +16,8 @@ relative lane reading (`coarse_relative`) as a sensitivity row.
 
 import json
 from collections import Counter
+from collections.abc import Iterator
+from dataclasses import dataclass
 from itertools import permutations
 from pathlib import Path
 
@@ -28,8 +30,8 @@ from analysis.contracts import EXPORT_COLUMNS, alignment_error
 from analysis.load import normalise
 from analysis.metrics import add_alignment_errors, participant_means
 from analysis.plots import plot_power, plot_trial_contrast
-from app.assignment import least_used, pick_trials
-from app.fileio import sha256_bytes, write_json
+from app.assignment import least_used, pick_by_arm
+from app.fileio import read_bytes, sha256_bytes, write_json
 from app.observers import inverse_planning
 from app.observers.config import ObserversConfig, default_observers
 
@@ -39,8 +41,8 @@ INSTRUMENT_ROWS = (("absolute", "coarse"), ("relative", "coarse_relative"))  # r
 
 
 def load_bank(path: Path) -> dict:
-    """The study's trial bank (var/trials/<study>/bank.json) as plain JSON."""
-    return json.loads(Path(path).read_text())
+    """A trial bank (a working bank.json, or a bundle's bank.json.gz) as plain JSON."""
+    return json.loads(read_bytes(path))
 
 
 def trial_payload(world_bank: dict, trial: dict, steps_to_predict: int) -> dict:
@@ -77,48 +79,84 @@ def trial_rows(participant: str, world_position: int, trial_index: int, payload:
         "click_time_ms": np.arange(1, k * n + 1) * SIMULATED_TRIAL_MS / (k * n),
         "clip_sha256": np.full(k * n, trial["clip_sha256"]),
     }
-    answers = {"ours": trial["predictions"]["ours"]["actions"],
-               "vae": trial["predictions"]["vae"]["actions"],
+    answers = {"ours": primary_answer(trial, "ours")["actions"],
+               "vae": primary_answer(trial, "vae")["actions"],
                "cv": trial["cv_actions"], "policy": trial["policy_actions"]}
     for model, actions in answers.items():
         actions = np.asarray(actions, dtype=np.float64)[:, :n]
         cols[f"{model}_vx"] = actions[..., 0].ravel()
         cols[f"{model}_vy"] = actions[..., 1].ravel()
     for model in ("ours", "vae"):
-        cols[f"{model}_code"] = np.full(k * n, trial["predictions"][model]["code"])
-        cols[f"{model}_sha256"] = np.full(k * n, trial["predictions"][model]["content_hash"])
+        cols[f"{model}_code"] = np.full(k * n, primary_answer(trial, model)["code"])
+        cols[f"{model}_sha256"] = np.full(k * n, primary_answer(trial, model)["content_hash"])
     return cols
+
+
+def primary_answer(trial: dict, model: str) -> dict:
+    """The primary seed's answer of `model` to a bank trial (what the server stores)."""
+    return trial["predictions"][model][0]
+
+
+@dataclass(frozen=True)
+class SimulatedTrial:
+    """One main trial a simulated participant answered."""
+
+    participant: int
+    world_position: int
+    trial_index: int
+    trial: dict  # the bank's trial
+    payload: dict  # what the server would send (trial_payload)
+    clicks: np.ndarray  # [K, n, 2] clicked positions
+
+
+def main_trials(bank: dict) -> dict[str, dict[str, tuple[dict, dict]]]:
+    """Per world, main trial id -> (trial, payload), in bank order."""
+    return {world: {t["trial_id"]: (t, trial_payload(bank["worlds"][world], t,
+                                                    bank["steps_to_predict"]))
+                    for t in bank["worlds"][world]["trials"] if t["kind"] == "main"}
+            for world in sorted(bank["worlds"])}
+
+
+def simulated_trials(bank: dict, preset: str, n: int, trials_per_world: int, seed: int = 0,
+                     show_progress: bool = True, observers: ObserversConfig | None = None
+                     ) -> Iterator[SimulatedTrial]:
+    """Every main trial `n` simulated participants of one observer preset answer, in order.
+
+    Trials are assigned as the server assigns them (least seen first within each selection
+    arm), so every trial is seen about equally often, as in the real study; world orders are
+    counterbalanced the same way (the server's `counterbalance_world_order: true`)."""
+    observers = observers or default_observers()
+    rng = np.random.default_rng(seed)
+    main = main_trials(bank)
+    relative = inverse_planning.reads_relative(preset, observers)
+    readings: dict[str, tuple] = {}  # trial id -> the preset's reading, which is deterministic
+    orders, order_use, exposure = list(permutations(main)), Counter(), Counter()
+    for p in tqdm(range(n), desc=f"{preset} participants", disable=not show_progress):
+        order = least_used(orders, order_use, 1, rng)[0]
+        order_use[order] += 1
+        for position, world in enumerate(order):
+            arms = [(tid, trial.get("arm", "")) for tid, (trial, _) in main[world].items()]
+            chosen = pick_by_arm(arms, exposure, trials_per_world, rng)
+            exposure.update(chosen)
+            for index, trial_id in enumerate(chosen):
+                trial, payload = main[world][trial_id]
+                if preset.startswith("coarse") and trial_id not in readings:
+                    readings[trial_id] = inverse_planning.trial_reading(payload, observers,
+                                                                        relative)
+                clicks = inverse_planning.predict(preset, payload, rng, trial["policy_actions"],
+                                                  observers, readings.get(trial_id))
+                yield SimulatedTrial(p, position, index, trial, payload, clicks)
 
 
 def simulate_participants(bank: dict, preset: str, n: int, trials_per_world: int, seed: int = 0,
                           show_progress: bool = True,
                           observers: ObserversConfig | None = None) -> pd.DataFrame:
-    """Rows of `n` simulated participants of one observer preset, in the export CSV's columns.
-
-    Trials are assigned as the server assigns them (least seen first), so every trial is seen
-    about equally often, as in the real study; world orders are counterbalanced the same way
-    (the server's `counterbalance_world_order: true`, as in the paper's study)."""
-    observers = observers or default_observers()
-    rng = np.random.default_rng(seed)
-    worlds = sorted(bank["worlds"])
-    # trial id -> (trial, payload) of every main trial, built once
-    main = {world: {t["trial_id"]: (t, trial_payload(bank["worlds"][world], t,
-                                                    bank["steps_to_predict"]))
-                    for t in bank["worlds"][world]["trials"] if t["kind"] == "main"}
-            for world in worlds}
-    orders, order_use, exposure = list(permutations(worlds)), Counter(), Counter()
-    parts: list[dict[str, np.ndarray]] = []
-    for p in tqdm(range(n), desc=f"{preset} participants", disable=not show_progress):
-        order = least_used(orders, order_use, 1, rng)[0]
-        order_use[order] += 1
-        for position, world in enumerate(order):
-            chosen = pick_trials(list(main[world]), exposure, trials_per_world, rng)
-            exposure.update(chosen)
-            for index, trial_id in enumerate(chosen):
-                trial, payload = main[world][trial_id]
-                clicks = inverse_planning.predict(preset, payload, rng, trial["policy_actions"],
-                                                  observers)
-                parts.append(trial_rows(f"sim-{p:05d}", position, index, payload, trial, clicks))
+    """Rows of `n` simulated participants of one observer preset, in the export CSV's columns
+    (`simulated_trials`)."""
+    parts = [trial_rows(f"sim-{s.participant:05d}", s.world_position, s.trial_index, s.payload,
+                        s.trial, s.clicks)
+             for s in simulated_trials(bank, preset, n, trials_per_world, seed, show_progress,
+                                       observers)]
     return export_frame(parts, bank["study_id"], preset)
 
 
@@ -199,7 +237,8 @@ def population_frames(bank: dict, n: int, trials_per_world: int, seed: int,
 
 def participant_diffs(frame: pd.DataFrame) -> pd.DataFrame:
     """Per participant and world: err_ours, err_vae and their difference."""
-    means = participant_means(frame)[["participant_id", "world", "err_ours", "err_vae"]]
+    means = participant_means(frame, ("ours", "vae"))[["participant_id", "world", "err_ours",
+                                                       "err_vae"]]
     return means.assign(diff=means["err_ours"] - means["err_vae"])
 
 
@@ -279,7 +318,7 @@ def start_state_answers(bank: dict, seed: int, observers: ObserversConfig) -> pd
                 preset, payload, np.random.default_rng(seed), trial["policy_actions"], observers)
                 for preset in ("coarse", "precise")}
             acts = {p: inverse_planning.clicks_to_actions(payload, c) for p, c in clicks.items()}
-            acts |= {m: np.asarray(trial["predictions"][m]["actions"], dtype=np.float64)
+            acts |= {m: np.asarray(primary_answer(trial, m)["actions"], dtype=np.float64)
                      for m in ("ours", "vae")}
             for k, state in enumerate(trial["start_states"]):
                 rows.append({"world": world, "start_kind": state["start_kind"],
@@ -320,7 +359,7 @@ def run_instrument(bank_path: Path, trials_per_world: int, out_dir: Path, n: int
     figure of where the contrast is."""
     observers = observers or default_observers()
     bank_path = Path(bank_path)
-    bank_bytes = bank_path.read_bytes()
+    bank_bytes = read_bytes(bank_path)  # the JSON, whose hash sessions record
     bank = json.loads(bank_bytes)
     frames = population_frames(bank, n, trials_per_world, seed, observers)
     table = welch_table(frames, alpha)

@@ -6,13 +6,16 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationError, model_validator
 
 from analysis.contracts import ExclusionRules
 from app.configio import ConfigError, StrictModel, load_yaml_model
 from app.settings import Settings
 
 WorldName = Literal["highway", "obstacle"]
+# where a study's frozen bundle is (app/study/bundle.py): `shipped` in the configs dir (in git,
+# served as it is), `built` in the data dir (made by `tomstudy bundle build`)
+BundleSource = Literal["shipped", "built"]
 
 
 class SegmentSteps(StrictModel):
@@ -156,33 +159,65 @@ class PredictionInput(StrictModel):
     min_step_fraction: float = Field(default=0.1, gt=0, lt=1)
 
 
-class ModelPaths(StrictModel):
-    """Checkpoint files of both models for one world, relative to the data dir."""
+class ModelFamily(StrictModel):
+    """Which training seeds of Ours and the VAE a study's bank answers with, per world.
 
-    ours: Path
-    vae: Path
+    Every seed is trained (in `tomstudy bundle build`, never at serve time) and every seed's
+    answers are stored in the bank, so results can be reported per seed and for the family.
+    `seeds[0]` is the primary seed: its answers fill the live export's ours_*/vae_* columns and
+    the dashboard. Seed k's VAE takes its k-means k from seed k's Ours. Checkpoints live at
+    app.layout's `checkpoint(world, model, seed)`.
+    """
+
+    seeds: list[int] = Field(default_factory=lambda: [0], min_length=1, max_length=32)
+
+    @model_validator(mode="after")
+    def _distinct(self) -> "ModelFamily":
+        if len(set(self.seeds)) != len(self.seeds) or min(self.seeds) < 0:
+            raise ValueError("seeds: must be distinct integers >= 0")
+        return self
+
+    @property
+    def primary(self) -> int:
+        """The seed whose answers the live export and the dashboard show."""
+        return self.seeds[0]
 
 
 class MainTrialSelection(StrictModel):
-    """Which held-out segments become main trials (app/study/trial_builder.py).
+    """Which held-out segments become main trials (app/study/trial_builder.py), in two arms.
 
-    `random`: the first usable segments, robot labels taking turns. `models_disagree`: build
-    `candidates_per_trial` x bank_trials_per_world usable segments the same way and keep, per
-    robot label, those where Ours' and the VAE's answers differ most (mean 1-cos over the start
-    states and steps): where the two models agree, no prediction can favour either (controversial
-    stimuli: Golan, Raju & Kriegeskorte 2020, PNAS 117:29330-29337). It reads the models'
-    answers only, never a participant's or a simulated observer's, and favours neither model.
+    `random`: every main trial is in the random arm: the first usable segments, robot labels
+    taking turns. `models_disagree`: the first `random_arm_trials` usable segments form the
+    random arm as above; for the rest (the `models_disagree` arm), build `candidates_per_trial`
+    times as many further usable segments and keep, per robot label, those where the two model
+    families disagree most: the mean 1-cos between every Ours seed's and every VAE seed's answers
+    over the start states and steps. Where the models agree no prediction can favour either
+    (controversial stimuli: Golan, Raju & Kriegeskorte 2020, PNAS 117:29330-29337). The rule
+    reads the models' answers only, averaged over seeds so no single training run decides, never
+    a participant's or a simulated observer's, and favours neither model. Each participant sees
+    both arms in proportion to their sizes (app/assignment.py `pick_by_arm`).
     """
 
     rule: Literal["random", "models_disagree"] = "random"
     candidates_per_trial: int = Field(default=1, ge=1, le=8)
+    random_arm_trials: int = Field(default=0, ge=0)
 
     @model_validator(mode="after")
     def _one_candidate_when_random(self) -> "MainTrialSelection":
         if self.rule == "random" and self.candidates_per_trial != 1:
             raise ValueError("candidates_per_trial: must be 1 with rule random "
                              "(it would only move the attention checks to other segments)")
+        if self.rule == "random" and self.random_arm_trials:
+            raise ValueError("random_arm_trials: only with rule models_disagree (with rule "
+                             "random every main trial is in the random arm)")
         return self
+
+    def arm_sizes(self, bank_trials: int) -> dict[str, int]:
+        """Main trials per arm in a world's bank of `bank_trials` main trials."""
+        if self.rule == "random":
+            return {"random": bank_trials}
+        return {"random": self.random_arm_trials,
+                "models_disagree": bank_trials - self.random_arm_trials}
 
 
 class StudyConfig(StrictModel):
@@ -210,23 +245,43 @@ class StudyConfig(StrictModel):
     target_sample_size: int = Field(ge=1)
     exclusions: ExclusionRules = ExclusionRules()
     in_progress_timeout_min: float = Field(default=90.0, gt=0)
-    models: dict[WorldName, ModelPaths]
+    models: ModelFamily = ModelFamily()
+    bundle: BundleSource = "built"
 
     @model_validator(mode="after")
     def _consistent(self) -> "StudyConfig":
-        missing = [w for w in self.worlds if w not in self.models]
-        if missing:
-            raise ValueError(f"models: no checkpoints for world(s) {', '.join(missing)}")
         if len(set(self.worlds)) != len(self.worlds):
             raise ValueError("worlds: each world may appear once")
         if self.bank_trials_per_world < self.trials_per_world:
             raise ValueError("bank_trials_per_world must be >= trials_per_world")
+        if self.main_trial_selection.random_arm_trials > self.bank_trials_per_world:
+            raise ValueError("main_trial_selection.random_arm_trials must be <= "
+                             "bank_trials_per_world")
         if self.attention_checks.min_passing_starts > self.start_states:
             raise ValueError("attention_checks.min_passing_starts must be <= start_states")
         keys = [q.key for q in self.survey]
         if len(set(keys)) != len(keys):
             raise ValueError("survey: question keys must be unique")
         return self
+
+
+# the study config's keys that shape the trial bank: a change to any of them rebuilds it
+BANK_DESIGN_KEYS = ("worlds", "examples_per_trial", "segment_steps", "start_states",
+                    "steps_to_predict", "practice_trials", "bank_trials_per_world", "bank_seed",
+                    "main_trial_selection", "prediction_input", "models")
+BANK_ATTENTION_KEYS = ("per_world", "candidate_max_angle_deg")  # the rest only score answers
+
+
+def bank_design(config: dict) -> dict | None:
+    """The bank-shaping part of a study config (validated, so defaults count), or None if the
+    config no longer validates."""
+    try:
+        valid = StudyConfig.model_validate(config).model_dump(mode="json")
+    except ValidationError:
+        return None
+    design = {key: valid[key] for key in BANK_DESIGN_KEYS}
+    return design | {"attention_checks": {k: valid["attention_checks"][k]
+                                          for k in BANK_ATTENTION_KEYS}}
 
 
 def config_sha256(config: StudyConfig) -> str:

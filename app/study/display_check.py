@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from app.data.trajectory import ROBOT, TrajectorySet
-from app.fileio import write_json
+from app.fileio import read_bytes, write_json
 from app.layout import Layout
 
 MOVING_M = 1e-3  # a step shorter than this has no direction
@@ -79,16 +79,16 @@ def world_figures(trajs: TrajectorySet, world_bank: dict) -> dict:
     }
 
 
-def check_display(data_dir: Path, study_id: str) -> dict:
-    """Figures for every world of the study's bank; also written to the bank folder."""
+def check_display(data_dir: Path, study_id: str, bank_path: Path) -> dict:
+    """Figures for every world of a study's bank (the one it is served from) on the data dir's
+    trajectories; also written to the data dir's trials/<study>/ folder."""
     layout = Layout(data_dir)
-    bank_path = layout.bank(study_id)
-    if not bank_path.is_file():
-        raise FileNotFoundError(f"{bank_path}: no trial bank; run `tomstudy build-trials "
-                                f"--study {study_id}`")
-    bank = json.loads(bank_path.read_text())
+    bank = json.loads(read_bytes(bank_path))
     result = {}
     for name, world_bank in sorted(bank["worlds"].items()):
+        if not layout.trajectories(name).is_file():
+            raise FileNotFoundError(f"{layout.trajectories(name)}: no trajectories; run "
+                                    f"`tomstudy simulate {name}` (the figures need the data)")
         trajs = TrajectorySet.load(layout.trajectories(name))
         result[name] = world_figures(trajs, world_bank)
     write_json(layout.display_check(study_id), result)

@@ -19,6 +19,7 @@ from app.settings import DEFAULT_ADMIN_TOKEN, REPO_ROOT, Settings, get_settings
 from app.study import health
 from app.study.balance import ensure_rows
 from app.study.bank_guard import check_bank_unchanged
+from app.study.bundle import load_bundle
 from app.study.config import StudyConfig, config_sha256, load_study_config
 from app.study.context import StudyContext
 from app.study.db import create_tables, make_engine
@@ -28,7 +29,6 @@ from app.study.model_answers import ModelAnswers
 from app.study.openapi import declare_error_responses
 from app.study.recruitment import preview_key
 from app.study.routes import dashboard, pages, participant, researcher
-from app.study.trials import TrialBank
 
 MAX_BODY_BYTES = 64 * 1024
 FRONTEND_DIR = REPO_ROOT / "frontend"
@@ -67,10 +67,11 @@ def weak_token_problem(token: str) -> str | None:
 
 
 def load_study(settings: Settings, study_id: str) -> StudyContext:
-    """Config, bank and both models of one study (the models verified against the bank)."""
+    """Config, bundle (bank and every checkpoint, verified against its manifest and each other)
+    of one study; BundleError or BankMismatch if it cannot be served as it is."""
     config = load_study_config(settings, study_id)
-    bank = TrialBank.load(settings.data_dir, study_id)
-    return StudyContext(study_id, config, bank, ModelAnswers(config, bank, settings.data_dir),
+    bundle = load_bundle(config, study_id, settings.configs_dir, settings.data_dir)
+    return StudyContext(study_id, config, bundle.bank, ModelAnswers(bundle),
                         config_sha256=config_sha256(config),
                         preview_key=preview_key(settings.admin_token, study_id),
                         trust_client_clock=settings.trust_client_clock)

@@ -15,7 +15,7 @@ from itertools import permutations
 import numpy as np
 from pydantic import field_validator
 
-from app.assignment import least_used, pick_trials
+from app.assignment import least_used, pick_by_arm
 from app.configio import StrictModel
 from app.study.config import StudyConfig
 from app.study.errors import Refused
@@ -152,9 +152,10 @@ def layout_plan(config: StudyConfig, bank: TrialBank, order: tuple[str, ...],
 
 def _world_block(config: StudyConfig, bank: TrialBank, world: str, exposure: dict[str, int],
                  rng: np.random.Generator) -> list[tuple[str, bool]]:
-    """One world's (trial id, is attention check): main trials shuffled, checks not first."""
-    main = [t.trial_id for t in bank.trials_of(world, "main")]
-    chosen = pick_trials(main, exposure, config.trials_per_world, rng)
+    """One world's (trial id, is attention check): main trials of every arm shuffled, checks not
+    first."""
+    main = [(t.trial_id, t.arm) for t in bank.trials_of(world, "main")]
+    chosen = pick_by_arm(main, exposure, config.trials_per_world, rng)
     checks = [t.trial_id for t in bank.trials_of(world, "attention")]
     block = [(tid, False) for tid in chosen]
     for tid in least_used(checks, exposure, config.attention_checks.per_world, rng):

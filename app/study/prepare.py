@@ -1,52 +1,62 @@
-"""Run whatever a study still lacks: simulate both worlds, train both models, build the bank.
+"""Run whatever a study still lacks, up to the frozen bundle it is served from.
 
-Each step is skipped when its output exists (and, for the bank, still matches the
-checkpoints it was built from), so `make serve` on a fresh clone does everything once
-and later starts in seconds. The steps are the ones `tomstudy simulate`, `train` and
-`build-trials` run (`simulate`, `train_world`, `build_trials`), so they write the same files.
+A `shipped` study (the paper's) is served from the bundle in the configs dir as it is: a fresh
+clone simulates and trains nothing. A `built` study's bundle is made once by `build_bundle`,
+the steps `tomstudy bundle build` runs: simulate both worlds, train every seed of both models
+(app/learning/family.py), build the bank and freeze it (app/study/bundle.py). Each step is
+skipped when its output exists (the bank also when it still matches its checkpoints), so an
+interrupted build resumes. A bundle that exists is served as it is: rebuilding is explicit.
 """
 
 import json
+import time
 from collections.abc import Callable
 from pathlib import Path
-
-from pydantic import ValidationError
 
 from app.fileio import sha256_file
 from app.layout import Layout
 from app.settings import Settings
-from app.study.config import StudyConfig, load_study_config
+from app.study.bundle import MANIFEST, Bundle, bundle_dir, freeze
+from app.study.config import StudyConfig, bank_design, load_study_config
 
 
-def prepare_study(settings: Settings, study_id: str, n_trajectories: int = 2000,
-                  seed: int = 0, say: Callable[[str], None] = print) -> Path:
-    """Simulate, train and build-trials as needed for `study_id`; returns the bank path."""
+def prepare_study(settings: Settings, study_id: str, workers: int = 2,
+                  say: Callable[[str], None] = print) -> Path:
+    """The folder of the bundle `study_id` is served from, built first if it is a missing
+    `built` one."""
+    config = load_study_config(settings, study_id)
+    root = bundle_dir(config, study_id, settings.configs_dir, settings.data_dir)
+    if config.bundle == "shipped" or (root / MANIFEST).is_file():
+        say(f"serving the {config.bundle} bundle {root}")
+        return root
+    return build_bundle(settings, study_id, workers, say=say).root
+
+
+def build_bundle(settings: Settings, study_id: str, workers: int = 2, n_trajectories: int = 2000,
+                 seed: int = 0, say: Callable[[str], None] = print) -> Bundle:
+    """Simulate, train the model family and build the bank where missing or stale, then freeze
+    the bundle into the data dir's bundles/<study>/ (never into the configs dir)."""
+    from app.learning.config import load_train_config
+    from app.learning.family import train_family
+
+    started = time.perf_counter()
     config = load_study_config(settings, study_id)
     layout = settings.layout
     for world in config.worlds:
         ensure_trajectories(layout, world, n_trajectories, seed, say)
-        ours = layout.resolve(config.models[world].ours)
-        ensure_checkpoint(layout, world, "ours", ours, seed, say)
-        ensure_checkpoint(layout, world, "vae", layout.resolve(config.models[world].vae), seed,
-                          say, ours_checkpoint=ours)
-    bank = layout.bank(study_id)
-    if bank_is_current(bank, config):
-        say(f"{bank} is up to date; skipping build-trials")
-        return bank
-    from app.study.trial_builder import build_trials
+    train_family(layout, config.worlds, config.models.seeds, load_train_config(), workers, say)
+    if bank_is_current(layout, study_id, config):
+        say(f"{layout.bank(study_id)} is up to date; skipping build-trials")
+    else:
+        from app.study.trial_builder import build_trials
 
-    say(f"building the trial bank of {study_id}")
-    return build_trials(config, study_id, layout.root)
-
-
-def missing_inputs(settings: Settings, study_id: str) -> list[Path]:
-    """The files a server of `study_id` needs that do not exist (config errors raise)."""
-    config = load_study_config(settings, study_id)
-    layout = settings.layout
-    needed = [layout.bank(study_id)]
-    needed += [layout.resolve(getattr(config.models[w], model_name))
-               for w in config.worlds for model_name in ("ours", "vae")]
-    return [path for path in needed if not path.is_file()]
+        say(f"building the trial bank of {study_id}")
+        build_trials(config, study_id, layout.root)
+    out = layout.bundle_dir(study_id)
+    bundle = freeze(config, study_id, settings.configs_dir, layout.root, out,
+                    round(time.perf_counter() - started, 1))
+    say(f"froze {out} ({len(bundle.manifest['files'])} files)")
+    return bundle
 
 
 def ensure_trajectories(layout: Layout, world: str, n: int, seed: int, say) -> None:
@@ -61,46 +71,10 @@ def ensure_trajectories(layout: Layout, world: str, n: int, seed: int, say) -> N
     simulate(world, n, seed, layout.root)
 
 
-def ensure_checkpoint(layout: Layout, world: str, model_name: str, checkpoint: Path, seed: int,
-                      say, ours_checkpoint: Path | None = None) -> None:
-    """Train one model unless its checkpoint exists (written to checkpoint.parent; the VAE's
-    k-means k comes from `ours_checkpoint`)."""
-    if checkpoint.is_file():
-        say(f"{checkpoint} exists; skipping train")
-        return
-    from app.learning.config import load_train_config
-    from app.learning.train import train_world
-
-    say(f"training {model_name} on {world}")
-    written = train_world(layout, world, model_name, seed, load_train_config(), checkpoint.parent,
-                          ours_checkpoint)
-    if written != checkpoint:
-        raise RuntimeError(f"training wrote {written}, the study config expects {checkpoint}")
-
-
-# the study config's keys that shape the trial bank: a change to any of them rebuilds it
-BANK_DESIGN_KEYS = ("worlds", "examples_per_trial", "segment_steps", "start_states",
-                    "steps_to_predict", "practice_trials", "bank_trials_per_world", "bank_seed",
-                    "main_trial_selection", "prediction_input", "models")
-BANK_ATTENTION_KEYS = ("per_world", "candidate_max_angle_deg")  # the rest only score answers
-
-
-def bank_design(config: dict) -> dict | None:
-    """The bank-shaping part of a study config (validated, so defaults count), or None if the
-    config no longer validates."""
-    try:
-        valid = StudyConfig.model_validate(config).model_dump(mode="json")
-    except ValidationError:
-        return None
-    design = {key: valid[key] for key in BANK_DESIGN_KEYS}
-    return design | {"attention_checks": {k: valid["attention_checks"][k]
-                                          for k in BANK_ATTENTION_KEYS}}
-
-
-def bank_is_current(bank: Path, config: StudyConfig) -> bool:
-    """True if the bank exists, was built with this config's bank design, and its checkpoints
-    and trajectories are unchanged."""
-    meta_path = bank.with_name("meta.json")
+def bank_is_current(layout: Layout, study_id: str, config: StudyConfig) -> bool:
+    """True if the study's working bank exists, was built with this config's bank design, and
+    its checkpoints and trajectories (named relative to the data dir) are unchanged."""
+    bank, meta_path = layout.bank(study_id), layout.bank_meta(study_id)
     if not bank.is_file() or not meta_path.is_file():
         return False
     meta = json.loads(meta_path.read_text())
@@ -111,6 +85,6 @@ def bank_is_current(bank: Path, config: StudyConfig) -> bool:
         inputs = [(world["trajectories"], world["trajectories_sha256"])]
         inputs += [(c["path"], c["file_sha256"]) for c in world["checkpoints"].values()]
         for path, digest in inputs:
-            if not Path(path).is_file() or sha256_file(Path(path)) != digest:
+            if not layout.resolve(path).is_file() or sha256_file(layout.resolve(path)) != digest:
                 return False
     return sha256_file(bank) == meta.get("bank_sha256")

@@ -1,13 +1,14 @@
 """`tomstudy build-trials`: held-out trajectories -> the study's trial bank (JSON + meta.json).
 
-Per world: the test split both checkpoints held out; segments cut where the world says the
-robot's behaviour is still visible (`World.visible_ends`: before a Highway lane change
-completes, well before an Obstacle goal is reached); main trials kept by the config's
-`main_trial_selection` (the first usable ones, or those where the two models disagree
-most, robot labels taking turns); `start_states` start states on the
-data near the robot; both models, a constant-velocity baseline and the world's own policy
-(`World.robot_policy_actions`) answered for every start state. Everything is computed from
-the rounded numbers the participant is shown. Nothing here depends on which world it is.
+Per world: the test split every checkpoint held out (all seeds share the split); segments cut
+where the world says the robot's behaviour is still visible (`World.visible_ends`: before a
+Highway lane change completes, well before an Obstacle goal is reached); main trials kept by
+the config's `main_trial_selection` in two arms (the first usable ones; and of further ones,
+those where the Ours and VAE families disagree most, robot labels taking turns); `start_states`
+start states on the data near the robot; every seed of both models, a constant-velocity
+baseline and the world's own policy (`World.robot_policy_actions`) answered for every start
+state. Everything is computed from the rounded numbers the participant is shown. Nothing here
+depends on which world it is.
 
 Start states (K = the config's `start_states`, n = `steps_to_predict`, r = the reachable
 radius `max_step_m`). The first is the robot's own segment-end state (`own`). The other
@@ -67,11 +68,13 @@ class WorldInputs:
 
     world: World
     trajs: TrajectorySet
-    models: dict
+    models: dict[str, list]  # model name -> one TrainedModel per seed, the primary first
     held_out: np.ndarray
     trajectories_path: Path
     covered: np.ndarray  # robot positions [M, 2] start states are drawn from
     covered_trajectories: int
+    seeds: list[int]  # the model family's seeds, in the order of every models list
+    data_dir: Path  # meta.json names the inputs relative to it
 
 
 def build_trials(config: StudyConfig, study_id: str, data_dir: Path) -> Path:
@@ -96,7 +99,7 @@ def build_trials(config: StudyConfig, study_id: str, data_dir: Path) -> Path:
 
 
 def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
-    """The world, its trajectories, both checkpoints and the test split they share."""
+    """The world, its trajectories, every seed's checkpoints and the test split they share."""
     from app.learning.checkpoint import (
         CheckpointError,
         check_matches_data,
@@ -110,20 +113,21 @@ def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
         raise FileNotFoundError(f"{npz_path}: no trajectories; run `tomstudy simulate {name}`")
     trajs = TrajectorySet.load(npz_path)
     data_hash = trajectory_hash(trajs.positions, trajs.lengths, trajs.labels)
-    models, splits = {}, []  # test trajectory sets
-    for kind in ("ours", "vae"):
-        path = layout.resolve(getattr(config.models[name], kind))
+    models, splits = {"ours": [], "vae": []}, []  # test trajectory sets
+    for kind, seed in ((k, s) for k in models for s in config.models.seeds):
+        path = layout.checkpoint(name, kind, seed)
         model = load_model(path, world=name)
         check_matches_data(model, name, trajs.dt_s, data_hash)
         if model.n_actions != config.steps_to_predict:
             raise CheckpointError(f"{path}: predicts {model.n_actions} steps, the study asks "
                                   f"for {config.steps_to_predict}")
-        models[kind] = model
+        models[kind].append(model)
         splits.append(set(model.data_meta["split_trajectories"]["test"]))
     held_out = np.array(sorted(set.intersection(*splits)), dtype=np.int64)
     learned = np.setdiff1d(np.arange(len(trajs)), sorted(set.union(*splits)))
     return WorldInputs(build_world(name), trajs, models, held_out, npz_path,
-                       covered_states(trajs, learned), len(learned))
+                       covered_states(trajs, learned), len(learned), list(config.models.seeds),
+                       layout.root)
 
 
 def covered_states(trajs: TrajectorySet, index: np.ndarray) -> np.ndarray:
@@ -142,21 +146,21 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
     label_name = world.robot_label
     max_step = config.prediction_input.max_step_factor * robot_step_percentile(
         trajs, inputs.held_out)
-    need_segment = max(m.segment_len for m in inputs.models.values())
-    candidates = segment_candidates(config, world, trajs, inputs.held_out, need_segment, rng)
+    candidates = segment_candidates(config, world, trajs, inputs.held_out,
+                                    model_history(inputs), rng)
     selection = config.main_trial_selection
-    needed = (config.bank_trials_per_world * selection.candidates_per_trial
-              + config.practice_trials + config.attention_checks.per_world)
+    arms = selection.arm_sizes(config.bank_trials_per_world)
+    pool_size = arms["random"] + arms.get("models_disagree", 0) * selection.candidates_per_trial
+    needed = pool_size + config.practice_trials + config.attention_checks.per_world
     if len(candidates) < needed:
         raise ValueError(f"{world.name}: only {len(candidates)} held-out trajectories give a "
                          f"usable segment, the bank needs {needed}; simulate more")
     scene = trajs.scene.model_dump()
     practice, used = regular_trials(config, inputs, candidates, config.practice_trials,
                                     max_step, scene, rng)
-    pool, tried = regular_trials(config, inputs, candidates[used:],
-                                 config.bank_trials_per_world * selection.candidates_per_trial,
-                                 max_step, scene, rng)
-    main = select_main_trials(pool, config.bank_trials_per_world, selection.rule)
+    pool, tried = regular_trials(config, inputs, candidates[used:], pool_size, max_step, scene,
+                                 rng)
+    main = main_trials(pool, arms)
     used += tried
     checks, straightness = attention_trials(config, inputs, candidates[used:], max_step,
                                             scene, rng)
@@ -173,30 +177,50 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
                      trials=trials)
     meta = world_meta(inputs, trials, straightness)
     meta["segments_skipped_no_data_starts"] = used - len(practice) - len(pool)
-    meta["main_trial_selection"] = {
-        "rule": selection.rule, "candidates": len(pool),
-        "ours_vs_vae_candidates": round(float(np.mean([model_disagreement(t) for t in pool])), 4),
-        "ours_vs_vae_kept": round(float(np.mean([model_disagreement(t) for t in main])), 4)}
+    meta["main_trial_selection"] = selection_meta(selection.rule, arms, pool, main)
     return bank, meta
 
 
+def model_history(inputs: WorldInputs) -> int:
+    """Steps every model reads before a segment's end (the longest segment_len of them)."""
+    return max(m.segment_len for family in inputs.models.values() for m in family)
+
+
 def model_disagreement(trial: TrialRecord) -> float:
-    """Mean 1-cos between Ours' and the VAE's answers over a trial's start states and steps."""
-    return float(alignment_error(np.asarray(trial.predictions["ours"].actions),
-                                 np.asarray(trial.predictions["vae"].actions)).mean())
+    """Mean 1-cos between every Ours seed's and every VAE seed's answers, over the trial's start
+    states and steps: how far apart the two families are, not two checkpoints."""
+    return float(np.mean([alignment_error(np.asarray(ours.actions),
+                                          np.asarray(vae.actions)).mean()
+                          for ours in trial.predictions["ours"]
+                          for vae in trial.predictions["vae"]]))
 
 
-def select_main_trials(pool: list[TrialRecord], count: int, rule: str) -> list[TrialRecord]:
-    """`count` main trials of the pool: its first ones (`random`), or per robot label those
-    where the two models disagree most (`models_disagree`); robot labels take turns."""
-    if rule == "random":
-        return pool[:count]
+def main_trials(pool: list[TrialRecord], arms: dict[str, int]) -> list[TrialRecord]:
+    """The random arm (the pool's first trials), then the models_disagree arm: of the rest, per
+    robot label those where the families disagree most, robot labels taking turns."""
+    random_arm, rest = pool[: arms["random"]], pool[arms["random"]:]
     by_label: dict[int, list[TrialRecord]] = {}
-    for trial in pool:
+    for trial in rest:
         by_label.setdefault(trial.robot_label, []).append(trial)
     ranked = {label: sorted(trials, key=model_disagreement, reverse=True)
               for label, trials in by_label.items()}
-    return interleave(ranked)[:count]
+    disputed = interleave(ranked)[: arms.get("models_disagree", 0)]
+    return ([t.model_copy(update={"arm": "random"}) for t in random_arm]
+            + [t.model_copy(update={"arm": "models_disagree"}) for t in disputed])
+
+
+def selection_meta(rule: str, arms: dict[str, int], pool: list[TrialRecord],
+                   main: list[TrialRecord]) -> dict:
+    """meta.json's account of the main-trial selection: the arms, and the mean family
+    disagreement of each arm and of the candidates the models_disagree arm was chosen from."""
+    def mean_disagreement(trials: list[TrialRecord]) -> float | None:
+        return round(float(np.mean([model_disagreement(t) for t in trials])), 4) if trials \
+            else None
+
+    return {"rule": rule, "arms": arms, "candidates": len(pool) - arms["random"],
+            "ours_vs_vae_candidates": mean_disagreement(pool[arms["random"]:]),
+            **{f"ours_vs_vae_{arm}": mean_disagreement([t for t in main if t.arm == arm])
+               for arm in arms}}
 
 
 def regular_trials(config: StudyConfig, inputs: WorldInputs, candidates: list, count: int,
@@ -226,13 +250,18 @@ def world_meta(inputs: WorldInputs, trials: list[TrialRecord], straightness: dic
     """Input hashes and counts for meta.json."""
     labels = [t.robot_label for t in trials if t.kind == "main"]
     starts = [s.start_kind for t in trials if t.kind == "main" for s in t.start_states]
+    def relative(path: Path) -> str:
+        return Path(path).relative_to(inputs.data_dir).as_posix()
+
     return {
-        "trajectories": str(inputs.trajectories_path),
+        "trajectories": relative(inputs.trajectories_path),
         "trajectories_sha256": sha256_file(inputs.trajectories_path),
         "held_out_trajectories": len(inputs.held_out),
-        "checkpoints": {k: {"path": str(m.path), "content_hash": m.content_hash,
-                            "file_sha256": sha256_file(m.path)}
-                        for k, m in inputs.models.items()},
+        "checkpoints": {f"{kind}/seed{seed}": {"path": relative(m.path),
+                                               "content_hash": m.content_hash,
+                                               "file_sha256": sha256_file(m.path)}
+                        for kind, family in inputs.models.items()
+                        for seed, m in zip(inputs.seeds, family, strict=True)},
         "trials": {kind: sum(t.kind == kind for t in trials)
                    for kind in ("main", "practice", "attention")},
         "main_robot_labels": {str(v): labels.count(v) for v in sorted(set(labels))},
@@ -300,21 +329,16 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
     trajs = inputs.trajs
     label_name = inputs.world.robot_label
     shown = clip_of(trajs, src, start, end, label_name)
-    history = max(m.segment_len for m in inputs.models.values())
-    model_input = clip_of(trajs, src, end - history, end, label_name)
+    model_input = clip_of(trajs, src, end - model_history(inputs), end, label_name).positions
     segment = np.asarray(shown.positions)
     states = start_states(config, inputs, src, end, segment, max_step, rng, near)
     examples = [clip_of(trajs, e, 0, int(trajs.lengths[e]), label_name)
                 for e in pick_examples(trajs, inputs.held_out, src, label_name,
                                        config.examples_per_trial, rng)]
     joint = np.array([[s.robot, s.human] for s in states])
-    predictions = {}
-    for kind, model in inputs.models.items():
-        z, code, actions = model.trial(np.asarray(model_input.positions), joint)
-        predictions[kind] = ModelAnswer(z=[float(v) for v in z], code=int(code),
-                                        actions=np.round(actions, 5).tolist(),
-                                        content_hash=model.content_hash,
-                                        segment_positions=model_input.positions)
+    predictions = {kind: [model_answer(model, seed, model_input, joint)
+                          for seed, model in zip(inputs.seeds, family, strict=True)]
+                   for kind, family in inputs.models.items()}
     dt = trajs.dt_s
     cv = (segment[-1, ROBOT] - segment[-2, ROBOT]) / dt
     labels = {k: int(v[src]) for k, v in trajs.labels.items()}
@@ -325,12 +349,20 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
     record = TrialRecord(
         trial_id="", world=inputs.world.name, kind="", source_index=src, segment_start=start,
         robot_label=labels[label_name], examples=examples, segment=shown, start_states=states,
-        predictions=predictions,
+        model_input=model_input, predictions=predictions,
         cv_actions=np.round(np.broadcast_to(cv, (len(states), config.steps_to_predict, 2)),
                             5).tolist(),
         policy_actions=np.round(np.asarray(policy), 5).tolist(), clip_sha256="")
     return record.model_copy(update={"clip_sha256": clip_sha256(
         scene, dt, record.browser_payload())})
+
+
+def model_answer(model, seed: int, model_input: list, joint: np.ndarray) -> ModelAnswer:
+    """One checkpoint's answer to a trial: its latent, code and actions from every start state
+    (rounded as stored; app/study/model_answers.py recomputes them at start-up)."""
+    z, code, actions = model.trial(np.asarray(model_input), joint)
+    return ModelAnswer(seed=seed, z=[float(v) for v in z], code=int(code),
+                       actions=np.round(actions, 5).tolist(), content_hash=model.content_hash)
 
 
 def clip_of(trajs: TrajectorySet, i: int, start: int, end: int, label_name: str) -> Clip:

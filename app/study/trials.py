@@ -8,7 +8,10 @@ Shape legend per trial: E examples, L segment steps, K start states, n steps to 
 - examples[e].positions [len+1, 2, 2], segment.positions [L+1, 2, 2] (m; robot first)
 - start_states[k].robot / .human [2] (m); the human stays at its segment-end position;
   start_states[k].start_kind says where the robot start came from (`own` first)
-- predictions[model].actions, cv_actions, policy_actions [K, n, 2] (m/s)
+- model_input [T+1, 2, 2] (m): what every model read, the latest T steps ending at the
+  segment's end (T = the checkpoints' segment_len; it may reach back before the shown segment)
+- predictions[model][s].actions, cv_actions, policy_actions [K, n, 2] (m/s); predictions holds
+  one answer per seed of the study's model family, the primary seed first
 """
 
 import json
@@ -17,7 +20,7 @@ from functools import cached_property
 from pathlib import Path
 
 from app.configio import StrictModel
-from app.fileio import sha256_bytes
+from app.fileio import read_bytes, sha256_bytes
 from app.layout import Layout
 
 
@@ -47,13 +50,9 @@ class StartState(StrictModel):
 
 
 class ModelAnswer(StrictModel):
-    """One model's reading of the segment and its predicted actions [K, n, 2].
+    """One checkpoint's (model and seed) reading of the segment and its actions [K, n, 2]."""
 
-    `segment_positions` is what the model read: the latest `segment_len` steps ending at
-    the shown segment's end (it may reach back before the shown segment's start).
-    """
-
-    segment_positions: list[list[list[float]]]
+    seed: int
     z: list[float]
     code: int
     actions: list[list[list[float]]]
@@ -73,10 +72,15 @@ class TrialRecord(StrictModel):
     examples: list[Clip]
     segment: Clip
     start_states: list[StartState]
-    predictions: dict[str, ModelAnswer]
+    model_input: list[list[list[float]]]
+    predictions: dict[str, list[ModelAnswer]]  # model -> one answer per seed, primary first
     cv_actions: list[list[list[float]]]
     policy_actions: list[list[list[float]]]
     clip_sha256: str
+
+    def primary(self, model: str) -> ModelAnswer:
+        """The primary seed's answer of `model` (what the live export and dashboard show)."""
+        return self.predictions[model][0]
 
     def browser_payload(self) -> dict:
         """What the participant's browser needs to play and ask this trial."""
@@ -125,12 +129,18 @@ class TrialBank:
 
     @classmethod
     def load(cls, data_dir: Path, study_id: str) -> "TrialBank":
-        """Read the study's bank.json; FileNotFoundError says how to build it."""
+        """Read the study's working bank.json (trials/<study>/, what build-trials wrote; a
+        server reads its bundle's); FileNotFoundError says how to build it."""
         path = Layout(data_dir).bank(study_id)
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no trial bank; run `tomstudy build-trials "
                                     f"--study {study_id}`")
-        raw = path.read_bytes()
+        return cls.read(path)
+
+    @classmethod
+    def read(cls, path: Path) -> "TrialBank":
+        """A bank file (bank.json, or a bundle's bank.json.gz); its sha256 is of the JSON."""
+        raw = read_bytes(path)
         return cls(BankFile.model_validate_json(raw), sha256_bytes(raw))
 
     @cached_property

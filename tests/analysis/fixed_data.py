@@ -113,7 +113,8 @@ def toward_actions(scene: dict, starts: list, target, speed: float, steps: int =
 
 
 def small_bank(trials: int = 6, seed: int = 0) -> dict:
-    """A trial bank in bank.json's layout: Ours heads at the segment's target, the VAE drifts."""
+    """A trial bank in bank.json's layout, a family of two seeds per model: Ours heads at the
+    segment's target (seed 1 a little off it), the VAE drifts (each seed its own way)."""
     rng = np.random.default_rng(seed)
     worlds = {}
     for world, scene in (("highway", HIGHWAY_SCENE), ("obstacle", OBSTACLE_SCENE)):
@@ -132,16 +133,21 @@ def small_bank(trials: int = 6, seed: int = 0) -> dict:
                 starts = [[float(rng.uniform(2, 8)), float(rng.uniform(2, 8))] for _ in range(5)]
                 speed, code = 0.8, OBSTACLE_SCENE["goals"].index(goal)
             ours = toward_actions(scene, starts, target, speed)
-            drift = rng.normal(scale=1.2, size=(5, 3, 2)) * speed
-            vae = (np.asarray(ours) + drift).tolist()
+            family = {"ours": [ours, (np.asarray(ours) + rng.normal(scale=0.1, size=(5, 3, 2))
+                                      * speed).tolist()],
+                      "vae": [(np.asarray(ours) + rng.normal(scale=1.2, size=(5, 3, 2))
+                               * speed).tolist() for _ in range(2)]}
             records.append({
                 "trial_id": f"{world}-{t}", "kind": "main", "clip_sha256": f"clip{t}",
                 "segment": {"positions": segment, "headings": [[0.0, 0.0]] * len(segment)},
                 "start_states": [{"robot": s, "human": segment[-1][1], "robot_heading": 0.0,
                                   "human_heading": 0.0, "robot_speed": speed, "start_kind": kind}
                                  for s, kind in zip(starts, START_KINDS[world], strict=True)],
-                "predictions": {"ours": {"code": code, "actions": ours, "content_hash": "o1"},
-                                "vae": {"code": t % 3, "actions": vae, "content_hash": "v1"}},
+                "arm": ("random", "models_disagree")[t % 2],
+                "predictions": {model: [{"seed": s, "code": code if model == "ours" else t % 3,
+                                         "actions": actions, "content_hash": f"{model[0]}{s}"}
+                                        for s, actions in enumerate(answers)]
+                                for model, answers in family.items()},
                 "cv_actions": [[[speed, 0.0]] * 3] * 5, "policy_actions": ours,
             })
         worlds[world] = {"world": world, "dt_s": 0.5, "scene": scene,

@@ -7,7 +7,14 @@ from pathlib import Path
 import pytest
 import yaml
 
-from tests.conftest import REPO, SmallStudy, free_port, start_server
+from tests.conftest import (
+    REPO,
+    SMALL_SEEDS,
+    SmallStudy,
+    build_bundle_of,
+    free_port,
+    start_server,
+)
 
 BROWSER_STUDY = "browser_study"
 CHROMIUM = Path("/usr/bin/chromium")
@@ -22,21 +29,19 @@ BANK_TRIALS_PER_WORLD = 10
 @pytest.fixture(scope="session")
 def browser_study(small_study: SmallStudy, tmp_path_factory) -> SmallStudy:
     """A copy of the small study's data and configs with the paper's study and its own bank."""
-    from app.configio import load_yaml_model
-    from app.study.config import StudyConfig
-    from app.study.trial_builder import build_trials
-
     root = tmp_path_factory.mktemp("browser-study")
     data_dir, configs_dir = root / "var", root / "configs"
     shutil.copytree(small_study.configs_dir, configs_dir)
-    shutil.copytree(small_study.data_dir, data_dir, ignore=shutil.ignore_patterns("trials"))
+    shutil.copytree(small_study.data_dir, data_dir,
+                    ignore=shutil.ignore_patterns("trials", "bundles"))
     study = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
     study["bank_trials_per_world"] = BANK_TRIALS_PER_WORLD
     study["main_trial_selection"] = {"rule": "random", "candidates_per_trial": 1}
+    study |= {"models": {"seeds": SMALL_SEEDS}, "bundle": "built"}
     (configs_dir / f"{BROWSER_STUDY}.yaml").write_text(yaml.safe_dump(study))
-    config = load_yaml_model(configs_dir / f"{BROWSER_STUDY}.yaml", StudyConfig)
-    build_trials(config, BROWSER_STUDY, data_dir)
-    return SmallStudy(data_dir, configs_dir, BROWSER_STUDY)
+    browser = SmallStudy(data_dir, configs_dir, BROWSER_STUDY)
+    build_bundle_of(browser)
+    return browser
 
 
 @dataclass(frozen=True)

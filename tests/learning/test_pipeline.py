@@ -1,5 +1,5 @@
-"""The pipeline's learning stages: `tomstudy train` and `serve --prepare` give identical
-checkpoints; `tomstudy sweep` and `tomstudy select`."""
+"""The pipeline's learning stages: `tomstudy train` and the family training of a bundle build
+give identical checkpoints; `tomstudy sweep` and `tomstudy select`."""
 
 import json
 import shutil
@@ -12,8 +12,9 @@ from app.cli import cli
 from app.fileio import write_json
 from app.layout import Layout
 from app.learning.checkpoint import load_model
+from app.learning.config import TrainConfig
+from app.learning.family import train_family
 from app.settings import get_settings
-from app.study.prepare import ensure_checkpoint
 from tests.learning.synthetic import make_lane_trajs
 
 TINY = {"max_epochs": 2, "patience_epochs": 1, "windows_per_trajectory": 4,
@@ -37,30 +38,38 @@ def data_dir(tmp_path, monkeypatch):
     get_settings.cache_clear()
 
 
-def cli_train(model_name: str) -> None:
-    """`tomstudy train --world lanes --model <model_name>` with the tiny training.yaml."""
+def cli_train(model_name: str, seed: int = 0) -> None:
+    """`tomstudy train --world lanes --model <model_name> --seed <seed>` with the tiny
+    training.yaml."""
     config = get_settings().configs_dir / "training.yaml"
     result = CliRunner().invoke(cli, ["train", "--world", "lanes", "--model", model_name,
-                                      "--config", str(config)])
+                                      "--seed", str(seed), "--config", str(config)])
     assert result.exit_code == 0, result.output
 
 
-def test_train_and_prepare_write_the_same_checkpoints(data_dir, tmp_path):
-    for model_name in ("ours", "vae"):
-        cli_train(model_name)
-    moved = Layout(tmp_path / "elsewhere")  # prepare's step, in a copy of the data dir
+def test_train_and_the_family_build_write_the_same_checkpoints(data_dir, tmp_path):
+    for seed in (0, 1):
+        for model_name in ("ours", "vae"):
+            cli_train(model_name, seed)
+    moved = Layout(tmp_path / "elsewhere")  # the bundle build's step, in a copy of the data dir
     shutil.copytree(data_dir.world_data("lanes"), moved.world_data("lanes"))
-    ours = moved.checkpoint("lanes", "ours")
-    ensure_checkpoint(moved, "lanes", "ours", ours, 0, say=lambda _: None)
-    ensure_checkpoint(moved, "lanes", "vae", moved.checkpoint("lanes", "vae"), 0,
-                      say=lambda _: None, ours_checkpoint=ours)
-    for model_name in ("ours", "vae"):
-        by_cli = load_model(data_dir.checkpoint("lanes", model_name))
-        by_prepare = load_model(moved.checkpoint("lanes", model_name))
-        assert by_cli.content_hash == by_prepare.content_hash
-        assert by_cli.data_meta["source"] == {"world": "lanes", "seed": 1, "n": 60}
-    vae = load_model(data_dir.checkpoint("lanes", "vae"))
-    assert len(vae.kmeans_centres) == load_model(ours).codes["n_codes_used"]
+    said = []
+    ran = train_family(moved, ["lanes"], [0, 1], TrainConfig(**TINY), workers=2, say=said.append)
+    assert sorted(ran) == [("lanes", m, s) for m in ("ours", "vae") for s in (0, 1)]
+    for seed in (0, 1):
+        for model_name in ("ours", "vae"):
+            by_cli = load_model(data_dir.checkpoint("lanes", model_name, seed))
+            by_family = load_model(moved.checkpoint("lanes", model_name, seed))
+            assert by_cli.content_hash == by_family.content_hash
+            assert by_cli.data_meta["source"] == {"world": "lanes", "seed": 1, "n": 60}
+        vae = load_model(data_dir.checkpoint("lanes", "vae", seed))
+        ours = load_model(data_dir.checkpoint("lanes", "ours", seed))
+        assert len(vae.kmeans_centres) == ours.codes["n_codes_used"]
+    seeds = {load_model(data_dir.checkpoint("lanes", "ours", s)).content_hash for s in (0, 1)}
+    assert len(seeds) == 2  # two seeds, two networks
+    assert train_family(moved, ["lanes"], [0, 1], TrainConfig(**TINY), say=said.append) == []
+    assert said[-2:] == [f"training 0 {m} checkpoint(s) on 2 process(es); 2 already exist"
+                         for m in ("ours", "vae")]
 
 
 def test_the_vae_without_an_ours_checkpoint_is_a_clear_error(data_dir):

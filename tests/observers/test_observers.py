@@ -214,7 +214,7 @@ def test_observers_never_read_the_models_answers():
     rng = np.random.default_rng(5)
     for world in poisoned["worlds"].values():
         for trial in world["trials"]:
-            for answer in trial["predictions"].values():
+            for answer in (a for family in trial["predictions"].values() for a in family):
                 answer["actions"] = rng.normal(size=(5, 3, 2)).tolist()
                 answer["code"] = -1
             trial["cv_actions"] = rng.normal(size=(5, 3, 2)).tolist()
@@ -333,7 +333,7 @@ def test_separation_says_where_models_and_observers_differ():
     same = bank_with_examples()
     for world in same["worlds"].values():
         for trial in world["trials"]:
-            trial["predictions"]["vae"]["actions"] = trial["predictions"]["ours"]["actions"]
+            trial["predictions"]["vae"][0]["actions"] = trial["predictions"]["ours"][0]["actions"]
     alike = separation(same, seed=0)
     assert np.allclose(alike[["ours_vs_vae", "coarse_diff", "precise_diff"]], 0.0)
 
@@ -344,18 +344,23 @@ def test_instrument_command_prints_the_table(tmp_path, monkeypatch):
     from app.cli import cli
     from app.settings import get_settings
 
-    bank_dir = tmp_path / "var" / "trials" / "paper_study"
-    bank_dir.mkdir(parents=True)
-    (bank_dir / "bank.json").write_text(json.dumps(bank_with_examples()))
+    bank = tmp_path / "bank.json"
+    bank.write_text(json.dumps(bank_with_examples()))
     monkeypatch.setenv("TOMSTUDY_DATA_DIR", str(tmp_path / "var"))
     get_settings.cache_clear()
     try:
-        result = CliRunner().invoke(cli, ["instrument", "--n", "4", "--replications", "4",
-                                          "--out", str(tmp_path / "o")])
+        result = CliRunner().invoke(cli, ["instrument", "--n", "4", "--replications", "2",
+                                          "--bank", str(bank), "--out", str(tmp_path / "o")])
     finally:
         get_settings.cache_clear()
     written = json.loads((tmp_path / "o" / "instrument.json").read_text())
     assert result.exit_code == (0 if all(written["passed"].values()) else 1), result.output
     assert "highway   absolute" in result.output and "obstacle  relative" in result.output
     assert "start kind" in result.output and "obstacle  all" in result.output
-    assert "pass rate" in result.output and written["replications"] == 4
+    assert "pass rate" in result.output and written["replications"] == 2
+    grid = json.loads((tmp_path / "o" / "grid.json").read_text())
+    assert grid["seed_pairs"] == [0, 1] and (tmp_path / "o" / "grid.png").is_file()
+    assert "pass rate per seed pair" in result.output and "goal (pass rate >= 0.8" in result.output
+    for world in ("highway", "obstacle"):
+        for level in grid["noise_levels"]:
+            assert f"{world:<10}{level:<16}" in result.output

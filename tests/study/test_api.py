@@ -61,12 +61,15 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
     assert frame["is_practice"].sum() == k * n and frame["attention_check"].sum() == 2 * k * n
     for (trial_id, start), kinds in frame.groupby(["trial_id", "start_index"])["start_kind"]:
         assert set(kinds) == {bank[trial_id]["start_states"][start]["start_kind"]}
+    arms = frame.fillna({"arm": ""}).groupby("trial_id")["arm"].agg(set)
+    assert all(got == {bank[tid]["arm"]} for tid, got in arms.items())
+    assert {bank[tid]["arm"] for tid in arms.index} == {"random", "models_disagree", ""}
     row = frame.iloc[0]
+    primary = bank[row["trial_id"]]["predictions"]["ours"][0]  # the family's first seed
     stored = bank[row["trial_id"]]
-    assert row["ours_sha256"] == stored["predictions"]["ours"]["content_hash"]
-    assert row["ours_code"] == stored["predictions"]["ours"]["code"]
-    assert math.isclose(row["ours_vx"], stored["predictions"]["ours"]["actions"][0][0][0],
-                        abs_tol=1e-4)
+    assert row["ours_sha256"] == primary["content_hash"] and primary["seed"] == 0
+    assert row["ours_code"] == primary["code"]
+    assert math.isclose(row["ours_vx"], primary["actions"][0][0][0], abs_tol=1e-4)
     assert math.isclose(row["policy_vy"], stored["policy_actions"][0][0][1], abs_tol=1e-9)
     assert row["clip_sha256"] == stored["clip_sha256"]
     dt = json.loads(json.dumps(trial["dt_s"]))

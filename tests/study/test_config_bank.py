@@ -1,5 +1,5 @@
-"""The study config, the trial bank (start states on the data, their count and kinds), the
-model answers' check, prepare, production refusal."""
+"""The study config, the trial bank (start states on the data, their count and kinds, the
+selection arms and the model family's answers), production refusal."""
 
 import io
 import json
@@ -23,18 +23,16 @@ from app.study.config import MainTrialSelection, StudyConfig, load_study_config
 from app.study.db import create_tables
 from app.study.deps import get_db
 from app.study.main import UnsafeSettings, create_app
-from app.study.model_answers import BankMismatch, ModelAnswers
-from app.study.prepare import bank_is_current, prepare_study
 from app.study.tables import Participant
 from app.study.trial_builder import (
     NoStartStates,
     build_trials,
+    main_trials,
     model_disagreement,
-    select_main_trials,
     take_turns,
 )
 from app.study.trials import TrialBank, clip_sha256
-from tests.conftest import REPO, TOMSTUDY
+from tests.conftest import REPO, TOMSTUDY, SmallStudy, build_bundle_of
 from tests.study import flow
 from tests.study.flow import ADMIN, TOKEN, new_id, prediction_body, prolific
 
@@ -106,14 +104,23 @@ def test_bank_trials_have_the_paper_shape(bank, small_study):
             assert len({tuple(p) for p in starts[:, 0]}) == k
             assert (starts[..., 0] >= b["x_min_m"]).all() and (starts[..., 0] <= b["x_max_m"]).all()
             for kind in ("ours", "vae"):
-                assert np.asarray(t.predictions[kind].actions).shape == (k, 3, 2)
+                assert [a.seed for a in t.predictions[kind]] == cfg.models.seeds
+                for answer in t.predictions[kind]:
+                    assert np.asarray(answer.actions).shape == (k, 3, 2)
+            assert bool(t.arm) == (t.kind == "main")
             assert np.asarray(t.policy_actions).shape == (k, 3, 2)
             assert t.clip_sha256 == clip_sha256(world.scene, world.dt_s, t.browser_payload())
             assert all("start_kind" not in s for s in t.browser_payload()["start_states"])
-        hashes = {t.predictions["ours"].content_hash for t in world.trials}
         meta = json.loads(Layout(small_study.data_dir).bank_meta(small_study.study_id)
                           .read_text())
-        assert hashes == {meta["worlds"][name]["checkpoints"]["ours"]["content_hash"]}
+        for seed_index, seed in enumerate(cfg.models.seeds):
+            hashes = {t.predictions["ours"][seed_index].content_hash for t in world.trials}
+            assert hashes == {meta["worlds"][name]["checkpoints"][f"ours/seed{seed}"][
+                "content_hash"]}
+        arms = [t.arm for t in world.trials if t.kind == "main"]
+        assert arms == (["random"] * cfg.main_trial_selection.random_arm_trials
+                        + ["models_disagree"] * (cfg.bank_trials_per_world
+                                                 - cfg.main_trial_selection.random_arm_trials))
 
 
 DATA_KINDS = {"highway": ("same_lane", "adjacent_lane"), "obstacle": ("near", "mid")}
@@ -127,8 +134,9 @@ def learned_robot_states(data_dir: Path, world: str, cfg: StudyConfig) -> np.nda
     trajs = TrajectorySet.load(data_dir / "data" / world / "trajectories.npz")
     test = set()
     for kind in ("ours", "vae"):
-        model = load_model(data_dir / getattr(cfg.models[world], kind))
-        test |= set(model.data_meta["split_trajectories"]["test"])
+        for seed in cfg.models.seeds:
+            model = load_model(Layout(data_dir).checkpoint(world, kind, seed))
+            test |= set(model.data_meta["split_trajectories"]["test"])
     return np.concatenate([trajs.positions[i, : trajs.lengths[i] + 1, 0]
                            for i in range(len(trajs)) if i not in test])
 
@@ -196,8 +204,7 @@ def three_starts(small_study, tmp_path_factory):
     study["start_states"] = 3
     study["attention_checks"]["min_passing_starts"] = 2
     (configs / "three_starts.yaml").write_text(yaml.safe_dump(study))
-    build_trials(load_yaml_model(configs / "three_starts.yaml", StudyConfig), "three_starts",
-                 data)
+    build_bundle_of(SmallStudy(data, configs, "three_starts"))
     return data, configs
 
 
@@ -217,14 +224,29 @@ def test_a_models_disagree_bank_keeps_the_most_controversial_of_its_candidates(s
     for name, world_meta in meta["worlds"].items():
         selection = world_meta["main_trial_selection"]
         assert selection["candidates"] == 2 * config.bank_trials_per_world
-        assert selection["ours_vs_vae_kept"] >= selection["ours_vs_vae_candidates"]
+        assert selection["arms"] == {"random": 0, "models_disagree": config.bank_trials_per_world}
+        assert selection["ours_vs_vae_models_disagree"] >= selection["ours_vs_vae_candidates"]
         assert len(bank.trials_of(name, "main")) == config.bank_trials_per_world
         assert world_meta["trials"]["attention"] == config.attention_checks.per_world
 
 
-def test_random_selection_takes_one_candidate_per_trial():
+def test_random_selection_takes_one_candidate_per_trial_and_has_one_arm():
     with pytest.raises(ValueError, match="candidates_per_trial: must be 1 with rule random"):
         MainTrialSelection(rule="random", candidates_per_trial=2)
+    with pytest.raises(ValueError, match="random_arm_trials: only with rule models_disagree"):
+        MainTrialSelection(rule="random", random_arm_trials=3)
+    assert MainTrialSelection().arm_sizes(30) == {"random": 30}
+    assert MainTrialSelection(rule="models_disagree", random_arm_trials=12).arm_sizes(30) == {
+        "random": 12, "models_disagree": 18}
+
+
+def test_the_random_arm_cannot_exceed_the_bank(tmp_path):
+    data = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
+    data["main_trial_selection"]["random_arm_trials"] = data["bank_trials_per_world"] + 1
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match="random_arm_trials must be <= bank_trials_per_world"):
+        load_yaml_model(path, StudyConfig)
 
 
 def test_start_states_config_sets_the_count_and_the_api_follows(three_starts, tmp_path):
@@ -267,47 +289,31 @@ def test_build_trials_is_reproducible(small_study, tmp_path):
     assert sha256_file(path) == sha256_file(original)
 
 
-def test_model_answers_refuse_a_bank_from_other_checkpoints(small_study, bank, tmp_path):
-    data = tmp_path / "var"
-    data.mkdir()
-    (data / "models").symlink_to(small_study.data_dir / "models")
-    raw = json.loads(Layout(small_study.data_dir).bank(small_study.study_id).read_text())
-    raw["worlds"]["obstacle"]["trials"][2]["predictions"]["vae"]["actions"][1][2][0] += 0.5
-    out = Layout(data).bank(small_study.study_id)
-    out.parent.mkdir(parents=True)
-    out.write_text(json.dumps(raw))
-    cfg = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml", StudyConfig)
-    with pytest.raises(BankMismatch, match="vae answers differ"):
-        ModelAnswers(cfg, TrialBank.load(data, small_study.study_id), data)
-
-
-def test_prepare_skips_what_exists(small_study):
-    settings = Settings(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir)
-    said = []
-    bank = prepare_study(settings, small_study.study_id, say=said.append)
-    config = load_study_config(settings, small_study.study_id)
-    assert bank_is_current(bank, config)
-    assert sum("skipping" in s for s in said) == 2 + 4 + 1, said
-    # a change to the bank's design (not just its inputs) makes it stale
-    redesigned = config.model_copy(update={"main_trial_selection": MainTrialSelection(
-        rule="models_disagree", candidates_per_trial=2)})
-    assert not bank_is_current(bank, redesigned)
-    assert bank_is_current(bank, config.model_copy(update={"title": "renamed"}))
-    rescored = config.attention_checks.model_copy(update={"max_angle_deg": 30.0})
-    assert bank_is_current(bank, config.model_copy(update={"attention_checks": rescored}))
-
-
 def test_models_disagree_keeps_the_most_controversial_trials_per_label(small_study):
     bank = TrialBank.load(small_study.data_dir, small_study.study_id)
     pool = bank.trials_of("obstacle", "main")
-    kept = select_main_trials(pool, 4, "models_disagree")
-    labels = sorted({t.robot_label for t in pool})
+    kept = main_trials(pool, {"random": 1, "models_disagree": 3})
+    assert [t.arm for t in kept] == ["random"] + ["models_disagree"] * 3
+    assert kept[0].trial_id == pool[0].trial_id  # the random arm: the pool's first
+    rest, disputed = pool[1:], kept[1:]
+    labels = sorted({t.robot_label for t in rest})
     for label in labels:
-        mine = sorted((model_disagreement(t) for t in pool if t.robot_label == label), reverse=True)
-        taken = [model_disagreement(t) for t in kept if t.robot_label == label]
+        mine = sorted((model_disagreement(t) for t in rest if t.robot_label == label),
+                      reverse=True)
+        taken = [model_disagreement(t) for t in disputed if t.robot_label == label]
         assert taken == mine[:len(taken)]  # within a label, the most controversial first
-    counts = [sum(t.robot_label == label for t in kept) for label in labels]
+    counts = [sum(t.robot_label == label for t in disputed) for label in labels]
     assert max(counts) - min(counts) <= 1  # labels take turns
+
+
+def test_family_disagreement_is_the_mean_over_every_ours_and_vae_seed(bank):
+    from analysis.contracts import alignment_error
+
+    trial = bank.trials_of("highway", "main")[0]
+    pairs = [alignment_error(np.asarray(o.actions), np.asarray(v.actions)).mean()
+             for o in trial.predictions["ours"] for v in trial.predictions["vae"]]
+    assert len(pairs) == len(trial.predictions["ours"]) ** 2 == 4
+    assert model_disagreement(trial) == pytest.approx(np.mean(pairs))
 
 
 def test_production_mode_refuses_the_default_token(small_study, tmp_path):
@@ -347,11 +353,3 @@ def test_in_memory_database_through_dependency_override(small_study, tmp_path):
     assert stored.position == 1 and stored.recruitment == "prolific"
     shutil.rmtree(tmp_path, ignore_errors=True)
 
-
-def test_serve_without_a_bank_says_what_is_missing(small_study, tmp_path):
-    env = small_study.env(f"sqlite:///{tmp_path / 'x.db'}", TOMSTUDY_DATA_DIR=str(tmp_path))
-    run = subprocess.run([TOMSTUDY, "serve", "--port", "1",
-                          "--study", small_study.study_id],
-                         env=env, capture_output=True, text=True, timeout=60)
-    assert run.returncode == 2
-    assert "bank.json" in run.stderr and "--prepare" in run.stderr
