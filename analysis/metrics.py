@@ -1,4 +1,5 @@
-"""Alignment errors over the predictions table, per-participant means, and exclusions.
+"""Alignment errors over the predictions table, per-participant means, exclusions, and the
+subsets (world, selection arm) a comparison is read in.
 
 The metric and the rules themselves are defined once in analysis/contracts.py. Rows where
 a vector is shorter than ZERO_SPEED_MPS are counted as `zero_vectors`, so a report can say
@@ -6,6 +7,7 @@ how often the error fell back to 1. Only numpy and pandas: the researcher dashbo
 imports these for its running numbers.
 """
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -112,3 +114,22 @@ def apply_exclusions(frame: pd.DataFrame, rules: ExclusionRules) -> Exclusions:
         practice_rows_dropped=int(frame["is_practice"].sum()),
         attention_rows_dropped=int((~frame["is_practice"] & frame["attention_check"]).sum()),
     )
+
+
+POOLED = "pooled"
+
+
+def answer_subsets(answer_sets: dict[str, pd.DataFrame]) -> Iterator[tuple[dict, pd.DataFrame]]:
+    """Each (world, arm, answers) subset of the rows, in that order, as (labels, rows): per
+    world, the arms pooled first, then each selection arm (an older export's '' arm is only
+    pooled); `answer_sets` maps a name (e.g. primary, family) to rows with err_ columns."""
+    frames = list(answer_sets.values())
+    worlds = sorted(set().union(*(f["world"].unique() for f in frames)))
+    arms = sorted(set().union(*(f["arm"].unique() for f in frames)) - {""})
+    for world in worlds:
+        for arm in (POOLED, *arms):
+            for answers, rows in answer_sets.items():
+                in_arm = (rows["arm"] == arm) | (arm == POOLED)
+                subset = rows[(rows["world"] == world) & in_arm]
+                if len(subset):
+                    yield {"world": world, "arm": arm, "answers": answers}, subset

@@ -220,3 +220,80 @@ def plot_trial_contrast(by_trial: pd.DataFrame, base: Path) -> list[Path]:
         ax.grid(alpha=0.3)
     fig.tight_layout()
     return save(fig, base)
+
+
+VERDICT_COLORS = {"ours": MODEL_COLORS["ours"], "vae": MODEL_COLORS["vae"], "neither": "#777777"}
+
+
+def _diff_with_ci(ax, x, rows: pd.DataFrame, **style) -> None:
+    """Mean Ours - VAE differences at x with their 95% CIs as error bars."""
+    mean = rows["mean_diff"].to_numpy()
+    yerr = [mean - rows["ci95_low"].to_numpy(), rows["ci95_high"].to_numpy() - mean]
+    ax.errorbar(x, mean, yerr=yerr, fmt="none", ecolor=style.pop("ecolor", "black"),
+                capsize=3, lw=1, zorder=2)
+    ax.scatter(x, mean, zorder=3, edgecolor="black", linewidth=0.5, **style)
+
+
+def plot_seed_pairs(per_seed: pd.DataFrame, family: pd.DataFrame, alpha: float,
+                    base: Path) -> list[Path]:
+    """Per world: each seed pair's Ours - VAE mean difference with its 95% CI, coloured by
+    which model it favours at alpha, and the family (mean over seeds) beside them."""
+    worlds = sorted(per_seed["world"].unique())
+    fig, axes = plt.subplots(1, len(worlds), figsize=(4.6 * len(worlds), 4.0), squeeze=False)
+    for ax, world in zip(axes[0], worlds, strict=True):
+        pairs = per_seed[per_seed["world"] == world].sort_values("pair")
+        fam = family[family["world"] == world]
+        x = np.arange(len(pairs))
+        _diff_with_ci(ax, x, pairs, s=30, c=[VERDICT_COLORS[v] for v in pairs["verdict"]])
+        _diff_with_ci(ax, [len(pairs) + 0.6], fam, s=90, marker="D",
+                      c=[VERDICT_COLORS[v] for v in fam["verdict"]], ecolor="#D55E00")
+        ax.axhline(0, color="grey", lw=0.8, ls="--")
+        labels = [f"{o}/{v}" for o, v in zip(pairs["ours_seed"], pairs["vae_seed"], strict=True)]
+        ax.set_xticks([*x, len(pairs) + 0.6], [*labels, "family"], fontsize=7)
+        ax.set_xlabel("seed pair (Ours seed / VAE seed)")
+        counts = pairs["verdict"].value_counts()
+        ax.set_title(f"{world}: pairs favouring Ours {counts.get('ours', 0)}, VAE "
+                     f"{counts.get('vae', 0)}, neither {counts.get('neither', 0)}", fontsize=9)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0][0].set_ylabel("err_ours - err_vae (< 0 favours Ours)")
+    fig.suptitle(f"Per seed pair and family, 95% CI (colour: the model favoured at p < {alpha}, "
+                 "grey: neither)", fontsize=9)
+    fig.tight_layout()
+    return save(fig, base)
+
+
+def plot_leave_one_trial_out(table: pd.DataFrame, base: Path, top: int = 25) -> list[Path]:
+    """Per world (columns) and set of answers (rows): the Ours - VAE mean difference with each
+    of the `top` most influential main trials left out, beside the all-trials result."""
+    worlds = sorted(table["world"].unique())
+    answer_sets = list(dict.fromkeys(table["answers"]))
+    shown = min(top, int(table.groupby(["world", "answers"]).size().max()))
+    fig, axes = plt.subplots(len(answer_sets), len(worlds), squeeze=False,
+                             figsize=(4.8 * len(worlds), (0.17 * shown + 1.4) * len(answer_sets)))
+    for r, answers in enumerate(answer_sets):
+        for c, world in enumerate(worlds):
+            ax = axes[r][c]
+            rows = table[(table["world"] == world) & (table["answers"] == answers)].head(top)
+            y = np.arange(len(rows))[::-1]
+            colors = np.where(rows["flips"], "#D55E00", "#333333")
+            _trial_panel(ax, rows, y, colors)
+            total = int(((table["world"] == world) & (table["answers"] == answers)).sum())
+            ax.set_title(f"{world}, {answers} answers: the {len(rows)} most influential of "
+                         f"{total} trials\n(red: leaving it out flips the verdict)", fontsize=8)
+    fig.tight_layout()
+    return save(fig, base)
+
+
+def _trial_panel(ax, rows: pd.DataFrame, y: np.ndarray, colors: np.ndarray) -> None:
+    """Horizontal: each trial's leave-one-out mean difference and CI; the all-trials mean."""
+    mean = rows["mean_diff"].to_numpy()
+    ax.errorbar(mean, y, xerr=[mean - rows["ci95_low"], rows["ci95_high"] - mean], fmt="none",
+                ecolor="#999999", lw=0.8, capsize=2)
+    ax.scatter(mean, y, c=colors, s=16, zorder=3)
+    ax.axvline(rows["all_trials_mean_diff"].iloc[0], color="#0072B2", lw=1.2,
+               label="all trials")
+    ax.axvline(0, color="grey", lw=0.8, ls="--")
+    ax.set_yticks(y, rows["trial_id"], fontsize=6)
+    ax.set_xlabel("err_ours - err_vae without the trial (< 0 favours Ours)", fontsize=8)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.grid(axis="x", alpha=0.3)

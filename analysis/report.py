@@ -1,13 +1,17 @@
 """`tomstudy analyze`: one command from exported predictions to a self-contained report.
 
 Writes into the output folder: report.html (analysis/templates/study_report.html.j2,
-figures embedded as base64 PNG), summary.json, per_participant.csv and by_start_kind.csv
-(every number the report shows), the figures as PNG and SVG, and meta.json (data hash,
-checkpoint hashes, study config, exclusions). The study config is read by the caller
+figures embedded as base64 PNG), summary.json, per_participant.csv, by_start_kind.csv,
+per_seed.csv, family.csv, by_arm.csv, mixed_model.csv and leave_one_trial_out.csv (every
+number the report shows), the figures as PNG and SVG, and meta.json (data and bank hashes,
+the model family's content hashes, study config). The study config is read by the caller
 (app/cli.py) and arrives as plain values and paths (`StudyInputs`).
+
+Besides the primary answers (the primary seed's, in the export), the report reads every
+seed's answers from the trial bank (analysis/seeds.py) and treats trials as a random factor
+(analysis/trial_effects.py); both, and the per-arm comparison, run on the same kept rows.
 """
 
-import hashlib
 import json
 import time
 from dataclasses import dataclass
@@ -17,6 +21,7 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from analysis.bank import Bank, family_hashes, read_bank
 from analysis.contracts import MODELS, ExclusionRules
 from analysis.csvsafe import write_csv
 from analysis.html import render_page
@@ -27,10 +32,19 @@ from analysis.metrics import (
     participant_means,
     zero_vector_counts,
 )
-from analysis.plots import plot_errors, plot_fields
-from analysis.stats import breakdown, compare_per_world, displacement_errors, mean_ci95
+from analysis.plots import plot_errors, plot_fields, plot_leave_one_trial_out, plot_seed_pairs
+from analysis.seeds import seed_results, verdict_counts
+from analysis.stats import (
+    ALPHA,
+    breakdown,
+    by_arm_table,
+    compare_per_world,
+    displacement_errors,
+    mean_ci95,
+    plain_records,
+)
+from analysis.trial_effects import influence_summary, leave_one_trial_out, mixed_model_table
 
-ALPHA = 0.01
 WAIVABLE = ("failed_attention_check", "incomplete", "too_fast")
 
 
@@ -44,8 +58,9 @@ class StudyInputs:
 
     config: dict  # the study config as plain data, recorded in meta.json
     rules: ExclusionRules
-    checkpoints: dict[str, Path]  # "<world>/<model>" -> checkpoint file
-    bank: Path  # the trial bank: each world's scene for the field figures (may be absent)
+    models: dict  # the bundle manifest's {world: {model: {seed (str): content_hash}}}
+    bank: Path  # the trial bank (bank.json or a bundle's bank.json.gz; may be absent): every
+    #             seed's answers and each world's scene
 
 
 def waive_rules(rules: ExclusionRules, waive: tuple[str, ...]) -> ExclusionRules:
@@ -61,26 +76,6 @@ def waive_rules(rules: ExclusionRules, waive: tuple[str, ...]) -> ExclusionRules
         else:
             changes[rule] = False
     return rules.model_copy(update=changes)
-
-
-def sha256_file(path: Path) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def checkpoint_hashes(checkpoints: dict[str, Path]) -> dict:
-    """SHA-256 of each checkpoint file (None where the file is absent)."""
-    return {key: sha256_file(path) if Path(path).is_file() else None
-            for key, path in checkpoints.items()}
-
-
-def load_scenes(bank_path: Path) -> tuple[dict, str | None]:
-    """Each world's scene (JSON) from the trial bank (empty if there is no bank) and its hash."""
-    path = Path(bank_path)
-    if not path.is_file():
-        return {}, None
-    bank = json.loads(path.read_text())
-    return {w: b["scene"] for w, b in bank["worlds"].items()}, sha256_file(path)
 
 
 def write_json(path: Path, data: object) -> None:
@@ -133,12 +128,45 @@ def start_kind_table(kept: pd.DataFrame) -> pd.DataFrame:
             .drop(columns="_rank").reset_index(drop=True))
 
 
-def nested_by_kind(table: pd.DataFrame) -> dict:
-    """The start-kind table as {world: {start_kind: {column: value}}}, NaN as null."""
+def nested(table: pd.DataFrame, keys: list[str]) -> dict:
+    """A table as nested dicts, one level per key column (e.g. {world: {start_kind: row}}),
+    NaN as null."""
     out: dict = {}
-    for row in table.astype(object).where(table.notna(), None).to_dict("records"):
-        out.setdefault(row.pop("world"), {})[row.pop("start_kind")] = row
+    for row in plain_records(table):
+        node = out
+        for key in keys[:-1]:
+            node = node.setdefault(str(row.pop(key)), {})
+        node[str(row.pop(keys[-1]))] = row
     return out
+
+
+def robustness(kept: pd.DataFrame, bank: Bank | None, bank_path: Path,
+               out_dir: Path) -> tuple[dict, list[Path]]:
+    """Per seed pair and family, per arm, the crossed mixed model and leave-one-trial-out:
+    their summary.json entries, CSVs and figures. 'primary' is the export's (primary seed's)
+    answers on every kept row; 'family' the mean over seeds on the rows that ran the bank."""
+    seeds = seed_results(kept, bank, str(bank_path))
+    answer_sets = {"primary": kept} | ({"family": seeds.family_rows} if seeds.ok else {})
+    tables = {"per_seed": seeds.per_seed, "family": seeds.family,
+              "by_arm": by_arm_table(answer_sets), "mixed_model": mixed_model_table(answer_sets),
+              "leave_one_trial_out": leave_one_trial_out(answer_sets)}
+    for name, table in tables.items():
+        if not table.empty:
+            write_csv(table, out_dir / f"{name}.csv", float_format="%.10g")
+    figures = plot_seed_pairs(seeds.per_seed, seeds.family, ALPHA,
+                              out_dir / "seed_pairs") if seeds.ok else []
+    figures += plot_leave_one_trial_out(tables["leave_one_trial_out"],
+                                        out_dir / "leave_one_trial_out")
+    summary = {
+        "seeds": seeds.join,
+        "per_seed": nested(seeds.per_seed, ["world", "pair"]) if seeds.ok else {},
+        "seed_pair_verdicts": verdict_counts(seeds.per_seed) if seeds.ok else {},
+        "family": nested(seeds.family, ["world"]) if seeds.ok else {},
+        "by_arm": nested(tables["by_arm"], ["world", "arm", "answers"]),
+        "mixed_model": nested(tables["mixed_model"], ["world", "arm", "answers"]),
+        "leave_one_trial_out": influence_summary(tables["leave_one_trial_out"]),
+    }
+    return summary, figures
 
 
 def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInputs,
@@ -147,7 +175,7 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
     started = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    steps = tqdm(total=6, desc="analyze", unit="step")
+    steps = tqdm(total=7, desc="analyze", unit="step")
     rules = waive_rules(inputs.rules, waive)
     frame = frame[frame["study_id"] == study_id].reset_index(drop=True)
     if frame.empty:
@@ -165,9 +193,11 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
     versus_cv = compare_per_world(means, "ours", "cv")
     ade = displacement_errors(kept)
     steps.update(1)
-    scenes, bank_hash = load_scenes(inputs.bank)
-    figures = plot_errors(means, results, out_dir / "alignment_error")
-    figures += plot_fields(kept, scenes, out_dir / "fields")
+    bank = read_bank(inputs.bank)
+    extra, extra_figures = robustness(kept, bank, inputs.bank, out_dir)
+    steps.update(1)
+    figures = plot_errors(means, results, out_dir / "alignment_error") + extra_figures
+    figures += plot_fields(kept, bank.scenes() if bank else {}, out_dir / "fields")
     steps.update(1)
     per_participant = means.merge(ade, on=["participant_id", "world"], how="left")
     write_csv(per_participant, out_dir / "per_participant.csv", float_format="%.10g")
@@ -183,20 +213,20 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
         "ours_vs_vae": {w: r.as_dict() for w, r in results.items()},
         "ours_vs_cv": {w: r.as_dict() for w, r in versus_cv.items()},
         "per_ours_code": per_code(kept),
-        "by_start_kind": nested_by_kind(by_kind),
+        "by_start_kind": nested(by_kind, ["world", "start_kind"]),
         "hypothesis_supported": {w: bool(r.p_one_sided_less < ALPHA)
                                  for w, r in results.items()},
+        **extra,
         "figures": sorted(p.name for p in figures),
     }
-    write_outputs(out_dir, summary, figures, inputs, digest, bank_hash, frame, started)
+    write_outputs(out_dir, summary, figures, inputs, digest, bank, frame, started)
     steps.update(2)
     steps.close()
     return summary
 
 
 def write_outputs(out_dir: Path, summary: dict, figures: list[Path], inputs: StudyInputs,
-                  digest: str, bank_hash: str | None, frame: pd.DataFrame,
-                  started: float) -> None:
+                  digest: str, bank: Bank | None, frame: pd.DataFrame, started: float) -> None:
     """summary.json, report.html and meta.json."""
     write_json(out_dir / "summary.json", summary)
     (out_dir / "report.html").write_text(render_html(summary, [f for f in figures
@@ -204,11 +234,21 @@ def write_outputs(out_dir: Path, summary: dict, figures: list[Path], inputs: Stu
     hashes_in_data = {m: sorted(set(frame[f"{m}_sha256"])) for m in ("ours", "vae")}
     write_json(out_dir / "meta.json", {
         "data_sha256": digest, "rows": len(frame), "source": summary["source"],
-        "checkpoint_sha256": checkpoint_hashes(inputs.checkpoints),
-        "model_hashes_in_data": hashes_in_data, "trial_bank_sha256": bank_hash,
+        "models": inputs.models, **bank_models(bank, inputs.models),
+        "model_hashes_in_data": hashes_in_data,
+        "trial_bank_sha256": bank.sha256 if bank else None,
+        "trial_bank_path": str(inputs.bank),
         "study_config": inputs.config, "wall_time_s": round(time.perf_counter() - started, 3),
         "package_version": _version(),
     })
+
+
+def bank_models(bank: Bank | None, models: dict) -> dict:
+    """The content hashes of the answers the bank stores, and whether they are the models the
+    study names (None without a bank or without models to compare)."""
+    in_bank = family_hashes(bank.data) if bank else None
+    same = in_bank == models if (in_bank is not None and models) else None
+    return {"models_in_bank": in_bank, "models_match_bank": same}
 
 
 def _version() -> str:
@@ -245,11 +285,41 @@ def run_analyze(study_id: str, out_dir: Path, csv: Path | None, database_url: st
     else:
         frame, source = load_database(database_url, study_id), "database"
     summary = analyze(frame, study_id, out_dir, inputs, source, waive)
-    for world, res in summary["ours_vs_vae"].items():
-        w = summary["worlds"][world]
-        print(f"{world}: n={res['n']} Ours {w['err_ours']['mean']:.3f} VAE "
-              f"{w['err_vae']['mean']:.3f} CV {w['err_cv']['mean']:.3f} | t={res['t']:.2f} "
-              f"p={res['p_two_sided']:.2g} (one-sided {res['p_one_sided_less']:.2g}) "
-              f"d_z={res['d_z']:.2f}")
+    print("\n".join(headline(summary)))
     print(f"wrote {Path(out_dir) / 'report.html'}")
     return summary
+
+
+def headline(summary: dict) -> list[str]:
+    """The lines `analyze` prints: per world the primary test, the family's and the trials'."""
+    lines = []
+    for world, res in summary["ours_vs_vae"].items():
+        w = summary["worlds"][world]
+        lines.append(f"{world}: n={res['n']} Ours {w['err_ours']['mean']:.3f} VAE "
+                     f"{w['err_vae']['mean']:.3f} CV {w['err_cv']['mean']:.3f} | "
+                     f"t={res['t']:.2f} p={res['p_two_sided']:.2g} (one-sided "
+                     f"{res['p_one_sided_less']:.2g}) d_z={res['d_z']:.2f}")
+        if world in summary["family"]:
+            lines.append(_family_line(summary["family"][world],
+                                      summary["seed_pair_verdicts"][world]))
+        lines.append(_trials_line(summary["mixed_model"][world]["pooled"]["primary"],
+                                  summary["leave_one_trial_out"][world]["primary"]))
+    seeds = summary["seeds"]
+    if seeds["status"] != "ok" or seeds["other_banks"] or seeds["rows_not_in_bank"]:
+        lines.append(f"per seed: {seeds['note']}")
+    return lines
+
+
+def _family_line(fam: dict, pairs: dict) -> str:
+    return (f"  family ({fam['ours_seeds']} Ours x {fam['vae_seeds']} VAE seeds): Ours "
+            f"{fmt(fam['err_ours'])} VAE {fmt(fam['err_vae'])} | diff {fmt(fam['mean_diff'])} "
+            f"t={fmt(fam['t'], 2)} p={fmt(fam['p_two_sided'], 2)} -> {fam['verdict']}; seed "
+            f"pairs favour Ours {pairs['ours']}, VAE {pairs['vae']}, neither {pairs['neither']}")
+
+
+def _trials_line(mixed: dict, influence: dict) -> str:
+    top = influence["most_influential"]
+    flips = ", ".join(influence["flipping_trials"]) or "none"
+    return (f"  trials as random: diff {fmt(mixed['estimate'])} [{fmt(mixed['ci95_low'])}, "
+            f"{fmt(mixed['ci95_high'])}] p={fmt(mixed['p'], 2)} ({mixed['status']}); without "
+            f"{top['trial_id']} the diff moves most ({fmt(top['shift'])}); flips: {flips}")

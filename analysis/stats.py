@@ -7,8 +7,10 @@ import pandas as pd
 from scipy import stats
 
 from analysis.contracts import MODELS
-from analysis.metrics import UNIT_KEYS
+from analysis.metrics import UNIT_KEYS, answer_subsets, participant_means
 
+ALPHA = 0.01  # the preregistered significance level of every Ours-vs-VAE test
+PAIR = ("ours", "vae")  # the two models every paired comparison contrasts
 POSITION_MODELS = ("ours", "vae", "cv")
 PREDICTION_KEYS = ["participant_id", "trial_id", "start_index"]
 BREAKDOWN_STATS = ("mean_diff", "ci95_low", "ci95_high", "t", "p_two_sided", "p_one_sided_less",
@@ -66,6 +68,20 @@ def paired_comparison(a: np.ndarray, b: np.ndarray) -> PairedResult:
     )
 
 
+def verdicts(mean_diff, p_two_sided, alpha: float = ALPHA) -> np.ndarray:
+    """Which model a test favours: 'ours' or 'vae' (by the sign of Ours - VAE) where the
+    two-sided p is below alpha, else 'neither' (also where p is NaN)."""
+    mean_diff = np.asarray(mean_diff, dtype=np.float64)
+    significant = np.asarray(p_two_sided, dtype=np.float64) < alpha
+    return np.where(significant & (mean_diff < 0), "ours",
+                    np.where(significant & (mean_diff > 0), "vae", "neither"))
+
+
+def with_verdicts(table: pd.DataFrame) -> pd.DataFrame:
+    """`table` (of paired results) with a `verdict` column: ours, vae or neither at ALPHA."""
+    return table.assign(verdict=verdicts(table["mean_diff"], table["p_two_sided"]))
+
+
 def compare_per_world(means: pd.DataFrame, a: str = "ours",
                       b: str = "vae") -> dict[str, PairedResult]:
     """Per world, the paired comparison of per-participant mean errors of models a and b."""
@@ -84,6 +100,23 @@ def breakdown(means: pd.DataFrame, keys: list[str], a: str = "ours", b: str = "v
                      **{f"err_{m}": float(group[f"err_{m}"].mean()) for m in models},
                      **{name: getattr(res, name) for name in BREAKDOWN_STATS}})
     return pd.DataFrame(rows)
+
+
+def by_arm_table(answer_sets: dict[str, pd.DataFrame]) -> pd.DataFrame:
+    """Per world, arm (pooled first) and set of answers (e.g. primary, family): n participants,
+    n trials, mean errors and the paired Ours-vs-VAE comparison with its verdict."""
+    parts = [breakdown(participant_means(rows, models=PAIR), ["world"], models=PAIR)
+             .assign(arm=labels["arm"], answers=labels["answers"],
+                     n_trials=rows["trial_id"].nunique())
+             for labels, rows in answer_subsets(answer_sets)]
+    table = pd.concat(parts, ignore_index=True)
+    first = ["world", "arm", "answers", "n", "n_trials"]
+    return with_verdicts(table[first + [c for c in table.columns if c not in first]])
+
+
+def plain_records(table: pd.DataFrame) -> list[dict]:
+    """A table's rows as dicts of plain values, NaN as None (for JSON)."""
+    return table.astype(object).where(table.notna(), None).to_dict("records")
 
 
 def mean_ci95(values: np.ndarray) -> tuple[float, float, float]:

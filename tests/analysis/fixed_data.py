@@ -1,5 +1,9 @@
 """A small, fixed, hand-readable predictions table in the export CSV's columns."""
 
+import copy
+import hashlib
+import json
+
 import numpy as np
 import pandas as pd
 
@@ -154,3 +158,52 @@ def small_bank(trials: int = 6, seed: int = 0) -> dict:
                          "max_step_m": 8.0 if scene["lanes"] else 0.6,
                          "min_step_m": 0.8 if scene["lanes"] else 0.06, "trials": records}
     return {"study_id": "paper_study", "steps_to_predict": 3, "worlds": worlds}
+
+
+def with_seeds(bank: dict, n_seeds: int = 3, seed: int = 0) -> dict:
+    """`bank` with a family of `n_seeds` answers per model and trial (seeds 100, 101, ...):
+    the primary seed's actions as stored, the others those plus noise (a family's spread)."""
+    rng = np.random.default_rng(seed)
+    out = copy.deepcopy(bank)
+    for world, world_bank in out["worlds"].items():
+        for trial in world_bank["trials"]:
+            for model, answers in trial["predictions"].items():
+                primary = answers[0] if isinstance(answers, list) else answers
+                actions = np.asarray(primary["actions"], dtype=np.float64)
+                spread = 0.5 * np.abs(actions).mean()
+                trial["predictions"][model] = [
+                    {"seed": 100 + k, "z": [], "code": primary["code"],
+                     "actions": (actions + (k > 0) * rng.normal(scale=spread, size=actions.shape))
+                     .tolist(), "content_hash": f"{model}-{world}-{100 + k}"}
+                    for k in range(n_seeds)]
+    return out
+
+
+def family_bank(frame: pd.DataFrame, seeds: dict[str, list[int]], seed: int = 0) -> dict:
+    """A bank with, for each trial of `frame`, random answers [K, n, 2] of every training seed
+    of each model (`seeds`: model -> seeds, primary first); K and n as in `frame`."""
+    rng = np.random.default_rng(seed)
+    k, n = frame["start_index"].max() + 1, frame["step"].max() + 1
+    worlds: dict = {}
+    for world, trial_id in frame[["world", "trial_id"]].drop_duplicates().itertuples(index=False):
+        answers = {model: [{"seed": s, "z": [0.0], "code": 0, "content_hash": f"{model}{s}",
+                            "actions": rng.normal(size=(k, n, 2)).tolist()} for s in family]
+                   for model, family in seeds.items()}
+        worlds.setdefault(world, {"dt_s": DT_S, "scene": {}, "trials": []})["trials"].append(
+            {"trial_id": trial_id, "kind": "main", "arm": "random",
+             "start_states": [{}] * k, "predictions": answers})
+    return {"study_id": "paper_study", "worlds": worlds}
+
+
+def on_bank(frame: pd.DataFrame, bank: dict) -> tuple[pd.DataFrame, bytes]:
+    """`frame` as a study served from `bank` answers it: ours/vae columns the bank's primary
+    answers, `bank_sha256` the hash of the bank's JSON; and those JSON bytes."""
+    raw = json.dumps(bank).encode()
+    out = frame.copy()
+    out["bank_sha256"] = hashlib.sha256(raw).hexdigest()
+    trials = {t["trial_id"]: t for w in bank["worlds"].values() for t in w["trials"]}
+    for model in ("ours", "vae"):
+        actions = np.array([trials[r.trial_id]["predictions"][model][0]["actions"]
+                            [r.start_index][r.step] for r in out.itertuples()])
+        out[f"{model}_vx"], out[f"{model}_vy"] = actions[:, 0], actions[:, 1]
+    return out, raw

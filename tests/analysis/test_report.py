@@ -1,5 +1,7 @@
 """`analyze` writes a self-contained report whose numbers match the per-participant table."""
 
+import gzip
+import hashlib
 import json
 
 import numpy as np
@@ -10,32 +12,49 @@ from analysis.contracts import ExclusionRules
 from analysis.metrics import add_alignment_errors
 from analysis.report import AnalysisError, StudyInputs, run_analyze, start_kind_table
 from app.observers.simulated_study import simulate_participants
-from tests.analysis.fixed_data import fixed_predictions, small_bank
+from tests.analysis.fixed_data import fixed_predictions, small_bank, with_seeds
 
 RULES = ExclusionRules(failed_attention_check=True, incomplete=True, too_fast_trial_ms=4000,
                        too_fast_max_fraction=0.25)
 
 
+SEEDED_BANK = with_seeds(small_bank(), n_seeds=3)
+BANK_JSON = json.dumps(SEEDED_BANK).encode()
+BANK_SHA = hashlib.sha256(BANK_JSON).hexdigest()
+MODELS = {world: {model: {str(100 + k): f"{model}-{world}-{100 + k}" for k in range(3)}
+                  for model in ("ours", "vae")} for world in ("highway", "obstacle")}
+
+
 @pytest.fixture
 def inputs(tmp_path) -> StudyInputs:
-    """The study's side of an analysis: a bank on disk, one absent checkpoint."""
-    bank = tmp_path / "var" / "trials" / "paper_study" / "bank.json"
+    """The study's side of an analysis: a bundle's gzipped bank with 3 seeds per model."""
+    bank = tmp_path / "bundles" / "paper_study" / "bank.json.gz"
     bank.parent.mkdir(parents=True)
-    bank.write_text(json.dumps(small_bank()))
-    config = {"exclusions": RULES.model_dump(), "models": {"highway": {"ours": "ours.pt"}}}
-    return StudyInputs(config=config, rules=RULES, bank=bank,
-                       checkpoints={"highway/ours": tmp_path / "var" / "ours.pt"})
+    bank.write_bytes(gzip.compress(BANK_JSON))
+    config = {"exclusions": RULES.model_dump(), "bundle": "shipped"}
+    return StudyInputs(config=config, rules=RULES, bank=bank, models=MODELS)
 
 
-def test_report_from_csv(tmp_path, inputs):
-    frame = simulate_participants(small_bank(), "coarse", 12, 5, seed=3, show_progress=False)
+def simulated_export(kind: str, n: int, seed: int):
+    """Simulated participants on the bank's primary answers, as the server exports them."""
+    frame = simulate_participants(small_bank(), kind, n, 5, seed=seed, show_progress=False)
+    frame["arm"] = frame["trial_id"].str[-1].astype(int).mod(2).map(
+        {0: "random", 1: "models_disagree"})
+    return frame.assign(bank_sha256=BANK_SHA)
+
+
+def test_report_from_csv(tmp_path, inputs, capsys):
+    frame = simulated_export("coarse", 12, seed=3)
     frame.loc[frame["participant_id"] == "sim-00001", "completed"] = False
+    frame.loc[frame["participant_id"] == "sim-00002", "bank_sha256"] = "e" * 64
     frame.to_csv(tmp_path / "export.csv", index=False)
     out = tmp_path / "report"
     summary = run_analyze("paper_study", out, tmp_path / "export.csv", "", inputs)
     for name in ("report.html", "summary.json", "per_participant.csv", "meta.json",
                  "alignment_error.png", "alignment_error.svg", "fields_highway.png",
-                 "fields_obstacle.svg"):
+                 "fields_obstacle.svg", "per_seed.csv", "family.csv", "by_arm.csv",
+                 "mixed_model.csv", "leave_one_trial_out.csv", "seed_pairs.png",
+                 "leave_one_trial_out.svg"):
         assert (out / name).is_file(), name
     assert summary["exclusions"]["excluded_incomplete"] == 1
     table = pd.read_csv(out / "per_participant.csv")
@@ -48,8 +67,8 @@ def test_report_from_csv(tmp_path, inputs):
     html = (out / "report.html").read_text()
     assert "data:image/png;base64," in html and "src='http" not in html
     meta = json.loads((out / "meta.json").read_text())
-    assert len(meta["data_sha256"]) == 64 and meta["trial_bank_sha256"]
-    assert meta["checkpoint_sha256"] == {"highway/ours": None}
+    assert meta["trial_bank_sha256"] == BANK_SHA and len(meta["data_sha256"]) == 64
+    assert meta["models"] == MODELS and meta["models_match_bank"] is True
     assert meta["study_config"] == inputs.config
 
     assert "start_kind" in pd.read_csv(tmp_path / "export.csv").columns
@@ -69,6 +88,54 @@ def test_report_from_csv(tmp_path, inputs):
         assert summary["by_start_kind"][row.world][row.start_kind]["n"] == 11
     assert "adjacent_lane" in html and "By start kind" in html
 
+    # every seed's answers: sim-00002 ran another bank, is left out of them, and it is said
+    seeds = summary["seeds"]
+    assert seeds["participants_other_bank"] == ["sim-00002"] and "left out" in seeds["note"]
+    assert seeds["primary_max_abs_diff"] < 1e-9  # the bank's primary seed is the export's
+    per_seed = pd.read_csv(out / "per_seed.csv")
+    family = pd.read_csv(out / "family.csv").set_index("world")
+    on_bank = kept[kept["participant_id"] != "sim-00002"]
+    for world in ("highway", "obstacle"):
+        pairs = per_seed[per_seed["world"] == world].set_index("pair")
+        assert list(pairs.index) == [0, 1, 2] and (pairs["n"] == 10).all()
+        people = on_bank[on_bank["world"] == world].groupby("participant_id")
+        primary = (people["err_ours"].mean() - people["err_vae"].mean()).mean()
+        assert pairs.loc[0, "mean_diff"] == pytest.approx(primary, rel=1e-9)
+        # equal families: the family's mean error is the mean of the pairs'
+        assert family.loc[world, "err_ours"] == pytest.approx(pairs["err_ours"].mean())
+        assert family.loc[world, "n"] == 10
+        counts = summary["seed_pair_verdicts"][world]
+        assert sum(counts.values()) == 3
+        assert counts[summary["family"][world]["verdict"]] >= 1
+        arms = summary["by_arm"][world]
+        assert list(arms) == ["pooled", "models_disagree", "random"]
+        assert arms["pooled"]["primary"]["n"] == 11 and arms["pooled"]["family"]["n"] == 10
+        mixed = summary["mixed_model"][world]["pooled"]["primary"]
+        assert mixed["status"] in ("ok", "boundary") and mixed["n_participants"] == 11
+        assert summary["leave_one_trial_out"][world]["family"]["most_influential"]["trial_id"]
+    influence = pd.read_csv(out / "leave_one_trial_out.csv")
+    trials = kept.groupby("world")["trial_id"].nunique().sum()
+    assert len(influence) == 2 * trials  # each main trial, for primary and family answers
+    for section in ("Model families", "By selection arm", "crossed mixed model",
+                    "Leave-one-trial-out"):
+        assert section in html
+    printed = capsys.readouterr().out
+    assert "family (3 Ours x 3 VAE seeds)" in printed and "trials as random" in printed
+    assert "1 participant(s)) ran another bank" in printed
+
+
+def test_without_a_bank_the_report_says_so_and_keeps_the_rest(tmp_path):
+    fixed_predictions(n_participants=3).to_csv(tmp_path / "export.csv", index=False)
+    inputs = StudyInputs(config={}, rules=RULES, models={}, bank=tmp_path / "absent.json.gz")
+    out = tmp_path / "report"
+    summary = run_analyze("paper_study", out, tmp_path / "export.csv", "", inputs)
+    assert summary["seeds"]["status"] == "no_bank" and summary["family"] == {}
+    assert not (out / "per_seed.csv").exists() and (out / "mixed_model.csv").is_file()
+    assert list(summary["by_arm"]["highway"]["pooled"]) == ["primary"]
+    assert "no trial bank at" in (out / "report.html").read_text()
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["trial_bank_sha256"] is None and meta["models_match_bank"] is None
+
 
 def test_start_kind_table_with_one_participant_has_no_test():
     rows = add_alignment_errors(fixed_predictions(n_participants=3, starts=2))
@@ -81,7 +148,7 @@ def test_start_kind_table_with_one_participant_has_no_test():
 
 
 def test_all_excluded_is_a_clear_error_and_waive_is_reported(tmp_path, inputs):
-    frame = simulate_participants(small_bank(), "random", 6, 5, seed=4, show_progress=False)
+    frame = simulated_export("random", 6, seed=4)
     frame["attention_passed"] = False
     frame.to_csv(tmp_path / "export.csv", index=False)
     with pytest.raises(AnalysisError, match="every participant was excluded"):
