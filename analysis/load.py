@@ -108,6 +108,7 @@ def load_database(url: str, study_id: str) -> pd.DataFrame:
                 (part.c.attention_failed == 0).label("attention_passed"),
                 trial.c.world, trial.c.world_position, trial.c.trial_id, trial.c.trial_index,
                 trial.c.is_practice, trial.c.attention_check, trial.c.clip_sha256,
+                *[trial.c[c] for c in ADDED_COLUMNS if c in trial.c],  # older schemas lack them
                 *[pred.c[c] for c in EXPORT_COLUMNS if c in pred.c and c not in
                   ("participant_id", "trial_id", "submission_id")],
                 trial.c.duration_ms.label("trial_duration_ms"), trial.c.replays,

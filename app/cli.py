@@ -213,18 +213,23 @@ def analyze(
 
 
 def analysis_inputs(study: str) -> "StudyInputs":
-    """What `analyze` takes from the study config, as plain values and paths."""
+    """What `analyze` takes from the study config and its bundle, as plain values and paths
+    (without a bundle on this machine the analysis runs on the export alone, and says so)."""
     from analysis.report import StudyInputs
-    from app.study.bundle import checkpoint_file
+    from app.study.bundle import BANK, BundleError, load_bundle
     from app.study.config import load_study_config
 
     settings = get_settings()
     config = load_study_config(settings, study)
-    bundle = served_bundle(study)
-    checkpoints = {f"{world}/{model}": bundle.root / checkpoint_file(world, model, bundle.seeds[0])
-                   for world in config.worlds for model in ("ours", "vae")}
+    try:
+        bundle = load_bundle(config, study, settings.configs_dir, settings.data_dir)
+    except BundleError as err:
+        typer.echo(f"warning: {err}; per-seed and family results need the bundle", err=True)
+        models, bank = {}, settings.layout.bundle_dir(study) / BANK
+    else:
+        models, bank = bundle.manifest["models"], bundle.root / BANK
     return StudyInputs(config=config.model_dump(mode="json"), rules=config.exclusions,
-                       checkpoints=checkpoints, bank=bundle.root / "bank.json.gz")
+                       models=models, bank=bank)
 
 
 @cli.command()
