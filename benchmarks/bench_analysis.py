@@ -1,8 +1,8 @@
 """Time `tomstudy analyze` on 300,000 predictions against just reading the same CSV.
 
 1,000 simulated participants x 20 trials x 5 start states x 3 steps, answered by the
-coarse observers run in process on the study's trial bank (var/trials/<study>/bank.json;
-run `tomstudy build-trials` first). Prints both wall times and their ratio; target: the
+coarse observers run in process on the trial bank of the bundle the study is served from
+(the paper's ships with the code). Prints both wall times and their ratio; target: the
 whole analysis (load, exclusions, errors, tests, ADE/FDE, figures, report) under 10 s.
 
     .venv/bin/python benchmarks/bench_analysis.py [--participants 1000] [--study paper_study]
@@ -16,9 +16,8 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.report import run_analyze
-from app.cli import analysis_inputs
+from app.cli import analysis_inputs, served_bank
 from app.observers.simulated_study import load_bank, simulate_participants
-from app.settings import get_settings
 
 TARGET_S = 10.0
 
@@ -29,11 +28,8 @@ def main() -> None:
     parser.add_argument("--participants", type=int, default=1000)
     parser.add_argument("--study", default="paper_study")
     args = parser.parse_args()
-    settings = get_settings()
-    bank_path = settings.data_dir / "trials" / args.study / "bank.json"
-    if not bank_path.is_file():
-        raise SystemExit(f"{bank_path} not found: run `tomstudy build-trials --study {args.study}`")
-    frame = simulate_participants(load_bank(bank_path), "coarse", args.participants, 10, seed=0)
+    frame = simulate_participants(load_bank(served_bank(args.study)), "coarse", args.participants,
+                                  10, seed=0)
     with tempfile.TemporaryDirectory() as tmp:
         csv = Path(tmp) / "export.csv"
         frame.to_csv(csv, index=False)

@@ -1,7 +1,7 @@
 """Participant routes under load: p50/p99 of each route beside a bare endpoint's, same run.
 
 Starts a real `tomstudy serve` on 127.0.0.1 (SQLite WAL, 1 worker, unless told) with the
-paper's study when its trial bank is in the data dir, else the small test study. Then N
+paper's study (its bundle ships with the code), else the small test study. Then N
 simulated participants (200) run the whole flow at once, as app/study/bots.py does: start
 a session with Prolific-style parameters, read the state, consent, instructions, per trial
 post telemetry and predictions, then the survey. Before each step every participant also
@@ -34,8 +34,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from app.layout import Layout  # noqa: E402
 from app.study.bots import survey_answers  # noqa: E402
+from app.study.bundle import MANIFEST, shipped_dir  # noqa: E402
 from benchmarks._rawhttp import RawClient  # noqa: E402
 from tests.conftest import (  # noqa: E402
     REPO,
@@ -152,11 +152,11 @@ async def run_load(port: int, study_id: str, participants: int, study_param: str
 
 
 def choose_study(which: str, data_dir: Path) -> SmallStudy:
-    """The paper's study if its bank is built in `data_dir` (or asked for), else the small one."""
+    """The paper's study if its bundle ships (or asked for), else the small one."""
     paper = SmallStudy(data_dir, REPO / "study_configs", "paper_study")
-    has_paper = Layout(data_dir).bank("paper_study").is_file()
+    has_paper = (shipped_dir(REPO / "study_configs", "paper_study") / MANIFEST).is_file()
     if which == "paper" and not has_paper:
-        sys.exit(f"no paper_study trial bank in {data_dir} (tomstudy serve --prepare builds it)")
+        sys.exit("no paper_study bundle in study_configs/bundles/ (restore it from git)")
     if which == "paper" or (which == "auto" and has_paper):
         return paper
     return cached_small_study()  # the tests' cache, rebuilt when the pipeline code changes
