@@ -18,6 +18,8 @@ coarse one means the study cannot tell them apart.
 """
 
 import math
+import multiprocessing as mp
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,10 +87,12 @@ class PopulationAnswers:
 
 
 def population_answers(bank: dict, preset: str, n: int, trials_per_world: int, seed: int,
-                       observers: ObserversConfig, index: dict[str, int]) -> PopulationAnswers:
+                       observers: ObserversConfig, index: dict[str, int],
+                       readings: dict | None = None) -> PopulationAnswers:
     """n simulated participants of one preset (`simulated_trials`: the server's assignment, no
     model read), their clicks turned into actions as the server turns them."""
-    answered = list(simulated_trials(bank, preset, n, trials_per_world, seed, False, observers))
+    answered = list(simulated_trials(bank, preset, n, trials_per_world, seed, False, observers,
+                                     readings))
     return PopulationAnswers(
         participant=np.array([a.participant for a in answered]),
         world=np.array([a.payload["world"] for a in answered]),
@@ -147,29 +151,49 @@ def noise_levels(view_deg: dict[str, float] | None) -> dict[str, dict[str, float
     return levels
 
 
+def level_rows(bank: dict, trials_per_world: int, observers: ObserversConfig, n: int, seed: int,
+               alpha: float, replications: int, label: str,
+               per_world: dict[str, float] | None) -> list[dict]:
+    """Every (replication, seed pair, world, reading) check at one noise level."""
+    index, family = family_answers(bank)
+    readings = {preset: {} for preset in INSTRUMENT_POPULATIONS}  # not noise-dependent
+    rows = []
+    for r in range(replications + 1):
+        for world in sorted(bank["worlds"]):
+            sd = None if per_world is None else per_world.get(world, per_world.get("*"))
+            noisy = observers if sd is None else with_click_noise(observers, sd)
+            populations = {
+                preset: population_answers(only_world(bank, world), preset, n, trials_per_world,
+                                           seed + offset + 3 * r, noisy, index, readings[preset])
+                for offset, preset in enumerate(INSTRUMENT_POPULATIONS)}
+            rows += [dict(row, noise=label, click_sd_deg=sd, replication=r)
+                     for row in grid_rows(populations, family, seed_pairs(bank), world, alpha)]
+    return rows
+
+
 def run_grid(bank: dict, trials_per_world: int, observers: ObserversConfig, n: int = 22,
              seed: int = 0, alpha: float = 0.01, replications: int = 50,
-             view_deg: dict[str, float] | None = None) -> pd.DataFrame:
-    """Every (noise level, replication, seed pair, world, reading) check, one row each."""
-    index, family = family_answers(bank)
-    pairs, levels = seed_pairs(bank), noise_levels(view_deg)
-    rows = []
-    bar = tqdm(total=len(levels) * (replications + 1), desc="instrument grid", unit="study")
-    for label, per_world in levels.items():
-        for r in range(replications + 1):
-            for world in sorted(bank["worlds"]):
-                sd = None if per_world is None else per_world.get(world, per_world.get("*"))
-                noisy = observers if sd is None else with_click_noise(observers, sd)
-                populations = {
-                    preset: population_answers(only_world(bank, world), preset, n,
-                                               trials_per_world, seed + offset + 3 * r, noisy,
-                                               index)
-                    for offset, preset in enumerate(INSTRUMENT_POPULATIONS)}
-                rows += [dict(row, noise=label, click_sd_deg=sd, replication=r)
-                         for row in grid_rows(populations, family, pairs, world, alpha)]
+             view_deg: dict[str, float] | None = None, workers: int = 2) -> pd.DataFrame:
+    """Every (noise level, replication, seed pair, world, reading) check, one row each; the
+    noise levels run `workers` at a time."""
+    levels = noise_levels(view_deg)
+    args = (bank, trials_per_world, observers, n, seed, alpha, replications)
+    bar = tqdm(total=len(levels), desc="instrument grid", unit="noise level")
+    rows: dict[str, list[dict]] = {}
+    if workers == 1:
+        for label, per_world in levels.items():
+            rows[label] = level_rows(*args, label, per_world)
             bar.update(1)
+    else:
+        # spawn, not fork: the parent may have run torch or hold threads
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+            futures = {pool.submit(level_rows, *args, label, per_world): label
+                       for label, per_world in levels.items()}
+            for done in as_completed(futures):
+                rows[futures[done]] = done.result()
+                bar.update(1)
     bar.close()
-    return pd.DataFrame(rows)
+    return pd.DataFrame([row for label in levels for row in rows[label]])
 
 
 def only_world(bank: dict, world: str) -> dict:

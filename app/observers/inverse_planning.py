@@ -28,6 +28,7 @@ Presets:
 - random: uniformly random directions and lengths.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -116,12 +117,14 @@ def direction_noise(noise: NoiseConfig | None, rng: np.random.Generator) -> floa
     """One click's direction error [rad]."""
     if noise is None:
         return 0.0
-    return float(np.deg2rad(rng.normal(0.0, noise.direction_sd_deg.value)))
+    return math.radians(rng.normal(0.0, noise.direction_sd_deg.value))
 
 
+# the functions below run once per simulated click (hundreds of thousands in an instrument
+# run), so they use plain float arithmetic rather than numpy calls on two numbers
 def rotate(vector: np.ndarray, angle_rad: float) -> np.ndarray:
     """`vector` rotated by `angle_rad`."""
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
     return np.array([c * vector[0] - s * vector[1], s * vector[0] + c * vector[1]])
 
 
@@ -132,7 +135,8 @@ def step_limits(payload: dict) -> tuple[float, float]:
 
 def clip_length(payload: dict, length_m: float) -> float:
     """A move length [m] clipped inside the server's accepted lengths."""
-    return float(np.clip(length_m, *step_limits(payload)))
+    low, high = step_limits(payload)
+    return min(max(float(length_m), low), high)
 
 
 def inside_bounds(payload: dict, point: np.ndarray) -> bool:
@@ -146,18 +150,22 @@ def inside_bounds(payload: dict, point: np.ndarray) -> bool:
 def valid_move(payload: dict, origin: np.ndarray, direction: np.ndarray,
                length: float) -> np.ndarray:
     """origin + length * unit(direction), turned towards the scene centre if it leaves bounds."""
-    norm = np.linalg.norm(direction)
+    norm = math.hypot(direction[0], direction[1])
     unit = direction / norm if norm > 1e-9 else np.array([1.0, 0.0])
+    point = origin + length * unit
+    if inside_bounds(payload, point):
+        return point
     b = payload["scene"]["bounds"]
-    centre = np.array([(b["x_min_m"] + b["x_max_m"]) / 2, (b["y_min_m"] + b["y_max_m"]) / 2])
-    for _ in range(12):
+    inward = np.array([(b["x_min_m"] + b["x_max_m"]) / 2, (b["y_min_m"] + b["y_max_m"]) / 2]
+                      ) - origin
+    inward = inward / (math.hypot(inward[0], inward[1]) + 1e-9)
+    for _ in range(11):  # 12 directions tried in all
+        unit = unit + inward
+        unit = unit / (math.hypot(unit[0], unit[1]) + 1e-9)
         point = origin + length * unit
         if inside_bounds(payload, point):
             return point
-        inward = centre - origin
-        unit = unit + inward / (np.linalg.norm(inward) + 1e-9)
-        unit = unit / (np.linalg.norm(unit) + 1e-9)
-    return origin + length * (centre - origin) / (np.linalg.norm(centre - origin) + 1e-9)
+    return origin + length * inward
 
 
 def start_positions(payload: dict) -> np.ndarray:
@@ -210,7 +218,7 @@ def predict_from_actions(payload: dict, actions: np.ndarray, rng: np.random.Gene
 
     def next_move(i: int, k: int, position: np.ndarray) -> tuple[np.ndarray, float]:
         action = np.asarray(actions[i, k], dtype=np.float64)
-        length = float(np.linalg.norm(action)) * factor * payload["dt_s"]
+        length = math.hypot(action[0], action[1]) * factor * payload["dt_s"]
         return rotate(action, direction_noise(noise, rng)), clip_length(payload, length)
 
     return walk(payload, next_move)

@@ -118,18 +118,20 @@ def main_trials(bank: dict) -> dict[str, dict[str, tuple[dict, dict]]]:
 
 
 def simulated_trials(bank: dict, preset: str, n: int, trials_per_world: int, seed: int = 0,
-                     show_progress: bool = True, observers: ObserversConfig | None = None
-                     ) -> Iterator[SimulatedTrial]:
+                     show_progress: bool = True, observers: ObserversConfig | None = None,
+                     readings: dict | None = None) -> Iterator[SimulatedTrial]:
     """Every main trial `n` simulated participants of one observer preset answer, in order.
 
     Trials are assigned as the server assigns them (least seen first within each selection
     arm), so every trial is seen about equally often, as in the real study; world orders are
-    counterbalanced the same way (the server's `counterbalance_world_order: true`)."""
+    counterbalanced the same way (the server's `counterbalance_world_order: true`). A coarse
+    preset's reading of a trial is deterministic; `readings` (trial id -> reading) may carry
+    them over from an earlier call with the same inference settings and lane reading."""
     observers = observers or default_observers()
     rng = np.random.default_rng(seed)
     main = main_trials(bank)
     relative = inverse_planning.reads_relative(preset, observers)
-    readings: dict[str, tuple] = {}  # trial id -> the preset's reading, which is deterministic
+    readings = {} if readings is None else readings
     orders, order_use, exposure = list(permutations(main)), Counter(), Counter()
     for p in tqdm(range(n), desc=f"{preset} participants", disable=not show_progress):
         order = least_used(orders, order_use, 1, rng)[0]
