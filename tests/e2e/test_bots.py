@@ -101,6 +101,7 @@ def test_two_hundred_concurrent_participants_complete_in_exact_balance(small_stu
     assert sorted(orders.values()) == [CROWD // 2, CROWD // 2]
     for kind, counts in exposure(plans, bank).items():
         assert max(counts) - min(counts) <= 1, (kind, counts)
+    assert arms_given(plans, bank) == {(1, 2)}  # per world 1 random + 2 models_disagree trials
     exported = _export(url, study, tmp_path)
     assert len(exported) == rows_in_db
     assert exported["participant_id"].nunique() == CROWD
@@ -109,17 +110,33 @@ def test_two_hundred_concurrent_participants_complete_in_exact_balance(small_stu
     assert from_db.equals(exported)
 
 
-def exposure(plans: list, bank_path) -> dict[tuple[str, str], list[int]]:
-    """(world, trial kind) -> how many sessions were given each bank trial of that kind."""
+def exposure(plans: list, bank_path) -> dict[tuple[str, str, str], list[int]]:
+    """(world, trial kind, arm) -> how many sessions were given each bank trial of that kind
+    (main trials are balanced within their selection arm; each arm gives its own quota)."""
     import json
 
     bank = json.loads(bank_path.read_text())
     given = Counter(s["trial_id"] for _, plan in plans for s in plan if "trial_id" in s)
-    out: dict[tuple[str, str], list[int]] = {}
+    out: dict[tuple[str, str, str], list[int]] = {}
     for world, trials in ((w, b["trials"]) for w, b in bank["worlds"].items()):
         for t in trials:
-            out.setdefault((world, t["kind"]), []).append(given[t["trial_id"]])
+            out.setdefault((world, t["kind"], t["arm"]), []).append(given[t["trial_id"]])
     return out
+
+
+def arms_given(plans: list, bank_path) -> set[tuple[int, ...]]:
+    """Every (random, models_disagree) count of main trials a session got in one world."""
+    import json
+
+    arm = {t["trial_id"]: t["arm"] for w in json.loads(bank_path.read_text())["worlds"].values()
+           for t in w["trials"] if t["kind"] == "main"}
+    seen = set()
+    for _, plan in plans:
+        for world in {s["world"] for s in plan if "trial_id" in s}:
+            mine = [arm[s["trial_id"]] for s in plan
+                    if s.get("world") == world and s.get("trial_id") in arm]
+            seen.add((mine.count("random"), mine.count("models_disagree")))
+    return seen
 
 
 def test_precise_and_random_bots_complete(small_study, fresh_server):

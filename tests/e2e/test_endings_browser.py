@@ -22,7 +22,7 @@ import pytest
 import yaml
 
 from app.layout import Layout
-from tests.conftest import SmallStudy, free_port, start_server
+from tests.conftest import SmallStudy, build_bundle_of, free_port, start_server
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
     VIEWPORT,
@@ -172,12 +172,11 @@ def mturk_server(browser_study, turk_submit_to, tmp_path_factory):
     root = tmp_path_factory.mktemp("mturk")
     shutil.copytree(browser_study.configs_dir, root / "configs")
     shutil.copytree(browser_study.data_dir, root / "var")
-    layout = Layout(root / "var")
-    shutil.copytree(layout.bank_dir(BROWSER_STUDY), layout.bank_dir(MTURK_STUDY))
     config = yaml.safe_load((root / "configs" / f"{BROWSER_STUDY}.yaml").read_text())
     config["recruitment"] |= {"platform": "mturk", "mturk_submit_hosts": [turk_submit_to]}
     (root / "configs" / f"{MTURK_STUDY}.yaml").write_text(yaml.safe_dump(config))
     study = SmallStudy(root / "var", root / "configs", MTURK_STUDY)
+    build_bundle_of(study)
     port, db_path = free_port(), root / "study.db"
     proc = start_server(study, f"sqlite:///{db_path}", port, log=root / "server.log")
     yield study, f"http://127.0.0.1:{port}", db_path
