@@ -110,13 +110,23 @@ def build_small_study(root: Path) -> SmallStudy:
 def build_bundle_of(study: SmallStudy) -> None:
     """Build the study's bank from its data dir's checkpoints and freeze its bundle."""
     from app.configio import load_yaml_model
-    from app.layout import Layout
-    from app.study.bundle import freeze
     from app.study.config import StudyConfig
     from app.study.trial_builder import build_trials
 
     config = load_yaml_model(study.configs_dir / f"{study.study_id}.yaml", StudyConfig)
     build_trials(config, study.study_id, study.data_dir)
+    freeze_bundle_of(study)
+
+
+def freeze_bundle_of(study: SmallStudy) -> None:
+    """Freeze the study's bundle from its data dir's working bank as it is (after a test
+    changed it, say)."""
+    from app.configio import load_yaml_model
+    from app.layout import Layout
+    from app.study.bundle import freeze
+    from app.study.config import StudyConfig
+
+    config = load_yaml_model(study.configs_dir / f"{study.study_id}.yaml", StudyConfig)
     freeze(config, study.study_id, study.configs_dir, study.data_dir,
            Layout(study.data_dir).bundle_dir(study.study_id))
 

@@ -14,21 +14,23 @@ from app.study.bank_guard import BankChanged, banks_run
 from app.study.db import make_engine
 from app.study.main import create_app
 from app.study.recruitment import preview_key
-from tests.conftest import TOMSTUDY, SmallStudy, free_port, start_server
+from tests.conftest import TOMSTUDY, SmallStudy, free_port, freeze_bundle_of, start_server
 from tests.study.flow import TOKEN, Participant, make_client
 
 
 @pytest.fixture
 def rebuilt(small_study, tmp_path) -> SmallStudy:
-    """The small study with a bank of other bytes (and its meta.json to match), as after a
-    researcher rebuilt it."""
+    """The small study with a bundle whose bank has other bytes, as after a researcher rebuilt
+    and froze it."""
     data_dir = tmp_path / "var"
     shutil.copytree(small_study.data_dir, data_dir)
     bank = Layout(data_dir).bank(small_study.study_id)
     bank.write_text(json.dumps(json.loads(bank.read_text()), indent=1))
     meta = bank.with_name("meta.json")
     meta.write_text(json.dumps(json.loads(meta.read_text()) | {"bank_sha256": sha256_file(bank)}))
-    return SmallStudy(data_dir, small_study.configs_dir)
+    study = SmallStudy(data_dir, small_study.configs_dir)
+    freeze_bundle_of(study)
+    return study
 
 
 def run_sessions(study: SmallStudy, db_url: str, n: int, pilots: int = 0) -> str:

@@ -27,7 +27,7 @@ from app.study.bundle_diff import compare_bundles
 from app.study.config import StudyConfig, load_study_config
 from app.study.model_answers import BankMismatch, ModelAnswers
 from app.study.prepare import bank_is_current, build_bundle, prepare_study
-from tests.conftest import REPO, SMALL_SEEDS, TOMSTUDY, SmallStudy
+from tests.conftest import REPO, SMALL_SEEDS, TOMSTUDY, SmallStudy, freeze_bundle_of
 
 
 def copied(study: SmallStudy, tmp_path) -> SmallStudy:
@@ -113,8 +113,7 @@ def refrozen_with(study: SmallStudy, change) -> None:
     raw = json.loads(path.read_text())
     change(raw)
     path.write_text(json.dumps(raw))
-    freeze(config_of(study), study.study_id, study.configs_dir, study.data_dir,
-           bundle_root(study))
+    freeze_bundle_of(study)
 
 
 def test_model_answers_refuse_stored_answers_their_checkpoint_does_not_give(small_study,

@@ -3,7 +3,6 @@
 import os
 import re
 import subprocess
-from pathlib import Path
 
 import pytest
 import typer
@@ -11,7 +10,6 @@ import yaml
 from sqlalchemy.engine import make_url
 
 from app.cli import cli
-from app.layout import Layout
 from app.settings import Settings
 from tests.conftest import REPO
 
@@ -127,30 +125,13 @@ def run_entrypoint(tmp_path):
     return run
 
 
-def add_bank(data_dir: Path, study: str) -> None:
-    bank = Layout(data_dir).bank(study)
-    bank.parent.mkdir(parents=True)
-    bank.write_text("{}")
-
-
-def test_first_start_builds_the_study_then_serves(run_entrypoint):
-    out = run_entrypoint("--workers", "2")
-    assert "first start: no trial bank for paper_study" in out[0]
-    assert out[-1] == "tomstudy serve --host 0.0.0.0 --port 8000 --prepare --workers 2"
-
-
-def test_a_study_with_a_bank_is_served_without_rebuilding(run_entrypoint):
-    add_bank(run_entrypoint.data_dir, "paper_study")
-    assert run_entrypoint() == ["tomstudy serve --host 0.0.0.0 --port 8000"]
-
-
-@pytest.mark.parametrize("study_args", [["--study", "paper_study,other"],
-                                        ["--study=paper_study,other"]])
-def test_every_served_study_needs_its_bank(run_entrypoint, study_args):
-    add_bank(run_entrypoint.data_dir, "paper_study")
-    out = run_entrypoint(*study_args)
-    assert len(out) == 2 and "no trial bank for other" in out[0]
-    assert out[-1].endswith("--prepare " + " ".join(study_args))
+@pytest.mark.parametrize("args", [[], ["--workers", "2"], ["--study", "paper_study,other"],
+                                  ["--study=paper_study,other"]])
+def test_every_start_prepares_then_serves_with_the_options_given(run_entrypoint, args):
+    # --prepare builds nothing for a shipped bundle or a built one that exists
+    # (tests/study/test_bundle.py): only a `built` study without its bundle is built first
+    assert run_entrypoint(*args) == [" ".join(["tomstudy serve --host 0.0.0.0 --port 8000 "
+                                               "--prepare", *args])]
 
 
 def test_a_command_instead_of_options_runs_that_command(run_entrypoint):
