@@ -211,9 +211,9 @@ def summarise_grid(grid: pd.DataFrame, alpha: float) -> pd.DataFrame:
     reruns = grid[grid["replication"] > 0].groupby(keys)
     out = first.drop(columns=["replication"]).assign(
         pass_rate=reruns["passed"].mean() if len(grid["replication"].unique()) > 1 else np.nan)
-    effect = grid.groupby(keys).apply(standardised_gap, include_groups=False)
-    out["effect_size_d"] = effect
-    out["n_for_power_0.8"] = [participants_needed(TTestIndPower(), d, alpha) for d in effect]
+    out["effect_size_d"] = grid.groupby(keys).apply(standardised_gap, include_groups=False)
+    out["n_for_power_0.8"] = [participants_needed(TTestIndPower(), d, alpha)
+                              for d in out["effect_size_d"]]
     return out.reset_index()
 
 

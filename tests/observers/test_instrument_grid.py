@@ -80,6 +80,12 @@ def test_the_grid_has_a_row_per_level_rerun_pair_world_and_reading():
     pd.testing.assert_series_equal(indexed["pass_rate"], rates.reindex(indexed.index),
                                    check_names=False)
     assert (indexed["welch_t"] == first["welch_t"].reindex(indexed.index)).all()
+    from statsmodels.stats.power import TTestIndPower
+
+    for _, row in summary.iterrows():  # each cell's n follows its own effect size
+        expected = participants_needed(TTestIndPower(), row["effect_size_d"], 0.01)
+        assert row["n_for_power_0.8"] == expected or (math.isnan(expected)
+                                                      and math.isnan(row["n_for_power_0.8"]))
 
 
 def test_participants_needed_falls_with_the_effect_and_is_absent_without_one():
