@@ -31,6 +31,7 @@ test: $(STAMP)
 
 # Pilot end to end on a fresh database: serve, KIND bots (coarse|coarse_relative|precise|random),
 # analyze. The database is app/layout.py's pilot_database(KIND) under the default data dir.
+# Bots answer without thinking from one address, so this loopback server has no rate limits.
 KIND ?= coarse
 PILOT_PORT ?= 8765
 # random clickers fail the attention checks by design (as they should); their report waives
@@ -39,6 +40,7 @@ PILOT_WAIVE = $(if $(filter random,$(KIND)),--waive failed_attention_check)
 pilot: $(STAMP)
 	rm -f var/pilot_$(KIND).db*
 	DATABASE_URL=sqlite:///$(CURDIR)/var/pilot_$(KIND).db TOMSTUDY_TRUST_CLIENT_CLOCK=1 \
+	  TOMSTUDY_RATE_LIMIT_STARTS= TOMSTUDY_RATE_LIMIT_REQUESTS= \
 	  $(BIN)/tomstudy serve --prepare \
 	  --study paper_study --port $(PILOT_PORT) & pid=$$!; \
 	for i in $$(seq 600); do curl -sf http://127.0.0.1:$(PILOT_PORT)/s/paper_study >/dev/null && break; sleep 1; done; \

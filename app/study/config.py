@@ -2,6 +2,7 @@
 
 import hashlib
 import json
+import math
 from functools import lru_cache
 from pathlib import Path
 from typing import Literal
@@ -76,13 +77,18 @@ class Endings(StrictModel):
     `failed_checks` is the completed study with at least `min_failed` failed attention
     checks: Prolific lets a researcher reject only after two failed checks (in a study of
     five minutes or more), so these sessions are marked for manual review, not rejected;
-    its code '' means the completed code. Declined consent and device screen-outs end
-    before any trial.
+    its code '' means the completed code. `excluded` is a completed study that the
+    study's `exclusions` remove (too many too-fast trials, or a failed check under
+    `failed_attention_check`) without `min_failed` failed checks: the study chooses its
+    code, '' meaning failed_checks' (review, never the approve code by default). Declined
+    consent and device screen-outs end before any trial.
     """
 
     failed_checks: Ending = Ending(message="Thank you. Your submission will be reviewed "
                                            "by the researchers.")
     min_failed: int = Field(default=2, ge=1)
+    excluded: Ending = Ending(message="Thank you. Your submission will be reviewed by the "
+                                      "researchers.")
     declined_consent: Ending = Ending(message="You chose not to take part. Please return "
                                               "the study on the recruiting platform so "
                                               "that your place goes to someone else.")
@@ -132,8 +138,10 @@ class RecruitmentConfig(StrictModel):
         if outcome == "completed":
             return Ending(completion_code=self.completion_code)
         chosen = getattr(self.endings, outcome)
-        if outcome == "failed_checks" and not chosen.completion_code:
-            return chosen.model_copy(update={"completion_code": self.completion_code})
+        fallback = {"failed_checks": "completed", "excluded": "failed_checks"}.get(outcome)
+        if fallback and not chosen.completion_code:
+            code = self.ending(fallback).completion_code
+            return chosen.model_copy(update={"completion_code": code})
         return chosen
 
 
@@ -210,6 +218,9 @@ class StudyConfig(StrictModel):
     target_sample_size: int = Field(ge=1)
     exclusions: ExclusionRules = ExclusionRules()
     in_progress_timeout_min: float = Field(default=90.0, gt=0)
+    # at most this x target_sample_size unfinished sessions run at once (pilots aside): a
+    # bound on what anonymous traffic can make the server hold (sessions.py)
+    max_live_sessions_per_target: float = Field(default=10.0, ge=1)
     models: dict[WorldName, ModelPaths]
 
     @model_validator(mode="after")
@@ -227,6 +238,11 @@ class StudyConfig(StrictModel):
         if len(set(keys)) != len(keys):
             raise ValueError("survey: question keys must be unique")
         return self
+
+
+def live_session_cap(config: StudyConfig) -> int:
+    """How many unfinished counted sessions the study runs at once."""
+    return math.ceil(config.max_live_sessions_per_target * config.target_sample_size)
 
 
 def config_sha256(config: StudyConfig) -> str:
