@@ -18,6 +18,9 @@ REPO = Path(__file__).resolve().parent.parent
 SMALL_STUDY = "small_study"
 PG_BIN = Path("/usr/lib/postgresql/15/bin")
 ADMIN_TOKEN = "test-token"  # the researcher token of every test server and app
+# test clients send many requests from one address (TestClient's host is "testserver"):
+# rate limits are off unless a test turns them on (tests/study/test_traffic.py)
+NO_RATE_LIMITS = {"rate_limit_starts": "", "rate_limit_requests": ""}
 TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")  # the installed CLI, for subprocesses
 
 # The paper's study, shrunk: the same trial shape (4 examples, 5-7 step segment, 5 start
@@ -46,7 +49,8 @@ class SmallStudy:
         """Environment for a `tomstudy` subprocess using this study and database."""
         env = dict(os.environ, TOMSTUDY_DATA_DIR=str(self.data_dir),
                    TOMSTUDY_CONFIGS_DIR=str(self.configs_dir), DATABASE_URL=db_url,
-                   TOMSTUDY_ADMIN_TOKEN=ADMIN_TOKEN)
+                   TOMSTUDY_ADMIN_TOKEN=ADMIN_TOKEN,
+                   **{f"TOMSTUDY_{k.upper()}": v for k, v in NO_RATE_LIMITS.items()})
         env.pop("TOMSTUDY_PRODUCTION", None)
         return env | extra
 
@@ -55,7 +59,8 @@ class SmallStudy:
         from app.settings import Settings
 
         return Settings(**dict(data_dir=self.data_dir, configs_dir=self.configs_dir,
-                               database_url=db_url, admin_token=ADMIN_TOKEN) | extra)
+                               database_url=db_url, admin_token=ADMIN_TOKEN,
+                               allowed_hosts="testserver", **NO_RATE_LIMITS) | extra)
 
 
 def _sources_hash() -> str:

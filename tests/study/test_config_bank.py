@@ -18,7 +18,7 @@ from sqlmodel import Session, create_engine, select
 from app.configio import ConfigError, load_yaml_model
 from app.fileio import sha256_file
 from app.layout import Layout
-from app.settings import DEFAULT_ADMIN_TOKEN, Settings
+from app.settings import Settings
 from app.study.config import MainTrialSelection, StudyConfig, load_study_config
 from app.study.db import create_tables
 from app.study.deps import get_db
@@ -34,9 +34,9 @@ from app.study.trial_builder import (
     take_turns,
 )
 from app.study.trials import TrialBank, clip_sha256
-from tests.conftest import REPO, TOMSTUDY
+from tests.conftest import REPO, TOMSTUDY, SmallStudy
 from tests.study import flow
-from tests.study.flow import ADMIN, TOKEN, new_id, prediction_body, prolific
+from tests.study.flow import ADMIN, new_id, prediction_body, prolific
 
 
 def test_paper_study_config_matches_the_paper():
@@ -116,6 +116,7 @@ def test_bank_trials_have_the_paper_shape(bank, small_study):
         assert hashes == {meta["worlds"][name]["checkpoints"]["ours"]["content_hash"]}
 
 
+OLD_DEFAULT_TOKEN = "change-me-researcher-token"  # the default before issue 22 removed it
 DATA_KINDS = {"highway": ("same_lane", "adjacent_lane"), "obstacle": ("near", "mid")}
 
 
@@ -236,8 +237,7 @@ def test_start_states_config_sets_the_count_and_the_api_follows(three_starts, tm
             assert np.asarray(t.policy_actions).shape[0] == 3
             if t.kind != "attention":
                 assert [s.start_kind for s in t.start_states] == ["own", *DATA_KINDS[name]]
-    settings = Settings(data_dir=data, configs_dir=configs, admin_token=TOKEN,
-                        database_url=f"sqlite:///{tmp_path / 'study.db'}")
+    settings = SmallStudy(data, configs).settings(f"sqlite:///{tmp_path / 'study.db'}")
     with TestClient(create_app(settings, ["three_starts"])) as client:
         p = flow.Participant(client, "three_starts")
         p.start()
@@ -310,13 +310,13 @@ def test_models_disagree_keeps_the_most_controversial_trials_per_label(small_stu
     assert max(counts) - min(counts) <= 1  # labels take turns
 
 
-def test_production_mode_refuses_the_default_token(small_study, tmp_path):
-    settings = Settings(data_dir=small_study.data_dir, production=True,
-                        admin_token=DEFAULT_ADMIN_TOKEN)
+@pytest.mark.parametrize("token", ["", OLD_DEFAULT_TOKEN])
+def test_production_mode_refuses_an_unset_or_old_default_token(small_study, tmp_path, token):
+    settings = Settings(data_dir=small_study.data_dir, production=True, admin_token=token)
     with pytest.raises(UnsafeSettings, match="TOMSTUDY_ADMIN_TOKEN"):
         create_app(settings, [small_study.study_id])
     env = small_study.env(f"sqlite:///{tmp_path / 'x.db'}", TOMSTUDY_PRODUCTION="1",
-                          TOMSTUDY_ADMIN_TOKEN=DEFAULT_ADMIN_TOKEN)
+                          TOMSTUDY_ADMIN_TOKEN=token)
     run = subprocess.run([TOMSTUDY, "serve", "--port", "1"],
                          env=env, capture_output=True, text=True, timeout=60)
     assert run.returncode == 2 and "refusing to start" in run.stderr
@@ -331,16 +331,14 @@ def test_in_memory_database_through_dependency_override(small_study, tmp_path):
         with Session(engine) as session:
             yield session
 
-    settings = Settings(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir,
-                        database_url=f"sqlite:///{tmp_path / 'unused.db'}")
+    settings = small_study.settings(f"sqlite:///{tmp_path / 'unused.db'}")
     app = create_app(settings, [small_study.study_id])
     app.dependency_overrides[get_db] = memory_db
     with TestClient(app) as client:
         r = client.post("/api/sessions", json={"study_id": small_study.study_id,
                                                "recruitment": prolific("memory")})
-        token = r.json()["session_token"]
-        r = client.post(f"/api/sessions/{token}/consent",
-                        json={"submission_id": new_id(), "agree": True})
+        r = client.post("/api/session/consent", json={"submission_id": new_id(), "agree": True},
+                        headers={"X-Session-Token": r.json()["session_token"]})
         assert r.status_code == 200 and r.json()["phase"] == "instructions"
     with Session(engine) as session:
         stored = session.execute(select(Participant)).scalars().one()
