@@ -32,8 +32,8 @@ class SegmentSteps(StrictModel):
 class AttentionChecks(StrictModel):
     """Trials whose answer is obvious: the robot keeps moving the way it plainly moves.
 
-    For these trials the bank places the start states a step beside or behind the
-    robot, and picks the segments where the world's own policy from every start state
+    Their start states follow the main trials' rule (so their geometry gives nothing
+    away); the bank picks the segments where the world's own policy from every start state
     moves closest to the robot's last segment velocity (meta.json reports the angle and
     whether it is within `candidate_max_angle_deg`). A participant passes one if, in at
     least `min_passing_starts` of the start states, the first clicked move is within
