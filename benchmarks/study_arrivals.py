@@ -24,9 +24,7 @@ largest rate below that is what the server holds.
 import argparse
 import asyncio
 import json
-import os
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -44,11 +42,11 @@ from app.study.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
 from benchmarks._rawhttp import RawClient  # noqa: E402
 from benchmarks.study_load import event, recruitment_params, write  # noqa: E402
 from tests.conftest import (  # noqa: E402
-    PG_BIN,
     REPO,
     SmallStudy,
     free_port,
     fresh_database,
+    start_cluster,
     start_server,
 )
 from tests.study.flow import DEVICE, prediction_body  # noqa: E402
@@ -216,7 +214,8 @@ def main() -> None:
         tmp = Path(tmp)
         stop = None
         if args.database == "postgres" and not args.postgres_url:
-            args.postgres_url, stop = throwaway_postgres(tmp / "pg")
+            (tmp / "pg").mkdir()
+            args.postgres_url, stop = start_cluster(tmp / "pg", fsync=True)
         try:
             measure(args, tmp)
         finally:
@@ -243,27 +242,6 @@ def measure(args: argparse.Namespace, tmp: Path) -> None:
         held = rate
     print(f"\n{where}: holds {held:g} arrivals/s with every route's p99 under "
           f"{P99_LIMIT_MS:.0f} ms ({held / PEAK_PER_S:.0f}x the expected peak)")
-
-
-def throwaway_postgres(root: Path):
-    """A PostgreSQL 15 cluster under `root` (fsync on, as a real one); (URL, stop)."""
-    root.mkdir()
-    as_postgres = ["runuser", "-u", "postgres", "--"] if os.geteuid() == 0 else []
-    if as_postgres:
-        shutil.chown(root, "postgres")
-    data = root / "data"
-    subprocess.run([*as_postgres, str(PG_BIN / "initdb"), "-D", str(data), "-A", "trust",
-                    "-U", "postgres"], check=True, capture_output=True)
-    port = free_port()
-    options = f"-c listen_addresses=127.0.0.1 -p {port} -k {root} -c max_connections=200"
-    subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-o", options,
-                    "-l", str(root / "pg.log"), "-w", "start"], check=True, capture_output=True)
-
-    def stop() -> None:
-        subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-m", "fast",
-                        "stop"], capture_output=True)
-
-    return f"postgresql+psycopg://postgres@127.0.0.1:{port}/postgres", stop
 
 
 if __name__ == "__main__":

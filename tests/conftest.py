@@ -198,6 +198,14 @@ def postgres_url():
     if not (PG_BIN / "initdb").exists():
         pytest.skip(f"PostgreSQL binaries not found in {PG_BIN} (apt-get install postgresql)")
     root = Path(tempfile.mkdtemp(prefix="tomstudy-pg-"))  # pytest's tmp is private to root
+    url, stop = start_cluster(root)
+    yield url
+    stop()
+    shutil.rmtree(root, ignore_errors=True)
+
+
+def start_cluster(root: Path, fsync: bool = False):
+    """A PostgreSQL 15 cluster in `root` on a free loopback port; (URL, stop function)."""
     data = root / "data"
     as_postgres = ["runuser", "-u", "postgres", "--"] if os.geteuid() == 0 else []
     if as_postgres:
@@ -205,13 +213,16 @@ def postgres_url():
     subprocess.run([*as_postgres, str(PG_BIN / "initdb"), "-D", str(data), "-A", "trust",
                     "--no-sync", "-U", "postgres"], check=True, capture_output=True)
     port = free_port()
-    options = f"-c listen_addresses=127.0.0.1 -p {port} -k {root} -c fsync=off"
+    options = (f"-c listen_addresses=127.0.0.1 -p {port} -k {root} -c max_connections=200"
+               + ("" if fsync else " -c fsync=off"))
     subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-o", options,
                     "-l", str(root / "pg.log"), "-w", "start"], check=True, capture_output=True)
-    yield f"postgresql+psycopg://postgres@127.0.0.1:{port}/postgres"
-    subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-m", "immediate",
-                    "stop"], capture_output=True)
-    shutil.rmtree(root, ignore_errors=True)
+
+    def stop() -> None:
+        subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-m",
+                        "immediate", "stop"], capture_output=True)
+
+    return f"postgresql+psycopg://postgres@127.0.0.1:{port}/postgres", stop
 
 
 def fresh_database(server_url: str, name: str) -> str:
