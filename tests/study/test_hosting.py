@@ -396,3 +396,12 @@ def test_the_session_token_never_travels_in_a_url(client, small_study):
     assert not [path for path in session_paths if "{" in path]
     assert client.get(f"/api/sessions/{p.token}/state").status_code in (404, 405)
     assert p.get("state").status_code == 200
+
+
+def test_serve_names_a_data_dir_it_cannot_write_instead_of_a_traceback(small_study, tmp_path):
+    blocked = tmp_path / "a-file"
+    blocked.write_text("")  # nothing can be created below a file (as root, too)
+    run = run_serve(small_study, tmp_path, TOMSTUDY_DATA_DIR=str(blocked / "var"))
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert run.stderr.startswith(f"error: TOMSTUDY_DATA_DIR: {blocked / 'var'} is not writable")
+    assert "chown" in run.stderr
