@@ -145,10 +145,7 @@ def test_start_states_lie_on_the_learned_data_near_the_robot(bank, small_study):
             kinds = [s.start_kind for s in t.start_states]
             robots = np.array([s.robot for s in t.start_states])
             assert kinds[0] == "own"
-            if t.kind == "attention":
-                assert set(kinds[1:]) == {"offset"}
-                continue
-            assert set(kinds[1:]) <= set(DATA_KINDS[name])
+            assert set(kinds[1:]) <= set(DATA_KINDS[name])  # attention checks too (issue 22)
             for kind in kinds[1:]:
                 counts[kind] += 1
             for p in robots[1:]:  # each one a state the models' data covers
