@@ -30,7 +30,10 @@ from sqlalchemy import insert
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from fastapi.testclient import TestClient  # noqa: E402
+
 from app.study.balance import STALE_BATCH, release_stale_batch  # noqa: E402
+from app.study.main import create_app  # noqa: E402
 from app.study.tables import Participant, utcnow  # noqa: E402
 from tests.conftest import cached_small_study  # noqa: E402
 from tests.study.flow import make_client, prolific  # noqa: E402
@@ -85,18 +88,25 @@ def without_cap(client, study_id: str) -> None:
 
 def stale_release(study, stale: int) -> tuple[np.ndarray, np.ndarray]:
     """(start latencies among `stale` abandoned sessions, seconds per sweep batch)."""
-    with (tempfile.TemporaryDirectory() as tmp,
-          make_client(study, f"sqlite:///{tmp}/stale.db") as client):
-        without_cap(client, study.study_id)
-        seed(client, study.study_id, stale, completed=False)
-        starts = start_latencies(client, study.study_id, 50, "among-stale")
-        ctx, batches = client.app.state.studies[study.study_id], []
-        while True:
-            t0 = time.perf_counter()
-            released = release_stale_batch(client.app.state.engine, ctx)
-            batches.append(time.perf_counter() - t0)
-            if released < STALE_BATCH:
-                return starts, np.asarray(batches)
+    with tempfile.TemporaryDirectory() as tmp:
+        # the app's own background sweep stays off: this loop is the sweep, timed
+        settings = study.settings(f"sqlite:///{tmp}/stale.db", stale_sweep_s=3600)
+        with TestClient(create_app(settings, [study.study_id])) as client:
+            return sweep_timed(client, study, stale)
+
+
+def sweep_timed(client, study, stale: int) -> tuple[np.ndarray, np.ndarray]:
+    """Seed `stale` abandoned sessions, time starts among them, then every sweep batch."""
+    without_cap(client, study.study_id)
+    seed(client, study.study_id, stale, completed=False)
+    starts = start_latencies(client, study.study_id, 50, "among-stale")
+    ctx, batches = client.app.state.studies[study.study_id], []
+    while True:
+        t0 = time.perf_counter()
+        released = release_stale_batch(client.app.state.engine, ctx)
+        batches.append(time.perf_counter() - t0)
+        if released < STALE_BATCH:
+            return starts, np.asarray(batches)
 
 
 def main() -> None:

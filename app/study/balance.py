@@ -118,7 +118,8 @@ def in_progress_cutoff(config: StudyConfig) -> datetime:
     return utcnow() - timedelta(minutes=config.in_progress_timeout_min)
 
 
-STALE_BATCH = 200  # sessions released per transaction: short write locks, bounded work
+STALE_BATCH = 50  # sessions released per transaction: SQLite's write lock held ~10 ms
+BATCH_PAUSE_S = 0.05  # between batches, so participants' writes go first
 
 
 def release_stale_batch(engine: Engine, ctx: StudyContext, limit: int = STALE_BATCH) -> int:
@@ -156,7 +157,7 @@ async def sweep_stale(engine: Engine, studies: list[StudyContext], interval_s: f
         for ctx in studies:
             try:
                 while await asyncio.to_thread(release_stale_batch, engine, ctx) == STALE_BATCH:
-                    await asyncio.sleep(0)
+                    await asyncio.sleep(BATCH_PAUSE_S)
             except Exception as err:  # a database hiccup must not end the sweep
                 logger.warning("releasing stale sessions of %s failed: %s", ctx.study_id, err)
         await asyncio.sleep(interval_s)
