@@ -214,8 +214,14 @@ def main() -> None:
         tmp = Path(tmp)
         stop = None
         if args.database == "postgres" and not args.postgres_url:
-            (tmp / "pg").mkdir()
-            args.postgres_url, stop = start_cluster(tmp / "pg", fsync=True)
+            # its own folder under /tmp: the private temp dir is not the postgres user's to enter
+            pg_root = Path(tempfile.mkdtemp(prefix="tomstudy-bench-pg-"))
+            url, stop_cluster = start_cluster(pg_root, fsync=True)
+            args.postgres_url = url
+
+            def stop() -> None:
+                stop_cluster()
+                shutil.rmtree(pg_root, ignore_errors=True)
         try:
             measure(args, tmp)
         finally:
