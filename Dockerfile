@@ -1,15 +1,25 @@
-# tomstudy study server, CPU only. Mirrors the README's install: torch==2.13.0 first (an
-# unpinned resolve pulls gigabytes of CUDA wheels), then the project.
+# tomstudy study server, CPU only. Every Python dependency is pinned (requirements/runtime.txt,
+# `make lock`), torch==2.13.0 is installed first from PyTorch's CPU index (an unpinned resolve
+# pulls gigabytes of CUDA wheels), and the dependencies are installed before the code is
+# copied, so a code edit rebuilds only the last layers.
 #
-#   docker build -t tomstudy .
+# The base image: compose.yaml builds on python:3.11-slim pinned by digest (PYTHON_IMAGE);
+# the default here is the tag, for builds that must use a local stand-in of it. Do the same
+# by hand:
+#   docker build --build-arg PYTHON_IMAGE=python:3.11-slim@sha256:<digest from compose.yaml> -t tomstudy .
+#   install -d -m 700 -o 10001 var    # the container's user (uid 10001) must own a bind-mounted var/
 #   umask 077   # tomstudy.env holds the key to every participant's data: keep it out of git
 #   echo "TOMSTUDY_ADMIN_TOKEN=$(python3 -c 'import secrets;print(secrets.token_urlsafe(32))')" \
 #     > tomstudy.env
+#   echo "TOMSTUDY_ALLOWED_HOSTS=study.example.org" >> tomstudy.env
 #   docker run --env-file tomstudy.env -p 127.0.0.1:8000:8000 -v "$PWD/var:/app/var" tomstudy
 #
-# The image runs in production mode (TOMSTUDY_PRODUCTION=1 below): it refuses to start
-# without a TOMSTUDY_ADMIN_TOKEN of at least 32 characters, and /docs, /redoc and
-# /openapi.json answer 404. It speaks plain HTTP: publish the port on 127.0.0.1 (as above)
+# The image runs in production mode (TOMSTUDY_PRODUCTION=1 below), as uid 10001 (not root),
+# under dumb-init (so `docker stop` works at any moment, the first start's build included),
+# with umask 077 (the database and the data dir readable by that user only). It refuses to
+# start without a TOMSTUDY_ADMIN_TOKEN of at least 32 characters (or TOMSTUDY_ADMIN_TOKEN_FILE),
+# answers only the Host names 127.0.0.1, localhost and TOMSTUDY_ALLOWED_HOSTS, and /docs,
+# /redoc and /openapi.json answer 404. It speaks plain HTTP: publish the port on 127.0.0.1
 # and put a reverse proxy that terminates HTTPS in front of it (README, "Hosting on the
 # internet"); never publish it on a public address as is.
 #
@@ -21,36 +31,43 @@
 # serve options, see app/study/entrypoint.sh). The paper's study is served from the frozen
 # bundle in study_configs/bundles/ (copied in below), so the first start trains nothing; a
 # study of your own with `bundle: built` is built into var/ on its first start (minutes, see
-# the README). HEALTHCHECK asks /healthz, which checks the database; its start period covers
-# such a first build.
-FROM python:3.11-slim
+# the README). HEALTHCHECK asks /healthz (which checks the database) on the host and port the
+# server was given; its start period covers such a first build.
+ARG PYTHON_IMAGE=python:3.11-slim
+FROM ${PYTHON_IMAGE}
 
 ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
     PIP_NO_CACHE_DIR=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1 \
     TOMSTUDY_DATA_DIR=/app/var \
-    TOMSTUDY_PRODUCTION=1
+    TOMSTUDY_PRODUCTION=1 \
+    FORWARDED_ALLOW_IPS=*
 
 WORKDIR /app
 
-RUN pip install --upgrade pip \
- && pip install torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu
+# dependencies only: this layer is rebuilt when requirements/runtime.txt changes, not the code
+COPY requirements/runtime.txt requirements/runtime.txt
+RUN pip install pip==26.3 \
+ && pip install torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu \
+ && pip install -r requirements/runtime.txt dumb-init==1.2.5.post1
 
 COPY pyproject.toml README.md ./
 COPY app ./app
 COPY analysis ./analysis
 COPY frontend ./frontend
 COPY study_configs ./study_configs
-# editable: the server finds frontend/ and study_configs/ beside the app package
-RUN pip install -e .
-
-RUN useradd --create-home tomstudy && mkdir -p /app/var && chown tomstudy /app/var
-USER tomstudy
+# editable: the server finds frontend/ and study_configs/ beside the app package; every
+# dependency is installed above, so this adds only the project itself
+RUN pip install --no-deps --no-build-isolation -e . \
+ && useradd --uid 10001 --create-home tomstudy \
+ && install -d -m 700 -o tomstudy /app/var
+USER 10001
 
 EXPOSE 8000
 VOLUME ["/app/var"]
-# urlopen raises (exit 1) on the 503 /healthz answers when the database is down
+# urlopen raises (exit 1) on the 503 /healthz answers when the database is down; the
+# entrypoint writes the address the server listens on
 HEALTHCHECK --interval=30s --timeout=15s --start-period=10m \
-  CMD python -c "import urllib.request as u; u.urlopen('http://127.0.0.1:8000/healthz', timeout=12)"
-# serves on 0.0.0.0:8000 inside the container; publish it on 127.0.0.1 only
-ENTRYPOINT ["/app/app/study/entrypoint.sh"]
+  CMD ["python", "-c", "import urllib.request as u; a = open('/tmp/tomstudy-healthz').read().strip(); u.urlopen(a, timeout=12)"]
+ENTRYPOINT ["dumb-init", "--", "/app/app/study/entrypoint.sh"]

@@ -4,14 +4,18 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install serve test lint data bench pilot screens fuzz clean
+# Every dependency is pinned in requirements/dev.txt (runtime.txt: what the image installs);
+# `make lock` re-resolves both from pyproject.toml.
+LOCK := requirements/dev.txt
 
-$(STAMP): pyproject.toml
+.PHONY: install serve test lint data bench pilot screens fuzz lock clean
+
+$(STAMP): pyproject.toml $(LOCK)
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install -q --upgrade pip
+	$(BIN)/pip install -q pip==26.3
 	# torch first and pinned: an unpinned resolve pulls gigabytes of CUDA wheels
-	$(BIN)/pip install -q torch==2.13.0
-	$(BIN)/pip install -q -e '.[dev]'
+	$(BIN)/pip install -q -c $(LOCK) torch==2.13.0
+	$(BIN)/pip install -q -c $(LOCK) -e '.[dev]'
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -31,6 +35,7 @@ test: $(STAMP)
 
 # Pilot end to end on a fresh database: serve, KIND bots (coarse|coarse_relative|precise|random),
 # analyze. The database is app/layout.py's pilot_database(KIND) under the default data dir.
+# Bots answer without thinking from one address, so this loopback server has no rate limits.
 KIND ?= coarse
 PILOT_PORT ?= 8765
 # random clickers fail the attention checks by design (as they should); their report waives
@@ -39,6 +44,7 @@ PILOT_WAIVE = $(if $(filter random,$(KIND)),--waive failed_attention_check)
 pilot: $(STAMP)
 	rm -f var/pilot_$(KIND).db*
 	DATABASE_URL=sqlite:///$(CURDIR)/var/pilot_$(KIND).db TOMSTUDY_TRUST_CLIENT_CLOCK=1 \
+	  TOMSTUDY_RATE_LIMIT_STARTS= TOMSTUDY_RATE_LIMIT_REQUESTS= \
 	  $(BIN)/tomstudy serve --prepare \
 	  --study paper_study --port $(PILOT_PORT) & pid=$$!; \
 	for i in $$(seq 600); do curl -sf http://127.0.0.1:$(PILOT_PORT)/s/paper_study >/dev/null && break; sleep 1; done; \
@@ -58,6 +64,18 @@ fuzz: $(STAMP)
 
 bench: $(STAMP)
 	for f in benchmarks/[!_]*.py; do $(BIN)/python $$f || exit 1; done
+
+# Re-resolve every pinned dependency from pyproject.toml (then run `make test` on the result).
+# pip-compile runs from a throwaway venv; torch's local "+cpu" label is dropped so the pins
+# install from PyPI too.
+lock:
+	$(PYTHON) -m venv $(VENV)-lock && $(VENV)-lock/bin/pip install -q pip-tools==7.6.2
+	$(VENV)-lock/bin/pip-compile -q --strip-extras --allow-unsafe --no-emit-index-url \
+	  --no-emit-find-links -o requirements/runtime.txt pyproject.toml
+	$(VENV)-lock/bin/pip-compile -q --strip-extras --allow-unsafe --no-emit-index-url \
+	  --no-emit-find-links --extra dev -o requirements/dev.txt pyproject.toml
+	sed -i 's/^torch==\(.*\)+cpu$$/torch==\1/' requirements/runtime.txt requirements/dev.txt
+	rm -rf $(VENV)-lock
 
 clean:
 	rm -rf var .pytest_cache .ruff_cache

@@ -21,7 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field
 STRING_COLUMNS = ("study_id", "participant_id", "recruitment", "outcome", "world",
                   "trial_id", "arm", "clip_sha256", "start_kind", "ours_sha256", "vae_sha256",
                   "submission_id", "submitted_at", "config_sha256", "bank_sha256")
-BOOL_COLUMNS = ("completed", "attention_passed", "is_practice", "attention_check")
+BOOL_COLUMNS = ("completed", "replaced", "attention_passed", "is_practice", "attention_check")
 INT_COLUMNS = ("world_position", "trial_index", "start_index", "step", "ours_code",
                "vae_code", "replays")
 FLOAT_COLUMNS = ("start_x", "start_y", "human_x", "human_y", "click_x", "click_y",
@@ -29,7 +29,7 @@ FLOAT_COLUMNS = ("start_x", "start_y", "human_x", "human_y", "click_x", "click_y
                  "cv_vx", "cv_vy", "policy_vx", "policy_vy", "click_time_ms",
                  "trial_duration_ms")
 EXPORT_COLUMNS = (
-    "study_id", "participant_id", "recruitment", "completed", "outcome",
+    "study_id", "participant_id", "recruitment", "completed", "outcome", "replaced",
     "attention_passed", "world", "world_position", "trial_id", "trial_index", "is_practice",
     "attention_check", "arm", "clip_sha256", "start_index", "start_kind", "step", "start_x",
     "start_y", "human_x", "human_y", "click_x", "click_y", "human_vx", "human_vy", "ours_vx",
@@ -38,7 +38,7 @@ EXPORT_COLUMNS = (
     "submission_id", "submitted_at", "config_sha256", "bank_sha256",
 )
 # columns added after the first export, with the value an older export's rows read as
-ADDED_COLUMNS = {"arm": ""}
+ADDED_COLUMNS = {"arm": "", "replaced": False}
 SORT_KEYS = ["participant_id", "trial_index", "trial_id", "start_index", "step"]
 
 # Every export except predictions (whose rows carry each model's hash already) names
@@ -61,7 +61,8 @@ PARTICIPANTS = {
     "status": "text", "started_at": "time", "ended_at": "time", "duration_min": "float",
     "last_seen": "time", "world_order": "text", "steps_done": "int", "steps_total": "int",
     "attention_checks": "int", "attention_failed": "int", "attention_verdict": "text",
-    "pilot": "bool", "replaced": "bool", "app_version": "text", **STUDY_VERSION,
+    "pilot": "bool", "replaced": "bool", "excluded": "bool", "exclusion_reasons": "text",
+    "app_version": "text", **STUDY_VERSION,
 }
 SCHEMAS = {"survey": SURVEY, "events": EVENTS, "participants": PARTICIPANTS}
 WHAT = ("predictions", *SCHEMAS)

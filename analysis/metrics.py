@@ -84,12 +84,14 @@ class Exclusions:
 
 
 def apply_exclusions(frame: pd.DataFrame, rules: ExclusionRules) -> Exclusions:
-    """Apply each named rule explicitly; pilot sessions, practice and attention-check trials
-    never count."""
+    """Apply each named rule explicitly; pilot sessions, replaced attempts (the person went
+    on in a newer one), practice and attention-check trials never count."""
     participants = frame.groupby("participant_id", sort=True)
     excluded: dict[str, list[str]] = {}
     pilot = participants["recruitment"].first() == PILOT  # researcher previews: never data
     excluded["pilot"] = sorted(pilot[pilot].index)
+    replaced = participants["replaced"].any()
+    excluded["replaced"] = sorted(replaced[replaced].index)
     if rules.failed_attention_check:
         failed = ~participants["attention_passed"].all()
         excluded["failed_attention_check"] = sorted(failed[failed].index)

@@ -5,6 +5,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
+from pydantic import ValidationError
 
 from app.configio import ConfigError
 from app.settings import get_settings
@@ -562,6 +563,7 @@ def serve(
     from app.study.main import STUDY_ENV
 
     settings = server_settings(host, workers, allow_bank_change)
+    check_data_dir_writable(settings.data_dir)
     if prepare:
         from app.study.prepare import prepare_study
 
@@ -587,6 +589,22 @@ def loadable_study(settings: "Settings", study_id: str) -> "StudyContext":
         return load_study(settings, study_id)
     except (BundleError, BankMismatch) as err:
         fail(str(err))
+
+
+def check_data_dir_writable(data_dir: Path) -> None:
+    """Exit 2 with what to do when this user cannot write the data dir (a bind mount owned
+    by another user, typically), instead of a traceback from the first file written."""
+    import os
+    import tempfile
+
+    try:
+        data_dir.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=data_dir):
+            pass
+    except OSError as err:
+        fail(f"TOMSTUDY_DATA_DIR: {data_dir} is not writable by this user (uid {os.getuid()}): "
+             f"{err.strerror}. Give it to this user (on the host of a bind mount: "
+             f"`sudo chown -R {os.getuid()} <the mounted folder>`), or use a volume")
 
 
 def check_database(settings: "Settings", studies: list["StudyContext"]) -> None:
@@ -619,6 +637,8 @@ def server_settings(host: str, workers: int, allow_bank_change: bool = False) ->
         os.environ["TOMSTUDY_ALLOW_BANK_CHANGE"] = "1"
         get_settings.cache_clear()
     settings = get_settings().for_host(host)
+    if not settings.admin_token.strip() and not settings.production:
+        settings = with_generated_token(settings)
     try:
         check_production(settings)
     except UnsafeSettings as err:
@@ -631,6 +651,20 @@ def server_settings(host: str, workers: int, allow_bank_change: bool = False) ->
         os.environ["TOMSTUDY_PRODUCTION"] = "1"
         get_settings.cache_clear()
     return settings
+
+
+def with_generated_token(settings: "Settings") -> "Settings":
+    """A loopback server without a researcher token gets a strong one for this run, printed
+    once; every worker reads it from the environment."""
+    import os
+    import secrets
+
+    token = secrets.token_urlsafe(32)
+    os.environ["TOMSTUDY_ADMIN_TOKEN"] = token
+    get_settings.cache_clear()
+    typer.echo(f"researcher token for this run (TOMSTUDY_ADMIN_TOKEN is not set; set it to "
+               f"keep one across restarts): {token}")
+    return settings.model_copy(update={"admin_token": token})
 
 
 db_cli = typer.Typer(no_args_is_help=True,
@@ -697,7 +731,11 @@ def preview_link_cmd(
     """Print the study's researcher preview link: its sessions are pilots that never count."""
     from app.study.recruitment import preview_key, preview_path
 
-    key = preview_key(get_settings().admin_token, study)
+    token = get_settings().admin_token
+    if not token.strip():
+        fail("TOMSTUDY_ADMIN_TOKEN: not set; the preview link is derived from the researcher "
+             "token of the running server (serve prints the one it made)")
+    key = preview_key(token, study)
     typer.echo(base_url.rstrip("/") + preview_path(study, key))
 
 
@@ -731,8 +769,11 @@ def export_cmd(
 @cli.command()
 def withdraw(
     study: Annotated[str, typer.Option(help="study id")],
-    external_id: Annotated[str, typer.Option("--external-id", help="the participant's platform "
-                                             "id (e.g. PROLIFIC_PID, workerId)")],
+    external_id: Annotated[str | None, typer.Option("--external-id", help="the participant's "
+                                                    "platform id (PROLIFIC_PID, workerId)")]
+    = None,
+    participant_id: Annotated[str | None, typer.Option(
+        "--participant-id", help="a session's public id (open and pilot sessions)")] = None,
 ) -> None:
     """Delete every row of one participant (all sessions, one transaction); print the audit."""
     import json
@@ -741,14 +782,22 @@ def withdraw(
 
     from app.study import withdrawal
     from app.study.errors import Refused
+    from app.study.tables import WithdrawalByExternalId, WithdrawalByParticipantId
 
-    _, engine = study_database(study)
+    if (external_id is None) == (participant_id is None):
+        fail("give exactly one of --external-id and --participant-id")
+    who = (WithdrawalByExternalId(study_id=study, external_id=external_id)
+           if external_id is not None else
+           WithdrawalByParticipantId(study_id=study, participant_id=participant_id))
+    config, engine = study_database(study)
     try:
         with Session(engine) as db:
-            audit = withdrawal.withdraw(db, study, external_id, via="cli")
+            audit = withdrawal.withdraw(db, study, who, config.recruitment.platform, via="cli")
             line = withdrawal.audit_line(audit)
+        line["storage"] = withdrawal.erase_from_files(engine)
     except Refused as err:
-        fail(err.detail.replace("external_id:", "--external-id:", 1), 1)
+        kind = err.detail.split(":", 1)[0]
+        fail(err.detail.replace(f"{kind}:", f"--{kind.replace('_', '-')}:", 1), 1)
     finally:
         engine.dispose()
     typer.echo(json.dumps(line))
@@ -829,4 +878,8 @@ def main() -> None:
         cli()
     except ConfigError as err:  # any command's config problem is a usage error
         typer.echo(f"error: {err}", err=True)
+        sys.exit(2)
+    except ValidationError as err:  # the settings (environment) are unusable
+        problems = "; ".join(e["msg"].removeprefix("Value error, ") for e in err.errors())
+        typer.echo(f"error: {problems}", err=True)
         sys.exit(2)

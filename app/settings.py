@@ -4,13 +4,16 @@ import ipaddress
 from functools import lru_cache
 from pathlib import Path
 
-from pydantic import Field
+from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+from sqlalchemy.engine import make_url
 
 from app.layout import DEFAULT_DATA_DIR, Layout
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_ADMIN_TOKEN = "change-me-researcher-token"
+# Host names every server answers to: what this machine, its healthcheck and a proxy on
+# it use. Any other Host (a DNS-rebinding page's name) is refused unless configured.
+LOOPBACK_HOSTS = ("localhost", "127.0.0.1", "::1", "[::1]")
 
 
 class Settings(BaseSettings):
@@ -21,7 +24,18 @@ class Settings(BaseSettings):
     data_dir: Path = Field(default=DEFAULT_DATA_DIR)
     configs_dir: Path = Field(default=REPO_ROOT / "study_configs")
     database_url: str = Field(default="", validation_alias="DATABASE_URL")
-    admin_token: str = DEFAULT_ADMIN_TOKEN
+    # no default anywhere: `serve` generates one when unset (app/study/main.py)
+    admin_token: str = ""
+    # secrets as files (compose secrets, /run/secrets/...): read when set
+    admin_token_file: Path | None = None
+    database_password_file: Path | None = None
+    # comma-separated public host names of the study (e.g. study.example.org)
+    allowed_hosts: str = ""
+    # per client address and worker process; "" turns a limit off (refused in production)
+    rate_limit_starts: str = "20/minute"
+    rate_limit_requests: str = "300/minute"
+    # how often each worker releases stale sessions' balance counts (balance.sweep_stale)
+    stale_sweep_s: float = Field(default=30.0, gt=0)
     # production: researcher token must be strong, API docs off (app/study/main.py)
     production: bool = False
     # bots answer faster than people and report a simulated clock; only `make pilot` sets this
@@ -29,20 +43,46 @@ class Settings(BaseSettings):
     # serve a study although sessions ran another trial bank (app/study/bank_guard.py)
     allow_bank_change: bool = False
 
+    @model_validator(mode="after")
+    def _read_secret_files(self) -> "Settings":
+        if self.admin_token_file is not None:
+            self.admin_token = read_secret(self.admin_token_file, "TOMSTUDY_ADMIN_TOKEN_FILE")
+        return self
+
     def resolved_database_url(self) -> str:
-        """The configured URL, or SQLite under the data dir."""
-        return self.database_url or f"sqlite:///{self.layout.study_database()}"
+        """The configured URL (with the password file's password), or SQLite under the data dir."""
+        if not self.database_url:
+            return f"sqlite:///{self.layout.study_database()}"
+        if self.database_password_file is None:
+            return self.database_url
+        password = read_secret(self.database_password_file, "TOMSTUDY_DATABASE_PASSWORD_FILE")
+        return make_url(self.database_url).set(password=password).render_as_string(
+            hide_password=False)
 
     @property
     def layout(self) -> Layout:
         """Every generated path under the data dir."""
         return Layout(self.data_dir)
 
+    @property
+    def trusted_hosts(self) -> list[str]:
+        """Host header values the server answers: loopback names plus `allowed_hosts`."""
+        configured = [h.strip().lower() for h in self.allowed_hosts.split(",") if h.strip()]
+        return list(dict.fromkeys([*LOOPBACK_HOSTS, *configured]))
+
     def for_host(self, host: str) -> "Settings":
         """These settings for a server bound to `host`: production unless `host` is loopback."""
         if self.production or is_loopback(host):
             return self
         return self.model_copy(update={"production": True})
+
+
+def read_secret(path: Path, name: str) -> str:
+    """The secret in `path` without its trailing newline; ValueError naming `name` if unreadable."""
+    try:
+        return Path(path).read_text().strip()
+    except OSError as err:
+        raise ValueError(f"{name}: cannot read {path} ({err.strerror})") from None
 
 
 def is_loopback(host: str) -> bool:

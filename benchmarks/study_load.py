@@ -36,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from app.study.bots import survey_answers  # noqa: E402
 from app.study.bundle import MANIFEST, shipped_dir  # noqa: E402
+from app.study.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
 from benchmarks._rawhttp import RawClient  # noqa: E402
 from tests.conftest import (  # noqa: E402
     REPO,
@@ -44,7 +45,7 @@ from tests.conftest import (  # noqa: E402
     free_port,
     start_server,
 )
-from tests.study.flow import prediction_body  # noqa: E402
+from tests.study.flow import DEVICE, prediction_body  # noqa: E402
 
 BARE = "GET bare"
 ROUTES = ("POST sessions", "GET state", "POST consent", "POST instructions", "POST events",
@@ -69,13 +70,13 @@ class SimulatedParticipant:
         self.study_id, self.study_param, self.bare_path = study_id, study_param, bare_path
         self.latencies = latencies
         self.rng = np.random.default_rng(seed)
-        self.base = ""
+        self.headers: dict[str, str] = {}
 
     async def call(self, route: str, path: str, body: dict | None = None) -> bytes:
         """One timed request; a status other than the route's success is an error."""
         method = route.split()[0]
         t0 = time.perf_counter()
-        status, payload = await self.client.request(method, path, body)
+        status, payload = await self.client.request(method, path, body, self.headers)
         self.latencies[route].append(time.perf_counter() - t0)
         if status not in EXPECTED_STATUS.get(route, (200,)):
             raise RuntimeError(f"{route} {path}: {status} {payload[:200]!r}")
@@ -85,7 +86,7 @@ class SimulatedParticipant:
         """POST one of the session's steps after a bare GET; returns the next state."""
         await self.call(BARE, self.bare_path)
         what = route.split()[1]
-        return json.loads(await self.call(route, f"{self.base}/{what}", body))
+        return json.loads(await self.call(route, f"{SESSION_PATH}/{what}", body))
 
     async def run(self) -> None:
         """From session start to done."""
@@ -103,17 +104,15 @@ class SimulatedParticipant:
         """POST /api/sessions, then GET the state."""
         await self.call(BARE, self.bare_path)
         session = json.loads(await self.call("POST sessions", "/api/sessions", {
-            "study_id": self.study_id, "recruitment": recruitment_params(self.study_param),
-            "client": {"screen_w": 1600, "screen_h": 900, "touch_only": False,
-                       "user_agent": "tomstudy-benchmark"}}))
-        self.base = f"/api/sessions/{session['session_token']}"
-        return json.loads(await self.call("GET state", f"{self.base}/state"))
+            "study_id": self.study_id, "recruitment": recruitment_params(self.study_param)}))
+        self.headers = {SESSION_HEADER: session["session_token"]}
+        return json.loads(await self.call("GET state", f"{SESSION_PATH}/state"))
 
     async def answer(self, state: dict) -> dict:
         """Do what the phase asks, as the browser would; returns the next state."""
         phase, step = state["phase"], state.get("step") or {}
         if phase == "consent":
-            return await self.step("POST consent", write(agree=True))
+            return await self.step("POST consent", write(agree=True, client=DEVICE))
         if phase == "instructions":
             return await self.step("POST instructions", write())
         if phase == "survey":

@@ -20,14 +20,17 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from app.study.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
 from benchmarks._rawhttp import RawClient  # noqa: E402
 from tests.conftest import cached_small_study, free_port, start_server  # noqa: E402
 from tests.study.flow import new_id, prediction_body, prolific  # noqa: E402
 
 
-async def request_json(client: RawClient, method: str, path: str, body: dict | None = None):
-    """One request through `client`; (status, parsed JSON answer)."""
-    status, payload = await client.request(method, path, body)
+async def request_json(client: RawClient, method: str, path: str, body: dict | None = None,
+                       token: str | None = None):
+    """One request through `client` (as session `token`); (status, parsed JSON answer)."""
+    headers = {SESSION_HEADER: token} if token else None
+    status, payload = await client.request(method, path, body, headers)
     try:
         return status, json.loads(payload)
     except ValueError as err:
@@ -62,9 +65,10 @@ async def run(port: int, study_id: str, participants: int, concurrency: int) -> 
             "study_id": study_id, "recruitment": prolific(f"bench{i}")})
         tokens.append(body["session_token"])
         for step in ("consent", "instructions"):
-            await request_json(clients[0], "POST", f"/api/sessions/{body['session_token']}/{step}",
-                                     {"submission_id": new_id(), "agree": True}
-                                     if step == "consent" else {"submission_id": new_id()})
+            await request_json(clients[0], "POST", f"{SESSION_PATH}/{step}",
+                               {"submission_id": new_id(), "agree": True}
+                               if step == "consent" else {"submission_id": new_id()},
+                               body["session_token"])
     gets, posts, states = [], [], {}
     for _ in range(3):
         wall, lat = await timed_batch(clients, [get_job(t, states) for t in tokens])
@@ -77,7 +81,7 @@ async def run(port: int, study_id: str, participants: int, concurrency: int) -> 
 def get_job(token: str, states: dict):
     """GET the state; remember it for the following POST."""
     async def job(client):
-        status, body = await request_json(client, "GET", f"/api/sessions/{token}/state")
+        status, body = await request_json(client, "GET", f"{SESSION_PATH}/state", token=token)
         states[token] = body
         return status, body
     return job
@@ -86,8 +90,8 @@ def get_job(token: str, states: dict):
 def post_job(token: str, states: dict):
     """POST a valid answer to the trial of the last GET."""
     body = prediction_body(states[token]["step"])
-    return lambda client: request_json(client, "POST", f"/api/sessions/{token}/predictions",
-                                       body)
+    return lambda client: request_json(client, "POST", f"{SESSION_PATH}/predictions", body,
+                                       token)
 
 
 def summarise(rounds) -> tuple[float, float]:

@@ -18,6 +18,9 @@ REPO = Path(__file__).resolve().parent.parent
 SMALL_STUDY = "small_study"
 PG_BIN = Path("/usr/lib/postgresql/15/bin")
 ADMIN_TOKEN = "test-token"  # the researcher token of every test server and app
+# test clients send many requests from one address (TestClient's host is "testserver"):
+# rate limits are off unless a test turns them on (tests/study/test_traffic.py)
+NO_RATE_LIMITS = {"rate_limit_starts": "", "rate_limit_requests": ""}
 TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")  # the installed CLI, for subprocesses
 
 # The paper's study, shrunk: the same trial shape (4 examples, 5-7 step segment, 5 start
@@ -51,7 +54,8 @@ class SmallStudy:
         """Environment for a `tomstudy` subprocess using this study and database."""
         env = dict(os.environ, TOMSTUDY_DATA_DIR=str(self.data_dir),
                    TOMSTUDY_CONFIGS_DIR=str(self.configs_dir), DATABASE_URL=db_url,
-                   TOMSTUDY_ADMIN_TOKEN=ADMIN_TOKEN)
+                   TOMSTUDY_ADMIN_TOKEN=ADMIN_TOKEN,
+                   **{f"TOMSTUDY_{k.upper()}": v for k, v in NO_RATE_LIMITS.items()})
         env.pop("TOMSTUDY_PRODUCTION", None)
         return env | extra
 
@@ -60,7 +64,8 @@ class SmallStudy:
         from app.settings import Settings
 
         return Settings(**dict(data_dir=self.data_dir, configs_dir=self.configs_dir,
-                               database_url=db_url, admin_token=ADMIN_TOKEN) | extra)
+                               database_url=db_url, admin_token=ADMIN_TOKEN,
+                               allowed_hosts="testserver", **NO_RATE_LIMITS) | extra)
 
 
 def _sources_hash() -> str:
@@ -217,6 +222,14 @@ def postgres_url():
     if not (PG_BIN / "initdb").exists():
         pytest.skip(f"PostgreSQL binaries not found in {PG_BIN} (apt-get install postgresql)")
     root = Path(tempfile.mkdtemp(prefix="tomstudy-pg-"))  # pytest's tmp is private to root
+    url, stop = start_cluster(root)
+    yield url
+    stop()
+    shutil.rmtree(root, ignore_errors=True)
+
+
+def start_cluster(root: Path, fsync: bool = False):
+    """A PostgreSQL 15 cluster in `root` on a free loopback port; (URL, stop function)."""
     data = root / "data"
     as_postgres = ["runuser", "-u", "postgres", "--"] if os.geteuid() == 0 else []
     if as_postgres:
@@ -224,13 +237,16 @@ def postgres_url():
     subprocess.run([*as_postgres, str(PG_BIN / "initdb"), "-D", str(data), "-A", "trust",
                     "--no-sync", "-U", "postgres"], check=True, capture_output=True)
     port = free_port()
-    options = f"-c listen_addresses=127.0.0.1 -p {port} -k {root} -c fsync=off"
+    options = (f"-c listen_addresses=127.0.0.1 -p {port} -k {root} -c max_connections=200"
+               + ("" if fsync else " -c fsync=off"))
     subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-o", options,
                     "-l", str(root / "pg.log"), "-w", "start"], check=True, capture_output=True)
-    yield f"postgresql+psycopg://postgres@127.0.0.1:{port}/postgres"
-    subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-m", "immediate",
-                    "stop"], capture_output=True)
-    shutil.rmtree(root, ignore_errors=True)
+
+    def stop() -> None:
+        subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-m",
+                        "immediate", "stop"], capture_output=True)
+
+    return f"postgresql+psycopg://postgres@127.0.0.1:{port}/postgres", stop
 
 
 def fresh_database(server_url: str, name: str) -> str:

@@ -168,7 +168,7 @@ def export_frame(parts: list[dict[str, np.ndarray]], study_id: str, preset: str)
     frame = pd.DataFrame(cols)
     size = len(frame)
     constants = {"study_id": study_id, "recruitment": "simulated", "completed": True,
-                 "outcome": "completed", "config_sha256": "", "bank_sha256": "",
+                 "outcome": "completed", "replaced": False, "config_sha256": "", "bank_sha256": "",
                  "attention_passed": True, "is_practice": False, "attention_check": False,
                  "trial_duration_ms": SIMULATED_TRIAL_MS, "replays": 0, "submitted_at": ""}
     for name, value in constants.items():

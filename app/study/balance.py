@@ -3,22 +3,24 @@
 BalanceCount holds, per study, how many counted sessions use each world order
 (`order:a,b`) and each trial (`trial:<id>`). A session is counted from its start while
 it runs; it stops counting when it goes stale (unfinished past `in_progress_timeout_min`,
-released lazily by the next start) or completes excluded (failed attention check, too
-many too-fast trials); a stale session that comes back and completes validly counts
-again. Pilot sessions never count. On PostgreSQL a transaction-scoped advisory lock
-makes read-choose-increment atomic across workers; SQLite serialises writers itself
-and the server refuses several workers on it.
+released in bounded batches by each worker's `sweep_stale`, off the request path) or
+completes excluded (failed attention check, too many too-fast trials); a stale session
+that comes back and completes validly counts again. Pilot sessions never count. On
+PostgreSQL a transaction-scoped advisory lock makes read-choose-increment atomic across
+workers; SQLite serialises writers itself and the server refuses several workers on it.
 """
 
+import asyncio
 import hashlib
+import logging
 from collections import Counter
 from datetime import datetime, timedelta
 
-from sqlalchemy import case, func, select, text, update
+from sqlalchemy import bindparam, case, func, select, text, update
 from sqlalchemy.engine import Engine
 from sqlmodel import Session
 
-from analysis.contracts import too_fast_share_exceeds
+from analysis.contracts import ExclusionRules, too_fast_share_exceeds
 from app.study.config import StudyConfig
 from app.study.context import StudyContext
 from app.study.db import insert_skipping_duplicates
@@ -116,22 +118,66 @@ def in_progress_cutoff(config: StudyConfig) -> datetime:
     return utcnow() - timedelta(minutes=config.in_progress_timeout_min)
 
 
-def release_stale(db: Session, ctx: StudyContext) -> int:
-    """Release counted unfinished sessions that went stale; returns how many."""
-    stale = db.execute(select(Participant).where(
-        Participant.study_id == ctx.study_id, Participant.counted.is_(True),
-        Participant.completed.is_(False),
-        Participant.updated_at < in_progress_cutoff(ctx.config))).scalars().all()
-    for participant in stale:
-        release(db, participant)
-    return len(stale)
+STALE_BATCH = 50  # sessions released per transaction: SQLite's write lock held ~10 ms
+BATCH_PAUSE_S = 0.05  # between batches, so participants' writes go first
 
 
-def settle_completion(db: Session, ctx: StudyContext, participant: Participant) -> None:
+def release_stale_batch(engine: Engine, ctx: StudyContext, limit: int = STALE_BATCH) -> int:
+    """Release up to `limit` counted unfinished sessions that went stale, in one transaction
+    of set-based SQL: one UPDATE flips and returns them, one executemany takes their keys
+    out of the counts. Safe beside other workers doing the same; returns how many."""
+    table = Participant.__table__
+    stale = (select(table.c.id)
+             .where(table.c.study_id == ctx.study_id, table.c.counted.is_(True),
+                    table.c.completed.is_(False),
+                    table.c.updated_at < in_progress_cutoff(ctx.config))
+             .limit(limit))
+    with engine.begin() as conn:
+        released = conn.execute(
+            update(table).where(table.c.id.in_(stale.scalar_subquery()),
+                                table.c.counted.is_(True))
+            .values(counted=False).returning(table.c.world_order, table.c.plan)).all()
+        keys = Counter(k for order, plan in released for k in plan_keys(order, plan))
+        if keys:
+            counts = BalanceCount.__table__
+            conn.execute(update(counts).where(counts.c.study_id == ctx.study_id,
+                                              counts.c.key == bindparam("released_key"))
+                         .values(count=counts.c.count - bindparam("times")),
+                         [{"released_key": k, "times": n} for k, n in keys.items()])
+    return len(released)
+
+
+logger = logging.getLogger(__name__)
+
+
+async def sweep_stale(engine: Engine, studies: list[StudyContext], interval_s: float) -> None:
+    """Forever: every `interval_s`, release each study's stale sessions batch by batch, each
+    batch in a worker thread so the event loop keeps serving (cancel to stop)."""
+    while True:
+        for ctx in studies:
+            try:
+                while await asyncio.to_thread(release_stale_batch, engine, ctx) == STALE_BATCH:
+                    await asyncio.sleep(BATCH_PAUSE_S)
+            except Exception as err:  # a database hiccup must not end the sweep
+                logger.warning("releasing stale sessions of %s failed: %s", ctx.study_id, err)
+        await asyncio.sleep(interval_s)
+
+
+def live_sessions(db: Session, ctx: StudyContext, at_most: int) -> int:
+    """Counted unfinished sessions written to within the timeout, counting up to `at_most`."""
+    live = (select(Participant.id)
+            .where(Participant.study_id == ctx.study_id, Participant.counted.is_(True),
+                   Participant.completed.is_(False),
+                   Participant.updated_at >= in_progress_cutoff(ctx.config))
+            .limit(at_most).subquery())
+    return db.execute(select(func.count()).select_from(live)).scalar_one()
+
+
+def settle_completion(db: Session, participant: Participant, excluded: bool) -> None:
     """At completion: an excluded session stops counting, a valid one counts (once)."""
     if participant.pilot:
         return
-    if is_excluded(db, ctx.config, participant):
+    if excluded:
         release(db, participant)
     else:
         hold(db, participant)
@@ -139,14 +185,33 @@ def settle_completion(db: Session, ctx: StudyContext, participant: Participant) 
 
 def is_excluded(db: Session, config: StudyConfig, participant: Participant) -> bool:
     """The enabled exclusion rules remove this session (attention check, too fast)."""
-    rules = config.exclusions
-    if rules.failed_attention_check and participant.attention_failed > 0:
-        return True
+    n_fast, n = trial_speeds(db, config.exclusions, Participant.id == participant.id).get(
+        participant.id, (0, 0))
+    return bool(exclusion_reasons(config.exclusions, participant.attention_failed, n_fast, n))
+
+
+def exclusion_reasons(rules: ExclusionRules, attention_failed: int, n_fast: int,
+                      n_trials: int) -> list[str]:
+    """The rules a session's answers break: failed_attention_check, too_fast."""
+    reasons = []
+    if rules.failed_attention_check and attention_failed > 0:
+        reasons.append("failed_attention_check")
+    if too_fast_share_exceeds(n_fast, n_trials, rules):
+        reasons.append("too_fast")
+    return reasons
+
+
+def trial_speeds(db: Session, rules: ExclusionRules, which) -> dict[int, tuple[int, int]]:
+    """Participant id -> (too-fast scored trials, scored trials) of the sessions `which`
+    (a condition on Participant) selects; scored = neither practice nor attention check."""
     fast = func.sum(case((rules.too_fast(TrialResponse.duration_ms), 1), else_=0))
-    n_fast, n = db.execute(select(fast, func.count()).where(
-        TrialResponse.participant_id == participant.id, TrialResponse.is_practice.is_(False),
-        TrialResponse.attention_check.is_(False))).one()
-    return bool(too_fast_share_exceeds(n_fast or 0, n, rules))
+    rows = db.execute(
+        select(TrialResponse.participant_id, fast, func.count())
+        .join(Participant, Participant.id == TrialResponse.participant_id)
+        .where(which, TrialResponse.is_practice.is_(False),
+               TrialResponse.attention_check.is_(False))
+        .group_by(TrialResponse.participant_id))
+    return {pid: (int(n_fast or 0), int(n)) for pid, n_fast, n in rows}
 
 
 def recount(db: Session, ctx: StudyContext) -> dict[str, int]:

@@ -34,6 +34,7 @@ import numpy as np
 
 from app.observers.inverse_planning import PRESETS, predict
 from app.study.plan import TRIAL_PHASES, Phase
+from app.study.sessions import SESSION_HEADER, SESSION_PATH
 
 THINK_MEDIAN_S = 2.5
 MAX_STEPS = 200  # no study has this many phases; a bot that gets here is stuck
@@ -123,7 +124,8 @@ class Bot:
         for attempt in range(RETRIES + 1):
             self.result.requests += 1
             try:
-                response = await self.client.request(method, path, json=body)
+                headers = {SESSION_HEADER: self.token} if self.token else None
+                response = await self.client.request(method, path, json=body, headers=headers)
             except httpx.TransportError as err:
                 if attempt == RETRIES:
                     raise BotError(f"{method} {path}: {type(err).__name__}: {err}") from err
@@ -159,19 +161,20 @@ class Bot:
         body = {"study_id": self.study_id,
                 "recruitment": {"PROLIFIC_PID": uuid.uuid4().hex[:24],
                                 "STUDY_ID": self.prolific_study_id,
-                                "SESSION_ID": uuid.uuid4().hex},
-                "client": {"screen_w": 1600, "screen_h": 900, "touch_only": False,
-                           "user_agent": f"tomstudy-bot/{self.preset}"}}
+                                "SESSION_ID": uuid.uuid4().hex}}
         session = await self.request("POST", "/api/sessions", body)
         self.token = session["session_token"]
         self.result.participant_id = session["participant_id"]
-        return await self.request("GET", f"/api/sessions/{self.token}/state")
+        return await self.request("GET", f"{SESSION_PATH}/state")
 
     async def answer(self, state: dict) -> dict:
         """Do what the current phase asks; returns the next state."""
-        phase, base = state["phase"], f"/api/sessions/{self.token}"
+        phase, base = state["phase"], SESSION_PATH
         if phase == Phase.CONSENT:
-            return await self.request("POST", f"{base}/consent", self.write(agree=True))
+            client = {"screen_w": 1600, "screen_h": 900, "touch_only": False,
+                      "user_agent": f"tomstudy-bot/{self.preset}"}
+            return await self.request("POST", f"{base}/consent",
+                                      self.write(agree=True, client=client))
         if phase == Phase.INSTRUCTIONS:
             return await self.request("POST", f"{base}/instructions", self.write())
         if phase in TRIAL_PHASES:
@@ -187,7 +190,7 @@ class Bot:
 
     async def predict(self, payload: dict) -> dict:
         """Watch the clip (telemetry), click 3 moves from each start state and submit."""
-        base = f"/api/sessions/{self.token}"
+        base = SESSION_PATH
         shown_at = self.clock_ms
         clip_s = len(payload["examples"]) * 4.0 + 3.0
         self.clock_ms += clip_s * 1000

@@ -2,6 +2,7 @@
 
 import hashlib
 import json
+import math
 from functools import lru_cache
 from pathlib import Path
 from typing import Literal
@@ -34,8 +35,8 @@ class SegmentSteps(StrictModel):
 class AttentionChecks(StrictModel):
     """Trials whose answer is obvious: the robot keeps moving the way it plainly moves.
 
-    For these trials the bank places the start states a step beside or behind the
-    robot, and picks the segments where the world's own policy from every start state
+    Their start states follow the main trials' rule (so their geometry gives nothing
+    away); the bank picks the segments where the world's own policy from every start state
     moves closest to the robot's last segment velocity (meta.json reports the angle and
     whether it is within `candidate_max_angle_deg`). A participant passes one if, in at
     least `min_passing_starts` of the start states, the first clicked move is within
@@ -79,13 +80,18 @@ class Endings(StrictModel):
     `failed_checks` is the completed study with at least `min_failed` failed attention
     checks: Prolific lets a researcher reject only after two failed checks (in a study of
     five minutes or more), so these sessions are marked for manual review, not rejected;
-    its code '' means the completed code. Declined consent and device screen-outs end
-    before any trial.
+    its code '' means the completed code. `excluded` is a completed study that the
+    study's `exclusions` remove (too many too-fast trials, or a failed check under
+    `failed_attention_check`) without `min_failed` failed checks: the study chooses its
+    code, '' meaning failed_checks' (review, never the approve code by default). Declined
+    consent and device screen-outs end before any trial.
     """
 
     failed_checks: Ending = Ending(message="Thank you. Your submission will be reviewed "
                                            "by the researchers.")
     min_failed: int = Field(default=2, ge=1)
+    excluded: Ending = Ending(message="Thank you. Your submission will be reviewed by the "
+                                      "researchers.")
     declined_consent: Ending = Ending(message="You chose not to take part. Please return "
                                               "the study on the recruiting platform so "
                                               "that your place goes to someone else.")
@@ -135,8 +141,10 @@ class RecruitmentConfig(StrictModel):
         if outcome == "completed":
             return Ending(completion_code=self.completion_code)
         chosen = getattr(self.endings, outcome)
-        if outcome == "failed_checks" and not chosen.completion_code:
-            return chosen.model_copy(update={"completion_code": self.completion_code})
+        fallback = {"failed_checks": "completed", "excluded": "failed_checks"}.get(outcome)
+        if fallback and not chosen.completion_code:
+            code = self.ending(fallback).completion_code
+            return chosen.model_copy(update={"completion_code": code})
         return chosen
 
 
@@ -245,6 +253,9 @@ class StudyConfig(StrictModel):
     target_sample_size: int = Field(ge=1)
     exclusions: ExclusionRules = ExclusionRules()
     in_progress_timeout_min: float = Field(default=90.0, gt=0)
+    # at most this x target_sample_size unfinished sessions run at once (pilots aside): a
+    # bound on what anonymous traffic can make the server hold (sessions.py)
+    max_live_sessions_per_target: float = Field(default=10.0, ge=1)
     models: ModelFamily = ModelFamily()
     bundle: BundleSource = "built"
 
@@ -282,6 +293,11 @@ def bank_design(config: dict) -> dict | None:
     design = {key: valid[key] for key in BANK_DESIGN_KEYS}
     return design | {"attention_checks": {k: valid["attention_checks"][k]
                                           for k in BANK_ATTENTION_KEYS}}
+
+
+def live_session_cap(config: StudyConfig) -> int:
+    """How many unfinished counted sessions the study runs at once."""
+    return math.ceil(config.max_live_sessions_per_target * config.target_sample_size)
 
 
 def config_sha256(config: StudyConfig) -> str:

@@ -45,7 +45,8 @@ from app.study.validation import (
     validate_survey,
 )
 
-FINISHED = ("completed", "failed_checks")  # outcomes of a session that did every trial
+# outcomes of a session that did every trial
+FINISHED = ("completed", "failed_checks", "excluded")
 
 
 # ---------------------------------------------------------------- step writes
@@ -75,16 +76,19 @@ def already_stored(db: Session, participant: Participant, body: SubmissionBody,
 def advance(db: Session, participant: Participant, body: SubmissionBody, submission_kind: str,
             payload: dict, extra_inserts: list[tuple[object, list[dict]]] = (),
             ending: dict | None = None,
-            before_commit: Callable[[], None] | None = None) -> bool:
+            before_commit: Callable[[], None] | None = None,
+            updates: dict | None = None) -> bool:
     """Store the submission and its rows and move one step on, in one transaction.
 
     With `ending` (ending_values) the session jumps to its done step and the ending's
-    receipt is stored in the same commit, before the browser is told where to go.
-    Returns False when a concurrent retry of the same UUID won the race (nothing stored).
+    receipt is stored in the same commit, before the browser is told where to go;
+    `updates` are other Participant columns to set with the step. A replaced session
+    moves no more. Returns False when a concurrent retry of the same UUID won the race
+    (nothing stored).
     """
     expected = participant.position
     now = utcnow()
-    values = {"position": expected + 1, "updated_at": now}
+    values = {**(updates or {}), "position": expected + 1, "updated_at": now}
     if ending is not None:
         values.update(ending, position=len(participant.plan) - 1, ended_at=now)
         if ending["completed"]:
@@ -101,7 +105,8 @@ def advance(db: Session, participant: Participant, body: SubmissionBody, submiss
             conn.execute(table.__table__.insert(), rows)
         moved = conn.execute(update(Participant.__table__)
                              .where(Participant.id == participant.id,
-                                    Participant.position == expected).values(**values))
+                                    Participant.position == expected,
+                                    Participant.replaced_at.is_(None)).values(**values))
         if moved.rowcount != 1:
             raise Refused(409, "position: the session moved on in another request; reload")
         _mirror(participant, values)
@@ -125,11 +130,12 @@ def ending_values(config: StudyConfig, outcome: str) -> dict:
             .completion_code, "completed": outcome in FINISHED}
 
 
-def finished_outcome(config: StudyConfig, participant: Participant) -> str:
-    """completed, or failed_checks once `endings.min_failed` attention checks failed."""
+def finished_outcome(config: StudyConfig, participant: Participant, excluded: bool) -> str:
+    """failed_checks once `endings.min_failed` attention checks failed, else excluded when
+    the study's exclusion rules remove the session, else completed."""
     if participant.attention_failed >= config.recruitment.endings.min_failed:
         return "failed_checks"
-    return "completed"
+    return "excluded" if excluded else "completed"
 
 
 def _mirror(participant: Participant, values: dict) -> None:
@@ -142,10 +148,11 @@ def _mirror(participant: Participant, values: dict) -> None:
 
 
 def record_consent(db: Session, participant: Participant, body: ConsentCreate) -> None:
-    """The participant agreed to take part."""
+    """The participant agreed to take part; their device info is stored from now on."""
     with replay_if_stored(db, participant, body, "consent") as fresh:
         expect_phase(participant, Phase.CONSENT)
-        fresh.stored = advance(db, participant, body, "consent", {"agree": True})
+        fresh.stored = advance(db, participant, body, "consent", {"agree": True},
+                               updates={"client": body.client.model_dump()})
 
 
 def record_instructions(db: Session, participant: Participant, body: SubmissionBody) -> None:
@@ -161,10 +168,11 @@ def record_survey(db: Session, ctx: StudyContext, participant: Participant,
     with replay_if_stored(db, participant, body, "survey") as fresh:
         expect_phase(participant, Phase.SURVEY)
         answers = validate_survey(ctx.config.survey, body.answers)
-        ending = ending_values(ctx.config, finished_outcome(ctx.config, participant))
+        excluded = balance.is_excluded(db, ctx.config, participant)
+        ending = ending_values(ctx.config, finished_outcome(ctx.config, participant, excluded))
         fresh.stored = advance(
             db, participant, body, "survey", {"answers": answers}, ending=ending,
-            before_commit=lambda: balance.settle_completion(db, ctx, participant))
+            before_commit=lambda: balance.settle_completion(db, participant, excluded))
 
 
 def record_decline(db: Session, ctx: StudyContext, participant: Participant,

@@ -17,7 +17,7 @@ from sqlmodel import Session
 from app.settings import Settings
 from app.study.context import StudyContext
 from app.study.errors import Refused
-from app.study.sessions import participant_by_token
+from app.study.sessions import SESSION_HEADER, check_can_continue, participant_by_token
 from app.study.tables import Participant
 
 
@@ -37,6 +37,8 @@ async def get_settings_dep(request: Request) -> Settings:
 
 
 SettingsDep = Annotated[Settings, Depends(get_settings_dep)]
+# the session token travels in a header, never in the URL (proxies and browsers log URLs)
+SessionTokenHeader = Annotated[str, Header(alias=SESSION_HEADER, min_length=1, max_length=64)]
 
 
 def study_context(request: Request, study_id: str) -> StudyContext:
@@ -48,12 +50,17 @@ def study_context(request: Request, study_id: str) -> StudyContext:
     return ctx
 
 
-async def get_participant(token: str, db: SessionDep) -> Participant:
-    """The participant whose session token is in the path."""
+async def get_participant(request: Request, db: SessionDep,
+                          x_session_token: SessionTokenHeader) -> Participant:
+    """The participant whose session token is in the X-Session-Token header; 410 once the
+    session can no longer continue (replaced by a newer attempt, or its bank is gone)."""
     try:
-        return participant_by_token(db, token)
+        participant = participant_by_token(db, x_session_token)
     finally:
         db.commit()  # end the read transaction (connection back to the pool, row kept)
+    ctx = study_context(request, participant.study_id)
+    check_can_continue(participant, ctx.bank.sha256)
+    return participant
 
 
 ParticipantDep = Annotated[Participant, Depends(get_participant)]

@@ -2,9 +2,10 @@
 
 
 class Refused(Exception):
-    """A request the study cannot accept: HTTP status and `field: message`."""
+    """A request the study cannot accept: HTTP status, `field: message`, optional headers."""
 
-    def __init__(self, status: int, detail: str) -> None:
+    def __init__(self, status: int, detail: str, headers: dict[str, str] | None = None) -> None:
         super().__init__(detail)
         self.status = status
         self.detail = detail
+        self.headers = headers or {}

@@ -3,7 +3,8 @@
 - `predictions`: the analysis table, one row per (participant, trial, start state, step);
 - `survey`: one row per (participant, answered question);
 - `events`: telemetry events and each trial's undo/reset presses, one long table;
-- `participants`: the payment and approval sheet, one row per session.
+- `participants`: the payment and approval sheet, one row per session, with whether the
+  analysis excludes it and why.
 
 The analysis exports carry the session's random `public_id` as `participant_id`, never
 the platform's id; only `participants` links the two. Every row carries the config and
@@ -20,11 +21,11 @@ import pandas as pd
 from sqlalchemy import func, select
 from sqlmodel import Session
 
-from analysis.contracts import EVENTS, EXPORT_COLUMNS, PARTICIPANTS, SURVEY, WHAT
+from analysis.contracts import EVENTS, EXPORT_COLUMNS, PARTICIPANTS, SURVEY, WHAT, ExclusionRules
 from analysis.csvsafe import write_csv
 from analysis.exports import typed
 from analysis.load import normalise
-from app.study.balance import in_progress_cutoff
+from app.study.balance import exclusion_reasons, in_progress_cutoff, trial_speeds
 from app.study.config import StudyConfig
 from app.study.plan import trial_steps
 from app.study.sessions import as_utc, session_status
@@ -63,6 +64,7 @@ def predictions_frame(db: Session, study_id: str) -> pd.DataFrame:
     query = (
         select(part.c.study_id, part.c.public_id.label("participant_id"), part.c.recruitment,
                part.c.completed, part.c.outcome,
+               part.c.replaced_at.is_not(None).label("replaced"),
                (part.c.attention_failed == 0).label("attention_passed"), trial.c.world,
                trial.c.world_position, trial.c.trial_index, trial.c.is_practice,
                trial.c.attention_check, trial.c.arm, trial.c.clip_sha256,
@@ -190,8 +192,20 @@ def participants_frame(db: Session, config: StudyConfig, study_id: str) -> pd.Da
     versions = _versions(sessions, _models(db, study_id))
     checks = checks_answered(db, study_id)
     cutoff = in_progress_cutoff(config)
-    rows = [_participant_row(p, versions[p.id], checks.get(p.id, 0), cutoff) for p in sessions]
+    speeds = trial_speeds(db, config.exclusions, Participant.study_id == study_id)
+    rows = [_participant_row(p, versions[p.id], checks.get(p.id, 0), cutoff)
+            | _exclusion(config.exclusions, p, speeds.get(p.id, (0, 0))) for p in sessions]
     return typed(pd.DataFrame(rows), PARTICIPANTS)
+
+
+def _exclusion(rules: ExclusionRules, p: Participant, speeds: tuple[int, int]) -> dict:
+    """Whether the analysis leaves the session out, and why (the same rules, `;`-joined)."""
+    reasons = exclusion_reasons(rules, p.attention_failed, *speeds)
+    if rules.incomplete and not p.completed:
+        reasons.append("incomplete")
+    reasons += [why for why, applies in (("pilot", p.pilot),
+                                         ("replaced", p.replaced_at is not None)) if applies]
+    return {"excluded": bool(reasons), "exclusion_reasons": ";".join(reasons)}
 
 
 def checks_answered(db: Session, study_id: str) -> dict[int, int]:

@@ -32,6 +32,9 @@ DOCS_POLICY = APP_POLICY | {
     "img-src": "'self' data: https://fastapi.tiangolo.com https://cdn.redoc.ly",
     "worker-src": "blob:",
 }
+# answers that hold a participant's session or the researcher's data: no cache may keep them
+NO_STORE_PREFIXES = ("/api/", "/researcher")
+NO_STORE = [(b"cache-control", b"no-store")]
 OTHER_HEADERS = {
     "x-content-type-options": "nosniff",
     "referrer-policy": "no-referrer",
@@ -62,7 +65,8 @@ def encoded_headers(policy: dict[str, str], framed_by: tuple[str, ...] = (),
 
 
 class SecurityHeaders:
-    """Add CSP, nosniff, Referrer-Policy, frame and opener headers to every HTTP response.
+    """Add CSP, nosniff, Referrer-Policy, frame and opener headers to every HTTP response,
+    and `Cache-Control: no-store` to the API's and the researcher page's.
 
     A header the app already set is kept; `docs_paths` get DOCS_POLICY; `framed_by`
     origins (MTurk's, when an MTurk study is served) may frame the pages, and forms may
@@ -80,6 +84,8 @@ class SecurityHeaders:
         if scope["type"] != "http":
             return await self.app(scope, receive, send)
         extra = self.docs_headers if scope["path"] in self.docs_paths else self.app_headers
+        if scope["path"].startswith(NO_STORE_PREFIXES):
+            extra = extra + NO_STORE
 
         async def send_with_headers(message: Message) -> None:
             if message["type"] == "http.response.start":

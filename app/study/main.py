@@ -4,8 +4,10 @@ Per process state is read-only (configs, trial banks, model answers); everything
 changes lives in the database, so several uvicorn workers can serve one study.
 """
 
+import asyncio
+import gc
 import os
-from contextlib import asynccontextmanager
+from contextlib import asynccontextmanager, suppress
 
 from fastapi import FastAPI, Request
 from fastapi.encoders import jsonable_encoder
@@ -13,11 +15,12 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
+from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from app.settings import DEFAULT_ADMIN_TOKEN, REPO_ROOT, Settings, get_settings
+from app.settings import REPO_ROOT, Settings, get_settings
 from app.study import health
-from app.study.balance import ensure_rows
+from app.study.balance import ensure_rows, sweep_stale
 from app.study.bank_guard import check_bank_unchanged
 from app.study.bundle import load_bundle
 from app.study.config import StudyConfig, config_sha256, load_study_config
@@ -27,6 +30,7 @@ from app.study.errors import Refused
 from app.study.headers import MTURK_FRAMERS, SecurityHeaders
 from app.study.model_answers import ModelAnswers
 from app.study.openapi import declare_error_responses
+from app.study.ratelimit import RateLimit, parse_limit
 from app.study.recruitment import preview_key
 from app.study.routes import dashboard, pages, participant, researcher
 
@@ -43,24 +47,32 @@ class UnsafeSettings(RuntimeError):
 
 
 def check_production(settings: Settings) -> None:
-    """Refuse production mode with a weak researcher token or with client clocks trusted."""
+    """Refuse a server without a researcher token (there is no default), and production mode
+    with a weak token, client clocks trusted or rate limits off; unreadable limits too."""
+    rate_limits(settings)
+    token = settings.admin_token.strip()
+    problem = weak_token_problem(token) if settings.production or not token else None
+    if problem:
+        mode = (" in production mode (TOMSTUDY_PRODUCTION=1 or a --host other than loopback)"
+                if settings.production else "")
+        raise UnsafeSettings(f"refusing to start{mode}: TOMSTUDY_ADMIN_TOKEN {problem}; "
+                             f"{NEW_TOKEN_HINT}")
     if not settings.production:
         return
-    problem = weak_token_problem(settings.admin_token)
-    if problem:
-        raise UnsafeSettings(f"refusing to start in production mode (TOMSTUDY_PRODUCTION=1 or "
-                             f"a --host other than loopback): TOMSTUDY_ADMIN_TOKEN {problem}; "
-                             f"{NEW_TOKEN_HINT}")
     if settings.trust_client_clock:
         raise UnsafeSettings("TOMSTUDY_TRUST_CLIENT_CLOCK is for pilots with bots; a "
                              "production server times trials itself; refusing to start")
+    for name in ("rate_limit_starts", "rate_limit_requests"):
+        if not getattr(settings, name).strip():
+            raise UnsafeSettings(f"TOMSTUDY_{name.upper()} is empty (no limit); a production "
+                                 "server limits anonymous traffic; refusing to start")
 
 
 def weak_token_problem(token: str) -> str | None:
     """What makes `token` unfit to guard a public server, or None."""
     token = token.strip()
-    if token == DEFAULT_ADMIN_TOKEN:
-        return "is the default, printed in the source"
+    if not token:
+        return "is not set (there is no default; `tomstudy serve` on loopback makes one)"
     if len(token) < MIN_ADMIN_TOKEN_CHARS:
         return f"has {len(token)} characters, fewer than {MIN_ADMIN_TOKEN_CHARS}"
     return None
@@ -92,7 +104,17 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
             if not settings.allow_bank_change:
                 check_bank_unchanged(app.state.engine, ctx.study_id, ctx.bank.sha256)
             ensure_rows(app.state.engine, ctx)
+        # The loaded banks, models and torch make ~330k long-lived objects: a full garbage
+        # collection over them took 140 ms, a pause every request in flight would wait for.
+        # They live as long as the process, so the collector stops scanning them.
+        gc.collect()
+        gc.freeze()
+        sweep = asyncio.create_task(sweep_stale(app.state.engine, list(app.state.studies.values()),
+                                                settings.stale_sweep_s))
         yield
+        sweep.cancel()
+        with suppress(asyncio.CancelledError):
+            await sweep
         app.state.engine.dispose()
 
     app = FastAPI(title="tomstudy", lifespan=lifespan, **docs_urls(settings),
@@ -107,10 +129,23 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     add_error_handlers(app)
     declare_error_responses(app)
     app.add_middleware(BodyLimit, max_bytes=MAX_BODY_BYTES)
+    app.add_middleware(RateLimit, **rate_limits(settings))
+    app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.trusted_hosts,
+                       www_redirect=False)
     configs = [load_study_config(settings, sid) for sid in studies]
     app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app),  # outermost: 413s too
                        framed_by=framing_origins(configs), form_targets=form_targets(configs))
     return app
+
+
+def rate_limits(settings: Settings) -> dict:
+    """The RateLimit middleware's limits from the settings; UnsafeSettings if unreadable."""
+    try:
+        return {"starts": parse_limit("TOMSTUDY_RATE_LIMIT_STARTS", settings.rate_limit_starts),
+                "requests": parse_limit("TOMSTUDY_RATE_LIMIT_REQUESTS",
+                                        settings.rate_limit_requests)}
+    except ValueError as err:
+        raise UnsafeSettings(f"refusing to start: {err}") from None
 
 
 def framing_origins(configs: list[StudyConfig]) -> tuple[str, ...]:
@@ -144,8 +179,9 @@ def add_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(Refused)
     async def refused(_: Request, err: Refused) -> JSONResponse:
-        headers = {"WWW-Authenticate": "Bearer"} if err.status == 401 else None
-        return JSONResponse({"detail": err.detail}, status_code=err.status, headers=headers)
+        headers = {"WWW-Authenticate": "Bearer"} if err.status == 401 else {}
+        return JSONResponse({"detail": err.detail}, status_code=err.status,
+                            headers=headers | err.headers)
 
     @app.exception_handler(RequestValidationError)
     async def invalid(_: Request, err: RequestValidationError) -> JSONResponse:

@@ -37,15 +37,21 @@ class ValidationProblem(BaseModel):
 UNREADABLE = "body: not readable as JSON (e.g. not UTF-8); JSON that fails to parse is a 422"
 TOO_LARGE = "body: larger than 64 KiB"
 INVALID = "a body or parameter fails validation; `detail` names the field"
-SESSION_STATUSES = {404: "token: unknown session"}
+RATE_LIMITED = "rate: too many requests from this address; `Retry-After` says when to retry"
+UNKNOWN_SESSION = "X-Session-Token: unknown session"
+GONE = ("X-Session-Token: the session cannot continue: a newer attempt of the same "
+        "participant replaced it, or the study's trial bank changed under it")
+SESSION_STATUSES = {404: UNKNOWN_SESSION, 410: GONE, 422: INVALID, 429: RATE_LIMITED}
 SESSION_WRITE_STATUSES = {
     400: UNREADABLE,
-    404: "token: unknown session; trial_id: not a trial of this session",
+    404: f"{UNKNOWN_SESSION}; trial_id: not a trial of this session",
     409: "phase: the session is at another step or trial, moved on in another request, or "
          "done (telemetry); submission_id: used by another session",
+    410: GONE,
     413: TOO_LARGE,
     422: f"{INVALID}, or breaks a study rule: clicks outside the scene or reach, survey "
          "answers, telemetry past its cap, a submission_id reused for a different request",
+    429: RATE_LIMITED,
 }
 START_STATUSES = {
     400: UNREADABLE,
@@ -56,6 +62,9 @@ START_STATUSES = {
          "moment, or has another attempt (SESSION_ID / assignmentId) in progress",
     413: TOO_LARGE,
     422: INVALID,
+    429: RATE_LIMITED,
+    503: "study: as many sessions are running as the study takes at once "
+         "(max_live_sessions_per_target x target_sample_size); `Retry-After` says when to retry",
 }
 RESEARCHER_STATUSES = {
     401: "authorization: missing bearer token",
@@ -65,7 +74,8 @@ RESEARCHER_STATUSES = {
 }
 WITHDRAWAL_STATUSES = RESEARCHER_STATUSES | {
     400: UNREADABLE,
-    404: "study_id: unknown study; external_id: no session of this id in the study",
+    404: "study_id: unknown study; external_id / participant_id: no session of this id in "
+         "the study",
     413: TOO_LARGE,
 }
 
@@ -78,7 +88,7 @@ def error_statuses(method: str, path: str) -> dict[int, str]:
         return RESEARCHER_STATUSES
     if path == "/api/sessions" and method == "POST":
         return START_STATUSES
-    if path.startswith("/api/sessions/{token}/"):
+    if path.startswith("/api/session/"):
         return SESSION_WRITE_STATUSES if method == "POST" else SESSION_STATUSES
     return {}
 

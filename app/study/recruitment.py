@@ -74,8 +74,9 @@ def _prolific(config: StudyConfig, params: UrlParams) -> Identity:
     if expected and params.STUDY_ID.lower() != expected.lower():
         raise Refused(403, "recruitment.STUDY_ID: this link belongs to another Prolific study; "
                            f"{_HOW['prolific']}")
-    return Identity("prolific", params.PROLIFIC_PID, params.SESSION_ID,
-                    params.model_dump(include={"PROLIFIC_PID", "STUDY_ID", "SESSION_ID"}))
+    kept = params.model_dump(include={"PROLIFIC_PID", "STUDY_ID", "SESSION_ID"})
+    pid = normalise_external_id("prolific", params.PROLIFIC_PID)
+    return Identity("prolific", pid, params.SESSION_ID, kept | {"PROLIFIC_PID": pid})
 
 
 def _mturk(config: StudyConfig, params: UrlParams) -> Identity:
@@ -84,10 +85,21 @@ def _mturk(config: StudyConfig, params: UrlParams) -> Identity:
                            "to start the study")
     for name in ("workerId", "assignmentId", "hitId"):
         _require("mturk", params, name, PLATFORM_ID, "1-64 letters, digits, - or _")
-    kept = params.model_dump(include={"workerId", "assignmentId", "hitId"})
+    worker = normalise_external_id("mturk", params.workerId)
+    kept = params.model_dump(include={"workerId", "assignmentId", "hitId"}) | {"workerId": worker}
     if params.turkSubmitTo is not None:
         kept["turkSubmitTo"] = _submit_host(config, params.turkSubmitTo)
-    return Identity("mturk", params.workerId, params.assignmentId, kept)
+    return Identity("mturk", worker, params.assignmentId, kept)
+
+
+def normalise_external_id(platform: str, external_id: str) -> str:
+    """One spelling per person: Prolific ids are hex (lower case), MTurk worker ids upper
+    case; `ABC` and `abc` are the same participant on either platform."""
+    if platform == "prolific":
+        return external_id.lower()
+    if platform == "mturk":
+        return external_id.upper()
+    return external_id
 
 
 def _submit_host(config: StudyConfig, submit_to: str) -> str:

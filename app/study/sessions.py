@@ -4,7 +4,9 @@ A session start is checked against the study's platform (recruitment.py), then, 
 the study's lock, either resumes the live session of that external id (same attempt
 key), replaces it (a new attempt after it went stale), or creates a new one whose plan
 takes the least-used world order and the least-exposed trials (plan.py, from the counts
-balance.py keeps). Its cost does not grow with the number of stored participants.
+balance.py keeps), unless the study already runs `live_session_cap` unfinished sessions.
+Its cost does not grow with the number of stored participants; stale sessions are
+released elsewhere (balance.release_stale_batch, off the request path).
 """
 
 import secrets
@@ -17,11 +19,16 @@ from sqlmodel import Session
 
 from app import __version__
 from app.study import balance
+from app.study.config import live_session_cap
 from app.study.context import StudyContext
 from app.study.errors import Refused
 from app.study.plan import assign_plan, dump_plan
 from app.study.recruitment import ATTEMPT_KEYS, Identity, identify
 from app.study.tables import Participant, SessionCreate, utcnow
+
+# a started session's routes are SESSION_PATH/...; its token travels in this header
+SESSION_HEADER = "X-Session-Token"
+SESSION_PATH = "/api/session"
 
 
 def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
@@ -52,13 +59,14 @@ def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Iden
             db.commit()
             return existing, True
         _replace(db, existing)
-    balance.release_stale(db, ctx)
+    if not who.pilot:
+        check_room(db, ctx)
     order, steps = assign_plan(ctx.config, ctx.bank, balance.read_usage(db, ctx.study_id), rng)
     participant = Participant(
         study_id=ctx.study_id, recruitment=who.recruitment, external_id=who.external_id,
         attempt_key=who.attempt_key, pilot=who.pilot, public_id=secrets.token_hex(8),
         session_token=secrets.token_urlsafe(24), recruitment_params=who.params,
-        client=body.client.model_dump(), world_order=",".join(order), plan=dump_plan(steps),
+        world_order=",".join(order), plan=dump_plan(steps),
         config_sha256=ctx.config_sha256, bank_sha256=ctx.bank.sha256, app_version=__version__)
     db.add(participant)
     db.flush()
@@ -66,6 +74,18 @@ def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Iden
         balance.hold(db, participant)
     db.commit()
     return participant, False
+
+
+ROOM_RETRY_S = 60
+
+
+def check_room(db: Session, ctx: StudyContext) -> None:
+    """503 while the study runs as many unfinished counted sessions as it takes at once."""
+    cap = live_session_cap(ctx.config)
+    if balance.live_sessions(db, ctx, cap) >= cap:
+        raise Refused(503, f"study: {cap} sessions are running, the most this study takes at "
+                           "once; please try again in a few minutes",
+                      {"Retry-After": str(ROOM_RETRY_S)})
 
 
 def live_participant(db: Session, study_id: str, external_id: str | None) -> Participant | None:
@@ -115,8 +135,26 @@ def participant_by_token(db: Session, token: str) -> Participant:
     found = db.execute(select(Participant).where(Participant.session_token == token))
     participant = found.scalars().first()
     if participant is None:
-        raise Refused(404, "token: unknown session")
+        raise Refused(404, f"{SESSION_HEADER}: unknown session")
     return participant
+
+
+REPLACED = (f"{SESSION_HEADER}: this attempt was replaced by a newer one of the same "
+            "participant, so this page can no longer save answers. The study continues in "
+            "the other tab or attempt: please close this one.")
+BANK_GONE = (f"{SESSION_HEADER}: the study was changed after this session started, so it "
+             "cannot continue. Your answers so far are saved. Please return the study on the "
+             "recruiting platform and contact the researchers there.")
+
+
+def check_can_continue(participant: Participant, bank_sha256: str) -> None:
+    """410 for a replaced session, and for an unfinished one whose trial bank is not loaded
+    any more (served with --allow-bank-change); an ended session still shows its ending."""
+    if participant.replaced_at is not None:
+        raise Refused(410, REPLACED)
+    ran = participant.bank_sha256
+    if ran and ran != bank_sha256 and not has_ended(participant):
+        raise Refused(410, BANK_GONE)
 
 
 def has_ended(participant: Participant) -> bool:

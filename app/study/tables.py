@@ -80,7 +80,7 @@ class Participant(ParticipantBase, table=True):
 
 
 # How a session ends; each has its own completion code (config.Endings).
-OUTCOMES = ("completed", "failed_checks", "declined_consent", "screened_out")
+OUTCOMES = ("completed", "failed_checks", "excluded", "declined_consent", "screened_out")
 
 
 class ParticipantPublic(SQLModel):
@@ -187,12 +187,15 @@ class Event(SQLModel, table=True):
 
 
 class WithdrawalAudit(SQLModel, table=True):
-    """What a withdrawal deleted: a salted hash of the external id, never the id itself."""
+    """What a withdrawal deleted: a salted hash of the id it was given, never the id itself."""
 
     id: int | None = Field(default=None, primary_key=True)
     study_id: str = Field(index=True, max_length=64)
+    # which id was given: external_id (platform id) or participant_id (a session's public id)
+    id_kind: str = Field(default="external_id", max_length=16,
+                         sa_column_kwargs={"server_default": text("'external_id'")})
     salt: str = Field(max_length=32)
-    id_sha256: str = Field(max_length=64)  # sha256(salt + ":" + external id)
+    id_sha256: str = Field(max_length=64)  # sha256(salt + ":" + that id)
     withdrawn_at: datetime = Field(default_factory=utcnow)
     via: str = Field(max_length=16)  # cli or api
     row_counts: dict = Field(default_factory=dict, sa_column=Column(JSON))
@@ -219,7 +222,7 @@ class UrlParams(_Body):
 
 
 class ClientInfo(_Body):
-    """The participant's device."""
+    """The participant's device: sent with consent, never stored before it."""
 
     screen_w: int = PydField(default=0, ge=0, le=100_000)
     screen_h: int = PydField(default=0, ge=0, le=100_000)
@@ -232,7 +235,6 @@ class SessionCreate(_Body):
 
     study_id: str = PydField(max_length=64)
     recruitment: UrlParams = UrlParams()
-    client: ClientInfo = ClientInfo()
     preview: str | None = PydField(default=None, max_length=128)  # researcher preview key
 
 
@@ -246,6 +248,7 @@ class ConsentCreate(SubmissionBody):
     """POST .../consent."""
 
     agree: Literal[True]  # consent is required to take part
+    client: ClientInfo = ClientInfo()
 
 
 Point = tuple[float, float]
@@ -288,11 +291,22 @@ class SurveyCreate(SubmissionBody):
     answers: dict[str, str | int | float | None]
 
 
-class WithdrawalCreate(_Body):
-    """POST /api/researcher/withdrawals: the participant to delete, by their platform id."""
+class WithdrawalByExternalId(_Body):
+    """Withdraw a participant by their platform id (every session of that person)."""
 
     study_id: str = PydField(max_length=64)
     external_id: str = PydField(min_length=1, max_length=128)
+
+
+class WithdrawalByParticipantId(_Body):
+    """Withdraw by a session's public id: open and pilot sessions have no platform id."""
+
+    study_id: str = PydField(max_length=64)
+    participant_id: str = PydField(min_length=1, max_length=32)
+
+
+# POST /api/researcher/withdrawals: exactly one of the two ids
+WithdrawalCreate = WithdrawalByExternalId | WithdrawalByParticipantId
 
 
 class EventIn(_Body):

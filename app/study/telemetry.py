@@ -57,7 +57,7 @@ def _count_stored(conn: Connection, participant_id: int, n: int) -> bool:
     claimed = conn.execute(
         update(table)
         .where(table.c.id == participant_id, table.c.completed.is_(False),
-               table.c.ended_at.is_(None),
+               table.c.ended_at.is_(None), table.c.replaced_at.is_(None),
                table.c.events_stored + n <= MAX_EVENTS_PER_SESSION)
         .values(events_stored=table.c.events_stored + n))
     return claimed.rowcount == 1

@@ -26,9 +26,9 @@ neither has one is skipped (meta.json counts it). Every start keeps the segment 
 heading and speed: the question is what this robot, moving as the segment shows, does
 from there; a data state's own heading and speed belong to another trajectory's
 behaviour, would be drawn in the browser and would make the world's policy answer a
-situation the segment does not show. Attention checks instead place K - 1 starts a step
-beside or behind the robot (`offset`, `World.offset_start_candidates`). The worlds apply
-their rules to the scene the trajectories were simulated in.
+situation the segment does not show. Attention checks get their start states by the same
+rule (so their geometry cannot give them away); they differ only in their segment. The
+worlds apply their rules to the scene the trajectories were simulated in.
 """
 
 import platform
@@ -323,15 +323,14 @@ def segment_ends(world: World, trajs: TrajectorySet, i: int, history: int,
 # ---------------------------------------------------------------- one trial
 
 def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, end: int,
-               max_step: float, scene: dict, rng: np.random.Generator,
-               near: bool = False) -> TrialRecord:
+               max_step: float, scene: dict, rng: np.random.Generator) -> TrialRecord:
     """Examples, segment, start states and every predictor's answers for one segment."""
     trajs = inputs.trajs
     label_name = inputs.world.robot_label
     shown = clip_of(trajs, src, start, end, label_name)
     model_input = clip_of(trajs, src, end - model_history(inputs), end, label_name).positions
     segment = np.asarray(shown.positions)
-    states = start_states(config, inputs, src, end, segment, max_step, rng, near)
+    states = start_states(config, inputs, src, end, segment, max_step, rng)
     examples = [clip_of(trajs, e, 0, int(trajs.lengths[e]), label_name)
                 for e in pick_examples(trajs, inputs.held_out, src, label_name,
                                        config.examples_per_trial, rng)]
@@ -389,22 +388,15 @@ class NoStartStates(ValueError):
 
 
 def start_states(config: StudyConfig, inputs: WorldInputs, src: int, end: int,
-                 segment: np.ndarray, max_step: float, rng: np.random.Generator,
-                 near: bool = False) -> list[StartState]:
-    """The robot's segment-end state plus K - 1 others by the module docstring's rule (or a
-    step beside or behind it, `near`); the human stays at its segment-end position."""
+                 segment: np.ndarray, max_step: float, rng: np.random.Generator
+                 ) -> list[StartState]:
+    """The robot's segment-end state plus K - 1 others by the module docstring's rule; the
+    human stays at its segment-end position."""
     trajs, world = inputs.trajs, inputs.world
     robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
-    others = config.start_states - 1
-    if near:
-        offsets = world.offset_start_candidates(trajs.scene, segment, max_step,
-                                                config.steps_to_predict)
-        points = farthest_points(robot, offsets, others)
-        kinds = ["offset"] * others
-    else:
-        pools = world.data_start_candidates(trajs.scene, segment, inputs.covered,
-                                            config.steps_to_predict * max_step)
-        points, kinds = take_turns(robot, pools, others, max_step, rng)
+    pools = world.data_start_candidates(trajs.scene, segment, inputs.covered,
+                                        config.steps_to_predict * max_step)
+    points, kinds = take_turns(robot, pools, config.start_states - 1, max_step, rng)
     heading = trajs.headings[src, end]
     speed = float(trajs.speeds[src, end, ROBOT])
     return [StartState(robot=np.round(p, POS_DECIMALS).tolist(),
@@ -436,19 +428,6 @@ def take_turns(robot: np.ndarray, pools: dict[str, np.ndarray], count: int, min_
     return chosen[1:], kinds
 
 
-def farthest_points(seed: np.ndarray, candidates: np.ndarray, k: int) -> list[np.ndarray]:
-    """k candidates chosen greedily to be far from the seed and from each other."""
-    chosen: list[np.ndarray] = []
-    dist = np.linalg.norm(candidates - seed, axis=1)
-    for _ in range(min(k, len(candidates))):
-        best = int(np.argmax(dist))
-        chosen.append(candidates[best])
-        dist = np.minimum(dist, np.linalg.norm(candidates - candidates[best], axis=1))
-    if len(chosen) < k:
-        raise NoStartStates("not enough free space for the start states")
-    return chosen
-
-
 # ---------------------------------------------------------------- kinds
 
 def obviousness_deg(trial: TrialRecord) -> float:
@@ -462,19 +441,20 @@ def obviousness_deg(trial: TrialRecord) -> float:
 
 def attention_trials(config: StudyConfig, inputs: WorldInputs, candidates: list, max_step: float,
                      scene: dict, rng: np.random.Generator) -> tuple[list[TrialRecord], dict]:
-    """The most obvious of up to EXTRA_CANDIDATES segments, start states near the robot.
+    """The most obvious of up to EXTRA_CANDIDATES segments, as attention checks.
 
-    Start states a step or so beside and behind the robot keep it in the situation the
-    segment shows, so "it keeps doing what it was doing" is the plainly right answer.
+    Their start states come from the same rule and the same data as main trials', so
+    nothing the browser gets (where the starts lie, how far apart) tells a check from a
+    main trial; what makes one a check is a segment after which the robot's own policy
+    plainly keeps going the way it goes, from every start state.
     """
     rule = config.attention_checks
     pool = []
     for src, start, end in tqdm(candidates[:EXTRA_CANDIDATES],
                                 desc=f"attention checks {inputs.world.name}", unit="trial"):
         try:
-            pool.append(make_trial(config, inputs, src, start, end, max_step, scene, rng,
-                                   near=True))
-        except NoStartStates:  # too little free room around the robot
+            pool.append(make_trial(config, inputs, src, start, end, max_step, scene, rng))
+        except NoStartStates:
             continue
     angles = [obviousness_deg(t) for t in pool]
     chosen = [int(i) for i in np.argsort(angles, kind="stable")[: rule.per_world]]

@@ -37,8 +37,9 @@ class StartState(StrictModel):
     """Where the robot starts one prediction; the human is fixed.
 
     `start_kind`: `own` (the robot's segment end), or how a data-covered start relates to
-    it (Highway `same_lane` / `adjacent_lane`, Obstacle `near` / `mid`), or `offset` (a
-    step beside or behind the robot, attention checks). See trial_builder.start_states.
+    it (Highway `same_lane` / `adjacent_lane`, Obstacle `near` / `mid`); banks built
+    before issue 22 also have `offset` (a step beside or behind the robot, their attention
+    checks). See trial_builder.start_states.
     """
 
     robot: list[float]

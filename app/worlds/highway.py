@@ -33,7 +33,6 @@ from app.configio import StrictModel, load_yaml_model
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Lane, Scene
 from app.data.trajectory import HUMAN, ROBOT, Episode, Rejected
 from app.worlds.mpc import SamplingMPC
-from app.worlds.offset_starts import offset_points
 
 INTENTS = ["keep", "left", "right"]
 LANE_SHIFT = {0: 0, 1: -1, 2: +1}  # left = towards lane 0 (smaller y) for cars driving +x
@@ -525,11 +524,3 @@ class HighwayWorld:
                 & (ahead > b.x_min_m) & (ahead < b.x_max_m))
         gap = np.abs(lane_of - robot_lane)
         return {"same_lane": pts[keep & (gap == 0)], "adjacent_lane": pts[keep & (gap == 1)]}
-
-    def offset_start_candidates(self, scene: Scene, segment: np.ndarray, max_step: float,
-                                n_steps: int) -> np.ndarray:
-        """The shared offset points that stay on the road (1 m inside its outer edges)."""
-        pts = offset_points(scene, segment, max_step, n_steps)
-        top = min(lane.y_center_m - lane.width_m / 2 for lane in scene.lanes)
-        bottom = max(lane.y_center_m + lane.width_m / 2 for lane in scene.lanes)
-        return pts[(pts[:, 1] > top + 1.0) & (pts[:, 1] < bottom - 1.0)]

@@ -20,7 +20,6 @@ from app.configio import StrictModel, load_yaml_model
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Circle, Scene
 from app.data.trajectory import HUMAN, ROBOT, Episode, Rejected
 from app.worlds.mpc import SamplingMPC
-from app.worlds.offset_starts import offset_points
 
 AGENTS = (ROBOT, HUMAN)
 COLLISION_SUBSTEPS = 4  # check each step's straight segment at 4 points, not just its end
@@ -502,11 +501,6 @@ class ObstacleWorld:
         for c in [*scene.obstacles, *scene.goals]:
             clear &= np.hypot(pts[:, 0] - c.x_m, pts[:, 1] - c.y_m) > c.radius_m + agent
         return {"near": pts[clear & (dist <= reach)], "mid": pts[clear & (dist > reach)]}
-
-    def offset_start_candidates(self, scene: Scene, segment: np.ndarray, max_step: float,
-                                n_steps: int) -> np.ndarray:
-        """The shared offset points (the plane has no road to stay on)."""
-        return offset_points(scene, segment, max_step, n_steps)
 
 
 def norm2(vectors: np.ndarray) -> np.ndarray:

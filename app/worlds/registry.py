@@ -61,12 +61,6 @@ class World(Protocol):
         `segment`, by start kind (the first kind draws first); `reach` = n steps x max step."""
         ...
 
-    def offset_start_candidates(self, scene: Scene, segment: np.ndarray, max_step: float,
-                                n_steps: int) -> np.ndarray:
-        """Robot positions [P, 2] a step or so beside or behind the segment end, for
-        attention checks."""
-        ...
-
 
 def default_config_path(world: str) -> Path:
     """study_configs/worlds/<world>.yaml under the configured configs dir."""

@@ -40,7 +40,7 @@ def _row(p, world, w, t, s, k, start, click, human, rng) -> list:
     policy = human + rng.normal(scale=0.1, size=2)
     values = {
         "study_id": "paper_study", "participant_id": f"p{p:02d}", "recruitment": "prolific",
-        "completed": True, "outcome": "completed", "attention_passed": True,
+        "completed": True, "outcome": "completed", "replaced": False, "attention_passed": True,
         "world": world, "world_position": w, "trial_id": f"{world}-{t}", "trial_index": t,
         "is_practice": False, "attention_check": False, "arm": ("random", "models_disagree")[t % 2],
         "clip_sha256": "c" * 8,

@@ -49,12 +49,13 @@ def add_lifecycle_sessions(url: str, token: str) -> None:
         pid = uuid.uuid4().hex[:24]
         started = httpx.post(f"{url}/api/sessions", json={"study_id": STUDY, "recruitment": {
             "PROLIFIC_PID": pid, "STUDY_ID": "5" * 24, "SESSION_ID": "s1"}}).json()
-        httpx.post(f"{url}/api/sessions/{started['session_token']}/{ending}",
-                   json={"submission_id": str(uuid.uuid4()), **body}).raise_for_status()
+        httpx.post(f"{url}/api/session/{ending}", json={"submission_id": str(uuid.uuid4()), **body},
+                   headers={"X-Session-Token": started["session_token"]}).raise_for_status()
     lab = httpx.post(f"{url}/api/sessions", json={"study_id": STUDY,
                                                   "preview": preview_key(token, STUDY)}).json()
-    httpx.post(f"{url}/api/sessions/{lab['session_token']}/consent",
-               json={"submission_id": str(uuid.uuid4()), "agree": True}).raise_for_status()
+    httpx.post(f"{url}/api/session/consent",
+               json={"submission_id": str(uuid.uuid4()), "agree": True},
+               headers={"X-Session-Token": lab["session_token"]}).raise_for_status()
 
 
 def shoot(url: str, token: str, out: Path) -> None:

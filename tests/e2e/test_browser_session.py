@@ -41,7 +41,8 @@ def current_state(page) -> dict:
     return page.evaluate(
         """async (key) => {
             const { token } = JSON.parse(sessionStorage.getItem(key));
-            return (await fetch(`/api/sessions/${token}/state`)).json();
+            const headers = { "X-Session-Token": token };
+            return (await fetch("/api/session/state", { headers })).json();
         }""",
         f"tomstudy.{BROWSER_STUDY}.session",
     )

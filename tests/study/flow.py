@@ -11,10 +11,12 @@ from fastapi.testclient import TestClient
 from app.study.bots import segment_key
 from app.study.main import create_app
 from app.study.plan import TRIAL_PHASES
+from app.study.sessions import SESSION_HEADER, SESSION_PATH
 from tests.conftest import ADMIN_TOKEN
 
 TOKEN = ADMIN_TOKEN
 ADMIN = {"Authorization": f"Bearer {TOKEN}"}
+DEVICE = {"screen_w": 1600, "screen_h": 900, "touch_only": False, "user_agent": "pytest"}
 
 
 def new_id() -> str:
@@ -89,9 +91,7 @@ class Participant:
         """POST /api/sessions (no parameters: a fresh valid Prolific participant)."""
         if not recruitment and preview is None:
             recruitment = prolific(new_id())
-        body = {"study_id": self.study_id, "recruitment": recruitment,
-                "client": {"screen_w": 1600, "screen_h": 900, "touch_only": False,
-                           "user_agent": "pytest"}}
+        body = {"study_id": self.study_id, "recruitment": recruitment}
         if preview is not None:
             body["preview"] = preview
         r = self.client.post("/api/sessions", json=body)
@@ -101,22 +101,38 @@ class Participant:
         return body
 
     def url(self, what: str) -> str:
-        """Path of one of this session's routes."""
-        return f"/api/sessions/{self.token}/{what}"
+        """Path of one of this session's routes (the token goes in `headers`)."""
+        return f"{SESSION_PATH}/{what}"
+
+    @property
+    def headers(self) -> dict:
+        """The header that names this session."""
+        return {SESSION_HEADER: self.token}
+
+    def get(self, what: str):
+        """GET one of this session's routes; returns the response."""
+        return self.client.get(self.url(what), headers=self.headers)
 
     def state(self) -> dict:
         """GET .../state."""
-        r = self.client.get(self.url("state"))
+        r = self.get("state")
         assert r.status_code == 200, r.text
         return r.json()
 
-    def post(self, what: str, body: dict):
-        """POST a step; returns the response."""
-        return self.client.post(self.url(what), json=body)
+    def post(self, what: str, body: dict, **kwargs):
+        """POST a step (or `content=` raw bytes); returns the response."""
+        if "content" not in kwargs:
+            kwargs["json"] = body
+        headers = self.headers | kwargs.pop("headers", {})
+        return self.client.post(self.url(what), headers=headers, **kwargs)
+
+    def consent(self):
+        """POST consent with the device info; returns the response."""
+        return self.post("consent", {"submission_id": new_id(), "agree": True, "client": DEVICE})
 
     def pass_intro(self) -> dict:
         """Consent and instructions."""
-        assert self.post("consent", {"submission_id": new_id(), "agree": True}).status_code == 200
+        assert self.consent().status_code == 200
         r = self.post("instructions", {"submission_id": new_id()})
         assert r.status_code == 200, r.text
         return r.json()

@@ -236,8 +236,8 @@ def test_bad_predictions_get_a_4xx_naming_the_field(client, small_study, bank):
         body = prediction_body(trial)
         body["points"][i][j][k] = 123456.789  # a marker, replaced by the bare literal
         raw = json.dumps(body).replace("123456.789", literal)
-        r = client.post(p.url("predictions"), content=raw,
-                        headers={"content-type": "application/json"})
+        r = p.post("predictions", None, content=raw,
+                   headers={"content-type": "application/json"})
         assert r.status_code == 422, r.text
         assert f"points.{i}.{j}.{k}: Input should be a finite number" in r.json()["message"]
     for unknown in (next(iter(bank)), "0123456789abcdef"):  # a bank id, someone's ref
@@ -246,8 +246,8 @@ def test_bad_predictions_get_a_4xx_naming_the_field(client, small_study, bank):
     later = next(s["ref"] for s in _plan(client, p)[::-1] if "ref" in s)
     r = p.post("predictions", dict(prediction_body(trial), trial_id=later))
     assert r.status_code == 409 and "not the current trial" in r.json()["detail"]
-    r = client.post(p.url("predictions"), content=b"{" + b" " * (70 * 1024) + b"}",
-                    headers={"content-type": "application/json"})
+    r = p.post("predictions", None, content=b"{" + b" " * (70 * 1024) + b"}",
+               headers={"content-type": "application/json"})
     assert r.status_code == 413 and r.json()["detail"].startswith("body:")
     assert p.state()["step"]["trial_id"] == trial["trial_id"]  # nothing moved
 
@@ -263,8 +263,10 @@ def _plan(client, participant: Participant) -> list[dict]:
 def test_other_bad_inputs(client, small_study):
     r = client.post("/api/sessions", json={"study_id": "nope"})
     assert r.status_code == 404 and r.json()["detail"].startswith("study_id:")
-    r = client.get("/api/sessions/not-a-token/state")
-    assert r.status_code == 404 and r.json()["detail"].startswith("token:")
+    r = client.get("/api/session/state", headers={"X-Session-Token": "not-a-token"})
+    assert r.status_code == 404 and r.json()["detail"].startswith("X-Session-Token:")
+    r = client.get("/api/session/state")
+    assert r.status_code == 422 and "X-Session-Token" in r.json()["message"]
     p = Participant(client, small_study.study_id)
     p.start()
     r = p.post("consent", {"submission_id": new_id(), "agree": False})

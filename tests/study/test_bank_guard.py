@@ -15,7 +15,7 @@ from app.study.db import make_engine
 from app.study.main import create_app
 from app.study.recruitment import preview_key
 from tests.conftest import TOMSTUDY, SmallStudy, free_port, freeze_bundle_of, start_server
-from tests.study.flow import TOKEN, Participant, make_client
+from tests.study.flow import TOKEN, Participant, make_client, new_id
 
 
 @pytest.fixture
@@ -98,3 +98,25 @@ def test_serve_refuses_a_changed_bank_unless_allowed(small_study, rebuilt, tmp_p
     finally:
         proc.terminate()
         proc.wait(timeout=10)
+
+
+def test_sessions_of_a_replaced_bank_are_told_plainly_and_finished_ones_keep_their_code(
+        small_study, rebuilt, db_url, bank):
+    with make_client(small_study, db_url) as client:
+        running = Participant(client, small_study.study_id)
+        running.start()
+        running.pass_intro()
+        done = Participant(client, small_study.study_id)
+        done.start()
+        done.pass_intro()
+        code = done.finish(bank)["step"]["completion_code"]
+    settings = rebuilt.settings(db_url, allow_bank_change=True)
+    with TestClient(create_app(settings, [rebuilt.study_id])) as client:
+        running.client = done.client = client
+        answers = [running.get("state"), running.post("events", {"events": [{
+            "submission_id": new_id(), "kind": "resize", "t_client_ms": 1.0,
+            "data": {"w": 1, "h": 1}}]})]
+        assert [r.status_code for r in answers] == [410, 410]  # not 500s, and not forever
+        assert "the study was changed after this session started" in answers[0].json()["detail"]
+        assert "return the study" in answers[0].json()["detail"]
+        assert done.state()["step"]["completion_code"] == code

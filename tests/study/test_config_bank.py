@@ -18,7 +18,7 @@ from sqlmodel import Session, create_engine, select
 from app.configio import ConfigError, load_yaml_model
 from app.fileio import sha256_file
 from app.layout import Layout
-from app.settings import DEFAULT_ADMIN_TOKEN, Settings
+from app.settings import Settings
 from app.study.config import MainTrialSelection, StudyConfig, load_study_config
 from app.study.db import create_tables
 from app.study.deps import get_db
@@ -34,7 +34,7 @@ from app.study.trial_builder import (
 from app.study.trials import TrialBank, clip_sha256
 from tests.conftest import REPO, TOMSTUDY, SmallStudy, build_bundle_of
 from tests.study import flow
-from tests.study.flow import ADMIN, TOKEN, new_id, prediction_body, prolific
+from tests.study.flow import ADMIN, new_id, prediction_body, prolific
 
 
 def test_paper_study_config_matches_the_paper():
@@ -123,6 +123,7 @@ def test_bank_trials_have_the_paper_shape(bank, small_study):
                                                  - cfg.main_trial_selection.random_arm_trials))
 
 
+OLD_DEFAULT_TOKEN = "change-me-researcher-token"  # the default before issue 22 removed it
 DATA_KINDS = {"highway": ("same_lane", "adjacent_lane"), "obstacle": ("near", "mid")}
 
 
@@ -152,10 +153,7 @@ def test_start_states_lie_on_the_learned_data_near_the_robot(bank, small_study):
             kinds = [s.start_kind for s in t.start_states]
             robots = np.array([s.robot for s in t.start_states])
             assert kinds[0] == "own"
-            if t.kind == "attention":
-                assert set(kinds[1:]) == {"offset"}
-                continue
-            assert set(kinds[1:]) <= set(DATA_KINDS[name])
+            assert set(kinds[1:]) <= set(DATA_KINDS[name])  # attention checks too (issue 22)
             for kind in kinds[1:]:
                 counts[kind] += 1
             for p in robots[1:]:  # each one a state the models' data covers
@@ -258,8 +256,7 @@ def test_start_states_config_sets_the_count_and_the_api_follows(three_starts, tm
             assert np.asarray(t.policy_actions).shape[0] == 3
             if t.kind != "attention":
                 assert [s.start_kind for s in t.start_states] == ["own", *DATA_KINDS[name]]
-    settings = Settings(data_dir=data, configs_dir=configs, admin_token=TOKEN,
-                        database_url=f"sqlite:///{tmp_path / 'study.db'}")
+    settings = SmallStudy(data, configs).settings(f"sqlite:///{tmp_path / 'study.db'}")
     with TestClient(create_app(settings, ["three_starts"])) as client:
         p = flow.Participant(client, "three_starts")
         p.start()
@@ -316,13 +313,13 @@ def test_family_disagreement_is_the_mean_over_every_ours_and_vae_seed(bank):
     assert model_disagreement(trial) == pytest.approx(np.mean(pairs))
 
 
-def test_production_mode_refuses_the_default_token(small_study, tmp_path):
-    settings = Settings(data_dir=small_study.data_dir, production=True,
-                        admin_token=DEFAULT_ADMIN_TOKEN)
+@pytest.mark.parametrize("token", ["", OLD_DEFAULT_TOKEN])
+def test_production_mode_refuses_an_unset_or_old_default_token(small_study, tmp_path, token):
+    settings = Settings(data_dir=small_study.data_dir, production=True, admin_token=token)
     with pytest.raises(UnsafeSettings, match="TOMSTUDY_ADMIN_TOKEN"):
         create_app(settings, [small_study.study_id])
     env = small_study.env(f"sqlite:///{tmp_path / 'x.db'}", TOMSTUDY_PRODUCTION="1",
-                          TOMSTUDY_ADMIN_TOKEN=DEFAULT_ADMIN_TOKEN)
+                          TOMSTUDY_ADMIN_TOKEN=token)
     run = subprocess.run([TOMSTUDY, "serve", "--port", "1"],
                          env=env, capture_output=True, text=True, timeout=60)
     assert run.returncode == 2 and "refusing to start" in run.stderr
@@ -337,16 +334,14 @@ def test_in_memory_database_through_dependency_override(small_study, tmp_path):
         with Session(engine) as session:
             yield session
 
-    settings = Settings(data_dir=small_study.data_dir, configs_dir=small_study.configs_dir,
-                        database_url=f"sqlite:///{tmp_path / 'unused.db'}")
+    settings = small_study.settings(f"sqlite:///{tmp_path / 'unused.db'}")
     app = create_app(settings, [small_study.study_id])
     app.dependency_overrides[get_db] = memory_db
     with TestClient(app) as client:
         r = client.post("/api/sessions", json={"study_id": small_study.study_id,
                                                "recruitment": prolific("memory")})
-        token = r.json()["session_token"]
-        r = client.post(f"/api/sessions/{token}/consent",
-                        json={"submission_id": new_id(), "agree": True})
+        r = client.post("/api/session/consent", json={"submission_id": new_id(), "agree": True},
+                        headers={"X-Session-Token": r.json()["session_token"]})
         assert r.status_code == 200 and r.json()["phase"] == "instructions"
     with Session(engine) as session:
         stored = session.execute(select(Participant)).scalars().one()

@@ -39,33 +39,44 @@ def serve_options() -> set[str]:
 def test_the_server_environment_names_only_settings_the_app_reads():
     env = SERVER["environment"]
     assert set(env) <= settings_env_names()
-    assert {"DATABASE_URL", "TOMSTUDY_ADMIN_TOKEN"} <= set(env)
+    assert {"DATABASE_URL", "TOMSTUDY_ADMIN_TOKEN_FILE", "TOMSTUDY_DATABASE_PASSWORD_FILE",
+            "TOMSTUDY_ALLOWED_HOSTS"} <= set(env)
     # production refuses bot clocks; the image sets production itself
     assert not {"TOMSTUDY_TRUST_CLIENT_CLOCK", "TOMSTUDY_PRODUCTION"} & set(env)
 
 
-def test_secrets_come_from_the_environment_and_are_required():
-    env = SERVER["environment"]
-    assert REQUIRED.fullmatch(env["TOMSTUDY_ADMIN_TOKEN"]).group(1) == "TOMSTUDY_ADMIN_TOKEN"
-    assert REQUIRED.fullmatch(DB["environment"]["POSTGRES_PASSWORD"]).group(1) == \
-        "POSTGRES_PASSWORD"
-    url = make_url(REQUIRED.sub("PASSWORD", env["DATABASE_URL"]))
-    assert (url.drivername, url.host, url.password) == ("postgresql+psycopg", "db", "PASSWORD")
-    assert (url.username, url.database) == (DB["environment"]["POSTGRES_USER"],
-                                            DB["environment"]["POSTGRES_DB"])
-    assert REQUIRED.search(env["DATABASE_URL"]).group(1) == "POSTGRES_PASSWORD"
+def test_secrets_come_from_files_never_from_the_environment():
+    env, db_env = SERVER["environment"], DB["environment"]
+    files = {name: spec["file"] for name, spec in COMPOSE["secrets"].items()}
+    assert files == {"admin_token": "./secrets/admin_token",
+                     "postgres_password": "./secrets/postgres_password"}
+    assert set(SERVER["secrets"]) == set(files) and DB["secrets"] == ["postgres_password"]
+    assert env["TOMSTUDY_ADMIN_TOKEN_FILE"] == "/run/secrets/admin_token"
+    assert env["TOMSTUDY_DATABASE_PASSWORD_FILE"] == "/run/secrets/postgres_password"
+    assert db_env["POSTGRES_PASSWORD_FILE"] == "/run/secrets/postgres_password"
+    url = make_url(env["DATABASE_URL"])
+    assert (url.drivername, url.host, url.password) == ("postgresql+psycopg", "db", None)
+    assert (url.username, url.database) == (db_env["POSTGRES_USER"], db_env["POSTGRES_DB"])
+    assert REQUIRED.fullmatch(env["TOMSTUDY_ALLOWED_HOSTS"])  # `up` stops until it is set
 
 
 def test_no_secret_literal_in_any_service():
     for service in COMPOSE["services"].values():
         for name, value in service.get("environment", {}).items():
             if re.search("PASSWORD|TOKEN|SECRET|KEY", name):
-                assert REQUIRED.fullmatch(str(value)), f"{name} must be ${{{name}:?...}}"
+                assert name.endswith("_FILE") and value.startswith("/run/secrets/"), name
     text = (REPO / "compose.yaml").read_text()
-    # a long random-looking word outside ${...} would be a pasted token or password
-    words = re.findall(r"[A-Za-z0-9_-]{24,}", REQUIRED.sub("", text))
+    # a long random-looking word outside ${...} and digests would be a pasted secret
+    words = re.findall(r"[A-Za-z0-9_-]{24,}", re.sub(r"sha256:\w+", "", REQUIRED.sub("", text)))
     assert [w for w in words if re.search(r"\d", w) and re.search("[a-z]", w)
             and re.search("[A-Z]", w)] == []
+
+
+def test_base_images_are_pinned_by_digest_and_the_database_is_checked_over_tcp():
+    assert re.fullmatch(r"postgres:15@sha256:[0-9a-f]{64}", DB["image"])
+    python = SERVER["build"]["args"]["PYTHON_IMAGE"]
+    assert re.fullmatch(r"python:3\.11-slim@sha256:[0-9a-f]{64}", python)
+    assert DB["healthcheck"]["test"][:4] == ["CMD", "pg_isready", "-h", "127.0.0.1"]
 
 
 def test_only_loopback_publishes_the_server_and_nothing_publishes_the_database():
@@ -95,7 +106,7 @@ def test_compose_command_and_entrypoint_call_real_serve_options():
 
 def test_the_image_runs_the_entrypoint_and_the_build_context_leaves_secrets_out():
     dockerfile = (REPO / "Dockerfile").read_text()
-    assert 'ENTRYPOINT ["/app/app/study/entrypoint.sh"]' in dockerfile
+    assert 'ENTRYPOINT ["dumb-init", "--", "/app/app/study/entrypoint.sh"]' in dockerfile
     assert "COPY app ./app" in dockerfile  # the entrypoint comes with the package
     assert os.access(ENTRYPOINT, os.X_OK)
     ignored = (REPO / ".dockerignore").read_text().split()
@@ -116,12 +127,13 @@ def run_entrypoint(tmp_path):
 
     def run(*args: str) -> list[str]:
         env = dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}",
-                   TOMSTUDY_DATA_DIR=str(data_dir))
+                   TOMSTUDY_DATA_DIR=str(data_dir), TOMSTUDY_HEALTHZ_FILE=str(run.healthz))
         done = subprocess.run(["sh", str(ENTRYPOINT), *args], env=env, capture_output=True,
                               text=True, timeout=10, check=True)
         return done.stdout.splitlines()
 
     run.data_dir = data_dir
+    run.healthz = tmp_path / "healthz"
     return run
 
 
@@ -136,3 +148,32 @@ def test_every_start_prepares_then_serves_with_the_options_given(run_entrypoint,
 
 def test_a_command_instead_of_options_runs_that_command(run_entrypoint):
     assert run_entrypoint("tomstudy", "preview-link") == ["tomstudy preview-link"]
+
+
+def test_the_image_installs_pinned_dependencies_before_its_code_and_runs_as_a_user():
+    dockerfile = (REPO / "Dockerfile").read_text()
+    steps = [line.split()[0] + " " + line.split()[1] for line in dockerfile.splitlines()
+             if line.startswith(("COPY", "RUN"))]
+    assert steps[:2] == ["COPY requirements/runtime.txt", "RUN pip"]  # no code yet
+    assert "pip install -r requirements/runtime.txt" in dockerfile
+    assert "pip install --no-deps --no-build-isolation -e ." in dockerfile
+    assert re.search(r"^USER 10001$", dockerfile, re.M)
+    pins = [line for line in (REPO / "requirements" / "runtime.txt").read_text().splitlines()
+            if line and not line.startswith(("#", " "))]
+    assert pins and all(re.fullmatch(r"[\w.-]+==[\w.]+", pin) for pin in pins)
+    assert "torch==2.13.0" in pins
+
+
+@pytest.mark.parametrize(("args", "asked"), [
+    ((), "http://127.0.0.1:8000/healthz"),
+    (("--port", "18800"), "http://127.0.0.1:18800/healthz"),
+    (("--host", "127.0.0.1", "--port=9000"), "http://127.0.0.1:9000/healthz"),
+    (("--host", "::1"), "http://[::1]:8000/healthz")])
+def test_the_healthcheck_asks_where_the_server_listens(run_entrypoint, args, asked):
+    run_entrypoint(*args)
+    assert run_entrypoint.healthz.read_text().strip() == asked
+
+
+def test_the_entrypoint_makes_private_files(run_entrypoint):
+    run_entrypoint()
+    assert run_entrypoint.healthz.stat().st_mode & 0o077 == 0  # umask 077

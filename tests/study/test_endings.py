@@ -2,8 +2,11 @@
 told where to go: completed, failed checks, declined consent, screened out; MTurk's preview
 and hand-in; each trial's undo/reset history (SQLite and PostgreSQL, same tests)."""
 
+import io
+
 from sqlmodel import Session, select
 
+from analysis.exports import read_export
 from app.study.plan import Phase
 from app.study.tables import Event, Participant, Submission, TrialResponse
 from tests.study.flow import (
@@ -66,7 +69,35 @@ def test_failing_two_attention_checks_ends_for_review_with_its_own_code(client, 
     q.start()
     q.pass_intro()
     fail_attention_checks(q, bank)
-    assert q.survey()["step"]["outcome"] == "completed"  # 2 failed < min_failed 3
+    done = q.survey()["step"]  # 2 failed < min_failed 3, but the exclusion rule holds
+    assert (done["outcome"], done["completion_code"]) == ("excluded", "C2TOMREVIEW")
+
+
+def test_a_session_the_rules_exclude_never_gets_the_approve_code(client, small_study, bank):
+    sid = small_study.study_id
+    hasty = Client(client, sid)
+    hasty.start()
+    hasty.pass_intro()
+    done = hasty.finish(bank, duration_ms=1000)["step"]  # every trial too fast
+    assert (done["outcome"], done["completion_code"]) == ("excluded", "C2TOMREVIEW")
+    assert "reviewed" in done["message"]
+    careful = Client(client, sid)
+    careful.start()
+    careful.pass_intro()
+    assert careful.finish(bank)["step"]["outcome"] == "completed"
+    endings = client.app.state.studies[sid].config.recruitment.endings
+    chosen = endings.excluded.model_copy(update={"completion_code": "C5TOMFAST"})
+    with_recruitment(client, sid, endings=endings.model_copy(update={"excluded": chosen}))
+    other = Client(client, sid)
+    other.start()
+    other.pass_intro()
+    done = other.finish(bank, duration_ms=1000)["step"]
+    assert (done["outcome"], done["completion_code"]) == ("excluded", "C5TOMFAST")
+    r = client.get(f"/api/researcher/export/participants.csv?study_id={sid}", headers=ADMIN)
+    sheet = read_export(io.StringIO(r.text), "participants").set_index("participant_id")
+    assert sheet.loc[stored(client, hasty.token).public_id, "exclusion_reasons"] == "too_fast"
+    assert sheet.loc[stored(client, careful.token).public_id, "excluded"] == False  # noqa: E712
+    assert sheet["excluded"].dtype == bool
 
 
 def test_declining_consent_ends_the_session_and_keeps_only_the_receipt(client, small_study):

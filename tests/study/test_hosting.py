@@ -6,12 +6,13 @@ import subprocess
 import time
 from contextlib import contextmanager
 
+import httpx
 import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy.engine import make_url
 
 from app.cli import server_settings
-from app.settings import DEFAULT_ADMIN_TOKEN, Settings, get_settings, is_loopback
+from app.settings import Settings, get_settings, is_loopback
 from app.study.db import CONNECT_TIMEOUT_S, make_engine, server_connect_args
 from app.study.main import (
     FRONTEND_DIR,
@@ -21,10 +22,13 @@ from app.study.main import (
     check_production,
     create_app,
 )
-from tests.conftest import REPO, TOMSTUDY, free_port
-from tests.study.flow import Participant
+from tests.conftest import ADMIN_TOKEN, REPO, TOMSTUDY, free_port
+from tests.study.flow import ADMIN, Participant
 
 STRONG_TOKEN = "x" * 40
+OLD_DEFAULT_TOKEN = "change-me-researcher-token"  # the default before issue 22 removed it
+LIMITS_ON = {"rate_limit_starts": "20/minute", "rate_limit_requests": "300/minute"}
+PRODUCTION = {"production": True, "admin_token": STRONG_TOKEN, **LIMITS_ON}
 
 
 def study_settings(small_study, tmp_path, **overrides) -> Settings:
@@ -52,10 +56,10 @@ def test_only_loopback_hosts_count_as_private(host, loopback):
 
 
 @pytest.mark.parametrize(("token", "problem"), [
-    (DEFAULT_ADMIN_TOKEN, "is the default"), ("test-token", "has 10 characters"),
-    (" " * 40 + "short", "has 5 characters")])
-def test_production_refuses_a_default_or_short_token(small_study, tmp_path, token, problem):
-    settings = study_settings(small_study, tmp_path, admin_token=token, production=True)
+    ("", "is not set"), (OLD_DEFAULT_TOKEN, "has 26 characters"),
+    ("test-token", "has 10 characters"), (" " * 40 + "short", "has 5 characters")])
+def test_production_refuses_an_unset_or_short_token(small_study, tmp_path, token, problem):
+    settings = study_settings(small_study, tmp_path, **PRODUCTION | {"admin_token": token})
     with pytest.raises(UnsafeSettings) as refused:
         create_app(settings, [small_study.study_id])
     message = str(refused.value)
@@ -64,8 +68,7 @@ def test_production_refuses_a_default_or_short_token(small_study, tmp_path, toke
 
 
 def test_production_accepts_a_long_token_and_loopback_any_token(small_study, tmp_path):
-    check_production(study_settings(small_study, tmp_path, admin_token=STRONG_TOKEN,
-                                    production=True))
+    check_production(study_settings(small_study, tmp_path, **PRODUCTION))
     check_production(study_settings(small_study, tmp_path).for_host("127.0.0.1"))
 
 
@@ -93,8 +96,8 @@ def test_serve_off_loopback_hands_production_mode_to_the_app(small_study, monkey
         get_settings.cache_clear()
 
 
-@pytest.mark.parametrize("token", [DEFAULT_ADMIN_TOKEN, "test-token"])
-def test_serve_off_loopback_refuses_a_weak_token(small_study, tmp_path, token):
+@pytest.mark.parametrize("token", ["", OLD_DEFAULT_TOKEN, "test-token"])
+def test_serve_off_loopback_refuses_an_unset_or_weak_token(small_study, tmp_path, token):
     run = run_serve(small_study, tmp_path, "--host", "0.0.0.0", TOMSTUDY_ADMIN_TOKEN=token)
     assert run.returncode == 2, run.stderr
     assert run.stderr.startswith("error: refusing to start in production mode")
@@ -144,14 +147,14 @@ def test_security_headers_on_pages_api_static_files_and_errors(client, small_stu
     answers = {
         "page": client.get(f"/s/{small_study.study_id}"),
         "landing": client.get("/"),
-        "api": client.get(p.url("state")),
+        "api": p.get("state"),
         "static js": client.get("/static/js/app.js"),
         "static css": client.get("/static/css/style.css"),
-        "unknown session": client.get("/api/sessions/nope/state"),
+        "unknown session": client.get("/api/session/state", headers={"X-Session-Token": "no"}),
         "unknown path": client.get("/no/such/page"),
-        "too large": client.post(p.url("events"), content=b"[" * (MAX_BODY_BYTES + 1),
-                                 headers={"content-type": "application/json"}),
-        "invalid": client.post(p.url("consent"), json={"agree": "maybe"}),
+        "too large": p.post("events", None, content=b"[" * (MAX_BODY_BYTES + 1),
+                            headers={"content-type": "application/json"}),
+        "invalid": p.post("consent", {"agree": "maybe"}),
     }
     statuses = {what: r.status_code for what, r in answers.items()}
     assert statuses == {"page": 200, "landing": 200, "api": 200, "static js": 200,
@@ -183,7 +186,7 @@ DOCS = ("/docs", "/redoc", "/openapi.json")
 
 
 def test_api_docs_are_off_in_production(small_study, tmp_path):
-    settings = study_settings(small_study, tmp_path, admin_token=STRONG_TOKEN, production=True)
+    settings = study_settings(small_study, tmp_path, **PRODUCTION)
     with TestClient(create_app(settings, [small_study.study_id])) as production:
         assert {path: production.get(path).status_code for path in DOCS} == dict.fromkeys(DOCS, 404)
         assert production.get(f"/s/{small_study.study_id}").status_code == 200
@@ -247,17 +250,19 @@ def test_schema_declares_the_error_statuses_and_bodies():
     spec = create_app(Settings(production=False, admin_token="test-token")).openapi()
     declared = {f"{method.upper()} {path}": sorted(int(s) for s in op["responses"])
                 for path, ops in spec["paths"].items() for method, op in ops.items()}
-    assert declared["POST /api/sessions"] == [200, 201, 400, 403, 404, 409, 413, 422]
-    assert declared["GET /api/sessions/{token}/state"] == [200, 404, 422]
-    assert declared["POST /api/sessions/{token}/predictions"] == [
-        200, 201, 400, 404, 409, 413, 422]
+    assert declared["POST /api/sessions"] == [200, 201, 400, 403, 404, 409, 413, 422, 429,
+                                              503]
+    assert declared["GET /api/session/state"] == [200, 404, 410, 422, 429]
+    assert declared["POST /api/session/predictions"] == [
+        200, 201, 400, 404, 409, 410, 413, 422, 429]
     assert declared["GET /api/researcher/export.csv"] == [200, 401, 403, 404, 422]
     assert declared["GET /healthz"] == [200, 503]
-    responses = spec["paths"]["/api/sessions/{token}/events"]["post"]["responses"]
+    responses = spec["paths"]["/api/session/events"]["post"]["responses"]
     body = {s: r["content"]["application/json"]["schema"]["$ref"].rsplit("/", 1)[1]
             for s, r in responses.items() if s != "202"}
     assert body == {"400": "ErrorDetail", "404": "ErrorDetail", "409": "ErrorDetail",
-                    "413": "ErrorDetail", "422": "ValidationProblem"}
+                    "410": "ErrorDetail", "413": "ErrorDetail", "422": "ValidationProblem",
+                    "429": "ErrorDetail"}
     assert "HTTPValidationError" not in spec["components"]["schemas"]
 
 
@@ -285,3 +290,118 @@ def test_a_database_of_an_older_schema_is_refused_with_what_to_do(small_study, t
                          timeout=120)
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "older tomstudy" in run.stderr and "`tomstudy db upgrade`" in run.stderr
+
+
+# ---------------------------------------------------------------- no default secret (issue 22)
+
+def test_a_loopback_server_without_a_token_makes_one_and_the_old_default_opens_nothing(
+        small_study, tmp_path):
+    port = free_port()
+    env = small_study.env(f"sqlite:///{tmp_path / 'gen.db'}")
+    env.pop("TOMSTUDY_ADMIN_TOKEN")
+    out = tmp_path / "serve.log"
+    with open(out, "wb") as log:
+        proc = subprocess.Popen([TOMSTUDY, "serve", "--host", "127.0.0.1", "--port", str(port),
+                                 "--study", small_study.study_id], env=env, cwd=REPO,
+                                stdout=log, stderr=subprocess.STDOUT)
+    try:
+        base = f"http://127.0.0.1:{port}"
+        wait_for(base)
+        printed = re.findall(r"researcher token for this run .*: (\S+)", out.read_text())
+        assert len(printed) == 1 and len(printed[0]) >= 40  # printed once, 32 random bytes
+        sheet = f"{base}/api/researcher/export/participants.csv?study_id={small_study.study_id}"
+        old = httpx.get(sheet, headers={"Authorization": f"Bearer {OLD_DEFAULT_TOKEN}"})
+        assert old.status_code == 403
+        made = httpx.get(sheet, headers={"Authorization": f"Bearer {printed[0]}"})
+        assert made.status_code == 200 and made.text.startswith("study_id,")
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def wait_for(base: str) -> None:
+    """Until the server at `base` answers /healthz (60 s at most)."""
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        try:
+            if httpx.get(f"{base}/healthz", timeout=1).status_code == 200:
+                return
+        except httpx.TransportError:
+            pass
+        time.sleep(0.2)
+    raise AssertionError(f"{base} did not answer")
+
+
+def test_the_app_factory_refuses_to_run_without_a_token(monkeypatch):
+    monkeypatch.delenv("TOMSTUDY_ADMIN_TOKEN", raising=False)
+    monkeypatch.delenv("TOMSTUDY_PRODUCTION", raising=False)
+    get_settings.cache_clear()
+    try:  # several workers would each make another token: the factory needs one given
+        with pytest.raises(UnsafeSettings, match="TOMSTUDY_ADMIN_TOKEN is not set"):
+            app_from_env()
+    finally:
+        get_settings.cache_clear()
+
+
+def test_secrets_can_come_from_files(small_study, tmp_path):
+    (tmp_path / "token").write_text(STRONG_TOKEN + "\n")
+    (tmp_path / "pw").write_text("s3cret/+pw\n")
+    settings = Settings(admin_token_file=tmp_path / "token", database_password_file=tmp_path / "pw",
+                        database_url="postgresql+psycopg://tomstudy@db:5432/tomstudy")
+    assert settings.admin_token == STRONG_TOKEN
+    url = make_url(settings.resolved_database_url())
+    assert url.password == "s3cret/+pw" and url.username == "tomstudy" and url.host == "db"
+    run = run_serve(small_study, tmp_path, TOMSTUDY_ADMIN_TOKEN_FILE=str(tmp_path / "nope"))
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert "TOMSTUDY_ADMIN_TOKEN_FILE: cannot read" in run.stderr
+
+
+# ---------------------------------------------------------------- Host header and caching
+
+def test_only_configured_and_loopback_host_names_are_answered(small_study, tmp_path):
+    settings = study_settings(small_study, tmp_path, allowed_hosts="study.example.org")
+    with TestClient(create_app(settings, [small_study.study_id])) as c:
+        page = f"/s/{small_study.study_id}"
+        answers = {host: c.get(page, headers={"host": host}).status_code
+                   for host in ("study.example.org", "127.0.0.1:8000", "localhost",
+                                "[::1]:8000", "rebind.attacker.example", "testserver")}
+        assert answers == {"study.example.org": 200, "127.0.0.1:8000": 200, "localhost": 200,
+                           "[::1]:8000": 200, "rebind.attacker.example": 400,
+                           "testserver": 400}
+        refused = c.get("/api/researcher/summary", headers={
+            "host": "rebind.attacker.example", "authorization": f"Bearer {ADMIN_TOKEN}"})
+        assert refused.status_code == 400
+        assert_security_headers(refused)
+
+
+def test_session_and_researcher_answers_are_never_stored_by_caches(client, small_study):
+    p = Participant(client, small_study.study_id)
+    p.start()
+    stored = {"state": p.get("state"), "start": client.post("/api/sessions", json={
+        "study_id": small_study.study_id, "recruitment": {}}),
+        "summary": client.get(f"/api/researcher/summary?study_id={small_study.study_id}",
+                              headers=ADMIN),
+        "researcher page": client.get("/researcher")}
+    assert {k: r.headers.get("cache-control") for k, r in stored.items()} == dict.fromkeys(
+        stored, "no-store")
+    assert "cache-control" not in client.get("/static/js/app.js").headers
+
+
+def test_the_session_token_never_travels_in_a_url(client, small_study):
+    p = Participant(client, small_study.study_id)
+    p.start()
+    paths = list(client.app.openapi()["paths"])
+    session_paths = [path for path in paths if path.startswith("/api/session")]
+    assert "/api/session/state" in session_paths
+    assert not [path for path in session_paths if "{" in path]
+    assert client.get(f"/api/sessions/{p.token}/state").status_code in (404, 405)
+    assert p.get("state").status_code == 200
+
+
+def test_serve_names_a_data_dir_it_cannot_write_instead_of_a_traceback(small_study, tmp_path):
+    blocked = tmp_path / "a-file"
+    blocked.write_text("")  # nothing can be created below a file (as root, too)
+    run = run_serve(small_study, tmp_path, TOMSTUDY_DATA_DIR=str(blocked / "var"))
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert run.stderr.startswith(f"error: TOMSTUDY_DATA_DIR: {blocked / 'var'} is not writable")
+    assert "chown" in run.stderr

@@ -245,7 +245,7 @@ def test_db_upgrade_makes_an_empty_database(tmp_path):
 def test_the_server_refuses_a_database_at_an_older_revision(db_url):
     engine = make_engine(db_url)
     migrate_to(engine, "0001")
-    with pytest.raises(migrate.SchemaOutdated, match=rf"revision 0001; this tomstudy needs "
+    with pytest.raises(migrate.SchemaOutdated, match=r"revision 0001; this tomstudy needs "
                                                      rf"{migrate.head()}; .*`tomstudy db upgrade`"):
         create_tables(engine)
     engine.dispose()

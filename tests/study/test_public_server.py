@@ -1,6 +1,7 @@
 """A public server fails closed: only the study's own traffic, opaque trials, server clocks,
 balance kept exactly in the database (SQLite and PostgreSQL, same tests)."""
 
+import io
 import json
 from datetime import timedelta
 
@@ -8,6 +9,7 @@ import pytest
 from sqlalchemy import update
 from sqlmodel import Session, select
 
+from analysis.load import load_csv
 from app.study import balance
 from app.study.plan import TRIAL_PHASES
 from app.study.recruitment import preview_key
@@ -134,7 +136,7 @@ def test_the_browser_cannot_tell_which_trial_is_the_attention_check(client, smal
         p.pass_intro()
         seen = []
         while (state := p.state())["phase"] in TRIAL_PHASES:
-            raw = client.get(p.url("state")).text
+            raw = p.get("state").text
             assert "attention" not in raw and "clip_sha256" not in raw
             seen.append(state["step"]["trial_id"])
             p.answer_trial(bank)
@@ -201,7 +203,8 @@ def test_balance_counts_match_the_sessions_they_summarise(client, small_study, b
         db.exec(update(Participant).where(Participant.session_token == people[3].token)
                 .values(updated_at=utcnow() - timedelta(days=1)))
         db.commit()
-    Client(client, sid).start()  # the next start releases it
+    Client(client, sid).start()
+    assert balance.release_stale_batch(engine, ctx) == 1  # what each worker's sweep runs
     with Session(engine) as db:
         rows = {p.session_token: p for p in db.exec(select(Participant))}
         careless = rows[people[2].token].attention_failed == 0  # straight clicks may pass
@@ -213,3 +216,70 @@ def test_balance_counts_match_the_sessions_they_summarise(client, small_study, b
         orders = [v for k, v in counts.items() if k.startswith(balance.ORDER)]
         assert max(orders) - min(orders) <= 1
         assert db.exec(select(BalanceCount)).all()  # rows exist for every order and trial
+
+
+def test_a_replaced_attempt_refuses_every_write_and_the_exports_mark_it(client, small_study,
+                                                                        bank):
+    sid = small_study.study_id
+    params = prolific("two-tabs")
+    old = Client(client, sid)
+    old.start(**params)
+    old.pass_intro()
+    old.answer_trial(bank)
+    with Session(client.app.state.engine) as db:  # the first tab was left for hours
+        db.exec(update(Participant).where(Participant.session_token == old.token)
+                .values(updated_at=utcnow() - timedelta(days=1)))
+        db.commit()
+    new = Client(client, sid)
+    new.start(**dict(params, SESSION_ID="second-attempt"))
+    new.pass_intro()
+    trial = old.get("state")
+    writes = {what: old.post(what, body) for what, body in (
+        ("predictions", prediction_body(new.state()["step"])),
+        ("survey", {"submission_id": new_id(), "answers": {}}),
+        ("events", {"events": [{"submission_id": new_id(), "kind": "visibility_hidden",
+                                "t_client_ms": 1.0, "data": {}}]}))}
+    assert trial.status_code == 410 and {k: r.status_code for k, r in writes.items()} == {
+        "predictions": 410, "survey": 410, "events": 410}
+    assert "continues in the other tab or attempt" in trial.json()["detail"]
+    new.finish(bank)
+    export = client.get(f"/api/researcher/export/predictions.csv?study_id={sid}", headers=ADMIN)
+    frame = load_csv(io.StringIO(export.text))
+    replaced = frame.groupby("participant_id")["replaced"].first()
+    assert sorted(replaced.tolist()) == [False, True]  # the old attempt's one trial, marked
+    assert frame[frame["replaced"]]["trial_id"].nunique() == 1
+
+
+def test_platform_ids_are_one_person_in_any_case(client, small_study, bank):
+    sid = small_study.study_id
+    lower = {"PROLIFIC_PID": "abcdef0123456789abcdef01", "STUDY_ID": HEX, "SESSION_ID": "s1"}
+    first = Client(client, sid)
+    first.start(**lower)
+    first.pass_intro()
+    first.finish(bank)
+    upper = Client(client, sid)
+    upper.start(**dict(lower, PROLIFIC_PID=lower["PROLIFIC_PID"].upper(), SESSION_ID="s2"))
+    assert upper.status == 409  # the same person, already completed
+    with_recruitment(client, sid, platform="mturk")
+    worker = {"workerId": "a1b2c3d4", "assignmentId": "ASG1", "hitId": "H1"}
+    Client(client, sid).start(**worker)
+    again = Client(client, sid)
+    again.start(**dict(worker, workerId="A1B2C3D4"))
+    assert again.status == 200  # the same worker and assignment: resumed
+    with Session(client.app.state.engine) as db:
+        ids = sorted(p.external_id for p in db.exec(select(Participant)))
+    assert ids == ["A1B2C3D4", "abcdef0123456789abcdef01"]
+
+
+def test_the_device_is_stored_only_after_consent(client, small_study):
+    p = Client(client, small_study.study_id)
+    r = client.post("/api/sessions", json={"study_id": small_study.study_id,
+                                           "recruitment": prolific("ua"), "client": {
+                                               "user_agent": "Mozilla/5.0"}})
+    assert r.status_code == 422 and "client" in r.json()["message"]  # not taken at start
+    p.start()
+    with Session(client.app.state.engine) as db:
+        assert db.exec(select(Participant)).one().client == {}
+    p.consent()
+    with Session(client.app.state.engine) as db:
+        assert db.exec(select(Participant)).one().client["user_agent"] == "pytest"

@@ -112,7 +112,8 @@ def test_sigkill_under_load_keeps_every_acknowledged_submission(small_study, tmp
         with httpx.Client(base_url=base, timeout=10) as client:
             for token, ids in acknowledged.items():
                 assert set(ids) <= stored  # nothing acknowledged was lost
-                state = client.get(f"/api/sessions/{token}/state").json()
+                state = client.get("/api/session/state",
+                                   headers={"X-Session-Token": token}).json()
                 # at most one more than acknowledged: committed, answer lost in the kill
                 assert state["progress"]["done"] in (len(ids), len(ids) + 1)
         assert frame.groupby("submission_id").size().eq(15).all()
@@ -162,16 +163,18 @@ def test_many_concurrent_participants_on_one_sqlite_worker(small_study, live_ser
     async def one(client: httpx.AsyncClient, i: int) -> int:
         r = await client.post("/api/sessions", json={
             "study_id": small_study.study_id, "recruitment": prolific(f"crowd-{i}")})
-        token = r.json()["session_token"]
-        await client.post(f"/api/sessions/{token}/consent",
+        session = {"X-Session-Token": r.json()["session_token"]}
+        await client.post("/api/session/consent", headers=session,
                           json={"submission_id": new_id(), "agree": True})
-        await client.post(f"/api/sessions/{token}/instructions", json={"submission_id": new_id()})
+        await client.post("/api/session/instructions", headers=session,
+                          json={"submission_id": new_id()})
         for _ in range(2):
-            state = (await client.get(f"/api/sessions/{token}/state")).json()
-            r = await client.post(f"/api/sessions/{token}/predictions",
+            state = (await client.get("/api/session/state", headers=session)).json()
+            r = await client.post("/api/session/predictions", headers=session,
                                   json=prediction_body(state["step"]))
             assert r.status_code == 201, r.text
-        return (await client.get(f"/api/sessions/{token}/state")).json()["progress"]["done"]
+        state = (await client.get("/api/session/state", headers=session)).json()
+        return state["progress"]["done"]
 
     async def run() -> list[int]:
         limits = httpx.Limits(max_connections=crowd)

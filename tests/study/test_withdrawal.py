@@ -13,6 +13,7 @@ from app.settings import Settings, get_settings
 from app.study import balance
 from app.study.main import create_app
 from app.study.plan import Phase
+from app.study.recruitment import preview_key
 from app.study.tables import (
     Event,
     Participant,
@@ -23,7 +24,15 @@ from app.study.tables import (
     utcnow,
 )
 from app.study.withdrawal import id_hash
-from tests.study.flow import ADMIN, at_first_trial, new_id, prolific
+from tests.study.flow import (
+    ADMIN,
+    TOKEN,
+    at_first_trial,
+    make_client,
+    new_id,
+    prolific,
+    with_recruitment,
+)
 from tests.study.flow import Participant as Driver
 
 TABLES = (Participant, Submission, TrialResponse, PredictionRow, Event)
@@ -101,6 +110,9 @@ def test_withdrawal_deletes_every_row_of_the_participant_only(client, small_stud
     released = balance_is_exact(client, study)
     assert sum(released.values()) < sum(held.values())  # the completed attempt was counted
     listed = client.get(f"/api/researcher/withdrawals/audit?study_id={sid}", headers=ADMIN)
+    backend = client.app.state.engine.dialect.name
+    assert line.pop("storage").startswith({"sqlite": "sqlite: deleted rows overwritten",
+                                           "postgresql": "postgresql: deleted rows stay"}[backend])
     assert listed.json() == [line]
     with Session(client.app.state.engine) as db:
         stored = db.execute(select(WithdrawalAudit)).scalars().one()
@@ -162,3 +174,66 @@ def test_the_schema_declares_what_the_new_routes_answer():
     assert declared["POST /api/researcher/withdrawals"] == [201, 400, 401, 403, 404, 413, 422]
     assert declared["GET /api/researcher/withdrawals/audit"] == [200, 401, 403, 404, 422]
     assert declared["GET /api/researcher/export/{what}.csv"] == [200, 401, 403, 404, 422]
+
+
+def test_open_and_pilot_sessions_are_withdrawn_by_their_public_id(client, small_study, study):
+    sid = small_study.study_id
+    lab = Driver(client, sid)
+    lab.start(preview=preview_key(TOKEN, sid))
+    lab.pass_intro()
+    with_recruitment(client, sid, platform="open")
+    visitor = Driver(client, sid)
+    visitor.start()
+    visitor.pass_intro()
+    before = counts(client)
+    for p in (lab, visitor):
+        public_id = public_id_of(client, p.token)
+        r = client.post("/api/researcher/withdrawals", headers=ADMIN,
+                        json={"study_id": sid, "participant_id": public_id})
+        assert r.status_code == 201, r.text
+        line = r.json()
+        assert line["id_kind"] == "participant_id"
+        assert line["id_sha256"] == id_hash(line["salt"], public_id)
+        assert p.get("state").status_code == 404
+    assert counts(client)["participant"] == before["participant"] - 2
+    both = client.post("/api/researcher/withdrawals", headers=ADMIN, json={
+        "study_id": sid, "external_id": "x", "participant_id": "y"})
+    assert both.status_code == 422 and "participant_id" in both.json()["message"]
+
+
+def test_any_spelling_of_a_platform_id_withdraws_the_person(client, small_study, study):
+    sid, ext = small_study.study_id, LEAVER["PROLIFIC_PID"]
+    r = client.post("/api/researcher/withdrawals", headers=ADMIN,
+                    json={"study_id": sid, "external_id": ext.upper()})
+    assert r.status_code == 201 and r.json()["row_counts"]["participant"] == 2
+    assert r.json()["id_sha256"] == id_hash(r.json()["salt"], ext)  # the id as normalised
+
+
+def test_a_withdrawn_id_leaves_the_sqlite_files(small_study, tmp_path, bank):
+    """No copy of the withdrawn id stays in study.db or its write-ahead log: deleted rows
+    are overwritten (secure_delete) and the log is checkpointed and truncated."""
+    db_path = tmp_path / "study.db"
+    marker = "ee" * 12  # a PROLIFIC_PID that is easy to find in the raw bytes
+    with make_client(small_study, f"sqlite:///{db_path}") as client:
+        sid = small_study.study_id
+        p = at_first_trial(client, sid, **(prolific("x") | {"PROLIFIC_PID": marker}))
+        p.finish(bank)
+        assert marker.encode() in raw_bytes(db_path)
+        r = client.post("/api/researcher/withdrawals", headers=ADMIN,
+                        json={"study_id": sid, "external_id": marker})
+        assert r.json()["storage"] == ("sqlite: deleted rows overwritten, write-ahead log "
+                                       "checkpointed and truncated")
+        assert marker.encode() not in raw_bytes(db_path)
+        assert db_path.with_name("study.db-wal").stat().st_size == 0
+
+
+def raw_bytes(db_path) -> bytes:
+    """The database file and its write-ahead log, as stored on disk."""
+    wal = db_path.with_name(db_path.name + "-wal")
+    return db_path.read_bytes() + (wal.read_bytes() if wal.exists() else b"")
+
+
+def public_id_of(client, token: str) -> str:
+    with Session(client.app.state.engine) as db:
+        return db.execute(select(Participant.public_id)
+                          .where(Participant.session_token == token)).scalar_one()

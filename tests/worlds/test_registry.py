@@ -37,16 +37,6 @@ def test_obstacle_segments_end_well_before_the_goal(worlds):
     assert ends.tolist() == list(range(7))  # at least 4 of the 10 m still to go
 
 
-def test_highway_offset_starts_stay_on_the_road(worlds):
-    world = worlds["highway"]
-    scene = world.scene()
-    segment = np.array([[[0.0, 0.0], [-20.0, 8.0]], [[3.0, 0.0], [-18.0, 8.0]]])  # lane 0
-    points = world.offset_start_candidates(scene, segment, 2.0, 3)
-    top = min(lane.y_center_m - lane.width_m / 2 for lane in scene.lanes)
-    assert len(points) and (points[:, 1] > top + 1.0).all()
-    assert (np.abs(points[:, 1]) < 2.0 + 1e-9).all()  # sideways steps off the road are gone
-
-
 def test_data_start_kinds_are_the_worlds_own(worlds):
     segment = np.array([[[0.0, 4.0], [-20.0, 8.0]], [[3.0, 4.0], [-18.0, 8.0]]])
     covered = np.array([[4.0, 4.0], [5.0, 0.0], [6.0, 8.0], [40.0, 4.0]])

@@ -1,9 +1,14 @@
-"""Participant API: start or resume a session, read its state, submit each step, telemetry."""
+"""Participant API: start or resume a session, read its state, submit each step, telemetry.
+
+A started session is addressed by its token in the X-Session-Token header, never in the
+URL: request lines end up in proxy access logs and browser history.
+"""
 
 from fastapi import APIRouter, Request, Response, status
 
 from app.study import crud, sessions, telemetry
 from app.study.deps import ContextDep, ParticipantDep, SessionDep, study_context
+from app.study.sessions import SESSION_PATH
 from app.study.state import state_json
 from app.study.tables import (
     ConsentCreate,
@@ -17,7 +22,7 @@ from app.study.tables import (
     SurveyCreate,
 )
 
-router = APIRouter(prefix="/api/sessions", tags=["participant"])
+router = APIRouter(tags=["participant"])
 STATE_DOC = "`{phase, progress: {done, total}, step}` (app/study/API.md)"
 
 
@@ -27,7 +32,8 @@ def state_response(ctx, participant, status_code: int = 200) -> Response:
                     media_type="application/json")
 
 
-@router.post("", response_model=ParticipantPublic, status_code=status.HTTP_201_CREATED,
+@router.post("/api/sessions", response_model=ParticipantPublic,
+             status_code=status.HTTP_201_CREATED,
              responses={200: {"description": "resumed an unfinished session"},
                         403: {"description": "missing or malformed platform parameters, or "
                                              "a wrong preview key"},
@@ -45,13 +51,13 @@ async def create_session(body: SessionCreate, request: Request, response: Respon
                              participant_id=participant.public_id, resumed=resumed)
 
 
-@router.get("/{token}/state", response_description=STATE_DOC)
+@router.get(f"{SESSION_PATH}/state", response_description=STATE_DOC)
 async def read_state(participant: ParticipantDep, ctx: ContextDep) -> Response:
     """The current phase, progress and what the phase needs (a refresh resumes here)."""
     return state_response(ctx, participant)
 
 
-@router.post("/{token}/consent")
+@router.post(f"{SESSION_PATH}/consent")
 async def submit_consent(body: ConsentCreate, participant: ParticipantDep, ctx: ContextDep,
                          db: SessionDep) -> Response:
     """Record consent; answers the next state."""
@@ -59,7 +65,7 @@ async def submit_consent(body: ConsentCreate, participant: ParticipantDep, ctx: 
     return state_response(ctx, participant)
 
 
-@router.post("/{token}/decline")
+@router.post(f"{SESSION_PATH}/decline")
 async def submit_decline(body: DeclineCreate, participant: ParticipantDep, ctx: ContextDep,
                          db: SessionDep) -> Response:
     """The participant does not agree: the session ends (declined_consent); answers done."""
@@ -67,7 +73,7 @@ async def submit_decline(body: DeclineCreate, participant: ParticipantDep, ctx: 
     return state_response(ctx, participant)
 
 
-@router.post("/{token}/screen-out")
+@router.post(f"{SESSION_PATH}/screen-out")
 async def submit_screen_out(body: ScreenOutCreate, participant: ParticipantDep,
                             ctx: ContextDep, db: SessionDep) -> Response:
     """The device cannot run the study (before any trial): the session ends (screened_out)."""
@@ -75,7 +81,7 @@ async def submit_screen_out(body: ScreenOutCreate, participant: ParticipantDep,
     return state_response(ctx, participant)
 
 
-@router.post("/{token}/instructions")
+@router.post(f"{SESSION_PATH}/instructions")
 async def submit_instructions(body: SubmissionBody, participant: ParticipantDep,
                               ctx: ContextDep, db: SessionDep) -> Response:
     """Record that the instructions were read; answers the next state."""
@@ -83,7 +89,7 @@ async def submit_instructions(body: SubmissionBody, participant: ParticipantDep,
     return state_response(ctx, participant)
 
 
-@router.post("/{token}/predictions", status_code=status.HTTP_201_CREATED,
+@router.post(f"{SESSION_PATH}/predictions", status_code=status.HTTP_201_CREATED,
              responses={200: {"description": "this submission_id was already stored"}})
 async def submit_predictions(body: PredictionCreate, participant: ParticipantDep,
                              ctx: ContextDep, db: SessionDep) -> Response:
@@ -92,7 +98,7 @@ async def submit_predictions(body: PredictionCreate, participant: ParticipantDep
     return state_response(ctx, participant, 201 if stored else 200)
 
 
-@router.post("/{token}/survey")
+@router.post(f"{SESSION_PATH}/survey")
 async def submit_survey(body: SurveyCreate, participant: ParticipantDep, ctx: ContextDep,
                         db: SessionDep) -> Response:
     """Store the closing survey; the session is then done."""
@@ -100,7 +106,7 @@ async def submit_survey(body: SurveyCreate, participant: ParticipantDep, ctx: Co
     return state_response(ctx, participant)
 
 
-@router.post("/{token}/events", status_code=status.HTTP_202_ACCEPTED,
+@router.post(f"{SESSION_PATH}/events", status_code=status.HTTP_202_ACCEPTED,
              responses={409: {"description": "the session is complete; no more events"}})
 async def submit_events(body: EventsCreate, participant: ParticipantDep,
                         db: SessionDep) -> dict:

@@ -44,10 +44,13 @@ def _csv(request: Request, db: SessionDep, study_id: str, what: str) -> Response
 @router.post("/withdrawals", status_code=201)
 def create_withdrawal(body: WithdrawalCreate, request: Request, db: SessionDep,
                       _: AdminDep) -> dict:
-    """Delete every row of one participant; answers the audit line (no id in it)."""
-    study_context(request, body.study_id)
-    audit = withdrawal.withdraw(db, body.study_id, body.external_id, via="api")
-    return withdrawal.audit_line(audit)
+    """Delete every row of one participant (by external_id, or participant_id for open and
+    pilot sessions); answers the audit line (no id in it) and what became of the files."""
+    ctx = study_context(request, body.study_id)
+    audit = withdrawal.withdraw(db, body.study_id, body, ctx.config.recruitment.platform,
+                                via="api")
+    return withdrawal.audit_line(audit) | {
+        "storage": withdrawal.erase_from_files(request.app.state.engine)}
 
 
 @router.get("/withdrawals/audit")

@@ -53,10 +53,10 @@ const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
  * Network failures and 5xx/429 are retried with the same body (same submission_id),
  * so the server stores it once; other 4xx are final and rethrown.
  */
-export async function sendUntilAcknowledged(method, path, body, { onRetry, maxDelayMs = 8000 } = {}) {
+export async function sendUntilAcknowledged(method, path, body, { onRetry, maxDelayMs = 8000, headers = {} } = {}) {
   for (let attempt = 0; ; attempt += 1) {
     try {
-      return await requestJson(method, path, body);
+      return await requestJson(method, path, body, headers);
     } catch (error) {
       const retryable = !(error instanceof ApiError) || error.status >= 500 || error.status === 429;
       if (!retryable) throw error;
@@ -68,56 +68,65 @@ export async function sendUntilAcknowledged(method, path, body, { onRetry, maxDe
 
 const enc = encodeURIComponent;
 
-/** The participant side of the API, bound to one session token once it is known. */
+/**
+ * The participant side of the API, bound to one session token once it is known. The token
+ * travels in the X-Session-Token header, never in a URL (proxies and history keep URLs).
+ */
 export class StudyApi {
   constructor(studyId) {
     this.studyId = studyId;
     this.token = null;
   }
 
-  startSession(recruitment, client, preview = null) {
-    const body = { study_id: this.studyId, recruitment, client };
+  startSession(recruitment, preview = null, options = {}) {
+    const body = { study_id: this.studyId, recruitment };
     if (preview) body.preview = preview;
-    return sendUntilAcknowledged("POST", "/api/sessions", body);
+    return sendUntilAcknowledged("POST", "/api/sessions", body, options);
   }
 
-  base() {
-    return `/api/sessions/${enc(this.token)}`;
+  sessionHeaders() {
+    return { "X-Session-Token": this.token };
+  }
+
+  /** POST a write of this session until the server acknowledges it. */
+  send(what, body, options = {}) {
+    return sendUntilAcknowledged("POST", `/api/session/${what}`, body, { ...options, headers: this.sessionHeaders() });
   }
 
   state() {
-    return requestJson("GET", `${this.base()}/state`);
+    return requestJson("GET", "/api/session/state", undefined, this.sessionHeaders());
   }
 
-  consent(options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/consent`, { submission_id: newUuid(), agree: true }, options);
+  /** Consent; the device info (`client`) is stored from here on, never before. */
+  consent(client, options) {
+    return this.send("consent", { submission_id: newUuid(), agree: true, client }, options);
   }
 
   decline(options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/decline`, { submission_id: newUuid() }, options);
+    return this.send("decline", { submission_id: newUuid() }, options);
   }
 
   screenOut(reason, options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/screen-out`, { submission_id: newUuid(), reason }, options);
+    return this.send("screen-out", { submission_id: newUuid(), reason }, options);
   }
 
   instructionsDone(options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/instructions`, { submission_id: newUuid() }, options);
+    return this.send("instructions", { submission_id: newUuid() }, options);
   }
 
   /** `body` must already carry its submission_id so a retry reuses it. */
   predictions(body, options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/predictions`, body, options);
+    return this.send("predictions", body, options);
   }
 
   survey(answers, options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/survey`, { submission_id: newUuid(), answers }, options);
+    return this.send("survey", { submission_id: newUuid(), answers }, options);
   }
 
   events(events, { keepalive = false } = {}) {
-    return fetch(`${this.base()}/events`, {
+    return fetch("/api/session/events", {
       method: "POST",
-      headers: { "Content-Type": "application/json" },
+      headers: { "Content-Type": "application/json", ...this.sessionHeaders() },
       body: JSON.stringify({ events }),
       keepalive,
     });

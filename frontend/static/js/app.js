@@ -90,6 +90,11 @@ function previewFromUrl() {
   return new URLSearchParams(location.search).get("preview");
 }
 
+/** A server refusal's message for a person: `field: message` without the field. */
+function forPeople(detail) {
+  return String(detail).replace(/^[\w.-]+: /, "");
+}
+
 function clientInfo() {
   return {
     screen_w: innerWidth,
@@ -169,11 +174,16 @@ class ParticipantApp {
         return true;
       } catch (error) {
         if (!(error instanceof ApiError) || error.status >= 500) throw error;
+        if (error.status === 410) {
+          this.fail(forPeople(error.detail), { reload: false }); // replaced, or the study changed
+          return false;
+        }
         sessionStorage.removeItem(this.storageKey); // expired or unknown: start again
       }
     }
     try {
-      const session = await this.api.startSession(recruitment, clientInfo(), preview);
+      const waiting = { onRetry: (error) => { $("screen-loading").textContent = error.detail ? forPeople(error.detail) : "Connecting to the study server\u2026"; } };
+      const session = await this.api.startSession(recruitment, preview, waiting);
       this.api.token = session.session_token;
       sessionStorage.setItem(this.storageKey, JSON.stringify({ token: session.session_token, recruitmentKey }));
       return true;
@@ -236,7 +246,7 @@ class ParticipantApp {
       button.onclick = () => {
         button.disabled = true;
         decline.disabled = true;
-        this.api.consent().then(resolve, reject);
+        this.api.consent(clientInfo()).then(resolve, reject);
       };
       decline.onclick = () => {
         button.disabled = true;
@@ -301,7 +311,7 @@ class ParticipantApp {
   showDone(state) {
     if (state.progress) this.updateProgress(state.progress);
     const step = state.step || {};
-    const finished = step.outcome === "completed" || step.outcome === "failed_checks";
+    const finished = ["completed", "failed_checks", "excluded"].includes(step.outcome);
     $("done-heading").textContent = finished ? "Thank you!" : "The study has ended";
     $("done-message").textContent = step.message || (finished ? "You have finished the study." : "");
     $("completion-code").textContent = step.completion_code ?? "";
@@ -530,5 +540,9 @@ function collectAnswers(form, questions) {
 const participantApp = new ParticipantApp($("app"));
 participantApp.run().catch((error) => {
   console.error(error);
+  if (error instanceof ApiError && error.status === 410) {
+    participantApp.fail(forPeople(error.detail), { reload: false }); // replaced, or the study changed
+    return;
+  }
   participantApp.fail(`The study could not continue (${error.message}). Your answers so far are saved; reloading the page resumes where you were.`);
 });
