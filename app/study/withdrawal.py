@@ -23,12 +23,13 @@ from app.study.tables import (
     Participant,
     PredictionRow,
     Submission,
+    TrialDraft,
     TrialResponse,
     WithdrawalAudit,
 )
 
 # children first: every one of them points at participant.id
-CHILD_TABLES = (PredictionRow, TrialResponse, Event, Submission)
+CHILD_TABLES = (PredictionRow, TrialResponse, Event, Submission, TrialDraft)
 
 
 def id_hash(salt: str, external_id: str) -> str:

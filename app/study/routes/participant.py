@@ -2,12 +2,14 @@
 
 from fastapi import APIRouter, Request, Response, status
 
-from app.study import crud, sessions, telemetry
-from app.study.deps import ContextDep, ParticipantDep, SessionDep, study_context
+from app.study import crud, drafts, sessions, tabs, telemetry
+from app.study.deps import ContextDep, ParticipantDep, SessionDep, WriterDep, study_context
 from app.study.state import state_json
 from app.study.tables import (
     ConsentCreate,
+    ContinueCreate,
     DeclineCreate,
+    DraftSave,
     EventsCreate,
     ParticipantPublic,
     PredictionCreate,
@@ -15,15 +17,18 @@ from app.study.tables import (
     SessionCreate,
     SubmissionBody,
     SurveyCreate,
+    TabClaim,
+    TabRelease,
 )
 
 router = APIRouter(prefix="/api/sessions", tags=["participant"])
 STATE_DOC = "`{phase, progress: {done, total}, step}` (app/study/API.md)"
 
 
-def state_response(ctx, participant, status_code: int = 200) -> Response:
+def state_response(ctx, participant, status_code: int = 200, draft: dict | None = None
+                   ) -> Response:
     """The participant's state as JSON (trial payloads pre-encoded, see app/study/state.py)."""
-    return Response(state_json(ctx, participant), status_code=status_code,
+    return Response(state_json(ctx, participant, draft), status_code=status_code,
                     media_type="application/json")
 
 
@@ -46,13 +51,35 @@ async def create_session(body: SessionCreate, request: Request, response: Respon
 
 
 @router.get("/{token}/state", response_description=STATE_DOC)
-async def read_state(participant: ParticipantDep, ctx: ContextDep) -> Response:
-    """The current phase, progress and what the phase needs (a refresh resumes here)."""
-    return state_response(ctx, participant)
+async def read_state(participant: ParticipantDep, ctx: ContextDep, db: SessionDep) -> Response:
+    """The current phase, progress and what the phase needs; in a trial, the clicks saved
+    so far (`step.draft`), so a refresh resumes where it was."""
+    return state_response(ctx, participant, draft=drafts.current_draft(db, participant))
+
+
+@router.put("/{token}/draft")
+async def save_draft(body: DraftSave, participant: WriterDep, ctx: ContextDep,
+                     db: SessionDep) -> dict:
+    """Keep the current trial's clicks so far; answers `{seq}`, the newest stored."""
+    return {"seq": drafts.save_draft(db, ctx, participant, body)}
+
+
+@router.post("/{token}/tab", responses={409: {"description": "another tab is the live one"}})
+async def claim_tab(body: TabClaim, participant: ParticipantDep, db: SessionDep) -> dict:
+    """Make this browser tab the session's live one (on load, then as a heartbeat); answers
+    how often to say so again."""
+    tabs.claim_tab(db, participant, body, drafts.current_draft(db, participant))
+    return {"live": True, "heartbeat_s": tabs.HEARTBEAT_S}
+
+
+@router.post("/{token}/tab/release", status_code=status.HTTP_204_NO_CONTENT)
+async def release_tab(body: TabRelease, participant: ParticipantDep, db: SessionDep) -> None:
+    """The live tab is closing (a beacon): another may claim the session without asking."""
+    tabs.release_tab(db, participant, body)
 
 
 @router.post("/{token}/consent")
-async def submit_consent(body: ConsentCreate, participant: ParticipantDep, ctx: ContextDep,
+async def submit_consent(body: ConsentCreate, participant: WriterDep, ctx: ContextDep,
                          db: SessionDep) -> Response:
     """Record consent; answers the next state."""
     crud.record_consent(db, participant, body)
@@ -60,7 +87,7 @@ async def submit_consent(body: ConsentCreate, participant: ParticipantDep, ctx: 
 
 
 @router.post("/{token}/decline")
-async def submit_decline(body: DeclineCreate, participant: ParticipantDep, ctx: ContextDep,
+async def submit_decline(body: DeclineCreate, participant: WriterDep, ctx: ContextDep,
                          db: SessionDep) -> Response:
     """The participant does not agree: the session ends (declined_consent); answers done."""
     crud.record_decline(db, ctx, participant, body)
@@ -68,7 +95,7 @@ async def submit_decline(body: DeclineCreate, participant: ParticipantDep, ctx: 
 
 
 @router.post("/{token}/screen-out")
-async def submit_screen_out(body: ScreenOutCreate, participant: ParticipantDep,
+async def submit_screen_out(body: ScreenOutCreate, participant: WriterDep,
                             ctx: ContextDep, db: SessionDep) -> Response:
     """The device cannot run the study (before any trial): the session ends (screened_out)."""
     crud.record_screen_out(db, ctx, participant, body)
@@ -76,16 +103,25 @@ async def submit_screen_out(body: ScreenOutCreate, participant: ParticipantDep,
 
 
 @router.post("/{token}/instructions")
-async def submit_instructions(body: SubmissionBody, participant: ParticipantDep,
+async def submit_instructions(body: SubmissionBody, participant: WriterDep,
                               ctx: ContextDep, db: SessionDep) -> Response:
     """Record that the instructions were read; answers the next state."""
     crud.record_instructions(db, participant, body)
     return state_response(ctx, participant)
 
 
+@router.post("/{token}/continue")
+async def submit_continue(body: ContinueCreate, participant: WriterDep, ctx: ContextDep,
+                          db: SessionDep) -> Response:
+    """The participant read a part's screen (world_intro, practice_over); answers the next
+    state."""
+    crud.record_continue(db, participant, body)
+    return state_response(ctx, participant)
+
+
 @router.post("/{token}/predictions", status_code=status.HTTP_201_CREATED,
              responses={200: {"description": "this submission_id was already stored"}})
-async def submit_predictions(body: PredictionCreate, participant: ParticipantDep,
+async def submit_predictions(body: PredictionCreate, participant: WriterDep,
                              ctx: ContextDep, db: SessionDep) -> Response:
     """Store one trial's clicked positions (start states x steps); answers the next state."""
     stored = crud.record_predictions(db, ctx, participant, body)
@@ -93,7 +129,7 @@ async def submit_predictions(body: PredictionCreate, participant: ParticipantDep
 
 
 @router.post("/{token}/survey")
-async def submit_survey(body: SurveyCreate, participant: ParticipantDep, ctx: ContextDep,
+async def submit_survey(body: SurveyCreate, participant: WriterDep, ctx: ContextDep,
                         db: SessionDep) -> Response:
     """Store the closing survey; the session is then done."""
     crud.record_survey(db, ctx, participant, body)
