@@ -1,11 +1,20 @@
 // Thin client for the study HTTP API (app/study/API.md). No state beyond the token.
 
-/** An HTTP answer outside 2xx, with the server's `detail` message. */
+/**
+ * An HTTP answer outside 2xx, with the server's `detail` message and, for refusals a
+ * participant can meet, its plain-language `notice` ({title, text, action}).
+ */
 export class ApiError extends Error {
-  constructor(status, detail) {
+  constructor(status, detail, notice = null) {
     super(`${status}: ${detail}`);
     this.status = status;
     this.detail = detail;
+    this.notice = notice;
+  }
+
+  /** True when the server refused because another tab is the session's live one. */
+  get otherTab() {
+    return this.status === 409 && String(this.detail).startsWith("tab:");
   }
 }
 
@@ -42,7 +51,9 @@ export async function requestJson(method, path, body, headers = {}) {
   } catch {
     parsed = { detail: text };
   }
-  if (!response.ok) throw new ApiError(response.status, parsed?.message ?? detailText(parsed?.detail ?? text));
+  if (!response.ok) {
+    throw new ApiError(response.status, parsed?.message ?? detailText(parsed?.detail ?? text), parsed?.notice ?? null);
+  }
   return parsed;
 }
 
@@ -53,10 +64,10 @@ const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
  * Network failures and 5xx/429 are retried with the same body (same submission_id),
  * so the server stores it once; other 4xx are final and rethrown.
  */
-export async function sendUntilAcknowledged(method, path, body, { onRetry, maxDelayMs = 8000 } = {}) {
+export async function sendUntilAcknowledged(method, path, body, { onRetry, maxDelayMs = 8000, headers = {} } = {}) {
   for (let attempt = 0; ; attempt += 1) {
     try {
-      return await requestJson(method, path, body);
+      return await requestJson(method, path, body, headers);
     } catch (error) {
       const retryable = !(error instanceof ApiError) || error.status >= 500 || error.status === 429;
       if (!retryable) throw error;
@@ -68,11 +79,22 @@ export async function sendUntilAcknowledged(method, path, body, { onRetry, maxDe
 
 const enc = encodeURIComponent;
 
-/** The participant side of the API, bound to one session token once it is known. */
+/**
+ * The participant side of the API, bound to one session token once it is known. Writes
+ * name this page's tab (`tabId`, header X-Tab-Id), so the server refuses them once another
+ * tab has taken the session over (app/study/tabs.py).
+ */
 export class StudyApi {
   constructor(studyId) {
     this.studyId = studyId;
     this.token = null;
+    this.tabId = null;
+  }
+
+  /** A write retried until acknowledged, naming this tab. */
+  write(what, body, options = {}, method = "POST") {
+    const headers = this.tabId ? { "X-Tab-Id": this.tabId } : {};
+    return sendUntilAcknowledged(method, `${this.base()}/${what}`, body, { ...options, headers });
   }
 
   startSession(recruitment, client, preview = null) {
@@ -90,28 +112,51 @@ export class StudyApi {
   }
 
   consent(options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/consent`, { submission_id: newUuid(), agree: true }, options);
+    return this.write("consent", { submission_id: newUuid(), agree: true }, options);
   }
 
   decline(options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/decline`, { submission_id: newUuid() }, options);
+    return this.write("decline", { submission_id: newUuid() }, options);
   }
 
   screenOut(reason, options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/screen-out`, { submission_id: newUuid(), reason }, options);
+    return this.write("screen-out", { submission_id: newUuid(), reason }, options);
   }
 
   instructionsDone(options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/instructions`, { submission_id: newUuid() }, options);
+    return this.write("instructions", { submission_id: newUuid() }, options);
   }
 
   /** `body` must already carry its submission_id so a retry reuses it. */
   predictions(body, options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/predictions`, body, options);
+    return this.write("predictions", body, options);
+  }
+
+  /** A part's screen was read (world_intro or practice_over). */
+  continueFrom(phase, options) {
+    return this.write("continue", { submission_id: newUuid(), phase }, options);
+  }
+
+  /** Keep the current trial's clicks so far (one attempt: the caller retries the newest). */
+  saveDraft(draft) {
+    const headers = this.tabId ? { "X-Tab-Id": this.tabId } : {};
+    return requestJson("PUT", `${this.base()}/draft`, draft, headers);
+  }
+
+  /** Claim the session for this tab (on load with `opened`, then as a heartbeat). */
+  claimTab({ takeover = false, opened = false } = {}) {
+    return requestJson("POST", `${this.base()}/tab`, { tab_id: this.tabId, takeover, opened, t_client_ms: Date.now() });
+  }
+
+  /** The page is going away: let another tab claim the session without asking. */
+  releaseTab() {
+    if (!this.token || !this.tabId) return;
+    const body = new Blob([JSON.stringify({ tab_id: this.tabId })], { type: "application/json" });
+    navigator.sendBeacon(`${this.base()}/tab/release`, body);
   }
 
   survey(answers, options) {
-    return sendUntilAcknowledged("POST", `${this.base()}/survey`, { submission_id: newUuid(), answers }, options);
+    return this.write("survey", { submission_id: newUuid(), answers }, options);
   }
 
   events(events, { keepalive = false } = {}) {
