@@ -390,6 +390,11 @@ class ClipData(_Body):
     replays: int = PydField(ge=0, le=10_000)
 
 
+# Events the server records itself (tabs.py): a page opened, or took over from another tab,
+# with the trial on screen, the start state its draft resumed and the clicks it restored.
+PAGE_OPENED, TAB_TAKEOVER = "page_opened", "tab_takeover"
+SERVER_EVENTS = (PAGE_OPENED, TAB_TAKEOVER)
+
 # Every kind's `data`: small and flat by construction (no other keys, bounded values).
 EVENT_DATA: dict[str, type[_Body]] = {
     "visibility_hidden": NoEventData, "visibility_shown": NoEventData,

@@ -19,7 +19,14 @@ from app.study import notices, telemetry
 from app.study.errors import Refused
 from app.study.plan import TrialStep, current_step
 from app.study.sessions import as_utc
-from app.study.tables import Participant, TabClaim, TabRelease, utcnow
+from app.study.tables import (
+    PAGE_OPENED,
+    TAB_TAKEOVER,
+    Participant,
+    TabClaim,
+    TabRelease,
+    utcnow,
+)
 
 TAB_HEADER = "X-Tab-Id"
 HEARTBEAT_S = 10  # the live page says it is still there this often (handed to the page)
@@ -46,7 +53,7 @@ def claim_tab(db: Session, participant: Participant, body: TabClaim,
         participant.live_tab, participant.live_tab_seen_at = body.tab_id, now
         if body.opened:
             telemetry.record_server_event(
-                db, participant, "tab_takeover" if taken_over else "page_opened",
+                db, participant, TAB_TAKEOVER if taken_over else PAGE_OPENED,
                 body.t_client_ms, opened_at(participant, draft))
         db.commit()
     except BaseException:

@@ -171,6 +171,28 @@ def test_upgrading_keeps_every_row_and_value(db_url, tmp_path, small_study):
     source.dispose()
 
 
+def test_0004_moves_a_session_that_ended_early_back_to_the_step_it_ended_at(db_url, tmp_path):
+    source = make_engine(load_fixture(tmp_path / "old.db"))
+    engine = make_engine(db_url)
+    migrate_to(engine, "0001")
+    copy_rows(source, engine)
+    migrate_to(engine, "0003")
+    with engine.begin() as conn:  # the unfinished session declined, as 0003's code stored it
+        conn.execute(text("UPDATE participant SET outcome = 'declined_consent', "
+                          "position = 20 WHERE id = 5"))
+        conn.execute(text("UPDATE submission SET kind = 'decline', step_index = 0 WHERE id = "
+                          "(SELECT min(id) FROM submission WHERE participant_id = 5)"))
+        positions = dict(conn.execute(text("SELECT id, position FROM participant")).all())
+
+    migrate.upgrade(engine)
+
+    with engine.connect() as conn:
+        after = dict(conn.execute(text("SELECT id, position FROM participant")).all())
+    assert after == positions | {5: 0}
+    engine.dispose()
+    source.dispose()
+
+
 def test_db_upgrade_on_the_database_9c39751_made(tmp_path):
     url = load_fixture(tmp_path / "study.db")
     engine = make_engine(url)
