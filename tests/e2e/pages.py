@@ -107,3 +107,43 @@ def watch_clips(page) -> None:
             return
         page.clock.fast_forward(CLIP_JUMP_MS)
     raise AssertionError("the clips never finished")
+
+
+def place(page, trial: dict, start: int, steps: list[int]) -> list[list[float]]:
+    """Click these steps of the planned path from start state `start`; returns the points."""
+    path = planned_path(trial, trial["start_states"][start])
+    for j in steps:
+        page.clock.fast_forward(THINK_MS)
+        page.click("#trial-canvas", position=canvas_px(page, path[j]))
+    return [path[j] for j in steps]
+
+
+def start_predicting(page) -> None:
+    """Watch the clips to the end and press Make predictions."""
+    watch_clips(page)
+    page.click("#start-predicting")
+
+
+def answer_trial(page) -> dict:
+    """Answer the trial on screen (from wherever its input stands) by clicking the rest of
+    every planned path, then submit; returns its payload."""
+    trial = current_state(page)["step"]
+    if page.is_visible("#start-predicting"):
+        start_predicting(page)
+    while page.is_visible("#screen-trial"):
+        # "Start position k of K: p of n positions placed."
+        where, placed = page.inner_text("#trial-caption").split(": ")
+        start = int(where.split()[2]) - 1
+        done = int(placed.split(" of")[0])
+        place(page, trial, start, list(range(done, trial["steps_to_predict"])))
+        last = page.inner_text("#next").startswith("Submit")
+        page.click("#next")
+        if last:
+            page.wait_for_function("() => document.querySelector('#screen-trial').hidden")
+    return trial
+
+
+def wait_saved(page) -> None:
+    """Wait until the page says every click so far is on the server."""
+    page.wait_for_function(
+        "() => document.querySelector('#save-status').textContent.includes('are saved')")

@@ -64,6 +64,16 @@ function unsupportedReason(min) {
   return null;
 }
 
+function clickCount(draft) {
+  return draft.points.reduce((n, points) => n + points.length, 0);
+}
+
+/** What a refusal cost: "" when every click is on the server, else which were not saved. */
+function unsavedText(clicks) {
+  if (!clicks) return "";
+  return clicks === 1 ? "Your last click in this tab was not saved." : `Your last ${clicks} clicks in this tab were not saved.`;
+}
+
 /** This tab's id (kept across its reloads; a duplicated tab gets its own). */
 function currentTabId() {
   let id = sessionStorage.getItem(TAB_KEY);
@@ -83,9 +93,10 @@ function currentTabId() {
  * their clicks are saved. `onRefused(error)` gets a 4xx that no retry can change.
  */
 class DraftSaver {
-  constructor(api, seq, { onStatus, onRefused }) {
+  constructor(api, seq, clicks, { onStatus, onRefused }) {
     this.api = api;
     this.seq = seq;
+    this.savedClicks = clicks; // clicks in the newest draft the server has
     this.latest = null;
     this.sending = false;
     this.failures = 0;
@@ -115,6 +126,7 @@ class DraftSaver {
     this.sending = true;
     try {
       await this.api.saveDraft(body);
+      this.savedClicks = clickCount(body);
       if (this.latest === body) this.latest = null;
       this.failures = 0;
       this.onStatus(this.latest ? "Saving your clicks…" : "Your clicks so far are saved.", "ok");
@@ -122,7 +134,7 @@ class DraftSaver {
       if (this.stopped) return; // the trial was submitted meanwhile: its answer is complete
       if (error instanceof ApiError && error.status < 500 && error.status !== 429) {
         this.stopped = true;
-        this.onRefused(error);
+        this.onRefused(error, Math.max(0, clickCount(this.latest ?? body) - this.savedClicks));
         return;
       }
       this.failures += 1;
@@ -599,9 +611,9 @@ class TrialScreen {
       onCaption: (text) => { $("trial-caption").textContent = text; },
     });
     this.input = null;
-    this.saver = new DraftSaver(this.api, this.draft?.seq ?? 0, {
+    this.saver = new DraftSaver(this.api, this.draft?.seq ?? 0, this.draft ? clickCount(this.draft) : 0, {
       onStatus: (text, kind) => this.setSaveStatus(text, kind),
-      onRefused: (error) => this.refused(error, "Your last clicks were not saved."),
+      onRefused: (error, lost) => this.refused(error, unsavedText(lost)),
     });
     const { part, parts, number, of } = this.trial;
     const which = this.trial.is_practice ? `Practice trial ${number} of ${of} (not counted)` : `Trial ${number} of ${of}`;
@@ -757,17 +769,18 @@ class TrialScreen {
   async refused(error, what) {
     this.stop();
     if (error.otherTab) {
-      this.app.tabLost(error.notice, `${what} The study had moved to the other tab.`);
+      this.app.tabLost(error.notice, what && `${what} The study had moved to the other tab.`);
       return;
     }
     if (error.status !== 404 && error.status !== 409) {
       this.reject(error);
       return;
     }
+    console.warn(error.detail); // the field name, for whoever reads the console; not the person
     await this.app.confirmNotice({
       title: "This trial was already answered",
-      text: `${what} This trial had already been answered, in another tab or window, and that `
-        + `answer is kept. The study continues with the next step. (${error.detail})`,
+      text: `${what ? `${what} ` : ""}This trial had already been answered, in another tab or window, `
+        + "and that answer is kept. The study continues with the next step.",
     });
     this.resolve(null);
   }
