@@ -23,7 +23,7 @@ def visible(page, screen: str) -> None:
 
 # the screens between trials that only ask to go on, and their buttons
 ONWARD = {"world": "#world-done", "practice-over": "#practice-over-done", "pause": "#pause-done"}
-SHOWN = "s => !document.querySelector(`#screen-${s}`).hidden"
+SHOWN = "s => document.querySelector(`#screen-${s}`)?.hidden === false"
 
 
 def through_instructions(page) -> None:
@@ -109,11 +109,14 @@ def watch_clips(page) -> None:
     raise AssertionError("the clips never finished")
 
 
-def place(page, trial: dict, start: int, steps: list[int]) -> list[list[float]]:
-    """Click these steps of the planned path from start state `start`; returns the points."""
+def place(page, trial: dict, start: int, steps: list[int],
+          think_ms: float = THINK_MS) -> list[list[float]]:
+    """Click these steps of the planned path from start state `start`, `think_ms` of the
+    page's clock apart; returns the points."""
     path = planned_path(trial, trial["start_states"][start])
     for j in steps:
-        page.clock.fast_forward(THINK_MS)
+        if think_ms:
+            page.clock.fast_forward(think_ms)
         page.click("#trial-canvas", position=canvas_px(page, path[j]))
     return [path[j] for j in steps]
 

@@ -12,6 +12,7 @@ import json
 import math
 import shutil
 import sqlite3
+import time
 from contextlib import closing
 from pathlib import Path
 
@@ -48,9 +49,11 @@ CLOSED, FULL = "browser_closed", "browser_full"
 
 @pytest.fixture
 def fresh(chromium):
-    """A new browser context on the fake clock; yields a function that opens pages in it."""
+    """A new browser context on a paused fake clock (its timers, heartbeats included, run only
+    when a test moves the clock); yields a function that opens pages in it."""
     context = chromium.new_context(viewport=VIEWPORT)
     context.clock.install()
+    context.clock.pause_at(int(time.time() * 1000) + 1000)
     errors = []
 
     def new_page():
@@ -163,7 +166,9 @@ def test_a_second_tab_is_told_and_takes_over_only_when_asked(fresh, browser_serv
     visible(second, "trial")
     assert "2 of 3 positions placed" in second.inner_text("#trial-caption")
 
-    place(first, trial, 0, [2])  # its draft is refused: the session moved to the other tab
+    # its draft is refused: the session moved to the other tab (no clock time passes, so no
+    # heartbeat tells it first)
+    place(first, trial, 0, [2], think_ms=0)
     visible(first, "notice")
     assert "another tab" in first.inner_text("#notice-title")
     assert first.inner_text("#notice-extra").startswith("Your last click in this tab was not "
@@ -254,19 +259,19 @@ REFUSALS = {  # case -> (the link, the heading the person reads)
                 "The study is already running for you"),
     "taken_part": (lambda base, _: study_url(base, _taken_part(base)),
                    "You have already taken part"),
-    "closed": (lambda _, closing_url: study_url(closing_url, fresh_recruitment(), CLOSED),
+    "closed": (lambda _, refusing: study_url(refusing(), fresh_recruitment(), CLOSED),
                "This study is closed"),
-    "full": (lambda _, closing_url: study_url(closing_url, fresh_recruitment(), FULL),
+    "full": (lambda _, refusing: study_url(refusing(), fresh_recruitment(), FULL),
              "This study is full"),
     "unknown_study": (lambda base, _: f"{base}/s/no_such_study", "This study is not available"),
 }
 
 
 @pytest.mark.parametrize("case", list(REFUSALS))
-def test_every_refusal_is_a_plain_page(fresh, browser_server, refusing_server, case):
+def test_every_refusal_is_a_plain_page(fresh, browser_server, request, case):
     link, title = REFUSALS[case]
     page = fresh()
-    page.goto(link(browser_server.url, refusing_server))
+    page.goto(link(browser_server.url, lambda: request.getfixturevalue("refusing_server")))
     page.wait_for_selector("#screen-notice:not([hidden]), #refusal")
     card = page.locator("#screen-notice:not([hidden]), #refusal")
     text = card.inner_text()
