@@ -393,7 +393,7 @@ def labels_clear(page) -> None:
     assert len(boxes["rings"]) == 3
     for i, label in enumerate(labels):
         others = boxes["agents"] + boxes["rings"] + labels[i + 1:]
-        assert not any(overlap(label, other) for other in others), label["text"]
+        assert not any(overlap(label, other) for other in others), json.dumps([label, boxes])
 
 
 def overlap(a: dict, b: dict) -> bool:

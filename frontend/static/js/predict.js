@@ -5,6 +5,7 @@ import {
   ROBOT_COLOR,
   agentStyle,
   centreOnAxis,
+  placeTag,
   drawAgent,
   drawBackground,
   drawPointer,
@@ -14,7 +15,6 @@ import {
   preferredHeight,
   publishView,
   sizeCanvas,
-  tagColor,
   viewAt,
 } from "./scene.js";
 
@@ -351,8 +351,7 @@ export class PredictionInput {
     [human, robot].forEach((style, i) => {
       const box = agents[i];
       if (box.x1 < 0 || box.y1 < 0 || box.x0 > width || box.y0 > height) return; // an edge arrow points to it
-      layout.place(style.tag, [(box.x0 + box.x1) / 2, (box.y0 + box.y1) / 2], (box.y1 - box.y0) / 2 + 12,
-        { color: tagColor(style) });
+      placeTag(layout, style, box);
     });
     this.drawNumbers(layout, view);
     this.drawPreview(ctx, view);

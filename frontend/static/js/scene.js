@@ -221,10 +221,20 @@ export class LabelLayout {
     this.blocked.push(box);
   }
 
-  /** Draw `text` at the first free spot around `anchor` (at `distance` px, `angles` first). */
-  place(text, anchor, distance, { color = "#111111", sizePx = 12, angles = [] } = {}) {
-    const tries = [...angles, ...Array.from({ length: 16 }, (_, k) => -Math.PI / 2 + (k * Math.PI) / 8)];
-    const spots = [1, 1.6, 2.4].flatMap((f) => tries.map((a) => [anchor[0] + f * distance * Math.cos(a), anchor[1] + f * distance * Math.sin(a)]));
+  /**
+   * Draw `text` at the first free spot around `anchor` (at `distance` px, `angles` first;
+   * further out when nothing near is free, e.g. a click on the robot's own body, with a thin
+   * line back to the anchor).
+   */
+  place(text, anchor, distance, { angles = [], ...style } = {}) {
+    const box = this.placeFirst(text, ringSpots(anchor, distance, angles), style);
+    const [cx, cy] = [(box.x0 + box.x1) / 2, (box.y0 + box.y1) / 2];
+    if (Math.hypot(cx - anchor[0], cy - anchor[1]) > 2 * distance) this.leader(anchor, box);
+    return box;
+  }
+
+  /** Draw `text` at the first of `spots` where it covers nothing and stays on the canvas. */
+  placeFirst(text, spots, { color = "#111111", sizePx = 12 } = {}) {
     const fits = (box) => box.x0 >= 0 && box.y0 >= 0 && box.x1 <= this.width && box.y1 <= this.height
       && ![...this.blocked, ...this.boxes].some((other) => overlaps(box, other));
     const spot = spots.find(([x, y]) => fits(labelBox(this.ctx, text, x, y, sizePx))) ?? spots[0];
@@ -232,6 +242,29 @@ export class LabelLayout {
     this.boxes.push({ ...box, text });
     return box;
   }
+
+  /** A thin line from `anchor` to the nearest point of `box`. */
+  leader([ax, ay], box) {
+    const x = Math.min(Math.max(ax, box.x0), box.x1);
+    const y = Math.min(Math.max(ay, box.y0), box.y1);
+    this.ctx.save();
+    this.ctx.strokeStyle = "#111111";
+    this.ctx.lineWidth = 1;
+    this.ctx.setLineDash([]);
+    this.ctx.beginPath();
+    this.ctx.moveTo(ax, ay);
+    this.ctx.lineTo(x, y);
+    this.ctx.stroke();
+    this.ctx.restore();
+  }
+}
+
+/** Spots on rings around `anchor` (1 to 8 x `distance`): `angles` first, then above, below,
+ * beside, the diagonals and the angles between. */
+function ringSpots(anchor, distance, angles) {
+  const order = [-4, 4, 0, 8, -2, -6, 2, 6, -3, -5, 3, 5, -1, -7, 1, 7].map((k) => (k * Math.PI) / 8);
+  return [1, 1.6, 2.4, 3.5, 5, 6.5, 8].flatMap((f) => [...angles, ...order].map((a) => (
+    [anchor[0] + f * distance * Math.cos(a), anchor[1] + f * distance * Math.sin(a)])));
 }
 
 /** Role of agent i: 0 is the robot, 1 the human (DESIGN.md section 3). */
@@ -323,7 +356,7 @@ export function drawAgent(ctx, view, style, position, heading, { alpha = 1, tag 
     label(ctx, style.tag, cx, cy - Math.max(width, length) / 2 - 10, tagColor(style), 12);
     ctx.restore();
   }
-  return agentBox(view, style, position);
+  return agentBox(view, style, position, heading);
 }
 
 /** The text colour of an agent's tag (dark enough on a white label). */
@@ -331,10 +364,13 @@ export function tagColor(style) {
   return style.name === "human" ? HUMAN_TEXT : style.color;
 }
 
-/** The box an agent covers on screen (its longer side in every direction: any heading). */
-export function agentBox(view, style, position) {
-  const reach = Math.max(style.length_m * view.scale, style.width_m * view.scale, 10) / 2;
-  return boxAround(view.toPx(position), reach + 1.5);
+/** The axis-aligned box an agent covers on screen, turned to `heading` (outline included). */
+export function agentBox(view, style, position, heading) {
+  const half = [Math.max(style.length_m * view.scale, 10) / 2, Math.max(style.width_m * view.scale, 10) / 2];
+  const [c, s] = [Math.abs(Math.cos(heading || 0)), Math.abs(Math.sin(heading || 0))];
+  const [x, y] = view.toPx(position);
+  const [rx, ry] = [half[0] * c + half[1] * s + 1.5, half[0] * s + half[1] * c + 1.5];
+  return { x0: x - rx, y0: y - ry, x1: x + rx, y1: y + ry };
 }
 
 /** Draw every agent (shapes first), then each tag where it covers no agent nor other tag. */
@@ -344,12 +380,19 @@ export function drawAgents(ctx, view, agents, layout) {
     layout.block(box);
     return box;
   });
-  agents.forEach(({ style }, i) => {
-    const box = boxes[i];
-    const centre = [(box.x0 + box.x1) / 2, (box.y0 + box.y1) / 2];
-    layout.place(style.tag, centre, (box.y1 - box.y0) / 2 + 12, { color: tagColor(style) });
-  });
+  agents.forEach(({ style }, i) => placeTag(layout, style, boxes[i]));
   return boxes;
+}
+
+/** An agent's tag ("R", "H") just off an edge of its box, where it covers no agent nor other
+ * label (above, below, right, left, the corners; then further out). */
+export function placeTag(layout, style, box) {
+  const [cx, cy] = [(box.x0 + box.x1) / 2, (box.y0 + box.y1) / 2];
+  const m = 11;
+  const edges = [[cx, box.y0 - m], [cx, box.y1 + m], [box.x1 + m, cy], [box.x0 - m, cy],
+    [box.x1 + m, box.y0 - m], [box.x0 - m, box.y0 - m], [box.x1 + m, box.y1 + m], [box.x0 - m, box.y1 + m]];
+  const further = ringSpots([cx, cy], Math.max(box.x1 - box.x0, box.y1 - box.y0) / 2 + 2 * m, []);
+  return layout.placeFirst(style.tag, [...edges, ...further], { color: tagColor(style) });
 }
 
 /**
