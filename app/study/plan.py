@@ -11,6 +11,7 @@ import secrets
 from dataclasses import dataclass
 from enum import StrEnum
 from itertools import permutations
+from typing import ClassVar
 
 import numpy as np
 from pydantic import field_validator
@@ -47,40 +48,39 @@ class Step(StrictModel):
     phase: Phase
 
 
-class PartStep(Step):
-    """A screen of one world's part (its introduction, or the end of its practice)."""
+class WorldStep(Step):
+    """A step inside one world's part; its phase is one of the subclass' `PHASES`."""
 
+    PHASES: ClassVar[tuple[Phase, ...]] = ()
     world: str
     world_position: int  # the world's place in this session's world order
 
     @field_validator("phase")
     @classmethod
-    def _is_part_phase(cls, phase: Phase) -> Phase:
-        if phase not in PART_PHASES:
-            raise ValueError(f"a part step's phase is one of {', '.join(PART_PHASES)}")
+    def _phase_fits(cls, phase: Phase) -> Phase:
+        if phase not in cls.PHASES:
+            raise ValueError(f"a {cls.__name__}'s phase is one of {', '.join(cls.PHASES)}")
         return phase
 
 
-class TrialStep(Step):
+class PartStep(WorldStep):
+    """A screen of one world's part (its introduction, or the end of its practice)."""
+
+    PHASES: ClassVar[tuple[Phase, ...]] = PART_PHASES
+
+
+class TrialStep(WorldStep):
     """One trial of the plan; `ref` is the only id of it the browser sees.
 
     `ref` is random per session, so neither the bank's trial id nor whether this is an
     attention check can be read from the browser's payload.
     """
 
+    PHASES: ClassVar[tuple[Phase, ...]] = TRIAL_PHASES
     trial_id: str  # the bank's id
     ref: str
-    world: str
-    world_position: int  # the world's place in this session's world order
     trial_index: int  # the trial's place within its world's block
     attention_check: bool
-
-    @field_validator("phase")
-    @classmethod
-    def _is_trial_phase(cls, phase: Phase) -> Phase:
-        if phase not in TRIAL_PHASES:
-            raise ValueError(f"a trial step's phase is one of {', '.join(TRIAL_PHASES)}")
-        return phase
 
 
 def parse_step(raw: dict) -> Step:

@@ -101,15 +101,22 @@ def query(db_path: Path, sql: str, *args) -> list[tuple]:
         return db.execute(sql, args).fetchall()
 
 
+def to_predictions(page, base: str) -> tuple[str, dict]:
+    """A new participant on `page`, through to the first practice trial's predictions;
+    returns their link's parameters and the trial."""
+    recruitment = fresh_recruitment()
+    page.goto(study_url(base, recruitment))
+    through_instructions(page)
+    trial = current_state(page)["step"]
+    start_predicting(page)
+    return recruitment, trial
+
+
 # ---------------------------------------------------------------- 1. a reload keeps the clicks
 
 def test_a_reload_mid_trial_keeps_the_clicks(fresh, browser_server):
     page = fresh()
-    recruitment = fresh_recruitment()
-    page.goto(study_url(browser_server.url, recruitment))
-    through_instructions(page)
-    trial = current_state(page)["step"]
-    start_predicting(page)
+    recruitment, trial = to_predictions(page, browser_server.url)
     before = place(page, trial, 0, [0, 1, 2])
     page.click("#next")
     before += place(page, trial, 1, [0, 1])
@@ -143,11 +150,7 @@ def test_a_reload_mid_trial_keeps_the_clicks(fresh, browser_server):
 
 def test_a_second_tab_is_told_and_takes_over_only_when_asked(fresh, browser_server):
     first = fresh()
-    recruitment = fresh_recruitment()
-    first.goto(study_url(browser_server.url, recruitment))
-    through_instructions(first)
-    trial = current_state(first)["step"]
-    start_predicting(first)
+    recruitment, trial = to_predictions(first, browser_server.url)
     place(first, trial, 0, [0])
     wait_saved(first)
 
