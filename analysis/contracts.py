@@ -52,7 +52,8 @@ SURVEY = {
 EVENTS = {
     "study_id": "text", "participant_id": "text", "source": "text", "kind": "text",
     "t_client_ms": "float", "t_trial_ms": "float", "received_at": "time",
-    "trial_id": "text", "start_index": "int", "replays": "int", "w": "int", "h": "int",
+    "trial_id": "text", "start_index": "int", "clicks": "int", "replays": "int", "w": "int",
+    "h": "int",
     **STUDY_VERSION,
 }
 PARTICIPANTS = {

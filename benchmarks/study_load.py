@@ -48,8 +48,9 @@ from tests.conftest import (  # noqa: E402
 from tests.study.flow import DEVICE, prediction_body  # noqa: E402
 
 BARE = "GET bare"
-ROUTES = ("POST sessions", "GET state", "POST consent", "POST instructions", "POST events",
-          "POST predictions", "POST survey")
+ROUTES = ("POST sessions", "GET state", "POST consent", "POST instructions", "POST continue",
+          "POST events", "PUT draft", "POST predictions", "POST survey")
+PART_PHASES = ("world_intro", "practice_over")  # a part's screens (app/study/plan.py)
 EXPECTED_STATUS = {"POST sessions": (201,), "POST events": (202,), "POST predictions": (201,),
                    BARE: (200, 404)}  # any other route: (200,)
 MAX_STEPS = 200  # a participant that has not finished after this many steps is stuck
@@ -83,7 +84,8 @@ class SimulatedParticipant:
         return payload
 
     async def step(self, route: str, body: dict) -> dict:
-        """POST one of the session's steps after a bare GET; returns the next state."""
+        """Send one of the session's writes (the route's method) after a bare GET; returns the
+        answer."""
         await self.call(BARE, self.bare_path)
         what = route.split()[1]
         return json.loads(await self.call(route, f"{SESSION_PATH}/{what}", body))
@@ -115,12 +117,32 @@ class SimulatedParticipant:
             return await self.step("POST consent", write(agree=True, client=DEVICE))
         if phase == "instructions":
             return await self.step("POST instructions", write())
+        if phase in PART_PHASES:
+            return await self.step("POST continue", write(phase=phase))
         if phase == "survey":
             return await self.step("POST survey", write(answers=survey_answers(step, self.rng)))
         clip = {"trial_id": step["trial_id"], "replays": 0}
         await self.step("POST events", {"events": [
             event("clip_finished", clip), event("resize", {"w": 1600, "h": 900})]})
-        return await self.step("POST predictions", prediction_body(step))
+        body = prediction_body(step)
+        for seq, draft in enumerate(drafts(step, body), start=1):  # the page saves every click
+            await self.step("PUT draft", draft | {"seq": seq})
+        return await self.step("POST predictions", body)
+
+
+def drafts(trial: dict, body: dict) -> list[dict]:
+    """The drafts the page saves while placing `body`'s clicks: one after each click."""
+    saved = []
+    for i, points in enumerate(body["points"]):
+        for j in range(1, len(points) + 1):
+            clicks = [p if k < i else (points[:j] if k == i else []) for k, p in
+                      enumerate(body["points"])]
+            times = [t if k < i else (body["click_times_ms"][i][:j] if k == i else [])
+                     for k, t in enumerate(body["click_times_ms"])]
+            saved.append({"trial_id": trial["trial_id"], "index": i,
+                          "points": clicks, "click_times_ms": times, "history": [],
+                          "shown_at_ms": body["shown_at_ms"], "replays": 0})
+    return saved
 
 
 def write(**fields) -> dict:

@@ -33,7 +33,7 @@ import httpx
 import numpy as np
 
 from app.observers.inverse_planning import PRESETS, predict
-from app.study.plan import TRIAL_PHASES, Phase
+from app.study.plan import PART_PHASES, TRIAL_PHASES, Phase
 from app.study.sessions import SESSION_HEADER, SESSION_PATH
 
 THINK_MEDIAN_S = 2.5
@@ -177,6 +177,8 @@ class Bot:
                                       self.write(agree=True, client=client))
         if phase == Phase.INSTRUCTIONS:
             return await self.request("POST", f"{base}/instructions", self.write())
+        if phase in PART_PHASES:
+            return await self.request("POST", f"{base}/continue", self.write(phase=phase))
         if phase in TRIAL_PHASES:
             return await self.predict(state["step"])
         if phase == Phase.SURVEY:

@@ -114,9 +114,15 @@ class RecruitmentConfig(StrictModel):
     needs workerId, assignmentId and hitId; `open` takes anonymous visitors (lab
     studies). Lab members use the researcher preview link instead; those sessions are
     marked pilot and never count.
+
+    `closed` and `max_counted_sessions` stop new participants (they see a page that asks
+    them to return the study); sessions already started go on, and lab previews still open.
     """
 
     platform: Platform = "prolific"
+    closed: bool = False  # true: new participants are turned away (the study is closed)
+    # the study is full once this many sessions count (in progress or completed validly)
+    max_counted_sessions: int | None = Field(default=None, ge=1)
     prolific_study_id: str = Field(default="", pattern=r"^[0-9a-fA-F]{0,24}$")
     completion_code: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")
     prolific_redirect_url: str = "https://app.prolific.com/submissions/complete?cc={completion_code}"
@@ -161,9 +167,14 @@ def check_redirect_template(name: str, template: str, completion_code: str) -> s
 
 
 class PredictionInput(StrictModel):
-    """Limits on a clicked move, as fractions of the robot's largest step in the bank data."""
+    """Limits on a clicked move, as fractions of the robot's largest step in the bank data.
 
-    max_step_factor: float = Field(default=1.5, gt=0)
+    The reach circle is the robot's 99.5th-percentile step times `max_step_factor`: a small
+    margin over what the robot really does, so a click near its edge is not refused for a
+    pixel and the circle does not invite moves several times the robot's step.
+    """
+
+    max_step_factor: float = Field(default=1.1, gt=0)
     min_step_fraction: float = Field(default=0.1, gt=0, lt=1)
 
 
@@ -228,6 +239,13 @@ class MainTrialSelection(StrictModel):
                 "models_disagree": bank_trials - self.random_arm_trials}
 
 
+class WorldIntro(StrictModel):
+    """The screen before a world's practice: its name for participants and what is in it."""
+
+    title: str = Field(min_length=1, max_length=80)
+    text: str = Field(min_length=1)
+
+
 class StudyConfig(StrictModel):
     """Everything that defines one online study."""
 
@@ -235,6 +253,8 @@ class StudyConfig(StrictModel):
     description: str = ""  # what the MTurk HIT preview shows (default: the title only)
     consent_text: str
     instructions_text: str
+    # per world: the screen that opens its part (what goals, obstacles or lanes mean)
+    world_intros: dict[WorldName, WorldIntro]
     worlds: list[WorldName] = Field(min_length=1)
     counterbalance_world_order: bool = True
     trials_per_world: int = Field(ge=1)
@@ -242,7 +262,7 @@ class StudyConfig(StrictModel):
     segment_steps: SegmentSteps
     start_states: int = Field(ge=1)  # per trial: the robot's own + data-covered (trial_builder)
     steps_to_predict: int = Field(ge=1)
-    practice_trials: int = Field(default=1, ge=0)
+    practice_trials: int = Field(default=1, ge=0)  # per world, before its scored trials
     bank_trials_per_world: int = Field(ge=1)
     bank_seed: int = Field(default=0, ge=0)
     main_trial_selection: MainTrialSelection = MainTrialSelection()
@@ -261,6 +281,9 @@ class StudyConfig(StrictModel):
 
     @model_validator(mode="after")
     def _consistent(self) -> "StudyConfig":
+        unexplained = [w for w in self.worlds if w not in self.world_intros]
+        if unexplained:
+            raise ValueError(f"world_intros: no introduction for world(s) {', '.join(unexplained)}")
         if len(set(self.worlds)) != len(self.worlds):
             raise ValueError("worlds: each world may appear once")
         if self.bank_trials_per_world < self.trials_per_world:

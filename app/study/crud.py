@@ -20,11 +20,13 @@ from sqlmodel import Session
 from app.study import balance
 from app.study.config import StudyConfig
 from app.study.context import StudyContext
+from app.study.drafts import discard_draft
 from app.study.errors import Refused
 from app.study.plan import BEFORE_TRIALS, Phase, TrialStep, expect_phase, expect_trial
 from app.study.sessions import as_utc
 from app.study.tables import (
     ConsentCreate,
+    ContinueCreate,
     DeclineCreate,
     Event,
     Participant,
@@ -80,19 +82,23 @@ def advance(db: Session, participant: Participant, body: SubmissionBody, submiss
             updates: dict | None = None) -> bool:
     """Store the submission and its rows and move one step on, in one transaction.
 
-    With `ending` (ending_values) the session jumps to its done step and the ending's
-    receipt is stored in the same commit, before the browser is told where to go;
-    `updates` are other Participant columns to set with the step. A replaced session
-    moves no more. Returns False when a concurrent retry of the same UUID won the race
-    (nothing stored).
+    With `ending` (ending_values) the session is done and the ending's receipt is stored
+    in the same commit, before the browser is told where to go; `updates` are other
+    Participant columns to set with the step. A replaced session moves no more. An ending
+    before the plan is through (declined, screened out) leaves the position at the step
+    that ended it, so the session counts only the steps it took (plan.current_step shows it
+    done).
+    Returns False when a concurrent retry of the same UUID won the race (nothing stored).
     """
     expected = participant.position
     now = utcnow()
     values = {**(updates or {}), "position": expected + 1, "updated_at": now}
     if ending is not None:
-        values.update(ending, position=len(participant.plan) - 1, ended_at=now)
+        values.update(ending, ended_at=now)
         if ending["completed"]:
             values["completed_at"] = now
+        else:
+            values["position"] = expected
     if payload.get("attention_ok") is False:
         values["attention_failed"] = Participant.attention_failed + 1
     conn = db.connection()
@@ -160,6 +166,13 @@ def record_instructions(db: Session, participant: Participant, body: SubmissionB
     with replay_if_stored(db, participant, body, "instructions") as fresh:
         expect_phase(participant, Phase.INSTRUCTIONS)
         fresh.stored = advance(db, participant, body, "instructions", {})
+
+
+def record_continue(db: Session, participant: Participant, body: ContinueCreate) -> None:
+    """The participant read a part's screen (its world's introduction, or practice over)."""
+    with replay_if_stored(db, participant, body, "continue") as fresh:
+        expect_phase(participant, Phase(body.phase))
+        fresh.stored = advance(db, participant, body, "continue", {"phase": body.phase})
 
 
 def record_survey(db: Session, ctx: StudyContext, participant: Participant,
@@ -248,7 +261,8 @@ def _store_predictions(db: Session, ctx: StudyContext, participant: Participant,
     response = trial_response(ctx, participant, step, trial, body, attention_ok)
     payload = {"trial_id": trial.trial_id, "attention_ok": attention_ok}
     return advance(db, participant, body, "predictions", payload,
-                   [(TrialResponse, [response]), (PredictionRow, rows)])
+                   [(TrialResponse, [response]), (PredictionRow, rows)],
+                   before_commit=lambda: discard_draft(db, participant))
 
 
 def trial_response(ctx: StudyContext, participant: Participant, step: TrialStep,

@@ -15,6 +15,7 @@ from fastapi import Depends, Header, Request
 from sqlmodel import Session
 
 from app.settings import Settings
+from app.study import notices, tabs
 from app.study.context import StudyContext
 from app.study.errors import Refused
 from app.study.sessions import SESSION_HEADER, check_can_continue, participant_by_token
@@ -46,7 +47,8 @@ def study_context(request: Request, study_id: str) -> StudyContext:
     ctx = request.app.state.studies.get(study_id)
     if ctx is None:
         known = ", ".join(sorted(request.app.state.studies))
-        raise Refused(404, f"study_id: unknown study {study_id!r} (served: {known})")
+        raise Refused(404, f"study_id: unknown study {study_id!r} (served: {known})",
+                      notices.unknown_study())
     return ctx
 
 
@@ -59,11 +61,23 @@ async def get_participant(request: Request, db: SessionDep,
     finally:
         db.commit()  # end the read transaction (connection back to the pool, row kept)
     ctx = study_context(request, participant.study_id)
-    check_can_continue(participant, ctx.bank.sha256)
+    check_can_continue(participant, ctx.bank.sha256, ctx.config.recruitment.platform)
     return participant
 
 
 ParticipantDep = Annotated[Participant, Depends(get_participant)]
+
+
+async def get_writer(participant: ParticipantDep,
+                     x_tab_id: Annotated[str | None, Header(max_length=64)] = None
+                     ) -> Participant:
+    """The participant of a write, refused (409) when it comes from a tab that is not the
+    session's live one (tabs.py; a request without the header is not checked)."""
+    tabs.check_live_tab(participant, x_tab_id)
+    return participant
+
+
+WriterDep = Annotated[Participant, Depends(get_writer)]
 
 
 async def participant_context(request: Request, participant: ParticipantDep) -> StudyContext:

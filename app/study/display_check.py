@@ -9,6 +9,9 @@ point one way per behaviour? Three figures per world, on the built data and the 
 - same_label_spread: mean 1 - cos between the world policy's first moves at the bank's start
   states, over pairs of main trials that share a robot label (pairs within one trial are
   left out). 0 = one direction per behaviour; 1 = what random directions give.
+- click resolution: the prediction view's scale (app/prediction_view.py), the median true
+  step on screen at that scale, and the degrees one pixel of click error turns a move of
+  that length: the angular resolution of the measurement.
 """
 
 import json
@@ -19,6 +22,7 @@ import numpy as np
 from app.data.trajectory import ROBOT, TrajectorySet
 from app.fileio import read_bytes, write_json
 from app.layout import Layout
+from app.prediction_view import prediction_view
 
 MOVING_M = 1e-3  # a step shorter than this has no direction
 
@@ -76,7 +80,17 @@ def world_figures(trajs: TrajectorySet, world_bank: dict) -> dict:
         "mean_direction": np.round(mean_direction / (np.linalg.norm(mean_direction) + 1e-12),
                                    3).tolist(),
         "same_label_spread": same_label_spread(world_bank),
+        "click_resolution": click_resolution(world_bank),
     }
+
+
+def click_resolution(world_bank: dict) -> dict:
+    """The prediction view's px per metre, the median true step in m and px, degrees per px."""
+    view = prediction_view(world_bank)
+    return {"px_per_m": view.px_per_m, "median_step_m": view.median_step_m,
+            "median_step_px": round(view.median_step_px, 1),
+            "reach_px": round(world_bank["max_step_m"] * view.px_per_m, 1),
+            "deg_per_px": round(view.resolution_deg, 3)}
 
 
 def check_display(data_dir: Path, study_id: str, bank_path: Path) -> dict:
@@ -96,7 +110,7 @@ def check_display(data_dir: Path, study_id: str, bank_path: Path) -> dict:
 
 
 def format_table(result: dict) -> str:
-    """A markdown table, one row per world."""
+    """Two markdown tables, one row per world: the display figures, then click resolution."""
     lines = ["| world | min click (m) | true steps shorter | against mean direction "
              "| against own displacement | same-label policy 1-cos |",
              "|---|---|---|---|---|---|"]
@@ -104,4 +118,11 @@ def format_table(result: dict) -> str:
         lines.append(f"| {name} | {f['min_click_m']:.3f} | {f['short_steps']:.1%} "
                      f"| {f['against_mean_direction']:.1%} | {f['against_own_displacement']:.1%} "
                      f"| {f['same_label_spread']['mean']:.3f} |")
+    lines += ["", "| world | px per m | median true step (m) | median step (px) "
+                  "| reach radius (px) | deg per px of click error |",
+              "|---|---|---|---|---|---|"]
+    for name, f in result.items():
+        r = f["click_resolution"]
+        lines.append(f"| {name} | {r['px_per_m']:.1f} | {r['median_step_m']:.3f} "
+                     f"| {r['median_step_px']:.1f} | {r['reach_px']:.1f} | {r['deg_per_px']:.3f} |")
     return "\n".join(lines)

@@ -29,7 +29,14 @@ from app.study.balance import exclusion_reasons, in_progress_cutoff, trial_speed
 from app.study.config import StudyConfig
 from app.study.plan import trial_steps
 from app.study.sessions import as_utc, session_status
-from app.study.tables import Event, Participant, PredictionRow, Submission, TrialResponse
+from app.study.tables import (
+    SERVER_EVENTS,
+    Event,
+    Participant,
+    PredictionRow,
+    Submission,
+    TrialResponse,
+)
 
 _FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields
               and c != "participant_id"]
@@ -162,11 +169,17 @@ def _telemetry_rows(db: Session, study_id: str, versions: dict[int, dict],
     rows = []
     for session, kind, t_client_ms, data, received in found:
         ref = data.get("trial_id")  # the browser's opaque id of the trial on screen
-        rows.append({**versions[session], "source": "telemetry", "kind": kind,
+        rows.append({**versions[session], "source": _source(kind), "kind": kind,
                      "t_client_ms": t_client_ms, "received_at": _utc(received),
                      "trial_id": bank_ids[session].get(ref, ref), "replays": data.get("replays"),
+                     "start_index": data.get("start_index"), "clicks": data.get("clicks"),
                      "w": data.get("w"), "h": data.get("h")})
     return rows
+
+
+def _source(kind: str) -> str:
+    """`telemetry` for what the browser reports, `server` for what the server saw (tabs.py)."""
+    return "server" if kind in SERVER_EVENTS else "telemetry"
 
 
 def _history_rows(db: Session, study_id: str, versions: dict[int, dict]) -> list[dict]:

@@ -180,8 +180,10 @@ def add_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(Refused)
     async def refused(_: Request, err: Refused) -> JSONResponse:
         headers = {"WWW-Authenticate": "Bearer"} if err.status == 401 else {}
-        return JSONResponse({"detail": err.detail}, status_code=err.status,
-                            headers=headers | err.headers)
+        body = {"detail": err.detail}
+        if err.notice is not None:  # what the participant's page shows instead of `detail`
+            body["notice"] = err.notice.as_dict()
+        return JSONResponse(body, status_code=err.status, headers=headers | err.headers)
 
     @app.exception_handler(RequestValidationError)
     async def invalid(_: Request, err: RequestValidationError) -> JSONResponse:

@@ -13,10 +13,19 @@ from pydantic.json_schema import models_json_schema
 REF = "#/components/schemas/{model}"
 
 
+class PlainNotice(BaseModel):
+    """The refusal in plain language for a participant (app/study/notices.py)."""
+
+    title: str
+    text: str
+    action: str = ""
+
+
 class ErrorDetail(BaseModel):
-    """A refused request: `detail` is `field: message`."""
+    """A refused request: `detail` is `field: message`; `notice` what a participant reads."""
 
     detail: str
+    notice: PlainNotice | None = None
 
 
 class ValidationItem(BaseModel):
@@ -46,7 +55,8 @@ SESSION_WRITE_STATUSES = {
     400: UNREADABLE,
     404: f"{UNKNOWN_SESSION}; trial_id: not a trial of this session",
     409: "phase: the session is at another step or trial, moved on in another request, or "
-         "done (telemetry); submission_id: used by another session",
+         "done (telemetry); submission_id: used by another session; tab: another tab of "
+         "this session is the live one",
     410: GONE,
     413: TOO_LARGE,
     422: f"{INVALID}, or breaks a study rule: clicks outside the scene or reach, survey "
@@ -58,8 +68,9 @@ START_STATUSES = {
     403: "recruitment: missing or malformed parameters of the study's platform, or another "
          "Prolific study; preview: a wrong preview key",
     404: "study_id: unknown study",
-    409: "recruitment: this participant already completed the study, started at the same "
-         "moment, or has another attempt (SESSION_ID / assignmentId) in progress",
+    409: "recruitment: this participant already took part under another attempt, started at "
+         "the same moment, or has another attempt (SESSION_ID / assignmentId) in progress; "
+         "study_id: the study is closed or full",
     413: TOO_LARGE,
     422: INVALID,
     429: RATE_LIMITED,
@@ -89,7 +100,7 @@ def error_statuses(method: str, path: str) -> dict[int, str]:
     if path == "/api/sessions" and method == "POST":
         return START_STATUSES
     if path.startswith("/api/session/"):
-        return SESSION_WRITE_STATUSES if method == "POST" else SESSION_STATUSES
+        return SESSION_WRITE_STATUSES if method in ("POST", "PUT") else SESSION_STATUSES
     return {}
 
 
@@ -131,7 +142,7 @@ def error_response(status: int, why: str) -> dict:
 
 def error_schemas() -> dict:
     """JSON schemas of the error bodies, named as `error_response` refers to them."""
-    _, top = models_json_schema([(ErrorDetail, "serialization"),
+    _, top = models_json_schema([(ErrorDetail, "serialization"), (PlainNotice, "serialization"),
                                  (ValidationProblem, "serialization")], ref_template=REF)
     return top["$defs"]
 

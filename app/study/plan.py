@@ -11,6 +11,7 @@ import secrets
 from dataclasses import dataclass
 from enum import StrEnum
 from itertools import permutations
+from typing import ClassVar
 
 import numpy as np
 from pydantic import field_validator
@@ -28,13 +29,16 @@ class Phase(StrEnum):
 
     CONSENT = "consent"
     INSTRUCTIONS = "instructions"
+    WORLD_INTRO = "world_intro"  # opens a world's part: what its scene shows
     PRACTICE = "practice"  # a practice trial (not scored)
+    PRACTICE_OVER = "practice_over"  # between a part's practice and its scored trials
     TRIAL = "trial"  # a main trial or an attention check (the browser cannot tell which)
     SURVEY = "survey"
     DONE = "done"
 
 
 TRIAL_PHASES = (Phase.PRACTICE, Phase.TRIAL)
+PART_PHASES = (Phase.WORLD_INTRO, Phase.PRACTICE_OVER)  # screens that only ask to go on
 BEFORE_TRIALS = (Phase.CONSENT, Phase.INSTRUCTIONS)  # a device screen-out may end these
 
 
@@ -44,31 +48,46 @@ class Step(StrictModel):
     phase: Phase
 
 
-class TrialStep(Step):
+class WorldStep(Step):
+    """A step inside one world's part; its phase is one of the subclass' `PHASES`."""
+
+    PHASES: ClassVar[tuple[Phase, ...]] = ()
+    world: str
+    world_position: int  # the world's place in this session's world order
+
+    @field_validator("phase")
+    @classmethod
+    def _phase_fits(cls, phase: Phase) -> Phase:
+        if phase not in cls.PHASES:
+            raise ValueError(f"a {cls.__name__}'s phase is one of {', '.join(cls.PHASES)}")
+        return phase
+
+
+class PartStep(WorldStep):
+    """A screen of one world's part (its introduction, or the end of its practice)."""
+
+    PHASES: ClassVar[tuple[Phase, ...]] = PART_PHASES
+
+
+class TrialStep(WorldStep):
     """One trial of the plan; `ref` is the only id of it the browser sees.
 
     `ref` is random per session, so neither the bank's trial id nor whether this is an
     attention check can be read from the browser's payload.
     """
 
+    PHASES: ClassVar[tuple[Phase, ...]] = TRIAL_PHASES
     trial_id: str  # the bank's id
     ref: str
-    world: str
-    world_position: int  # the world's place in this session's world order
     trial_index: int  # the trial's place within its world's block
     attention_check: bool
 
-    @field_validator("phase")
-    @classmethod
-    def _is_trial_phase(cls, phase: Phase) -> Phase:
-        if phase not in TRIAL_PHASES:
-            raise ValueError(f"a trial step's phase is one of {', '.join(TRIAL_PHASES)}")
-        return phase
-
 
 def parse_step(raw: dict) -> Step:
-    """A stored plan entry as its typed step (TrialStep in a trial phase)."""
-    model = TrialStep if raw["phase"] in TRIAL_PHASES else Step
+    """A stored plan entry as its typed step (TrialStep in a trial phase, PartStep on a
+    part's screens)."""
+    model = (TrialStep if raw["phase"] in TRIAL_PHASES
+             else PartStep if raw["phase"] in PART_PHASES else Step)
     return model.model_validate(raw)
 
 
@@ -83,7 +102,13 @@ def dump_plan(steps: list[Step]) -> list[dict]:
 
 
 def current_step(participant: Participant) -> Step:
-    """The step the participant is at (the last one, done, once the plan is through)."""
+    """The step the participant is at; the last one, done, once the session has ended.
+
+    An ending before the plan is through (declined consent, screened out) leaves `position`
+    where the session ended, so it still counts the steps the person really took.
+    """
+    if participant.completed or participant.ended_at is not None:
+        return parse_step(participant.plan[-1])
     return parse_step(participant.plan[min(participant.position, len(participant.plan) - 1)])
 
 
@@ -100,6 +125,11 @@ def expect_phase(participant: Participant, *phases: Phase) -> Step:
         raise Refused(409, f"phase: this request belongs to {' or '.join(phases)}, "
                            f"but the session is at {step.phase}")
     return step
+
+
+def part_steps(participant: Participant, world_position: int) -> list[TrialStep]:
+    """The trials (practice included) of one part of the participant's plan, in order."""
+    return [step for _, step in trial_steps(participant) if step.world_position == world_position]
 
 
 def expect_trial(participant: Participant, ref: str) -> TrialStep:
@@ -138,16 +168,27 @@ def assign_plan(config: StudyConfig, bank: TrialBank, usage: Usage,
 
 def layout_plan(config: StudyConfig, bank: TrialBank, order: tuple[str, ...],
                 exposure: dict[str, int], rng: np.random.Generator) -> list[Step]:
-    """consent, instructions, practice, per world its trials with attention checks, survey, done."""
+    """consent, instructions, one part per world (_part), survey, done."""
     plan = [Step(phase=Phase.CONSENT), Step(phase=Phase.INSTRUCTIONS)]
-    practice_pool = [t.trial_id for t in bank.trials_of(order[0], "practice")]
-    for i, tid in enumerate(least_used(practice_pool, exposure, config.practice_trials, rng)):
-        plan.append(_trial_step(Phase.PRACTICE, tid, order[0], 0, i, False))
     for position, world in enumerate(order):
-        plan += [_trial_step(Phase.TRIAL, tid, world, position, index, check)
-                 for index, (tid, check) in enumerate(_world_block(config, bank, world,
-                                                                   exposure, rng))]
+        plan += _part(config, bank, world, position, exposure, rng)
     return plan + [Step(phase=Phase.SURVEY), Step(phase=Phase.DONE)]
+
+
+def _part(config: StudyConfig, bank: TrialBank, world: str, position: int,
+          exposure: dict[str, int], rng: np.random.Generator) -> list[Step]:
+    """One world's part: its introduction, its practice and the screen that ends it, then its
+    trials with attention checks."""
+    steps: list[Step] = [PartStep(phase=Phase.WORLD_INTRO, world=world, world_position=position)]
+    pool = [t.trial_id for t in bank.trials_of(world, "practice")]
+    practice = least_used(pool, exposure, config.practice_trials, rng)
+    steps += [_trial_step(Phase.PRACTICE, tid, world, position, i, False)
+              for i, tid in enumerate(practice)]
+    if practice:
+        steps.append(PartStep(phase=Phase.PRACTICE_OVER, world=world, world_position=position))
+    return steps + [_trial_step(Phase.TRIAL, tid, world, position, index, check)
+                    for index, (tid, check) in enumerate(_world_block(config, bank, world,
+                                                                      exposure, rng))]
 
 
 def _world_block(config: StudyConfig, bank: TrialBank, world: str, exposure: dict[str, int],

@@ -11,6 +11,7 @@ import hmac
 import re
 from dataclasses import dataclass, field
 
+from app.study import notices
 from app.study.config import StudyConfig
 from app.study.errors import Refused
 from app.study.tables import SessionCreate, UrlParams
@@ -55,7 +56,8 @@ def identify(config: StudyConfig, body: SessionCreate, key: str) -> Identity:
     if body.preview is not None:
         if not key or not hmac.compare_digest(body.preview.encode(), key.encode()):
             raise Refused(403, "preview: not this study's preview key; copy the current "
-                               "preview link from the researcher dashboard")
+                               "preview link from the researcher dashboard",
+                          notices.preview_link_outdated())
         return Identity("pilot")
     platform = config.recruitment.platform
     if platform == "open":
@@ -73,7 +75,7 @@ def _prolific(config: StudyConfig, params: UrlParams) -> Identity:
     expected = config.recruitment.prolific_study_id
     if expected and params.STUDY_ID.lower() != expected.lower():
         raise Refused(403, "recruitment.STUDY_ID: this link belongs to another Prolific study; "
-                           f"{_HOW['prolific']}")
+                           f"{_HOW['prolific']}", notices.other_study("prolific"))
     kept = params.model_dump(include={"PROLIFIC_PID", "STUDY_ID", "SESSION_ID"})
     pid = normalise_external_id("prolific", params.PROLIFIC_PID)
     return Identity("prolific", pid, params.SESSION_ID, kept | {"PROLIFIC_PID": pid})
@@ -82,7 +84,7 @@ def _prolific(config: StudyConfig, params: UrlParams) -> Identity:
 def _mturk(config: StudyConfig, params: UrlParams) -> Identity:
     if params.assignmentId == MTURK_PREVIEW:
         raise Refused(403, "recruitment.assignmentId: this is the HIT preview; accept the HIT "
-                           "to start the study")
+                           "to start the study", notices.hit_preview())
     for name in ("workerId", "assignmentId", "hitId"):
         _require("mturk", params, name, PLATFORM_ID, "1-64 letters, digits, - or _")
     worker = normalise_external_id("mturk", params.workerId)
@@ -107,7 +109,7 @@ def _submit_host(config: StudyConfig, submit_to: str) -> str:
     host = submit_to.rstrip("/")
     if host not in config.recruitment.mturk_submit_hosts:
         raise Refused(403, "recruitment.turkSubmitTo: not an MTurk submit host of this study; "
-                           f"{_HOW['mturk']}")
+                           f"{_HOW['mturk']}", notices.link_incomplete("mturk"))
     return host
 
 
@@ -116,6 +118,7 @@ def _require(platform: str, params: UrlParams, name: str, pattern: re.Pattern,
     value = getattr(params, name)
     if not value:
         raise Refused(403, f"recruitment.{name}: missing; this study takes part through "
-                           f"{platform}: {_HOW[platform]}")
+                           f"{platform}: {_HOW[platform]}", notices.link_incomplete(platform))
     if not pattern.fullmatch(value):
-        raise Refused(403, f"recruitment.{name}: must be {shape}; {_HOW[platform]}")
+        raise Refused(403, f"recruitment.{name}: must be {shape}; {_HOW[platform]}",
+                      notices.link_incomplete(platform))

@@ -18,11 +18,11 @@ from sqlalchemy.exc import IntegrityError
 from sqlmodel import Session
 
 from app import __version__
-from app.study import balance
+from app.study import balance, notices
 from app.study.config import live_session_cap
 from app.study.context import StudyContext
 from app.study.errors import Refused
-from app.study.plan import assign_plan, dump_plan
+from app.study.plan import Usage, assign_plan, dump_plan
 from app.study.recruitment import ATTEMPT_KEYS, Identity, identify
 from app.study.tables import Participant, SessionCreate, utcnow
 
@@ -43,7 +43,8 @@ def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
         db.commit()
         if existing is None or not _resumable(existing, who, ctx):
             raise Refused(409, "recruitment: a session for this participant id was started "
-                               "at the same moment; reload the page") from None
+                               "at the same moment; reload the page",
+                          notices.started_twice()) from None
         return existing, True
     except BaseException:
         db.rollback()
@@ -59,9 +60,11 @@ def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Iden
             db.commit()
             return existing, True
         _replace(db, existing)
+    usage = balance.read_usage(db, ctx.study_id)
     if not who.pilot:
         check_room(db, ctx)
-    order, steps = assign_plan(ctx.config, ctx.bank, balance.read_usage(db, ctx.study_id), rng)
+        _admit(ctx, usage)
+    order, steps = assign_plan(ctx.config, ctx.bank, usage, rng)
     participant = Participant(
         study_id=ctx.study_id, recruitment=who.recruitment, external_id=who.external_id,
         attempt_key=who.attempt_key, pilot=who.pilot, public_id=secrets.token_hex(8),
@@ -85,7 +88,7 @@ def check_room(db: Session, ctx: StudyContext) -> None:
     if balance.live_sessions(db, ctx, cap) >= cap:
         raise Refused(503, f"study: {cap} sessions are running, the most this study takes at "
                            "once; please try again in a few minutes",
-                      {"Retry-After": str(ROOM_RETRY_S)})
+                      notices.busy(), headers={"Retry-After": str(ROOM_RETRY_S)})
 
 
 def live_participant(db: Session, study_id: str, external_id: str | None) -> Participant | None:
@@ -98,19 +101,34 @@ def live_participant(db: Session, study_id: str, external_id: str | None) -> Par
     return db.execute(query).scalars().first()
 
 
+def _admit(ctx: StudyContext, usage: Usage) -> None:
+    """Refuse a new participant while the study is closed or full (409 with a notice)."""
+    recruitment = ctx.config.recruitment
+    if recruitment.closed:
+        raise Refused(409, "study_id: the study is closed to new participants "
+                           "(recruitment.closed)", notices.closed(recruitment.platform))
+    counted = sum(usage.orders.values())
+    if recruitment.max_counted_sessions is not None and counted >= recruitment.max_counted_sessions:
+        raise Refused(409, f"study_id: the study is full ({counted} counted sessions, "
+                           "recruitment.max_counted_sessions)", notices.full(recruitment.platform))
+
+
 def _resumable(existing: Participant, who: Identity, ctx: StudyContext) -> bool:
-    """True to resume; False to replace a stale session; 409 otherwise."""
-    if existing.completed:
-        raise Refused(409, "recruitment: this participant has already completed the study")
+    """True to resume (the same link: its session, or its ending and code once it ended);
+    False to replace a stale session; 409 otherwise."""
     if existing.attempt_key == who.attempt_key:
         return True
-    if has_ended(existing):  # declined or screened out: the same link shows that ending
-        raise Refused(409, "recruitment: this participant has already ended the study")
+    platform = ctx.config.recruitment.platform
+    if has_ended(existing):
+        done = "completed" if existing.completed else "ended"
+        raise Refused(409, f"recruitment: this participant has already {done} the study",
+                      notices.already_taken_part(platform))
     if _is_stale(existing, ctx):
         return False
     key = ATTEMPT_KEYS[who.recruitment]
     raise Refused(409, f"recruitment.{key}: does not match the session in progress for this "
-                       "participant id; reopen the study from the original link")
+                       "participant id; reopen the study from the original link",
+                  notices.running_elsewhere(platform, ctx.config.in_progress_timeout_min))
 
 
 def _is_stale(participant: Participant, ctx: StudyContext) -> bool:
@@ -147,14 +165,14 @@ BANK_GONE = (f"{SESSION_HEADER}: the study was changed after this session starte
              "recruiting platform and contact the researchers there.")
 
 
-def check_can_continue(participant: Participant, bank_sha256: str) -> None:
+def check_can_continue(participant: Participant, bank_sha256: str, platform: str) -> None:
     """410 for a replaced session, and for an unfinished one whose trial bank is not loaded
     any more (served with --allow-bank-change); an ended session still shows its ending."""
     if participant.replaced_at is not None:
-        raise Refused(410, REPLACED)
+        raise Refused(410, REPLACED, notices.replaced())
     ran = participant.bank_sha256
     if ran and ran != bank_sha256 and not has_ended(participant):
-        raise Refused(410, BANK_GONE)
+        raise Refused(410, BANK_GONE, notices.study_changed(platform))
 
 
 def has_ended(participant: Participant) -> bool:

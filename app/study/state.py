@@ -9,7 +9,15 @@ import json
 
 from app.study.config import StudyConfig
 from app.study.context import StudyContext
-from app.study.plan import Phase, Step, TrialStep, current_step, trial_steps
+from app.study.plan import (
+    PartStep,
+    Phase,
+    Step,
+    TrialStep,
+    current_step,
+    part_steps,
+    trial_steps,
+)
 from app.study.recruitment import MTURK_SUBMIT_PATH
 from app.study.tables import Participant
 
@@ -31,7 +39,25 @@ def step_payload(ctx: StudyContext, participant: Participant, step: Step) -> dic
                 "world_order": participant.world_order.split(",")}
     if step.phase == Phase.SURVEY:
         return {"questions": [q.model_dump() for q in cfg.survey]}
+    if isinstance(step, PartStep):
+        return part_payload(ctx, participant, step)
     return done_payload(cfg, participant)
+
+
+def part_payload(ctx: StudyContext, participant: Participant, step: PartStep) -> dict:
+    """A part's screen: which part of how many, its world explained, and its trial counts."""
+    intro = ctx.config.world_intros[step.world]
+    trials = part_steps(participant, step.world_position)
+    return {**part_numbers(participant, step.world_position), "world": step.world,
+            "title": intro.title, "text": intro.text,
+            "scene": ctx.bank.world(step.world).scene,
+            "practice_trials": sum(t.phase == Phase.PRACTICE for t in trials),
+            "trials": sum(t.phase == Phase.TRIAL for t in trials)}
+
+
+def part_numbers(participant: Participant, world_position: int) -> dict:
+    """`part` (1-based) of `parts`: how the page names a world's place in the session."""
+    return {"part": world_position + 1, "parts": len(participant.world_order.split(","))}
 
 
 def done_payload(cfg: StudyConfig, participant: Participant) -> dict:
@@ -60,15 +86,19 @@ def mturk_submit(participant: Participant, outcome: str, code: str) -> dict | No
                        "completion_code": code}}
 
 
-def step_fields(step: TrialStep) -> dict:
+def step_fields(participant: Participant, step: TrialStep) -> dict:
     """The parts of a trial payload that depend on the participant's plan.
 
     The browser gets the step's random `ref` as `trial_id` and no attention-check flag:
-    nothing in the payload tells a script which trial is the check.
+    nothing in the payload tells a script which trial is the check. `number` of `of` counts
+    the part's practice trials, or its scored trials (checks included), from 1.
     """
+    same_kind = [t for t in part_steps(participant, step.world_position) if t.phase == step.phase]
     return {"trial_id": step.ref, "world": step.world,
             "index_in_world": step.trial_index, "world_position": step.world_position,
-            "is_practice": step.phase == Phase.PRACTICE}
+            "is_practice": step.phase == Phase.PRACTICE,
+            **part_numbers(participant, step.world_position),
+            "number": step.trial_index + 1, "of": len(same_kind)}
 
 
 def static_trial(ctx: StudyContext, trial_id: str) -> dict:
@@ -77,11 +107,16 @@ def static_trial(ctx: StudyContext, trial_id: str) -> dict:
     world = ctx.bank.world(trial.world)
     return {"scene": world.scene, "dt_s": world.dt_s,
             **trial.browser_payload(), "steps_to_predict": ctx.bank.data.steps_to_predict,
-            "max_step_m": world.max_step_m, "min_step_m": world.min_step_m}
+            "max_step_m": world.max_step_m, "min_step_m": world.min_step_m,
+            "view": ctx.view(trial.world).payload()}
 
 
-def state_json(ctx: StudyContext, participant: Participant) -> str:
-    """`{phase, progress: {done, total}, step}` as JSON; a trial's static part is encoded once."""
+def state_json(ctx: StudyContext, participant: Participant, draft: dict | None = None) -> str:
+    """`{phase, progress: {done, total}, step}` as JSON; a trial's static part is encoded once.
+
+    `draft` is the trial's in-progress answer (drafts.py), handed back so a reloaded page
+    resumes where it was.
+    """
     step = current_step(participant)
     state = {"phase": step.phase, "progress": progress_of(participant)}
     if not isinstance(step, TrialStep):
@@ -90,7 +125,7 @@ def state_json(ctx: StudyContext, participant: Participant) -> str:
     if static is None:
         static = json.dumps(static_trial(ctx, step.trial_id))
         ctx.trial_json[step.trial_id] = static
-    head = json.dumps({**state, "step": step_fields(step)})
+    head = json.dumps({**state, "step": {**step_fields(participant, step), "draft": draft}})
     return f"{head[:-2]}, {static[1:]}}}"
 
 

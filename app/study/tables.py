@@ -77,6 +77,9 @@ class Participant(ParticipantBase, table=True):
     config_sha256: str = Field(default="", max_length=64, sa_column_kwargs=_EMPTY)
     bank_sha256: str = Field(default="", max_length=64, sa_column_kwargs=_EMPTY)
     app_version: str = Field(default="", max_length=32, sa_column_kwargs=_EMPTY)
+    # the one browser tab that may write (tabs.py), and when it was last heard from
+    live_tab: str | None = Field(default=None, max_length=64)
+    live_tab_seen_at: datetime | None = None
 
 
 # How a session ends; each has its own completion code (config.Endings).
@@ -172,6 +175,21 @@ class PredictionRow(SQLModel, table=True):
     ours_sha256: str = Field(max_length=64)
     vae_sha256: str = Field(max_length=64)
     click_time_ms: float
+
+
+class TrialDraft(SQLModel, table=True):
+    """The current trial's answer in progress (drafts.py): kept until the trial is submitted.
+
+    One row per session; `seq` only grows, so a late save of older clicks never overwrites
+    newer ones. `data` is DraftSave's fields: clicks, click times, undo history, the start
+    state being answered, when the trial was first shown and its replays.
+    """
+
+    participant_id: int = Field(foreign_key="participant.id", primary_key=True)
+    trial_ref: str = Field(max_length=64)  # the plan step's `ref` (the browser's trial_id)
+    seq: int
+    data: dict = Field(default_factory=dict, sa_column=Column(JSON))
+    saved_at: datetime = Field(default_factory=utcnow)
 
 
 class Event(SQLModel, table=True):
@@ -275,6 +293,41 @@ class PredictionCreate(SubmissionBody):
     history: list[HistoryEntry] = PydField(default=[], max_length=500)
 
 
+class DraftSave(_Body):
+    """PUT .../draft: the current trial's clicks so far, saved after every change."""
+
+    trial_id: str = PydField(max_length=64)
+    seq: int = PydField(ge=0, le=10**9)  # grows with every change the page makes
+    index: int = PydField(ge=0, le=100)  # the start state being answered
+    points: list[list[Point]] = PydField(max_length=100)
+    click_times_ms: list[list[float]] = PydField(max_length=100)
+    history: list[HistoryEntry] = PydField(default=[], max_length=500)
+    shown_at_ms: float = PydField(ge=0)  # when the trial was first shown (browser epoch ms)
+    replays: int = PydField(default=0, ge=0, le=10_000)
+    predicting: bool = True  # false while the clips are still being watched
+
+
+class TabClaim(_Body):
+    """POST .../tab: this tab asks to be the session's live one (on load, then as a heartbeat)."""
+
+    tab_id: str = PydField(pattern=r"^[A-Za-z0-9_-]{8,64}$")
+    takeover: bool = False  # the person chose to continue here, closing the other tab's turn
+    opened: bool = False  # the page has just loaded (a first visit, reload or takeover)
+    t_client_ms: float = PydField(default=0, ge=0)
+
+
+class TabRelease(_Body):
+    """POST .../tab/release: the live tab is closing (sent as a beacon on pagehide)."""
+
+    tab_id: str = PydField(pattern=r"^[A-Za-z0-9_-]{8,64}$")
+
+
+class ContinueCreate(SubmissionBody):
+    """POST .../continue: a part's screen (world_intro, practice_over) was read."""
+
+    phase: Literal["world_intro", "practice_over"]
+
+
 class DeclineCreate(SubmissionBody):
     """POST .../decline: the participant does not agree to take part."""
 
@@ -350,6 +403,11 @@ class ClipData(_Body):
     trial_id: str = PydField(max_length=64)
     replays: int = PydField(ge=0, le=10_000)
 
+
+# Events the server records itself (tabs.py): a page opened, or took over from another tab,
+# with the trial on screen, the start state its draft resumed and the clicks it restored.
+PAGE_OPENED, TAB_TAKEOVER = "page_opened", "tab_takeover"
+SERVER_EVENTS = (PAGE_OPENED, TAB_TAKEOVER)
 
 # Every kind's `data`: small and flat by construction (no other keys, bounded values).
 EVENT_DATA: dict[str, type[_Body]] = {

@@ -7,6 +7,8 @@ concurrent batches, on several workers too, cannot pass the cap together, and no
 counts rows with COUNT(*).
 """
 
+import uuid
+
 from sqlalchemy import update
 from sqlalchemy.engine import Connection
 from sqlmodel import Session
@@ -35,6 +37,20 @@ def record_events(db: Session, participant: Participant, body: EventsCreate) -> 
         raise _refusal(db, participant)
     db.commit()
     return stored
+
+
+def record_server_event(db: Session, participant: Participant, kind: str,
+                        t_client_ms: float, data: dict) -> bool:
+    """Store an event the server itself saw (e.g. a page opened), within the same cap as
+    telemetry; False (nothing stored) once the session has reached it. Does not commit."""
+    conn = db.connection()
+    if not _count_stored(conn, participant.id, 1):
+        return False
+    conn.execute(Event.__table__.insert(), [{
+        "submission_id": str(uuid.uuid4()), "participant_id": participant.id, "kind": kind,
+        "t_client_ms": t_client_ms, "data": data, "received_at": utcnow()}])
+    participant.events_stored += 1
+    return True
 
 
 def _insert_new_events(conn: Connection, participant: Participant, body: EventsCreate):

@@ -34,6 +34,7 @@ from app.study.tables import (
     Participant,
     PredictionRow,
     Submission,
+    TrialDraft,
     TrialResponse,
     WithdrawalAudit,
     WithdrawalByExternalId,
@@ -42,7 +43,7 @@ from app.study.tables import (
 
 CHECKPOINT_TRIES = 5
 # children first: every one of them points at participant.id
-CHILD_TABLES = (PredictionRow, TrialResponse, Event, Submission)
+CHILD_TABLES = (PredictionRow, TrialResponse, Event, Submission, TrialDraft)
 
 
 def id_hash(salt: str, external_id: str) -> str:

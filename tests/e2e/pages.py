@@ -1,8 +1,14 @@
 """The participant page driven by clicking: the steps every browser test walks the same way."""
 
+import json
+import math
 import uuid
 
+from tests.e2e.conftest import BROWSER_STUDY
+
 VIEWPORT = {"width": 1280, "height": 900}
+CLIP_JUMP_MS = 2000  # fake-clock jump per poll while clips play
+THINK_MS = 1500  # fake-clock time between two clicks
 
 
 def fresh_recruitment() -> str:
@@ -15,14 +21,33 @@ def visible(page, screen: str) -> None:
     page.wait_for_selector(f"#screen-{screen}:not([hidden])", timeout=15000)
 
 
+# the screens between trials that only ask to go on, and their buttons
+ONWARD = {"world": "#world-done", "practice-over": "#practice-over-done", "pause": "#pause-done"}
+SHOWN = "s => document.querySelector(`#screen-${s}`)?.hidden === false"
+
+
 def through_instructions(page) -> None:
-    """Consent and instructions, by clicking."""
+    """Consent, instructions and the first part's introduction, by clicking."""
     visible(page, "consent")
     page.check("#consent-check")
     page.click("#consent-agree")
     visible(page, "instructions")
     page.click("#instructions-done")
+    onward(page)
     visible(page, "trial")
+
+
+def onward(page) -> str:
+    """Press on through a part's introduction, 'practice over' and pause screens; returns the
+    screen that asks for more (trial, survey or done)."""
+    screens = [*ONWARD, "trial", "survey", "done"]
+    while True:
+        page.wait_for_function(f"() => {json.dumps(screens)}.some({SHOWN})", timeout=15000)
+        shown = next(s for s in screens if page.evaluate(f"s => ({SHOWN})(s)", s))
+        if shown not in ONWARD:
+            return shown
+        page.click(ONWARD[shown])
+        page.wait_for_function(f"s => !({SHOWN})(s)", arg=shown, timeout=15000)
 
 
 def answer_survey(page) -> None:
@@ -32,3 +57,97 @@ def answer_survey(page) -> None:
                                                      "els => els.map(e => e.name)"))):
         page.check(f"#survey-form input[name={name}] >> nth=0")
     page.click("#survey-form button[type=submit]")
+
+
+def current_state(page, study_id: str = BROWSER_STUDY) -> dict:
+    """The server's state for this tab's session (token from sessionStorage, as the app does)."""
+    return page.evaluate(
+        """async (key) => {
+            const { token } = JSON.parse(sessionStorage.getItem(key));
+            const headers = { "X-Session-Token": token };
+            return (await fetch("/api/session/state", { headers })).json();
+        }""",
+        f"tomstudy.{study_id}.session",
+    )
+
+
+def canvas_view(page) -> tuple[float, float, float]:
+    """(px per m, x and y of the scene origin in CSS px) as the trial canvas publishes them."""
+    return tuple(page.eval_on_selector(
+        "#trial-canvas", "c => [c.dataset.pxPerM, c.dataset.originXPx, c.dataset.originYPx]"
+                         ".map(Number)"))
+
+
+def canvas_px(page, point) -> dict:
+    """Position inside the trial canvas of a scene point (the canvas has no border)."""
+    scale, origin_x, origin_y = canvas_view(page)
+    return {"x": origin_x + point[0] * scale, "y": origin_y + point[1] * scale}
+
+
+def planned_path(trial: dict, start_state: dict) -> list[list[float]]:
+    """Three mid-reach moves, as straight ahead of the robot as the scene bounds allow."""
+    bounds = trial["scene"]["bounds"]
+    reach = (trial["min_step_m"] + trial["max_step_m"]) / 2
+    margin = 0.02 * (bounds["x_max_m"] - bounds["x_min_m"])
+    start = start_state["robot"]
+    for offset_deg in (0, 15, -15, 30, -30, 45, -45, 60, -60, 90, -90, 120, -120, 150, -150, 180):
+        angle = start_state["robot_heading"] + math.radians(offset_deg)
+        path = [[start[0] + k * reach * math.cos(angle), start[1] + k * reach * math.sin(angle)]
+                for k in range(1, trial["steps_to_predict"] + 1)]
+        if all(bounds["x_min_m"] + margin <= x <= bounds["x_max_m"] - margin
+               and bounds["y_min_m"] + margin <= y <= bounds["y_max_m"] - margin for x, y in path):
+            return path
+    raise AssertionError(f"no straight path fits from {start}")
+
+
+def watch_clips(page) -> None:
+    """Jump the page's fake clock until every clip has played and predictions may start."""
+    button = page.locator("#start-predicting")
+    for _ in range(500):
+        if button.is_visible() and button.is_enabled():
+            return
+        page.clock.fast_forward(CLIP_JUMP_MS)
+    raise AssertionError("the clips never finished")
+
+
+def place(page, trial: dict, start: int, steps: list[int],
+          think_ms: float = THINK_MS) -> list[list[float]]:
+    """Click these steps of the planned path from start state `start`, `think_ms` of the
+    page's clock apart; returns the points."""
+    path = planned_path(trial, trial["start_states"][start])
+    for j in steps:
+        if think_ms:
+            page.clock.fast_forward(think_ms)
+        page.click("#trial-canvas", position=canvas_px(page, path[j]))
+    return [path[j] for j in steps]
+
+
+def start_predicting(page) -> None:
+    """Watch the clips to the end and press Make predictions."""
+    watch_clips(page)
+    page.click("#start-predicting")
+
+
+def answer_trial(page) -> dict:
+    """Answer the trial on screen (from wherever its input stands) by clicking the rest of
+    every planned path, then submit; returns its payload."""
+    trial = current_state(page)["step"]
+    if page.is_visible("#start-predicting"):
+        start_predicting(page)
+    while page.is_visible("#screen-trial"):
+        # "Start position k of K: p of n positions placed."
+        where, placed = page.inner_text("#trial-caption").split(": ")
+        start = int(where.split()[2]) - 1
+        done = int(placed.split(" of")[0])
+        place(page, trial, start, list(range(done, trial["steps_to_predict"])))
+        last = page.inner_text("#next").startswith("Submit")
+        page.click("#next")
+        if last:
+            page.wait_for_function("() => document.querySelector('#screen-trial').hidden")
+    return trial
+
+
+def wait_saved(page) -> None:
+    """Wait until the page says every click so far is on the server."""
+    page.wait_for_function(
+        "() => document.querySelector('#save-status').textContent.includes('are saved')")

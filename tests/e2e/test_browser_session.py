@@ -15,76 +15,29 @@ from pathlib import Path
 import pytest
 import yaml
 
-from app.study.plan import Phase
 from tests.conftest import ADMIN_TOKEN, REPO
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
+    THINK_MS,
     VIEWPORT,
     answer_survey,
+    canvas_px,
+    canvas_view,
+    current_state,
     fresh_recruitment,
+    onward,
+    planned_path,
     through_instructions,
     visible,
+    watch_clips,
 )
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 SCREENSHOTS = REPO / "var" / "screenshots"
-CLIP_JUMP_MS = 2000  # fake-clock jump per poll while clips play
-THINK_MS = 1500  # fake-clock time between two clicks
 RESIZED = {"width": 1300, "height": 880}
 PID = "e2e0000000000000000000a1"  # 24 hex characters, as Prolific sends
 RECRUITMENT = f"PROLIFIC_PID={PID}&STUDY_ID={'5' * 24}&SESSION_ID=e2e-session"
-
-
-def current_state(page) -> dict:
-    """The server's state for this tab's session (token from sessionStorage, as the app does)."""
-    return page.evaluate(
-        """async (key) => {
-            const { token } = JSON.parse(sessionStorage.getItem(key));
-            const headers = { "X-Session-Token": token };
-            return (await fetch("/api/session/state", { headers })).json();
-        }""",
-        f"tomstudy.{BROWSER_STUDY}.session",
-    )
-
-
-def canvas_view(page) -> tuple[float, float, float]:
-    """(px per m, x and y of the scene origin in CSS px) as the trial canvas publishes them."""
-    return tuple(page.eval_on_selector(
-        "#trial-canvas", "c => [c.dataset.pxPerM, c.dataset.originXPx, c.dataset.originYPx]"
-                         ".map(Number)"))
-
-
-def canvas_px(page, point) -> dict:
-    """Position inside the trial canvas of a scene point (the canvas has no border)."""
-    scale, origin_x, origin_y = canvas_view(page)
-    return {"x": origin_x + point[0] * scale, "y": origin_y + point[1] * scale}
-
-
-def planned_path(trial: dict, start_state: dict) -> list[list[float]]:
-    """Three mid-reach moves, as straight ahead of the robot as the scene bounds allow."""
-    bounds = trial["scene"]["bounds"]
-    reach = (trial["min_step_m"] + trial["max_step_m"]) / 2
-    margin = 0.02 * (bounds["x_max_m"] - bounds["x_min_m"])
-    start = start_state["robot"]
-    for offset_deg in (0, 15, -15, 30, -30, 45, -45, 60, -60, 90, -90, 120, -120, 150, -150, 180):
-        angle = start_state["robot_heading"] + math.radians(offset_deg)
-        path = [[start[0] + k * reach * math.cos(angle), start[1] + k * reach * math.sin(angle)]
-                for k in range(1, trial["steps_to_predict"] + 1)]
-        if all(bounds["x_min_m"] + margin <= x <= bounds["x_max_m"] - margin
-               and bounds["y_min_m"] + margin <= y <= bounds["y_max_m"] - margin for x, y in path):
-            return path
-    raise AssertionError(f"no straight path fits from {start}")
-
-
-def watch_clips(page) -> None:
-    """Jump the page's fake clock until every clip has played and predictions may start."""
-    button = page.locator("#start-predicting")
-    for _ in range(500):
-        if button.is_visible() and button.is_enabled():
-            return
-        page.clock.fast_forward(CLIP_JUMP_MS)
-    raise AssertionError("the clips never finished")
 
 
 def drop_first_answer(page) -> dict:
@@ -109,11 +62,12 @@ def predict_trial(page, screenshot: Path | None = None, replay: bool = False,
     With `undo_once`, the first click of the second start state is undone and placed again.
     """
     trial = current_state(page)["step"]
-    watch_clips(page)
-    if replay:
-        page.click("#replay")
+    if page.is_visible("#start-predicting"):  # else a draft resumed it in predictions
         watch_clips(page)
-    page.click("#start-predicting")
+        if replay:
+            page.click("#replay")
+            watch_clips(page)
+        page.click("#start-predicting")
     clicks = {}
     for k, start_state in enumerate(trial["start_states"]):
         for j, point in enumerate(planned_path(trial, start_state)):
@@ -137,7 +91,7 @@ def predict_trial(page, screenshot: Path | None = None, replay: bool = False,
         assert seen["dropped"] == 201
         page.clock.fast_forward(1000)  # the app's back-off before the retry
     page.wait_for_function(
-        "h => !document.querySelector('#screen-survey').hidden"
+        "h => document.querySelector('#screen-trial').hidden"
         " || document.querySelector('#trial-heading').textContent !== h", arg=heading)
     if lose_answer:
         page.unroute("**/predictions")
@@ -176,6 +130,7 @@ def complete_session(page, base_url: str) -> dict:
     page.click("#consent-agree")
     visible(page, "instructions")
     page.click("#instructions-done")
+    onward(page)
     visible(page, "trial")
     assert "Practice" in page.inner_text("#trial-heading")
     page.clock.fast_forward(1200)
@@ -192,7 +147,7 @@ def complete_session(page, base_url: str) -> dict:
     clicks = {}
     trial, trial_clicks = predict_trial(page)
     clicks[trial["trial_id"]] = trial_clicks
-    while current_state(page)["phase"] == Phase.TRIAL:
+    while onward(page) == "trial":
         n = len(clicks)  # 1 = the first main trial
         trial, trial_clicks = predict_trial(page, SCREENSHOTS / "predict.png" if n == 1 else None,
                                             replay=n == 2, lose_answer=n == 3,
@@ -255,7 +210,7 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
     n_worlds = len(config["worlds"])
     per_trial = config["start_states"] * config["steps_to_predict"]
     assert len(main) == n_worlds * config["trials_per_world"] * per_trial == 300
-    assert len(practice) == config["practice_trials"] * per_trial
+    assert len(practice) == n_worlds * config["practice_trials"] * per_trial
     assert len(checks) == n_worlds * config["attention_checks"]["per_world"] * per_trial
     assert all(truthy(r["completed"]) for r in mine)
     assert len({r["trial_id"] for r in mine}) == len(done["clicks"])
@@ -280,8 +235,9 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
     resized = {"w": RESIZED["width"], "h": RESIZED["height"]}
     assert resized in [data for kind, data in events if kind == "resize"]
     histories = stored_histories(browser_server.db_path, PID)
+    # the practice's undo and reset (check_input_rules) survived the reload with its draft
     assert [[(h["action"], h["start_index"]) for h in histories[t]] for t in trial_ids] == [
-        [], [("undo", 1)], *[[]] * (len(trial_ids) - 2)]
+        [("undo", 0), ("reset", 0)], [("undo", 1)], *[[]] * (len(trial_ids) - 2)]
     assert stored_ending(browser_server.db_path, PID) == ("completed", code)
 
 
@@ -425,12 +381,3 @@ def test_reduced_motion_shows_still_frames(chromium, browser_server):
     assert first == second and finished  # the clip's final frame, held still
     first, second, finished = first_clip_frames(chromium, browser_server.url, "no-preference")
     assert first != second and finished  # the same clip animates
-
-
-def test_a_link_without_platform_parameters_gets_a_clear_page(chromium, browser_server):
-    page = chromium.new_page(viewport=VIEWPORT)
-    page.goto(f"{browser_server.url}/s/{BROWSER_STUDY}?PROLIFIC_PID=not-an-id")
-    visible(page, "error")
-    text = page.inner_text("#error-text")
-    assert "PROLIFIC_PID" in text and "Prolific" in text and page.is_hidden("#error-reload")
-    page.close()

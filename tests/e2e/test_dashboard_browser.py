@@ -53,7 +53,7 @@ def test_dashboard_lists_sessions_and_replays_a_trial(browser_server, bot_sessio
     page.wait_for_selector(".trial-row")
     assert public_id in page.text_content("#replay-heading")
     trials = page.locator(".trial-row")
-    assert trials.count() == 23  # 1 practice + 2 worlds x (10 trials + 1 attention check)
+    assert trials.count() == 24  # 2 worlds x (1 practice + 10 trials + 1 attention check)
     trials.nth(2).locator("button").click()
     page.wait_for_selector("#replay-view:not([hidden])")
     assert page.get_attribute("#replay-clicks-count", "data-clicks") == "15"

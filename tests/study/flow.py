@@ -10,7 +10,7 @@ from fastapi.testclient import TestClient
 
 from app.study.bots import segment_key
 from app.study.main import create_app
-from app.study.plan import TRIAL_PHASES
+from app.study.plan import PART_PHASES, TRIAL_PHASES
 from app.study.sessions import SESSION_HEADER, SESSION_PATH
 from tests.conftest import ADMIN_TOKEN
 
@@ -55,6 +55,15 @@ def prediction_body(trial: dict, points: list | None = None, duration_ms: float 
     return {"submission_id": new_id(), "trial_id": trial["trial_id"], "points": points,
             "click_times_ms": [[gap * (i * n + j + 1) for j in range(n)] for i in range(k)],
             "shown_at_ms": 1000.0, "submitted_at_ms": 1000.0 + duration_ms, "replays": 1}
+
+
+def draft_body(trial: dict, clicks: int = 2, seq: int = 1) -> dict:
+    """A draft of `trial` (PUT .../draft): `clicks` of its first start state's straight moves."""
+    first = straight_clicks(trial)[0][:clicks]
+    rest = [[] for _ in trial["start_states"][1:]]
+    return {"trial_id": trial["trial_id"], "seq": seq, "index": 0, "points": [first, *rest],
+            "click_times_ms": [[1000.0 * (j + 1) for j in range(clicks)], *rest],
+            "history": [], "shown_at_ms": 1000.0, "replays": 0}
 
 
 def prolific(name: str) -> dict:
@@ -131,15 +140,25 @@ class Participant:
         return self.post("consent", {"submission_id": new_id(), "agree": True, "client": DEVICE})
 
     def pass_intro(self) -> dict:
-        """Consent and instructions."""
+        """Consent, instructions and the first part's introduction: at the practice trial."""
         assert self.consent().status_code == 200
         r = self.post("instructions", {"submission_id": new_id()})
         assert r.status_code == 200, r.text
-        return r.json()
+        return self.pass_screens()
+
+    def pass_screens(self) -> dict:
+        """Continue through part screens (a world's introduction, practice over); the state
+        after them."""
+        state = self.state()
+        while state["phase"] in PART_PHASES:
+            r = self.post("continue", {"submission_id": new_id(), "phase": state["phase"]})
+            assert r.status_code == 200, r.text
+            state = r.json()
+        return state
 
     def answer_trial(self, bank: dict | None = None, duration_ms: float = 8000) -> dict:
-        """Answer the current trial (attention checks along the robot's true first move)."""
-        trial = self.state()["step"]
+        """Answer the next trial (attention checks along the robot's true first move)."""
+        trial = self.pass_screens()["step"]
         points = straight_clicks(trial)
         record = bank_trial(bank, trial) if bank is not None else None
         if record is not None and record["kind"] == "attention":
@@ -150,6 +169,11 @@ class Participant:
         r = self.post("predictions", body)
         assert r.status_code == 201, r.text
         return r.json()
+
+    def save_draft(self, clicks: int = 2, seq: int = 1):
+        """PUT a draft of the next trial: `clicks` straight clicks from its first start state."""
+        trial = self.pass_screens()["step"]
+        return self.client.put(self.url("draft"), json=draft_body(trial, clicks, seq))
 
     def survey(self, strategy: str = "followed the lanes") -> dict:
         """POST the closing survey (`strategy` as the free-text answer); the answered state."""
@@ -162,14 +186,14 @@ class Participant:
     def finish(self, bank: dict | None = None, duration_ms: float = 8000,
                strategy: str = "followed the lanes") -> dict:
         """Answer every remaining trial and the survey."""
-        while self.state()["phase"] in TRIAL_PHASES:
+        while self.pass_screens()["phase"] in TRIAL_PHASES:
             self.answer_trial(bank, duration_ms)
         return self.survey(strategy)
 
 
 def fail_attention_checks(p: Participant, bank: dict) -> None:
     """Answer every trial; attention checks against the robot's plain move."""
-    while p.state()["phase"] in TRIAL_PHASES:
+    while p.pass_screens()["phase"] in TRIAL_PHASES:
         trial = p.state()["step"]
         record = bank_trial(bank, trial)
         points = straight_clicks(trial)

@@ -49,7 +49,7 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
     assert done["phase"] == Phase.DONE and done["step"]["completion_code"] == "C1TOMSTUDY"
     assert done["step"]["redirect_url"].endswith("cc=C1TOMSTUDY")
     total = done["progress"]["total"]
-    assert total == 1 + 2 * (3 + 1)  # practice + per world 3 trials and 1 attention check
+    assert total == 2 * (1 + 3 + 1)  # per world: 1 practice, 3 trials and 1 attention check
 
     r = client.get(f"/api/researcher/export.csv?study_id={small_study.study_id}", headers=ADMIN)
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
@@ -58,7 +58,7 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
     assert frame["completed"].dtype == bool and frame["attention_passed"].all()
     assert frame["ours_code"].dtype.kind == "i" and frame["human_vx"].dtype.kind == "f"
     assert frame.groupby("trial_id").size().eq(k * n).all()
-    assert frame["is_practice"].sum() == k * n and frame["attention_check"].sum() == 2 * k * n
+    assert frame["is_practice"].sum() == 2 * k * n and frame["attention_check"].sum() == 2 * k * n
     for (trial_id, start), kinds in frame.groupby(["trial_id", "start_index"])["start_kind"]:
         assert set(kinds) == {bank[trial_id]["start_states"][start]["start_kind"]}
     arms = frame.fillna({"arm": ""}).groupby("trial_id")["arm"].agg(set)
@@ -186,7 +186,7 @@ def test_excluded_completions_do_not_count_for_balance(client, small_study, bank
     excluded = summary["alignment_error"]["exclusions"]
     assert excluded["excluded_too_fast"] == 1 and excluded["excluded_incomplete"] == 1
     assert excluded["participants_kept"] == 2 - ("careless" not in counted)
-    assert running.state()["phase"] == Phase.TRIAL
+    assert running.pass_screens()["phase"] == Phase.TRIAL
 
 
 # ---------------------------------------------------------------- refusals

@@ -31,7 +31,8 @@ def _trial(label: int, first_moves: list[tuple[float, float]]) -> dict:
 def test_short_and_backward_steps_are_counted():
     forward = [(0, 0), (1, 0), (2, 0), (3, 0), (3.05, 0)]  # last step shorter than 0.1 m
     backward = [(0, 0), (1, 0), (0.5, 0), (1.5, 0), (2.5, 0)]  # one step against travel
-    bank = {"min_step_m": 0.1, "label_names": ["a"], "trials": [_trial(0, [(1, 0)] * 2)]}
+    bank = {"min_step_m": 0.1, "max_step_m": 1.0, "dt_s": 0.5, "label_names": ["a"],
+            "trials": [_trial(0, [(1, 0)] * 2)]}
     figures = world_figures(_trajectories([forward, backward]), bank)
     assert figures["short_steps"] == pytest.approx(1 / 8)
     assert figures["against_mean_direction"] == pytest.approx(1 / 8)

@@ -149,7 +149,7 @@ def test_upgrading_keeps_every_row_and_value(db_url, tmp_path, small_study):
 
     assert (report.before, report.after, report.stamped) == ("0001", migrate.head(), None)
     assert report.rows_before == FIXTURE_ROWS
-    assert report.rows_after == FIXTURE_ROWS | {"withdrawalaudit": 0}
+    assert report.rows_after == FIXTURE_ROWS | {"withdrawalaudit": 0, "trialdraft": 0}
     old_columns = {name: list(migrate.revision_columns("0001")[name]) for name in before}
     assert snapshot(engine, old_columns) == before
     added = snapshot(engine, {"participant": ["config_sha256", "bank_sha256", "app_version",
@@ -167,6 +167,28 @@ def test_upgrading_keeps_every_row_and_value(db_url, tmp_path, small_study):
         assert client.get("/healthz").status_code == 200
     with engine.connect() as conn:
         assert conn.execute(text("SELECT count(*) FROM participant")).scalar_one() == 6
+    engine.dispose()
+    source.dispose()
+
+
+def test_0004_moves_a_session_that_ended_early_back_to_the_step_it_ended_at(db_url, tmp_path):
+    source = make_engine(load_fixture(tmp_path / "old.db"))
+    engine = make_engine(db_url)
+    migrate_to(engine, "0001")
+    copy_rows(source, engine)
+    migrate_to(engine, "0003")
+    with engine.begin() as conn:  # the unfinished session declined, as 0003's code stored it
+        conn.execute(text("UPDATE participant SET outcome = 'declined_consent', "
+                          "position = 20 WHERE id = 5"))
+        conn.execute(text("UPDATE submission SET kind = 'decline', step_index = 0 WHERE id = "
+                          "(SELECT min(id) FROM submission WHERE participant_id = 5)"))
+        positions = dict(conn.execute(text("SELECT id, position FROM participant")).all())
+
+    migrate.upgrade(engine)
+
+    with engine.connect() as conn:
+        after = dict(conn.execute(text("SELECT id, position FROM participant")).all())
+    assert after == positions | {5: 0}
     engine.dispose()
     source.dispose()
 
@@ -191,7 +213,7 @@ def test_db_upgrade_on_the_database_9c39751_made(tmp_path):
            f"{migrate.head()}" in lines[0]
     counted = {line.split()[0]: line.split()[1:] for line in lines[2:]}
     assert counted == {name: [str(n), str(n)] for name, n in FIXTURE_ROWS.items()} \
-        | {"withdrawalaudit": ["-", "0"]}
+        | {"withdrawalaudit": ["-", "0"], "trialdraft": ["-", "0"]}
     create_tables(engine)  # the server accepts it now
     with engine.connect() as conn:
         assert conn.execute(text("SELECT plan FROM participant WHERE id = 1")).scalar_one() \

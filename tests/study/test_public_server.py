@@ -178,7 +178,8 @@ def test_a_reused_submission_id_must_carry_the_same_request(client, small_study)
     assert p.post("consent", consent).status_code == 200  # a true retry
     r = p.post("instructions", {"submission_id": consent["submission_id"]})
     assert r.status_code == 422 and r.json()["detail"].startswith("submission_id:")
-    trial = p.post("instructions", {"submission_id": new_id()}).json()["step"]
+    assert p.post("instructions", {"submission_id": new_id()}).status_code == 200
+    trial = p.pass_screens()["step"]
     body = prediction_body(trial)
     assert p.post("predictions", body).status_code == 201
     changed = dict(body, points=prediction_body(trial)["points"][::-1])

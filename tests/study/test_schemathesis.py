@@ -21,15 +21,16 @@ from schemathesis.config import SchemathesisConfig
 
 from app.settings import Settings
 from app.study.main import create_app
-from app.study.plan import TRIAL_PHASES, Phase
+from app.study.plan import PART_PHASES, TRIAL_PHASES, Phase
 from app.study.recruitment import preview_key
 from tests.study.flow import ADMIN, TOKEN, Participant, new_id, prolific
 
 MAX_EXAMPLES = int(os.environ.get("SCHEMATHESIS_MAX_EXAMPLES", "15"))
 MIN_CASES = int(os.environ.get("SCHEMATHESIS_MIN_CASES", "100"))
 # A session write valid per the schema may still break a study rule the schema does not
-# state (422): clicks outside the scene or out of reach, answers to other questions,
-# telemetry past its cap, a submission_id reused for another request; or exceed 64 KiB.
+# state (422): clicks outside the scene or out of reach, a draft that does not fit its
+# trial, answers to other questions, telemetry past its cap, a submission_id reused for
+# another request; or exceed 64 KiB.
 STUDY_RULES = ["2xx", "3xx", "401", "403", "404", "409", "413", "422"]
 # schemathesis' list of statuses that reject invalid data, plus 413: a body over 64 KiB
 REJECTIONS = ["400", "401", "403", "404", "405", "406", "409", "413", "415", "422", "428",
@@ -37,7 +38,8 @@ REJECTIONS = ["400", "401", "403", "404", "405", "406", "409", "413", "415", "42
 CONFIG = SchemathesisConfig.from_dict({
     "checks": {"negative_data_rejection": {"expected-statuses": REJECTIONS}},
     "operations": [{
-        "include-path-regex": "/(consent|instructions|predictions|survey|events)$",
+        "include-path-regex":
+            "/(consent|decline|screen-out|instructions|continue|draft|predictions|survey|events)$",
         "checks": {"positive_data_acceptance": {"expected-statuses": STUDY_RULES}}}]})
 # The schema does not depend on a study, so it is read at import from an app that never
 # starts; the requests go to the small study's app (`study_app`).
@@ -59,8 +61,8 @@ def real_values(study_app, small_study) -> dict[str, list]:
     """Real values to swap in for drawn ones, by key (None: keep the drawn value)."""
     tokens = []
     with TestClient(study_app) as client:
-        for phase in (Phase.CONSENT, Phase.INSTRUCTIONS, Phase.PRACTICE, Phase.SURVEY,
-                      Phase.DONE):
+        for phase in (Phase.CONSENT, Phase.INSTRUCTIONS, Phase.WORLD_INTRO, Phase.PRACTICE,
+                      Phase.PRACTICE_OVER, Phase.SURVEY, Phase.DONE):
             tokens.append(session_at(client, small_study.study_id, phase))
     people = [prolific(f"fuzz-{i}") for i in range(20)]  # a new session, then resumes
     return {"X-Session-Token": [None, *tokens], "study_id": [None, small_study.study_id],
@@ -72,16 +74,17 @@ def session_at(client, study_id: str, phase: Phase) -> str:
     """The token of a new anonymous session moved on to `phase`."""
     p = Participant(client, study_id)
     p.start()
-    if phase != Phase.CONSENT:
-        p.consent()
-    if phase in (Phase.PRACTICE, Phase.SURVEY, Phase.DONE):
-        p.post("instructions", {"submission_id": new_id()})
-    if phase in (Phase.SURVEY, Phase.DONE):
-        while p.state()["phase"] in TRIAL_PHASES:
+    while (now := p.state()["phase"]) != phase:
+        if now == Phase.CONSENT:
+            p.consent()
+        elif now == Phase.INSTRUCTIONS:
+            p.post("instructions", {"submission_id": new_id()})
+        elif now in PART_PHASES:
+            p.post("continue", {"submission_id": new_id(), "phase": now})
+        elif now in TRIAL_PHASES:
             p.answer_trial()
-    if phase == Phase.DONE:
-        p.finish()
-    assert p.state()["phase"] == phase
+        else:
+            p.survey()
     return p.token
 
 

@@ -11,7 +11,7 @@ import httpx
 import pandas as pd
 import pytest
 
-from app.study.plan import TRIAL_PHASES
+from app.study.plan import PART_PHASES, TRIAL_PHASES
 from tests.conftest import free_port, fresh_database, start_server
 from tests.study.flow import ADMIN, Participant, new_id, prediction_body, prolific
 
@@ -81,7 +81,7 @@ def test_sigkill_under_load_keeps_every_acknowledged_submission(small_study, tmp
             acknowledged[p.token] = []
             while not stop.is_set():
                 try:
-                    state = p.state()
+                    state = p.pass_screens()
                     if state["phase"] not in TRIAL_PHASES:
                         return
                     body = prediction_body(state["step"])
@@ -95,6 +95,7 @@ def test_sigkill_under_load_keeps_every_acknowledged_submission(small_study, tmp
         for t in threads:
             t.start()
         while sum(map(len, acknowledged.values())) < 6:
+            assert any(t.is_alive() for t in threads), "every participant stopped before 6 answers"
             time.sleep(0.02)
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
@@ -136,7 +137,7 @@ def test_two_workers_on_postgres_serve_concurrent_participants(small_study, post
             p.start(**prolific(f"w2-{i}"))
             p.pass_intro()
             p.answer_trial()
-            body = prediction_body(p.state()["step"])
+            body = prediction_body(p.pass_screens()["step"])
             statuses = [p.post("predictions", body).status_code for _ in range(2)]  # + a retry
             assert statuses == [201, 200]
             return p.state()["progress"]["done"]
@@ -170,6 +171,9 @@ def test_many_concurrent_participants_on_one_sqlite_worker(small_study, live_ser
                           json={"submission_id": new_id()})
         for _ in range(2):
             state = (await client.get("/api/session/state", headers=session)).json()
+            while state["phase"] in PART_PHASES:  # a part's introduction, practice over
+                state = (await client.post("/api/session/continue", headers=session, json={
+                    "submission_id": new_id(), "phase": state["phase"]})).json()
             r = await client.post("/api/session/predictions", headers=session,
                                   json=prediction_body(state["step"]))
             assert r.status_code == 201, r.text

@@ -19,6 +19,7 @@ from app.study.tables import (
     Participant,
     PredictionRow,
     Submission,
+    TrialDraft,
     TrialResponse,
     WithdrawalAudit,
     utcnow,
@@ -35,7 +36,7 @@ from tests.study.flow import (
 )
 from tests.study.flow import Participant as Driver
 
-TABLES = (Participant, Submission, TrialResponse, PredictionRow, Event)
+TABLES = (Participant, Submission, TrialResponse, PredictionRow, Event, TrialDraft)
 LEAVER = prolific("leaver")
 STAYER = prolific("stayer")
 
@@ -67,6 +68,7 @@ def study(client, small_study, bank):
     sid = small_study.study_id
     first = at_first_trial(client, sid, **LEAVER)
     first.answer_trial(bank)
+    assert first.save_draft().status_code == 200  # clicks in progress on its next trial
     post_events(first, 2)
     with client.app.state.engine.begin() as conn:  # the first attempt goes stale
         conn.execute(update(Participant.__table__)
@@ -142,7 +144,7 @@ def test_a_withdrawn_id_may_start_again_as_a_new_person(client, small_study, stu
     assert again.status == 201 and body["resumed"] is False  # not the completed one: a 409 before
     assert again.state()["phase"] == Phase.CONSENT
     assert counts(client, ext) == {"participant": 1, "submission": 0, "trialresponse": 0,
-                                   "predictionrow": 0, "event": 0}
+                                   "predictionrow": 0, "event": 0, "trialdraft": 0}
     balance_is_exact(client, study)
 
 
@@ -162,7 +164,7 @@ def test_tomstudy_withdraw(client, small_study, study, db_url, monkeypatch):
     line = json.loads(done.stdout)
     assert line["via"] == "cli" and ext not in done.stdout
     assert line["row_counts"] == {"predictionrow": 15, "trialresponse": 1, "event": 1,
-                                  "submission": 3, "participant": 1}
+                                  "submission": 4, "trialdraft": 0, "participant": 1}
     assert counts(client, ext)["participant"] == 0
     balance_is_exact(client, study)
 

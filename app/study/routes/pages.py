@@ -3,14 +3,18 @@
 from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 
+from app.prediction_view import MIN_WINDOW_PX
+from app.study import notices
 from app.study.deps import study_context
+from app.study.errors import Notice
 from app.study.plan import BEFORE_TRIALS, Phase
 from app.study.recruitment import MTURK_PREVIEW
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
 # what the participant page is told about phases (app.js keeps one handler per phase)
 PHASES = {"phases": [phase.value for phase in Phase],
-          "screen_out_phases": [phase.value for phase in BEFORE_TRIALS]}
+          "screen_out_phases": [phase.value for phase in BEFORE_TRIALS],
+          "min_window": MIN_WINDOW_PX}
 
 
 def _render(request: Request, name: str, study_id: str, **extra) -> HTMLResponse:
@@ -35,9 +39,18 @@ def show_study(study_id: str, request: Request) -> HTMLResponse:
     MTurk's HIT preview (assignmentId=ASSIGNMENT_ID_NOT_AVAILABLE) gets a page that
     describes the study and loads no script, so no session can start from it.
     """
+    if study_id not in request.app.state.studies:
+        return notice_page(request, notices.unknown_study(), status_code=404)
     if request.query_params.get("assignmentId") == MTURK_PREVIEW:
         return _render(request, "mturk_preview.html", study_id)
     return _render(request, "study.html", study_id, **PHASES)
+
+
+def notice_page(request: Request, notice: Notice, status_code: int) -> HTMLResponse:
+    """A plain-language page that turns a participant away (no script, nothing starts)."""
+    return request.app.state.templates.TemplateResponse(
+        request, "notice.html", {"title": "Online study", "notice": notice,
+                                 "static_url": "/static"}, status_code=status_code)
 
 
 @router.get("/researcher", response_class=HTMLResponse)

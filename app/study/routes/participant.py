@@ -6,13 +6,15 @@ URL: request lines end up in proxy access logs and browser history.
 
 from fastapi import APIRouter, Request, Response, status
 
-from app.study import crud, sessions, telemetry
-from app.study.deps import ContextDep, ParticipantDep, SessionDep, study_context
+from app.study import crud, drafts, sessions, tabs, telemetry
+from app.study.deps import ContextDep, ParticipantDep, SessionDep, WriterDep, study_context
 from app.study.sessions import SESSION_PATH
 from app.study.state import state_json
 from app.study.tables import (
     ConsentCreate,
+    ContinueCreate,
     DeclineCreate,
+    DraftSave,
     EventsCreate,
     ParticipantPublic,
     PredictionCreate,
@@ -20,15 +22,18 @@ from app.study.tables import (
     SessionCreate,
     SubmissionBody,
     SurveyCreate,
+    TabClaim,
+    TabRelease,
 )
 
 router = APIRouter(tags=["participant"])
 STATE_DOC = "`{phase, progress: {done, total}, step}` (app/study/API.md)"
 
 
-def state_response(ctx, participant, status_code: int = 200) -> Response:
+def state_response(ctx, participant, status_code: int = 200, draft: dict | None = None
+                   ) -> Response:
     """The participant's state as JSON (trial payloads pre-encoded, see app/study/state.py)."""
-    return Response(state_json(ctx, participant), status_code=status_code,
+    return Response(state_json(ctx, participant, draft), status_code=status_code,
                     media_type="application/json")
 
 
@@ -52,13 +57,35 @@ async def create_session(body: SessionCreate, request: Request, response: Respon
 
 
 @router.get(f"{SESSION_PATH}/state", response_description=STATE_DOC)
-async def read_state(participant: ParticipantDep, ctx: ContextDep) -> Response:
-    """The current phase, progress and what the phase needs (a refresh resumes here)."""
-    return state_response(ctx, participant)
+async def read_state(participant: ParticipantDep, ctx: ContextDep, db: SessionDep) -> Response:
+    """The current phase, progress and what the phase needs; in a trial, the clicks saved
+    so far (`step.draft`), so a refresh resumes where it was."""
+    return state_response(ctx, participant, draft=drafts.current_draft(db, participant))
+
+
+@router.put(f"{SESSION_PATH}/draft")
+async def save_draft(body: DraftSave, participant: WriterDep, ctx: ContextDep,
+                     db: SessionDep) -> dict:
+    """Keep the current trial's clicks so far; answers `{seq}`, the newest stored."""
+    return {"seq": drafts.save_draft(db, ctx, participant, body)}
+
+
+@router.post(f"{SESSION_PATH}/tab", responses={409: {"description": "another tab is the live one"}})
+async def claim_tab(body: TabClaim, participant: ParticipantDep, db: SessionDep) -> dict:
+    """Make this browser tab the session's live one (on load, then as a heartbeat); answers
+    how often to say so again."""
+    tabs.claim_tab(db, participant, body, drafts.current_draft(db, participant))
+    return {"live": True, "heartbeat_s": tabs.HEARTBEAT_S}
+
+
+@router.post(f"{SESSION_PATH}/tab/release", status_code=status.HTTP_204_NO_CONTENT)
+async def release_tab(body: TabRelease, participant: ParticipantDep, db: SessionDep) -> None:
+    """The live tab is closing (a beacon): another may claim the session without asking."""
+    tabs.release_tab(db, participant, body)
 
 
 @router.post(f"{SESSION_PATH}/consent")
-async def submit_consent(body: ConsentCreate, participant: ParticipantDep, ctx: ContextDep,
+async def submit_consent(body: ConsentCreate, participant: WriterDep, ctx: ContextDep,
                          db: SessionDep) -> Response:
     """Record consent; answers the next state."""
     crud.record_consent(db, participant, body)
@@ -66,7 +93,7 @@ async def submit_consent(body: ConsentCreate, participant: ParticipantDep, ctx: 
 
 
 @router.post(f"{SESSION_PATH}/decline")
-async def submit_decline(body: DeclineCreate, participant: ParticipantDep, ctx: ContextDep,
+async def submit_decline(body: DeclineCreate, participant: WriterDep, ctx: ContextDep,
                          db: SessionDep) -> Response:
     """The participant does not agree: the session ends (declined_consent); answers done."""
     crud.record_decline(db, ctx, participant, body)
@@ -74,7 +101,7 @@ async def submit_decline(body: DeclineCreate, participant: ParticipantDep, ctx: 
 
 
 @router.post(f"{SESSION_PATH}/screen-out")
-async def submit_screen_out(body: ScreenOutCreate, participant: ParticipantDep,
+async def submit_screen_out(body: ScreenOutCreate, participant: WriterDep,
                             ctx: ContextDep, db: SessionDep) -> Response:
     """The device cannot run the study (before any trial): the session ends (screened_out)."""
     crud.record_screen_out(db, ctx, participant, body)
@@ -82,16 +109,25 @@ async def submit_screen_out(body: ScreenOutCreate, participant: ParticipantDep,
 
 
 @router.post(f"{SESSION_PATH}/instructions")
-async def submit_instructions(body: SubmissionBody, participant: ParticipantDep,
+async def submit_instructions(body: SubmissionBody, participant: WriterDep,
                               ctx: ContextDep, db: SessionDep) -> Response:
     """Record that the instructions were read; answers the next state."""
     crud.record_instructions(db, participant, body)
     return state_response(ctx, participant)
 
 
+@router.post(f"{SESSION_PATH}/continue")
+async def submit_continue(body: ContinueCreate, participant: WriterDep, ctx: ContextDep,
+                          db: SessionDep) -> Response:
+    """The participant read a part's screen (world_intro, practice_over); answers the next
+    state."""
+    crud.record_continue(db, participant, body)
+    return state_response(ctx, participant)
+
+
 @router.post(f"{SESSION_PATH}/predictions", status_code=status.HTTP_201_CREATED,
              responses={200: {"description": "this submission_id was already stored"}})
-async def submit_predictions(body: PredictionCreate, participant: ParticipantDep,
+async def submit_predictions(body: PredictionCreate, participant: WriterDep,
                              ctx: ContextDep, db: SessionDep) -> Response:
     """Store one trial's clicked positions (start states x steps); answers the next state."""
     stored = crud.record_predictions(db, ctx, participant, body)
@@ -99,7 +135,7 @@ async def submit_predictions(body: PredictionCreate, participant: ParticipantDep
 
 
 @router.post(f"{SESSION_PATH}/survey")
-async def submit_survey(body: SurveyCreate, participant: ParticipantDep, ctx: ContextDep,
+async def submit_survey(body: SurveyCreate, participant: WriterDep, ctx: ContextDep,
                         db: SessionDep) -> Response:
     """Store the closing survey; the session is then done."""
     crud.record_survey(db, ctx, participant, body)

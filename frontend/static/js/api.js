@@ -1,11 +1,20 @@
 // Thin client for the study HTTP API (app/study/API.md). No state beyond the token.
 
-/** An HTTP answer outside 2xx, with the server's `detail` message. */
+/**
+ * An HTTP answer outside 2xx, with the server's `detail` message and, for refusals a
+ * participant can meet, its plain-language `notice` ({title, text, action}).
+ */
 export class ApiError extends Error {
-  constructor(status, detail) {
+  constructor(status, detail, notice = null) {
     super(`${status}: ${detail}`);
     this.status = status;
     this.detail = detail;
+    this.notice = notice;
+  }
+
+  /** True when the server refused because another tab is the session's live one. */
+  get otherTab() {
+    return this.status === 409 && String(this.detail).startsWith("tab:");
   }
 }
 
@@ -42,7 +51,9 @@ export async function requestJson(method, path, body, headers = {}) {
   } catch {
     parsed = { detail: text };
   }
-  if (!response.ok) throw new ApiError(response.status, parsed?.message ?? detailText(parsed?.detail ?? text));
+  if (!response.ok) {
+    throw new ApiError(response.status, parsed?.message ?? detailText(parsed?.detail ?? text), parsed?.notice ?? null);
+  }
   return parsed;
 }
 
@@ -71,11 +82,14 @@ const enc = encodeURIComponent;
 /**
  * The participant side of the API, bound to one session token once it is known. The token
  * travels in the X-Session-Token header, never in a URL (proxies and history keep URLs).
+ * Writes also name this page's tab (`tabId`, header X-Tab-Id), so the server refuses them
+ * once another tab has taken the session over (app/study/tabs.py).
  */
 export class StudyApi {
   constructor(studyId) {
     this.studyId = studyId;
     this.token = null;
+    this.tabId = null;
   }
 
   startSession(recruitment, preview = null, options = {}) {
@@ -84,49 +98,79 @@ export class StudyApi {
     return sendUntilAcknowledged("POST", "/api/sessions", body, options);
   }
 
-  sessionHeaders() {
-    return { "X-Session-Token": this.token };
+  /** The session token, and this tab's id on writes. */
+  headers({ write = false } = {}) {
+    const headers = { "X-Session-Token": this.token };
+    if (write && this.tabId) headers["X-Tab-Id"] = this.tabId;
+    return headers;
   }
 
-  /** POST a write of this session until the server acknowledges it. */
-  send(what, body, options = {}) {
-    return sendUntilAcknowledged("POST", `/api/session/${what}`, body, { ...options, headers: this.sessionHeaders() });
+  /** A write retried until acknowledged, naming this tab. */
+  write(what, body, options = {}, method = "POST") {
+    return sendUntilAcknowledged(method, `/api/session/${what}`, body, { ...options, headers: this.headers({ write: true }) });
   }
 
   state() {
-    return requestJson("GET", "/api/session/state", undefined, this.sessionHeaders());
+    return requestJson("GET", "/api/session/state", undefined, this.headers());
   }
 
   /** Consent; the device info (`client`) is stored from here on, never before. */
   consent(client, options) {
-    return this.send("consent", { submission_id: newUuid(), agree: true, client }, options);
+    return this.write("consent", { submission_id: newUuid(), agree: true, client }, options);
   }
 
   decline(options) {
-    return this.send("decline", { submission_id: newUuid() }, options);
+    return this.write("decline", { submission_id: newUuid() }, options);
   }
 
   screenOut(reason, options) {
-    return this.send("screen-out", { submission_id: newUuid(), reason }, options);
+    return this.write("screen-out", { submission_id: newUuid(), reason }, options);
   }
 
   instructionsDone(options) {
-    return this.send("instructions", { submission_id: newUuid() }, options);
+    return this.write("instructions", { submission_id: newUuid() }, options);
   }
 
   /** `body` must already carry its submission_id so a retry reuses it. */
   predictions(body, options) {
-    return this.send("predictions", body, options);
+    return this.write("predictions", body, options);
+  }
+
+  /** A part's screen was read (world_intro or practice_over). */
+  continueFrom(phase, options) {
+    return this.write("continue", { submission_id: newUuid(), phase }, options);
+  }
+
+  /** Keep the current trial's clicks so far (one attempt: the caller retries the newest). */
+  saveDraft(draft) {
+    return requestJson("PUT", "/api/session/draft", draft, this.headers({ write: true }));
+  }
+
+  /** Claim the session for this tab (on load with `opened`, then as a heartbeat). */
+  claimTab({ takeover = false, opened = false } = {}) {
+    return requestJson("POST", "/api/session/tab", { tab_id: this.tabId, takeover, opened, t_client_ms: Date.now() }, this.headers());
+  }
+
+  /** The page is going away: let another tab claim the session without asking. A keepalive
+   * fetch rather than sendBeacon, which cannot carry the token header. */
+  releaseTab() {
+    if (!this.token || !this.tabId) return;
+    fetch("/api/session/tab/release", {
+      method: "POST",
+      headers: { "Content-Type": "application/json", ...this.headers() },
+      body: JSON.stringify({ tab_id: this.tabId }),
+      keepalive: true,
+    }).catch(() => {});
   }
 
   survey(answers, options) {
-    return this.send("survey", { submission_id: newUuid(), answers }, options);
+    return this.write("survey", { submission_id: newUuid(), answers }, options);
   }
 
   events(events, { keepalive = false } = {}) {
     return fetch("/api/session/events", {
       method: "POST",
-      headers: { "Content-Type": "application/json", ...this.sessionHeaders() },
+      headers: { "Content-Type": "application/json", ...this.headers() },
       body: JSON.stringify({ events }),
       keepalive,
     });

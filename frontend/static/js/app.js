@@ -1,14 +1,21 @@
-// The participant app: one page driven by GET /api/sessions/{token}/state.
+// The participant app: one page driven by GET /api/session/state (token in X-Session-Token).
 import { ApiError, StudyApi, newUuid } from "./api.js";
 import { InstructionsDemo } from "./demo.js";
 import { ClipPlayer, trialClips } from "./player.js";
 import { PredictionInput } from "./predict.js";
+import { drawBackground, label, prepareCanvas } from "./scene.js";
 
-const MIN_WIDTH_PX = 900;
-const MIN_HEIGHT_PX = 600;
 const RECRUITMENT_PARAMS = ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID", "workerId", "assignmentId", "hitId", "turkSubmitTo"];
 const REDIRECT_DELAY_MS = 5000;
-const SCREENS = ["loading", "unsupported", "consent", "instructions", "trial", "survey", "done", "error"];
+const SCREENS = ["loading", "unsupported", "consent", "instructions", "world", "practice-over", "trial", "pause",
+  "survey", "done", "notice", "error"];
+// This tab's id survives its reloads; the flag tells a duplicated tab (which copies
+// sessionStorage while the original is open) to take its own. The takeover flag carries the
+// person's choice "continue here" across the reload that follows it.
+const TAB_KEY = "tomstudy.tab";
+const TAB_OPEN_KEY = "tomstudy.tab.open";
+const TAKEOVER_KEY = "tomstudy.tab.takeover";
+const SAVE_RETRY_MAX_MS = 8000;
 
 const $ = (id) => document.getElementById(id);
 
@@ -20,8 +27,10 @@ const $ = (id) => document.getElementById(id);
 const PHASE_HANDLERS = {
   consent: { show: (app, state) => app.showConsent(state.step) },
   instructions: { show: (app, state) => app.showInstructions(state.step) },
-  practice: { show: (app, state) => app.showTrial(state) },
-  trial: { show: (app, state) => app.showTrial(state) },
+  world_intro: { show: (app, state) => app.showWorld(state) },
+  practice: { show: (app, state) => app.showTrial(state), trial: true },
+  practice_over: { show: (app, state) => app.showPracticeOver(state) },
+  trial: { show: (app, state) => app.showTrial(state), trial: true },
   survey: { show: (app, state) => app.showSurvey(state.step) },
   done: { show: (app, state) => app.showDone(state), ends: true },
 };
@@ -37,19 +46,105 @@ function show(screen) {
   for (const name of SCREENS) $(`screen-${name}`).hidden = name !== screen;
 }
 
-/** Why this device cannot run the study ({code, text}: code as POST /screen-out takes it), or null. */
-function unsupportedReason() {
+/**
+ * Why this device cannot run the study ({code, text}: code as POST /screen-out takes it), or
+ * null. `min` is the smallest window the server's prediction view is made for.
+ */
+function unsupportedReason(min) {
   const touchOnly = matchMedia("(any-pointer: coarse)").matches && !matchMedia("(any-pointer: fine)").matches;
   if (touchOnly) {
     return { code: "touch_only", text: "This study needs a mouse or touchpad: touch-only devices are not supported." };
   }
-  if (innerWidth < MIN_WIDTH_PX || innerHeight < MIN_HEIGHT_PX) {
+  if (innerWidth < min.width || innerHeight < min.height) {
     return {
       code: "window_too_small",
-      text: `Your browser window is ${innerWidth} × ${innerHeight} pixels; the study needs at least ${MIN_WIDTH_PX} × ${MIN_HEIGHT_PX}.`,
+      text: `Your browser window is ${innerWidth} × ${innerHeight} pixels; the study needs at least ${min.width} × ${min.height}.`,
     };
   }
   return null;
+}
+
+function clickCount(draft) {
+  return draft.points.reduce((n, points) => n + points.length, 0);
+}
+
+/** What a refusal cost: "" when every click is on the server, else which were not saved. */
+function unsavedText(clicks) {
+  if (!clicks) return "";
+  return clicks === 1 ? "Your last click in this tab was not saved." : `Your last ${clicks} clicks in this tab were not saved.`;
+}
+
+/** This tab's id (kept across its reloads; a duplicated tab gets its own). */
+function currentTabId() {
+  let id = sessionStorage.getItem(TAB_KEY);
+  if (!id || sessionStorage.getItem(TAB_OPEN_KEY)) {
+    id = newUuid().replaceAll("-", "");
+    sessionStorage.setItem(TAB_KEY, id);
+  }
+  sessionStorage.setItem(TAB_OPEN_KEY, "1");
+  addEventListener("pagehide", () => sessionStorage.removeItem(TAB_OPEN_KEY));
+  addEventListener("pageshow", () => sessionStorage.setItem(TAB_OPEN_KEY, "1"));
+  return id;
+}
+
+/**
+ * Saves the current trial's clicks after every change (PUT .../draft), newest first: one
+ * request at a time, retried while the connection is down, and the person is told whether
+ * their clicks are saved. `onRefused(error)` gets a 4xx that no retry can change.
+ */
+class DraftSaver {
+  constructor(api, seq, clicks, { onStatus, onRefused }) {
+    this.api = api;
+    this.seq = seq;
+    this.savedClicks = clicks; // clicks in the newest draft the server has
+    this.latest = null;
+    this.sending = false;
+    this.failures = 0;
+    this.onStatus = onStatus;
+    this.onRefused = onRefused;
+    this.stopped = false;
+  }
+
+  save(draft) {
+    this.seq += 1;
+    this.latest = { ...draft, seq: this.seq };
+    this.flush();
+  }
+
+  /** True while some click is not yet on the server. */
+  pending() {
+    return this.latest !== null || this.sending;
+  }
+
+  stop() {
+    this.stopped = true;
+  }
+
+  async flush() {
+    if (this.sending || !this.latest || this.stopped) return;
+    const body = this.latest;
+    this.sending = true;
+    try {
+      await this.api.saveDraft(body);
+      this.savedClicks = clickCount(body);
+      if (this.latest === body) this.latest = null;
+      this.failures = 0;
+      this.onStatus(this.latest ? "Saving your clicks…" : "Your clicks so far are saved.", "ok");
+    } catch (error) {
+      if (this.stopped) return; // the trial was submitted meanwhile: its answer is complete
+      if (error instanceof ApiError && error.status < 500 && error.status !== 429) {
+        this.stopped = true;
+        this.onRefused(error, Math.max(0, clickCount(this.latest ?? body) - this.savedClicks));
+        return;
+      }
+      this.failures += 1;
+      this.onStatus("Connection problem: your clicks are kept in this window and will be saved as soon as the connection returns.", "error");
+      await new Promise((resolve) => setTimeout(resolve, Math.min(SAVE_RETRY_MAX_MS, 500 * 2 ** this.failures)));
+    } finally {
+      this.sending = false;
+    }
+    this.flush();
+  }
 }
 
 /** Batches telemetry events and posts them; kept in memory until the server takes them. */
@@ -112,6 +207,9 @@ class ParticipantApp {
     this.storageKey = `tomstudy.${studyId}.session`;
     this.phases = JSON.parse(root.dataset.phases);
     this.screenOutPhases = JSON.parse(root.dataset.screenOutPhases);
+    this.minWindow = JSON.parse(root.dataset.minWindow);
+    this.heartbeat = null;
+    this.lost = false;
   }
 
   async run() {
@@ -121,9 +219,103 @@ class ParticipantApp {
     if (!started) return;
     this.watchPage();
     let state = await this.api.state();
-    if (!this.handler(state.phase).ends) state = await this.checkDevice(state);
-    while (!this.handler(state.phase).ends) state = await this.showPhase(state);
+    if (!this.handler(state.phase).ends) {
+      if (!(await this.claimTab())) return;
+      state = await this.checkDevice(state);
+    }
+    while (!this.handler(state.phase).ends) {
+      const next = await this.showPhase(state);
+      if (this.lost) return;
+      if (this.pauseBetween(state, next)) {
+        this.updateProgress(next.progress);
+        await this.showPause(state.step, next.step);
+      }
+      state = next;
+    }
     this.handler(state.phase).show(this, state);
+  }
+
+  /** A short break screen between two trials of the same part. */
+  pauseBetween(state, next) {
+    return this.handler(state.phase).trial && this.handlers.get(next.phase)?.trial
+      && state.step?.part === next.step?.part;
+  }
+
+  showPause(done, next) {
+    const what = done.is_practice ? `Practice trial ${done.number} of ${done.of}` : `Trial ${done.number} of ${done.of}`;
+    $("pause-heading").textContent = `Part ${done.part} of ${done.parts} · ${what} saved`;
+    const button = $("pause-done");
+    button.textContent = next.is_practice ? "Continue to the next practice trial" : `Continue to trial ${next.number}`;
+    show("pause");
+    button.focus();
+    return new Promise((resolve) => { button.onclick = resolve; });
+  }
+
+  /**
+   * Make this tab the session's live one. If another tab holds it, say so and offer to
+   * continue here (false: the page waits for that choice).
+   */
+  async claimTab() {
+    this.api.tabId = currentTabId();
+    const takeover = sessionStorage.getItem(TAKEOVER_KEY) === "1";
+    sessionStorage.removeItem(TAKEOVER_KEY);
+    try {
+      const answer = await this.api.claimTab({ opened: true, takeover });
+      addEventListener("pagehide", () => this.api.releaseTab());
+      this.heartbeat = setInterval(() => this.beat(), answer.heartbeat_s * 1000);
+      return true;
+    } catch (error) {
+      if (!(error instanceof ApiError && error.otherTab)) throw error;
+      this.tabLost(error.notice);
+      return false;
+    }
+  }
+
+  /** Tell the server this tab is still the live one; it may answer that another took over. */
+  beat() {
+    this.api.claimTab().catch((error) => {
+      if (error instanceof ApiError && error.otherTab) this.tabLost(error.notice);
+    });
+  }
+
+  /**
+   * Another tab holds the session: stop, say so plainly (and what of this tab's work was not
+   * saved), and offer to continue here, which reloads the page as the live tab.
+   */
+  tabLost(notice, unsaved = "") {
+    this.lost = true;
+    clearInterval(this.heartbeat);
+    this.trialScreen?.stop();
+    this.showNotice(notice ?? { title: "The study is open in another tab", text: "", action: "takeover" }, {
+      extra: unsaved,
+      button: "Continue here instead",
+      onAction: () => {
+        sessionStorage.setItem(TAKEOVER_KEY, "1");
+        location.reload();
+      },
+    });
+  }
+
+  /** A plain-language notice; with `onAction`, one button (else the page stays here). */
+  showNotice(notice, { extra = "", button = "", onAction = null } = {}) {
+    $("notice-title").textContent = notice.title;
+    $("notice-text").textContent = notice.text;
+    $("notice-extra").textContent = extra;
+    $("notice-extra").hidden = !extra;
+    const action = $("notice-action");
+    action.hidden = !onAction;
+    action.textContent = button;
+    action.onclick = onAction;
+    $("progress").hidden = true;
+    show("notice");
+    if (onAction) action.focus();
+  }
+
+  /** The person must see `notice` before the study goes on; resolves when they continue. */
+  confirmNotice(notice, button = "Continue") {
+    return new Promise((resolve) => {
+      this.showNotice(notice, { button, onAction: resolve });
+    });
   }
 
   handler(phase) {
@@ -141,7 +333,7 @@ class ParticipantApp {
     const canEnd = this.screenOutPhases.includes(state.phase);
     return new Promise((resolve, reject) => {
       const check = () => {
-        const reason = unsupportedReason();
+        const reason = unsupportedReason(this.minWindow);
         if (!reason) {
           removeEventListener("resize", check);
           resolve(state);
@@ -174,27 +366,23 @@ class ParticipantApp {
         return true;
       } catch (error) {
         if (!(error instanceof ApiError) || error.status >= 500) throw error;
-        if (error.status === 410) {
-          this.fail(forPeople(error.detail), { reload: false }); // replaced, or the study changed
+        if (error.status === 410) { // replaced, or the study changed: the notice says so
+          this.failWith(error);
           return false;
         }
         sessionStorage.removeItem(this.storageKey); // expired or unknown: start again
       }
     }
     try {
-      const waiting = { onRetry: (error) => { $("screen-loading").textContent = error.detail ? forPeople(error.detail) : "Connecting to the study server\u2026"; } };
+      const waiting = { onRetry: (error) => { $("screen-loading").textContent = error.notice?.text ?? (error.detail ? forPeople(error.detail) : "Connecting to the study server\u2026"); } };
       const session = await this.api.startSession(recruitment, preview, waiting);
       this.api.token = session.session_token;
       sessionStorage.setItem(this.storageKey, JSON.stringify({ token: session.session_token, recruitmentKey }));
       return true;
     } catch (error) {
-      if (error instanceof ApiError && error.status === 409) {
-        // already completed or ended, or open with another attempt: the server says which
-        this.fail(`This link cannot start the study again: ${error.detail}.`, { reload: false });
-        return false;
-      }
-      if (error instanceof ApiError && error.status === 403) {
-        this.fail(`This link cannot start the study: ${error.detail}. Please open the study again from the page where you found it.`, { reload: false });
+      // a link the study cannot start from: the server's plain-language notice says what to do
+      if (error instanceof ApiError && error.status < 500 && error.notice) {
+        this.showNotice(error.notice);
         return false;
       }
       throw error;
@@ -217,6 +405,7 @@ class ParticipantApp {
   }
 
   updateProgress({ done, total }) {
+    if (this.lost) return;
     $("progress").hidden = false;
     const bar = $("progress-bar");
     bar.setAttribute("aria-valuemax", String(total));
@@ -275,10 +464,48 @@ class ParticipantApp {
     });
   }
 
+  /** A part's first screen: which part, its world explained and drawn, what the part holds. */
+  showWorld(state) {
+    const step = state.step;
+    $("world-part").textContent = step.part > 1 ? `Part ${step.part} of ${step.parts}: a new world` : `Part ${step.part} of ${step.parts}`;
+    $("world-title").textContent = step.title;
+    setProse($("world-text"), step.text);
+    const practice = step.practice_trials;
+    $("world-plan").textContent = practice
+      ? `This part starts with ${practice === 1 ? "a practice trial, which does" : `${practice} practice trials, which do`} not count, then ${step.trials} trials that do.`
+      : `This part has ${step.trials} trials.`;
+    const button = $("world-done");
+    button.textContent = practice ? "Start the practice" : "Start trial 1";
+    show("world");
+    drawWorldMap($("world-canvas"), step.scene);
+    return this.continueFrom(state.phase, button);
+  }
+
+  showPracticeOver(state) {
+    const step = state.step;
+    $("practice-over-part").textContent = `Part ${step.part} of ${step.parts}: ${step.title}`;
+    $("practice-over-text").textContent = `That was the practice. The next ${step.trials} trials count; `
+      + `they are numbered 1 to ${step.trials}. After each one you can take a short break.`;
+    show("practice-over");
+    return this.continueFrom(state.phase, $("practice-over-done"));
+  }
+
+  /** Resolve with the next state once `button` is pressed and the server has moved on. */
+  continueFrom(phase, button) {
+    button.disabled = false;
+    button.focus();
+    return new Promise((resolve, reject) => {
+      button.onclick = () => {
+        button.disabled = true;
+        this.api.continueFrom(phase).then(resolve, reject);
+      };
+    });
+  }
+
   showTrial(state) {
     show("trial");
-    const trial = new TrialScreen(state, this.api, this.telemetry);
-    return trial.run();
+    this.trialScreen = new TrialScreen(state, this);
+    return this.trialScreen.run();
   }
 
   showSurvey(step) {
@@ -347,24 +574,63 @@ class ParticipantApp {
     $("error-reload").onclick = () => location.reload();
     show("error");
   }
+
+  /** What an error that ended the run means for the person. */
+  failWith(error) {
+    if (error instanceof ApiError && error.otherTab) {
+      this.tabLost(error.notice);
+    } else if (error instanceof ApiError && error.notice && error.status < 500) {
+      this.showNotice(error.notice); // a replaced attempt, a changed study: what to do now
+    } else {
+      this.fail(`The study could not continue (${error.message}). Your answers so far are saved; reloading the page resumes where you were.`);
+    }
+  }
 }
 
-/** One practice or main trial: watch the clips, then predict from each start state. */
+/** The scene of a part, whole, with what is in it named: goals, obstacles, lanes. */
+function drawWorldMap(canvas, scene) {
+  const { ctx, view } = prepareCanvas(canvas, scene);
+  drawBackground(ctx, view, scene);
+  (scene.obstacles || []).forEach((o) => {
+    const [x, y] = view.toPx([o.x_m, o.y_m]);
+    label(ctx, "obstacle", x, y, "#111111", 12);
+  });
+  (scene.lanes || []).forEach((lane, k) => {
+    const [x, y] = view.toPx([scene.bounds.x_min_m, lane.y_center_m]);
+    label(ctx, `lane ${k + 1}`, x + 34, y, "#111111", 12);
+  });
+  if (scene.lanes?.length) {
+    const [x, y] = view.toPx([scene.bounds.x_max_m, scene.bounds.y_min_m]);
+    label(ctx, "cars drive this way →", x - 80, y + 10, "#111111", 12);
+  }
+}
+
+/**
+ * One practice or main trial: watch the clips, then predict from each start state. Every
+ * change is saved as a draft, so a reload (or a new tab that takes over) resumes at the
+ * same start state with the same clicks, without the clips again.
+ */
 class TrialScreen {
-  constructor(state, api, telemetry) {
+  constructor(state, app) {
     this.trial = state.step;
-    this.api = api;
-    this.telemetry = telemetry;
-    this.replays = 0;
+    this.app = app;
+    this.api = app.api;
+    this.telemetry = app.telemetry;
+    this.draft = this.trial.draft;
+    this.replays = this.draft?.replays ?? 0;
     this.canvas = $("trial-canvas");
     this.player = new ClipPlayer(this.canvas, this.trial.scene, trialClips(this.trial), {
       onCaption: (text) => { $("trial-caption").textContent = text; },
     });
     this.input = null;
-    const { done, total } = state.progress || { done: 0, total: 0 };
-    $("trial-heading").textContent = this.trial.is_practice
-      ? "Practice trial (not counted)"
-      : `Trial ${done + 1} of ${total}`;
+    this.saver = new DraftSaver(this.api, this.draft?.seq ?? 0, this.draft ? clickCount(this.draft) : 0, {
+      onStatus: (text, kind) => this.setSaveStatus(text, kind),
+      onRefused: (error, lost) => this.refused(error, unsavedText(lost)),
+    });
+    const { part, parts, number, of } = this.trial;
+    const which = this.trial.is_practice ? `Practice trial ${number} of ${of} (not counted)` : `Trial ${number} of ${of}`;
+    $("trial-heading").textContent = `Part ${part} of ${parts} · ${which}`;
+    this.setSaveStatus("");
   }
 
   run() {
@@ -376,20 +642,44 @@ class TrialScreen {
       $("undo").onclick = () => this.input?.undo();
       $("reset").onclick = () => this.input?.reset();
       $("next").onclick = () => this.confirm();
-      this.watch();
+      if (this.draft) this.resume();
+      else this.watch();
     });
+  }
+
+  /** Back after a reload or a takeover: straight to the predictions, clicks restored. */
+  resume() {
+    this.predict(this.draft);
+    const clicks = this.input.clickCount();
+    this.setMessage(clicks
+      ? `Welcome back: your ${clicks} click${clicks === 1 ? "" : "s"} so far ${clicks === 1 ? "is" : "are"} restored.`
+      : "Welcome back: continue with your predictions.");
+  }
+
+  /** Stop drawing and saving (the session went to another tab). */
+  stop() {
+    this.saver.stop();
+    this.input?.destroy();
+    this.player.stop();
   }
 
   setMessage(text, kind = "ok") {
     const message = $("trial-message");
     message.textContent = text;
-    message.className = `message ${kind}`;
+    message.className = `message one-line ${kind}`;
+  }
+
+  setSaveStatus(text, kind = "ok") {
+    const status = $("save-status");
+    status.textContent = text;
+    status.className = `save-status ${kind}`;
   }
 
   async watch() {
     this.input?.pause();
     $("predict-controls").hidden = true;
     $("legend-predict").hidden = true;
+    $("trial-side").hidden = true;
     $("replay").disabled = true;
     $("start-predicting").disabled = true;
     $("start-predicting").hidden = false;
@@ -408,26 +698,35 @@ class TrialScreen {
   replay() {
     this.replays += 1;
     this.telemetry.log("replay", { trial_id: this.trial.trial_id, replays: this.replays });
+    if (this.input) this.saveDraft();
     this.watch();
   }
 
-  predict() {
+  predict(draft = null) {
     this.player.stop();
     $("start-predicting").hidden = true;
     $("start-predicting").disabled = true;
     $("predict-controls").hidden = false;
     $("legend-predict").hidden = false;
+    $("trial-side").hidden = false;
     $("replay").disabled = false;
     if (!this.input) {
       this.input = new PredictionInput(this.canvas, this.trial, {
         onChange: (input, options) => this.changed(input, options),
         onMessage: (text, kind) => this.setMessage(text, kind),
+        overview: $("overview-canvas"),
       });
+      if (draft) this.input.restore(draft);
     }
     this.input.start();
     this.changed(this.input);
     this.setMessage(`Click where the robot will be after each of the next ${this.trial.steps_to_predict} steps.`);
     this.canvas.focus({ preventScroll: true });
+  }
+
+  saveDraft() {
+    if (this.submitting) return;
+    this.saver.save({ trial_id: this.trial.trial_id, replays: this.replays, ...this.input.snapshot() });
   }
 
   changed(input, { confirm = false } = {}) {
@@ -437,6 +736,7 @@ class TrialScreen {
     next.textContent = input.isLast() ? "Submit predictions" : `Next start position (${input.index + 2} of ${states})`;
     $("trial-caption").textContent = `Start position ${input.index + 1} of ${states}: `
       + `${input.current.length} of ${this.trial.steps_to_predict} positions placed.`;
+    this.saveDraft();
     if (confirm) this.confirm();
   }
 
@@ -453,6 +753,7 @@ class TrialScreen {
   async submit() {
     if (!this.input.allDone() || this.submitting) return;
     this.submitting = true;
+    this.saver.stop(); // the submission carries every click; a late draft would only be refused
     $("next").disabled = true;
     $("replay").disabled = true;
     this.body ??= { submission_id: newUuid(), ...this.input.body(this.replays) };
@@ -461,22 +762,39 @@ class TrialScreen {
       const state = await this.api.predictions(this.body, {
         onRetry: () => this.setMessage("Connection problem: retrying to save your predictions…", "error"),
       });
-      this.input.destroy();
-      this.player.stop();
+      this.stop();
       this.setMessage("");
       this.resolve(state);
     } catch (error) {
       this.submitting = false;
-      if (error instanceof ApiError && error.status < 500) {
-        // The server refused this answer (e.g. it moved on): show why and follow its state.
-        this.setMessage(`Not saved: ${error.detail}`, "error");
-        this.input.destroy();
-        this.player.stop();
-        this.resolve(null);
-      } else {
-        this.reject(error);
-      }
+      if (error instanceof ApiError && error.status < 500) this.refused(error, "These predictions were not saved.");
+      else this.reject(error);
     }
+  }
+
+  /**
+   * The server refused this trial's clicks (a 4xx no retry changes): never move on silently.
+   * Another tab holds the session: say so and offer to continue here. Otherwise the trial
+   * was answered elsewhere: say that these clicks were not used, and go on when the person
+   * has read it.
+   */
+  async refused(error, what) {
+    this.stop();
+    if (error.otherTab) {
+      this.app.tabLost(error.notice, what && `${what} The study had moved to the other tab.`);
+      return;
+    }
+    if (error.status !== 404 && error.status !== 409) {
+      this.reject(error);
+      return;
+    }
+    console.warn(error.detail); // the field name, for whoever reads the console; not the person
+    await this.app.confirmNotice({
+      title: "This trial was already answered",
+      text: `${what ? `${what} ` : ""}This trial had already been answered, in another tab or window, `
+        + "and that answer is kept. The study continues with the next step.",
+    });
+    this.resolve(null);
   }
 }
 
@@ -540,9 +858,5 @@ function collectAnswers(form, questions) {
 const participantApp = new ParticipantApp($("app"));
 participantApp.run().catch((error) => {
   console.error(error);
-  if (error instanceof ApiError && error.status === 410) {
-    participantApp.fail(forPeople(error.detail), { reload: false }); // replaced, or the study changed
-    return;
-  }
-  participantApp.fail(`The study could not continue (${error.message}). Your answers so far are saved; reloading the page resumes where you were.`);
+  participantApp.failWith(error);
 });

@@ -24,11 +24,12 @@ function num(value, digits = 3) {
   return value === null || value === undefined ? "–" : Number(value).toFixed(digits);
 }
 
+/** Month-day hours:minutes in the researcher's time zone. */
 function when(iso) {
   if (!iso) return "–";
   const d = new Date(iso);
   const pad = (n) => String(n).padStart(2, "0");
-  return `${pad(d.getMonth() + 1)}-${pad(d.getDate())} ${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}`;
+  return `${pad(d.getMonth() + 1)}-${pad(d.getDate())} ${pad(d.getHours())}:${pad(d.getMinutes())}`;
 }
 
 function duration(seconds) {
@@ -37,23 +38,24 @@ function duration(seconds) {
 }
 
 function attentionText({ failed, seen }) {
-  if (!seen) return "– (0 seen)";
-  return `${failed ? "failed" : "passed"} (${failed} of ${seen} failed)`;
+  if (!seen) return "none seen";
+  return `${failed} of ${seen}${failed ? ": review" : ""}`;
 }
 
 const STATUS_TEXT = { in_progress: "in progress", stale: "stale", ended: "ended", replaced: "replaced" };
 
-// Each column: header, how it reads a row for sorting, and the cell text.
+// Each column: header, how it reads a row for sorting, and the cell text (short enough for
+// the table to fit a 1280 px window; a preview session's platform reads "pilot"; the full
+// public id is the row's tooltip).
 const COLUMNS = [
   { key: "started_at", head: "started", text: (r) => when(r.started_at) },
-  { key: "public_id", head: "public id", text: (r) => r.public_id },
+  { key: "public_id", head: "public id", text: (r) => r.public_id.slice(0, 8) },
   { key: "platform", head: "platform", text: (r) => r.platform },
-  { key: "pilot", head: "pilot", text: (r) => (r.pilot ? "pilot" : "") },
   { key: "status", head: "status", text: (r) => STATUS_TEXT[r.status] ?? r.status },
   { key: "outcome", head: "outcome", text: (r) => (r.outcome ?? "–").replace(/_/g, " ") },
   { key: "last_seen", head: "last seen", text: (r) => when(r.last_seen) },
   { key: "world_order", head: "world order", text: (r) => r.world_order.replace(",", " → ") },
-  { key: "attention", head: "attention checks", sort: (r) => r.attention.failed, text: (r) => attentionText(r.attention) },
+  { key: "attention", head: "attention checks failed", sort: (r) => r.attention.failed, text: (r) => attentionText(r.attention) },
   { key: "duration_s", head: "duration", text: (r) => duration(r.duration_s) },
   { key: "progress", head: "trials", sort: (r) => r.progress.done, text: (r) => `${r.progress.done} / ${r.progress.total}` },
   { key: "version", head: "study version", sort: (r) => r.config_current && r.bank_current,
@@ -111,6 +113,7 @@ export class ParticipantsTable {
     this.sorted(columns).forEach((row, i) => {
       const tr = body.insertRow();
       tr.dataset.publicId = row.public_id;
+      tr.title = `session ${row.public_id}`;
       tr.classList.toggle("selected", row.public_id === this.selected);
       tr.classList.toggle("muted", row.pilot || row.status === "replaced");
       tr.insertCell().textContent = String(i + 1);

@@ -1,5 +1,5 @@
 // Play a trial's clips on a canvas: the example interactions, then the segment.
-import { agentStyle, drawAgent, drawBackground, drawTrace, prepareCanvas } from "./scene.js";
+import { LabelLayout, agentStyle, drawAgents, drawBackground, drawTrace, prepareCanvas } from "./scene.js";
 
 export const STEP_SECONDS = 0.35;
 const PAUSE_BETWEEN_CLIPS_MS = 700;
@@ -38,9 +38,10 @@ export function drawClipFrame(ctx, view, scene, clip, t) {
   poses.forEach((pose, agent) => {
     const style = agentStyle(scene, agent);
     const past = clip.positions.slice(0, Math.floor(t) + 1).map((step) => step[agent]);
-    drawTrace(ctx, view, style, [...past, pose.position], { alpha: 0.6, dots: true });
+    drawTrace(ctx, view, style, [...past, pose.position], { dots: true, width: 2 });
   });
-  poses.forEach((pose, agent) => drawAgent(ctx, view, agentStyle(scene, agent), pose.position, pose.heading));
+  const layout = new LabelLayout(ctx, view.width, view.height);
+  drawAgents(ctx, view, poses.map((pose, agent) => ({ style: agentStyle(scene, agent), ...pose })), layout);
 }
 
 /** The clip list of a trial, each with a caption. */

@@ -1,8 +1,28 @@
 // Prediction input: for each start state the participant places successive robot positions.
-import { ROBOT_COLOR, agentStyle, drawAgent, drawBackground, drawClickMarker, drawTrace, prepareCanvas } from "./scene.js";
+import {
+  GOAL_COLORS,
+  LabelLayout,
+  ROBOT_COLOR,
+  agentStyle,
+  centreOnAxis,
+  placeTag,
+  drawAgent,
+  drawBackground,
+  drawPointer,
+  drawRing,
+  drawTrace,
+  fitView,
+  preferredHeight,
+  publishView,
+  sizeCanvas,
+  viewAt,
+} from "./scene.js";
 
 const KEY_STEP_FRACTION = 0.1; // arrow key moves the cursor by this share of max_step_m
 const FINE_FACTOR = 0.25; // with Shift held
+const BELOW_CANVAS_PX = 72; // the legend line and the card's padding under the canvas
+const MIN_CANVAS_PX = 280;
+const VIEW_MARGIN_PX = 24;
 
 function distance(a, b) {
   return Math.hypot(b[0] - a[0], b[1] - a[1]);
@@ -21,15 +41,26 @@ function fmt(metres) {
   return `${Number(metres.toFixed(2))} m`;
 }
 
+/** CSS height the canvas may take: what is left of the window below its top edge. */
+function availableHeight(canvas) {
+  const top = canvas.parentElement.getBoundingClientRect().top + window.scrollY;
+  return Math.max(MIN_CANVAS_PX, Math.round(window.innerHeight - top - BELOW_CANVAS_PX));
+}
+
 /**
  * Collects `steps_to_predict` clicks for each start state of a trial.
  * Calls `onChange(input)` after every change and `onMessage(text, kind)` for feedback.
+ *
+ * The view is drawn at the server's scale for this world (`trial.view.px_per_m`,
+ * app/prediction_view.py), the same on every screen, around the robot; `overview`, when
+ * given, is a canvas that shows the whole scene with the zoomed frame on it.
  */
 export class PredictionInput {
-  constructor(canvas, trial, { onChange = () => {}, onMessage = () => {} } = {}) {
+  constructor(canvas, trial, { onChange = () => {}, onMessage = () => {}, overview = null } = {}) {
     this.canvas = canvas;
     this.trial = trial;
     this.scene = trial.scene;
+    this.overview = overview;
     this.onChange = onChange;
     this.onMessage = onMessage;
     this.steps = trial.steps_to_predict;
@@ -41,6 +72,33 @@ export class PredictionInput {
     this.cursor = null;
     this.showCursor = false;
     this.listeners = [];
+  }
+
+  /** Take up a saved draft (drafts.py): clicks, times, history, start state and the clock. */
+  restore(draft) {
+    this.points = draft.points.map((p) => p.map((q) => [...q]));
+    this.clickTimes = draft.click_times_ms.map((t) => [...t]);
+    this.history = [...draft.history];
+    this.index = draft.index;
+    this.shownAtEpoch = draft.shown_at_ms;
+    // click times count from the first showing, through the reload
+    this.shownAtPerf = performance.now() - (Date.now() - draft.shown_at_ms);
+  }
+
+  /** What a draft keeps of this input (the caller adds trial_id, seq and replays). */
+  snapshot() {
+    return {
+      index: this.index,
+      points: this.points,
+      click_times_ms: this.clickTimes,
+      history: this.history.slice(-500),
+      shown_at_ms: this.shownAtEpoch,
+    };
+  }
+
+  /** Clicks placed so far over every start state. */
+  clickCount() {
+    return this.points.reduce((n, p) => n + p.length, 0);
   }
 
   /** Show the input (first time: start the clock for click timestamps) and listen to it. */
@@ -240,37 +298,80 @@ export class PredictionInput {
     };
   }
 
+  /**
+   * The canvas size and view: the server's px per metre (else the whole scene, fitted, as
+   * in the instructions' demo), centred a little ahead of the robot and moved only as far as
+   * needed to keep the robot's start and the reach of its next move in sight.
+   */
+  layoutView() {
+    const { bounds } = this.scene;
+    const width = this.canvas.parentElement.clientWidth;
+    const scale = this.trial.view?.px_per_m;
+    if (!scale) {
+      const height = preferredHeight(bounds, width);
+      return { width, height, view: fitView(bounds, width, height) };
+    }
+    const sceneHeight = (bounds.y_max_m - bounds.y_min_m) * scale + 2 * VIEW_MARGIN_PX;
+    const height = Math.round(Math.min(availableHeight(this.canvas), sceneHeight));
+    const start = this.startState.robot;
+    const lead = this.steps * (this.trial.view.median_step_m ?? 0) / 2;
+    const want = [start[0] + lead * Math.cos(this.robotHeading), start[1] + lead * Math.sin(this.robotHeading)];
+    const [ax, ay] = this.anchor();
+    const r = this.trial.max_step_m;
+    const keep = (axis, a) => [Math.min(start[axis], a - r), Math.max(start[axis], a + r)];
+    const centre = [
+      centreOnAxis(bounds.x_min_m, bounds.x_max_m, width, scale, want[0], keep(0, ax)),
+      centreOnAxis(bounds.y_min_m, bounds.y_max_m, height, scale, want[1], keep(1, ay)),
+    ];
+    return { width, height, view: viewAt(scale, centre, width, height) };
+  }
+
   render() {
-    const { ctx, view } = prepareCanvas(this.canvas, this.scene);
+    const { width, height, view } = this.layoutView();
+    const ctx = sizeCanvas(this.canvas, width, height);
+    publishView(this.canvas, view);
     this.view = view;
     const scene = this.scene;
     const robot = agentStyle(scene, 0);
     const human = agentStyle(scene, 1);
+    const layout = new LabelLayout(ctx, width, height);
     drawBackground(ctx, view, scene);
     const segment = this.trial.segment.positions;
-    drawTrace(ctx, view, robot, segment.map((s) => s[0]), { alpha: 0.25 });
-    drawTrace(ctx, view, human, segment.map((s) => s[1]), { alpha: 0.25 });
-    drawAgent(ctx, view, human, this.startState.human, this.humanHeading);
-    this.drawRobots(ctx, view, robot);
+    drawTrace(ctx, view, robot, segment.map((s) => s[0]), { width: 2, past: true });
+    drawTrace(ctx, view, human, segment.map((s) => s[1]), { width: 2 });
     this.drawReach(ctx, view);
-    drawTrace(ctx, view, robot, [this.startState.robot, ...this.current], { alpha: 1, width: 3 });
+    const agents = [
+      drawAgent(ctx, view, human, this.startState.human, this.humanHeading, { tag: false }),
+      drawAgent(ctx, view, robot, this.startState.robot, this.robotHeading, { tag: false, seeThrough: true }),
+    ];
+    agents.forEach((box) => layout.block(box));
+    drawTrace(ctx, view, robot, [this.startState.robot, ...this.current], { width: 3 });
+    const rings = this.current.map((point) => drawRing(ctx, view, point));
+    rings.forEach((box) => layout.block(box));
+    [human, robot].forEach((style, i) => {
+      const box = agents[i];
+      if (box.x1 < 0 || box.y1 < 0 || box.x0 > width || box.y0 > height) return; // an edge arrow points to it
+      placeTag(layout, style, box);
+    });
+    this.drawNumbers(layout, view);
     this.drawPreview(ctx, view);
-    this.drawMarkers(ctx, view);
+    this.drawPointers(ctx, view, layout);
+    this.canvas.layoutBoxes = { agents, rings, labels: layout.boxes };
+    this.drawOverview(view);
   }
 
-  /** The robot at its start state, and (fainter) where the last click puts it. */
-  drawRobots(ctx, view, robot) {
-    drawAgent(ctx, view, robot, this.startState.robot, this.robotHeading, { alpha: this.current.length ? 0.4 : 1 });
-    if (!this.current.length) return;
-    const [a, b] = [this.startState.robot, ...this.current].slice(-2);
-    drawAgent(ctx, view, robot, b, Math.atan2(b[1] - a[1], b[0] - a[0]), { alpha: 0.6 });
-  }
-
+  /** The reach of one step around the last position, cut at the scene's edge. */
   drawReach(ctx, view) {
     if (this.stateDone()) return;
+    const { bounds } = this.scene;
     const [cx, cy] = view.toPx(this.anchor());
+    const [x0, y0] = view.toPx([bounds.x_min_m, bounds.y_min_m]);
+    const [x1, y1] = view.toPx([bounds.x_max_m, bounds.y_max_m]);
     ctx.save();
-    ctx.fillStyle = "rgba(0, 114, 178, 0.12)";
+    ctx.beginPath();
+    ctx.rect(x0, y0, x1 - x0, y1 - y0);
+    ctx.clip();
+    ctx.fillStyle = "rgba(0, 114, 178, 0.10)";
     ctx.strokeStyle = ROBOT_COLOR;
     ctx.lineWidth = 1.5;
     ctx.setLineDash([5, 4]);
@@ -286,11 +387,51 @@ export class PredictionInput {
     ctx.restore();
   }
 
-  /** Numbered markers on the clicked positions, drawn last so nothing hides them. */
-  drawMarkers(ctx, view) {
+  /** Each click's number beside its ring, off the path and clear of agents and other labels. */
+  drawNumbers(layout, view) {
+    const path = [this.startState.robot, ...this.current];
     this.current.forEach((point, k) => {
-      drawClickMarker(ctx, view, point, String(k + 1), { stroke: ROBOT_COLOR, radius: 9 });
+      const [ax, ay] = view.toPx(path[k]);
+      const [px, py] = view.toPx(point);
+      const along = Math.atan2(py - ay, px - ax);
+      layout.place(String(k + 1), [px, py], 17, { color: "#111111", angles: [along - Math.PI / 2, along + Math.PI / 2] });
     });
+  }
+
+  /** Arrows at the canvas edge towards the person and goals the zoomed view leaves out. */
+  drawPointers(ctx, view, layout) {
+    const human = agentStyle(this.scene, 1);
+    drawPointer(ctx, view, this.startState.human, "H", human.color, layout);
+    (this.scene.goals || []).forEach((goal, k) => {
+      drawPointer(ctx, view, [goal.x_m, goal.y_m], goal.label || `goal ${k + 1}`, GOAL_COLORS[k % GOAL_COLORS.length], layout);
+    });
+  }
+
+  /** The whole scene, small, with the robot, the person and the zoomed frame. */
+  drawOverview(view) {
+    const canvas = this.overview;
+    if (!canvas || !canvas.parentElement || !this.trial.view) return;
+    const { bounds } = this.scene;
+    const width = canvas.parentElement.clientWidth;
+    const aspect = (bounds.y_max_m - bounds.y_min_m) / (bounds.x_max_m - bounds.x_min_m);
+    const height = Math.max(40, Math.round((width - 8) * aspect + 8));
+    const ctx = sizeCanvas(canvas, width, height);
+    const small = fitView(bounds, width, height, 4);
+    drawBackground(ctx, small, this.scene, 0, { labels: false });
+    const dot = (point, color) => {
+      const [x, y] = small.toPx(point);
+      ctx.fillStyle = color;
+      ctx.beginPath();
+      ctx.arc(x, y, 4, 0, 2 * Math.PI);
+      ctx.fill();
+    };
+    dot(this.startState.human, agentStyle(this.scene, 1).color);
+    dot(this.startState.robot, ROBOT_COLOR);
+    const [x0, y0] = small.toPx(view.toM([0, 0]));
+    const [x1, y1] = small.toPx(view.toM([view.width, view.height]));
+    ctx.strokeStyle = "#111111";
+    ctx.lineWidth = 1.5;
+    ctx.strokeRect(x0, y0, x1 - x0, y1 - y0);
   }
 
   drawPreview(ctx, view) {
@@ -301,7 +442,7 @@ export class PredictionInput {
     const [ax, ay] = view.toPx(this.anchor());
     const [tx, ty] = view.toPx(target);
     ctx.save();
-    ctx.strokeStyle = ok ? ROBOT_COLOR : "#8a8a8a";
+    ctx.strokeStyle = ok ? ROBOT_COLOR : "#6b6b6b";
     ctx.lineWidth = 2;
     ctx.setLineDash([4, 4]);
     ctx.beginPath();

@@ -118,7 +118,7 @@ export class ReplayView {
       const button = el("button", { type: "button", className: "secondary", textContent: "Replay" });
       button.onclick = () => this.openTrial(row.public_id, t.trial_id);
       const check = t.attention_check ? (t.attention_ok ? "passed" : "failed") : "";
-      const kind = t.is_practice ? "practice" : `${t.trial_index + 1} in world ${t.world_position + 1}`;
+      const kind = `${t.is_practice ? "practice " : ""}${t.trial_index + 1} in part ${t.world_position + 1}`;
       const cells = [i + 1, t.world, kind, check, t.clicks, t.history, seconds(t.duration_ms), t.replays];
       return el("tr", { className: "trial-row" }, ...cells.map((c) => el("td", { textContent: String(c) })), el("td", {}, button));
     });
@@ -133,10 +133,14 @@ export class ReplayView {
     const { response, starts } = this.replay;
     $("replay-view").hidden = false;
     const check = response.attention_check ? `, attention check ${response.attention_ok ? "passed" : "failed"}` : "";
-    const kind = response.is_practice ? "practice" : `trial ${response.trial_index + 1} of world ${response.world_position + 1}`;
-    $("replay-title").textContent = `Session ${publicId}, ${response.world} ${kind}${check}: answered in ${seconds(response.duration_ms)} `
-      + `(browser ${seconds(response.client_duration_ms)}, server ${seconds(response.server_duration_ms)}), clip replayed ${response.replays}×; `
-      + `clip ${this.replay.clip_sha256.slice(0, 12)} verified against the bank.`;
+    const kind = `${response.is_practice ? "practice trial" : "trial"} ${response.trial_index + 1} of part ${response.world_position + 1}`;
+    $("replay-title").textContent = `Session ${publicId}, ${response.world} ${kind}${check}: answered in ${seconds(response.duration_ms)}, `
+      + `clip replayed ${response.replays}×; clip ${this.replay.clip_sha256.slice(0, 12)} verified against the bank.`;
+    $("replay-timing").textContent = `Two clocks time each trial. The browser's: ${seconds(response.client_duration_ms)} from the first `
+      + `prediction screen to Submit (after the clips). The server's: ${seconds(response.server_duration_ms)} from its answer to the `
+      + "previous step to this submission, so it also holds the clips, any pause between trials and the network. "
+      + `"Answered in" is the smaller of the two (${seconds(response.duration_ms)}): what the too-fast rule reads, `
+      + "so neither clock alone can make a trial look slower than it was.";
     $("replay-start").replaceChildren(el("option", { value: "all", textContent: "all" }),
       ...starts.map((s) => el("option", { value: String(s.start_index), textContent: `${s.start_index + 1} (${s.start_kind})` })));
     const slider = $("replay-time");

@@ -1,9 +1,18 @@
 // Draw a world from its scene JSON (app/data/scene.py) on a canvas.
 // Scene metres map to CSS pixels with one uniform scale; y grows downward in both.
 
+// Every agent, trace, marker and goal is at least 3:1 against the ground it is drawn on
+// (WCAG 2.1 SC 1.4.11; tests/e2e measures it on the canvas): the robot is Okabe-Ito blue,
+// the person a darker orange than Okabe-Ito's (which is 2.2:1 on white), and the road light
+// enough for both (dark asphalt left the blue robot at 1.2:1).
 export const ROBOT_COLOR = "#0072B2";
-export const HUMAN_COLOR = "#E69F00";
-// Okabe-Ito, as in analysis/scene_plot.py LABEL_COLORS.
+export const HUMAN_COLOR = "#B35C00";
+const HUMAN_TEXT = "#7a4000";
+export const GROUND = { field: "#fbfbf8", road: "#e8eaed", shoulder: "#cfd8c8" };
+const LANE_MARK = "#5f6368";
+// Goal rings: distinct from both agents' colours, each >= 5:1 on the field.
+export const GOAL_COLORS = ["#007A5A", "#6A3D9A", "#A0306A", "#333333"];
+// Okabe-Ito, as in analysis/scene_plot.py LABEL_COLORS (the researcher's plots).
 export const LABEL_COLORS = ["#009E73", "#D55E00", "#CC79A7", "#56B4E9", "#F0E442", "#000000"];
 const MARGIN_PX = 24;
 
@@ -14,15 +23,36 @@ export function fitView(bounds, cssWidth, cssHeight, margin = MARGIN_PX) {
   // a box not laid out yet (hidden panel, zero width) must not give a negative scale: canvas
   // calls reject negative radii, and the next resize redraws at the real size
   const scale = Math.max(1e-3, Math.min((cssWidth - 2 * margin) / spanX, (cssHeight - 2 * margin) / spanY));
-  const offsetX = (cssWidth - scale * spanX) / 2;
-  const offsetY = (cssHeight - scale * spanY) / 2;
+  const centre = [(bounds.x_min_m + bounds.x_max_m) / 2, (bounds.y_min_m + bounds.y_max_m) / 2];
+  return viewAt(scale, centre, cssWidth, cssHeight);
+}
+
+/** The transform that draws `scale` px per metre with scene point `centre` in the box's middle. */
+export function viewAt(scale, centre, cssWidth, cssHeight) {
+  const offsetX = cssWidth / 2 - centre[0] * scale;
+  const offsetY = cssHeight / 2 - centre[1] * scale;
   return {
     scale,
-    toPx: ([x, y]) => [offsetX + (x - bounds.x_min_m) * scale, offsetY + (y - bounds.y_min_m) * scale],
-    toM: ([px, py]) => [bounds.x_min_m + (px - offsetX) / scale, bounds.y_min_m + (py - offsetY) / scale],
+    width: cssWidth,
+    height: cssHeight,
+    toPx: ([x, y]) => [offsetX + x * scale, offsetY + y * scale],
+    toM: ([px, py]) => [(px - offsetX) / scale, (py - offsetY) / scale],
     offsetX,
     offsetY,
   };
+}
+
+/**
+ * The view centre along one axis: the scene's middle when its span fits the box, else
+ * `want` moved as little as needed to keep `keep` = [lo, hi] (metres) inside the box and
+ * the view inside the scene.
+ */
+export function centreOnAxis(lo, hi, spanPx, scale, want, keep, margin = MARGIN_PX) {
+  const half = (spanPx / 2 - margin) / scale;
+  if (hi - lo <= 2 * half) return (lo + hi) / 2;
+  let centre = Math.min(Math.max(want, keep[1] - half), keep[0] + half);
+  centre = Math.min(Math.max(centre, lo + half), hi - half);
+  return centre;
 }
 
 // Vertical room the page needs besides the canvas (header, heading, controls, legend).
@@ -37,12 +67,21 @@ export function preferredHeight(bounds, cssWidth, {
 }
 
 /**
- * Size the canvas backing store for devicePixelRatio and return {ctx, view}.
- * The view is also written to data-* attributes so tests and tools can map metres to pixels.
+ * Size the canvas backing store for devicePixelRatio and return {ctx, view}: the whole scene,
+ * fitted. The view is also written to data-* attributes so tests and tools can map metres to
+ * pixels.
  */
 export function prepareCanvas(canvas, scene) {
   const cssWidth = canvas.parentElement.clientWidth;
   const cssHeight = preferredHeight(scene.bounds, cssWidth);
+  const ctx = sizeCanvas(canvas, cssWidth, cssHeight);
+  const view = fitView(scene.bounds, cssWidth, cssHeight);
+  publishView(canvas, view);
+  return { ctx, view, cssWidth, cssHeight };
+}
+
+/** Give the canvas a CSS size and a backing store for devicePixelRatio; its 2-D context. */
+export function sizeCanvas(canvas, cssWidth, cssHeight) {
   const dpr = window.devicePixelRatio || 1;
   canvas.style.width = `${cssWidth}px`;
   canvas.style.height = `${cssHeight}px`;
@@ -50,29 +89,32 @@ export function prepareCanvas(canvas, scene) {
   canvas.height = Math.round(cssHeight * dpr);
   const ctx = canvas.getContext("2d");
   ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
-  const view = fitView(scene.bounds, cssWidth, cssHeight);
+  return ctx;
+}
+
+/** Write the view's scale and origin to the canvas' data-* attributes. */
+export function publishView(canvas, view) {
   Object.assign(canvas.dataset, {
     pxPerM: view.scale.toFixed(6),
     originXPx: view.toPx([0, 0])[0].toFixed(3),
     originYPx: view.toPx([0, 0])[1].toFixed(3),
   });
-  return { ctx, view, cssWidth, cssHeight };
 }
 
 /**
  * Background: bounds, road and lanes, obstacles and goals. `t` is the clip's fractional
  * step: in a moving frame the lane markings slide backwards by the distance it has moved.
  */
-export function drawBackground(ctx, view, scene, t = 0) {
+export function drawBackground(ctx, view, scene, t = 0, { labels = true } = {}) {
   const { bounds } = scene;
   const [x0, y0] = view.toPx([bounds.x_min_m, bounds.y_min_m]);
   const [x1, y1] = view.toPx([bounds.x_max_m, bounds.y_max_m]);
   ctx.clearRect(0, 0, ctx.canvas.width, ctx.canvas.height);
-  ctx.fillStyle = scene.lanes?.length ? "#d9dde1" : "#fbfbf8";
+  ctx.fillStyle = scene.lanes?.length ? GROUND.shoulder : GROUND.field;
   ctx.fillRect(x0, y0, x1 - x0, y1 - y0);
   drawLanes(ctx, view, scene, t);
   (scene.obstacles || []).forEach((obstacle) => drawObstacle(ctx, view, obstacle));
-  (scene.goals || []).forEach((goal, k) => drawGoal(ctx, view, goal, k));
+  (scene.goals || []).forEach((goal, k) => drawGoal(ctx, view, goal, k, labels));
   ctx.strokeStyle = "#6b6b6b";
   ctx.lineWidth = 1;
   ctx.setLineDash([]);
@@ -90,10 +132,10 @@ function drawLanes(ctx, view, scene, t) {
   for (const lane of sorted) {
     const [lx, top] = view.toPx([bounds.x_min_m, lane.y_center_m - lane.width_m / 2]);
     const [rx, bottom] = view.toPx([bounds.x_max_m, lane.y_center_m + lane.width_m / 2]);
-    ctx.fillStyle = "#5f6368";
+    ctx.fillStyle = GROUND.road;
     ctx.fillRect(lx, top, rx - lx, bottom - top);
   }
-  ctx.strokeStyle = "#ffffff";
+  ctx.strokeStyle = LANE_MARK;
   ctx.lineWidth = 1.5;
   sorted.forEach((lane, i) => {
     const edges = [lane.y_center_m - lane.width_m / 2, lane.y_center_m + lane.width_m / 2];
@@ -122,28 +164,107 @@ function drawObstacle(ctx, view, obstacle) {
   ctx.fill();
 }
 
-function drawGoal(ctx, view, goal, k) {
+function drawGoal(ctx, view, goal, k, withLabel) {
   const [cx, cy] = view.toPx([goal.x_m, goal.y_m]);
-  const color = LABEL_COLORS[k % LABEL_COLORS.length];
-  ctx.strokeStyle = color;
-  ctx.lineWidth = 2.5;
+  ctx.strokeStyle = GOAL_COLORS[k % GOAL_COLORS.length];
+  ctx.lineWidth = Math.min(3, Math.max(1.5, view.scale * 0.04));
   ctx.setLineDash([6, 4]);
   ctx.beginPath();
   ctx.arc(cx, cy, goal.radius_m * view.scale, 0, 2 * Math.PI);
   ctx.stroke();
   ctx.setLineDash([]);
-  label(ctx, goal.label || `goal ${k + 1}`, cx, cy, "#222222", 12);
+  if (withLabel) label(ctx, goal.label || `goal ${k + 1}`, cx, cy, "#222222", 12);
 }
 
-function label(ctx, text, x, y, color, sizePx, background = "rgba(255,255,255,0.85)") {
+/** A text on a white box centred at (x, y); returns the box {x0, y0, x1, y1} in CSS px. */
+export function label(ctx, text, x, y, color, sizePx, background = "rgba(255,255,255,0.92)") {
+  const box = labelBox(ctx, text, x, y, sizePx);
+  ctx.fillStyle = background;
+  ctx.fillRect(box.x0, box.y0, box.x1 - box.x0, box.y1 - box.y0);
+  ctx.fillStyle = color;
+  ctx.fillText(text, x, y);
+  return box;
+}
+
+function labelBox(ctx, text, x, y, sizePx) {
   ctx.font = `bold ${sizePx}px system-ui, sans-serif`;
   ctx.textAlign = "center";
   ctx.textBaseline = "middle";
-  const width = ctx.measureText(text).width + 6;
-  ctx.fillStyle = background;
-  ctx.fillRect(x - width / 2, y - sizePx / 2 - 2, width, sizePx + 4);
-  ctx.fillStyle = color;
-  ctx.fillText(text, x, y);
+  const half = (ctx.measureText(text).width + 6) / 2;
+  return { x0: x - half, y0: y - sizePx / 2 - 2, x1: x + half, y1: y + sizePx / 2 + 2 };
+}
+
+function overlaps(a, b) {
+  return a.x0 < b.x1 && b.x0 < a.x1 && a.y0 < b.y1 && b.y0 < a.y1;
+}
+
+/** A box around a point, `r` px each way. */
+export function boxAround([x, y], r) {
+  return { x0: x - r, y0: y - r, x1: x + r, y1: y + r };
+}
+
+/**
+ * Labels that never cover what is drawn: `block` the boxes of agents and markers, then
+ * `place` each label at the first of its candidate spots that overlaps nothing blocked or
+ * placed and stays on the canvas. `boxes` keeps every placed label (tests read them).
+ */
+export class LabelLayout {
+  constructor(ctx, width, height) {
+    this.ctx = ctx;
+    this.width = width;
+    this.height = height;
+    this.blocked = [];
+    this.boxes = [];
+  }
+
+  block(box) {
+    this.blocked.push(box);
+  }
+
+  /**
+   * Draw `text` at the first free spot around `anchor` (at `distance` px, `angles` first;
+   * further out when nothing near is free, e.g. a click on the robot's own body, with a thin
+   * line back to the anchor).
+   */
+  place(text, anchor, distance, { angles = [], ...style } = {}) {
+    const box = this.placeFirst(text, ringSpots(anchor, distance, angles), style);
+    const [cx, cy] = [(box.x0 + box.x1) / 2, (box.y0 + box.y1) / 2];
+    if (Math.hypot(cx - anchor[0], cy - anchor[1]) > 2 * distance) this.leader(anchor, box);
+    return box;
+  }
+
+  /** Draw `text` at the first of `spots` where it covers nothing and stays on the canvas. */
+  placeFirst(text, spots, { color = "#111111", sizePx = 12 } = {}) {
+    const fits = (box) => box.x0 >= 0 && box.y0 >= 0 && box.x1 <= this.width && box.y1 <= this.height
+      && ![...this.blocked, ...this.boxes].some((other) => overlaps(box, other));
+    const spot = spots.find(([x, y]) => fits(labelBox(this.ctx, text, x, y, sizePx))) ?? spots[0];
+    const box = label(this.ctx, text, spot[0], spot[1], color, sizePx);
+    this.boxes.push({ ...box, text });
+    return box;
+  }
+
+  /** A thin line from `anchor` to the nearest point of `box`. */
+  leader([ax, ay], box) {
+    const x = Math.min(Math.max(ax, box.x0), box.x1);
+    const y = Math.min(Math.max(ay, box.y0), box.y1);
+    this.ctx.save();
+    this.ctx.strokeStyle = "#111111";
+    this.ctx.lineWidth = 1;
+    this.ctx.setLineDash([]);
+    this.ctx.beginPath();
+    this.ctx.moveTo(ax, ay);
+    this.ctx.lineTo(x, y);
+    this.ctx.stroke();
+    this.ctx.restore();
+  }
+}
+
+/** Spots on rings around `anchor` (1 to 8 x `distance`): `angles` first, then above, below,
+ * beside, the diagonals and the angles between. */
+function ringSpots(anchor, distance, angles) {
+  const order = [-4, 4, 0, 8, -2, -6, 2, 6, -3, -5, 3, 5, -1, -7, 1, 7].map((k) => (k * Math.PI) / 8);
+  return [1, 1.6, 2.4, 3.5, 5, 6.5, 8].flatMap((f) => [...angles, ...order].map((a) => (
+    [anchor[0] + f * distance * Math.cos(a), anchor[1] + f * distance * Math.sin(a)])));
 }
 
 /** Role of agent i: 0 is the robot, 1 the human (DESIGN.md section 3). */
@@ -183,62 +304,109 @@ function stripeTile(color) {
 }
 
 /**
- * Draw one agent at `position` with `heading` (radians, scene frame).
- * Robot: solid fill and "R"; human: striped fill and "H"; cars carry a nose wedge.
+ * Draw one agent at `position` with `heading` (radians, scene frame); returns its box.
+ * Robot: solid fill and "R"; human: striped fill and "H"; cars carry a nose wedge. With
+ * `seeThrough` the body is a light tint inside a thick outline of its colour, so clicks and
+ * the reach disc under it stay visible (the robot's start in the prediction view).
  */
-export function drawAgent(ctx, view, style, position, heading, { alpha = 1, outline = true } = {}) {
+export function drawAgent(ctx, view, style, position, heading, { alpha = 1, tag = true, seeThrough = false } = {}) {
   const [cx, cy] = view.toPx(position);
   const length = Math.max(style.length_m * view.scale, 10);
   const width = Math.max(style.width_m * view.scale, 10);
+  const car = style.kind === "car";
   ctx.save();
-  ctx.globalAlpha = alpha;
   ctx.translate(cx, cy);
+  ctx.rotate(heading || 0);
+  const body = () => {
+    ctx.beginPath();
+    if (car) ctx.rect(-length / 2, -width / 2, length, width);
+    else ctx.arc(0, 0, length / 2, 0, 2 * Math.PI);
+  };
+  ctx.globalAlpha = alpha * (seeThrough ? 0.25 : 1);
   ctx.fillStyle = style.hatched ? stripes(ctx, style.color) : style.color;
+  body();
+  ctx.fill();
+  ctx.globalAlpha = alpha;
+  ctx.strokeStyle = seeThrough ? style.color : "#111111";
+  ctx.lineWidth = seeThrough ? 3 : 1.5;
+  body();
+  ctx.stroke();
+  ctx.fillStyle = "#111111";
   ctx.strokeStyle = "#111111";
-  ctx.lineWidth = outline ? 1.5 : 0;
-  ctx.beginPath();
-  if (style.kind === "car") {
-    ctx.rotate(heading || 0);
-    ctx.rect(-length / 2, -width / 2, length, width);
-    ctx.fill();
-    if (outline) ctx.stroke();
-    ctx.fillStyle = "#111111";
-    ctx.beginPath(); // nose wedge shows the heading
+  if (car) { // nose wedge shows the heading
+    const back = length / 2 - Math.min(width, length / 3);
+    ctx.beginPath();
     ctx.moveTo(length / 2, 0);
-    ctx.lineTo(length / 2 - Math.min(width, length / 3), -width / 2);
-    ctx.lineTo(length / 2 - Math.min(width, length / 3), width / 2);
+    ctx.lineTo(back, -width / 2);
+    ctx.lineTo(back, width / 2);
     ctx.closePath();
-    ctx.fill();
-  } else {
-    ctx.arc(0, 0, length / 2, 0, 2 * Math.PI);
-    ctx.fill();
-    if (outline) ctx.stroke();
-    if (heading !== undefined && heading !== null) {
-      ctx.rotate(heading);
-      ctx.strokeStyle = "#111111";
-      ctx.lineWidth = 2;
-      ctx.beginPath();
-      ctx.moveTo(0, 0);
-      ctx.lineTo(length / 2, 0);
-      ctx.stroke();
-    }
+    if (seeThrough) ctx.stroke();
+    else ctx.fill();
+  } else if (heading !== undefined && heading !== null) {
+    ctx.lineWidth = 2;
+    ctx.beginPath();
+    ctx.moveTo(0, 0);
+    ctx.lineTo(length / 2, 0);
+    ctx.stroke();
   }
   ctx.restore();
-  ctx.save();
-  ctx.globalAlpha = alpha;
-  const tagY = cy - Math.max(width, length) / 2 - 10;
-  label(ctx, style.tag, cx, tagY, style.color === HUMAN_COLOR ? "#7a4f00" : style.color, 12);
-  ctx.restore();
+  if (tag) {
+    ctx.save();
+    ctx.globalAlpha = alpha;
+    label(ctx, style.tag, cx, cy - Math.max(width, length) / 2 - 10, tagColor(style), 12);
+    ctx.restore();
+  }
+  return agentBox(view, style, position, heading);
 }
 
-/** A polyline through scene points, in the agent's colour (dashed for the human). */
-export function drawTrace(ctx, view, style, points, { alpha = 0.8, dots = false, width = 2.5 } = {}) {
+/** The text colour of an agent's tag (dark enough on a white label). */
+export function tagColor(style) {
+  return style.name === "human" ? HUMAN_TEXT : style.color;
+}
+
+/** The axis-aligned box an agent covers on screen, turned to `heading` (outline included). */
+export function agentBox(view, style, position, heading) {
+  const half = [Math.max(style.length_m * view.scale, 10) / 2, Math.max(style.width_m * view.scale, 10) / 2];
+  const [c, s] = [Math.abs(Math.cos(heading || 0)), Math.abs(Math.sin(heading || 0))];
+  const [x, y] = view.toPx(position);
+  const [rx, ry] = [half[0] * c + half[1] * s + 1.5, half[0] * s + half[1] * c + 1.5];
+  return { x0: x - rx, y0: y - ry, x1: x + rx, y1: y + ry };
+}
+
+/** Draw every agent (shapes first), then each tag where it covers no agent nor other tag. */
+export function drawAgents(ctx, view, agents, layout) {
+  const boxes = agents.map(({ style, position, heading, alpha }) => {
+    const box = drawAgent(ctx, view, style, position, heading, { alpha, tag: false });
+    layout.block(box);
+    return box;
+  });
+  agents.forEach(({ style }, i) => placeTag(layout, style, boxes[i]));
+  return boxes;
+}
+
+/** An agent's tag ("R", "H") just off an edge of its box, where it covers no agent nor other
+ * label (above, below, right, left, the corners; then further out). */
+export function placeTag(layout, style, box) {
+  const [cx, cy] = [(box.x0 + box.x1) / 2, (box.y0 + box.y1) / 2];
+  const m = 11;
+  const edges = [[cx, box.y0 - m], [cx, box.y1 + m], [box.x1 + m, cy], [box.x0 - m, cy],
+    [box.x1 + m, box.y0 - m], [box.x0 - m, box.y0 - m], [box.x1 + m, box.y1 + m], [box.x0 - m, box.y1 + m]];
+  const further = ringSpots([cx, cy], Math.max(box.x1 - box.x0, box.y1 - box.y0) / 2 + 2 * m, []);
+  return layout.placeFirst(style.tag, [...edges, ...further], { color: tagColor(style) });
+}
+
+/**
+ * A polyline through scene points, in the agent's colour (dashed for the human, dotted for
+ * a past stretch with `past`). Drawn opaque: a faded trace loses its contrast.
+ */
+export function drawTrace(ctx, view, style, points, { alpha = 1, dots = false, width = 2.5, past = false } = {}) {
   if (points.length < 2) return;
   ctx.save();
   ctx.globalAlpha = alpha;
   ctx.strokeStyle = style.color;
   ctx.lineWidth = width;
-  ctx.setLineDash(style.hatched ? [6, 4] : []);
+  ctx.lineCap = past ? "round" : "butt";
+  ctx.setLineDash(style.hatched ? [6, 4] : past ? [0.1, 6] : []);
   ctx.beginPath();
   points.forEach((p, i) => {
     const [px, py] = view.toPx(p);
@@ -276,4 +444,53 @@ export function drawClickMarker(ctx, view, point, label, { stroke = "#000000", r
   ctx.textBaseline = "middle";
   ctx.fillText(label, px, py + 0.5);
   ctx.restore();
+}
+
+/** A hollow ring on a clicked position: it covers nothing under it; returns its box. */
+export function drawRing(ctx, view, point, { color = ROBOT_COLOR, radius = 7 } = {}) {
+  const [px, py] = view.toPx(point);
+  ctx.save();
+  ctx.setLineDash([]);
+  for (const [stroke, width] of [["#ffffff", 5], [color, 2.5]]) {
+    ctx.strokeStyle = stroke;
+    ctx.lineWidth = width;
+    ctx.beginPath();
+    ctx.arc(px, py, radius, 0, 2 * Math.PI);
+    ctx.stroke();
+  }
+  ctx.fillStyle = color;
+  ctx.beginPath();
+  ctx.arc(px, py, 1.5, 0, 2 * Math.PI);
+  ctx.fill();
+  ctx.restore();
+  return boxAround([px, py], radius + 2.5);
+}
+
+/**
+ * For a scene point outside the view: an arrow at the canvas edge pointing to it, with its
+ * name, so the person knows where the agent or goal is. Returns the label box, or null when
+ * the point is in view.
+ */
+export function drawPointer(ctx, view, point, text, color, layout) {
+  const [px, py] = view.toPx(point);
+  const inset = 16;
+  if (px >= 0 && px <= view.width && py >= 0 && py <= view.height) return null;
+  const cx = view.width / 2;
+  const cy = view.height / 2;
+  const angle = Math.atan2(py - cy, px - cx);
+  const reach = Math.min((view.width / 2 - inset) / Math.abs(Math.cos(angle) || 1e-9),
+    (view.height / 2 - inset) / Math.abs(Math.sin(angle) || 1e-9));
+  const tip = [cx + reach * Math.cos(angle), cy + reach * Math.sin(angle)];
+  ctx.save();
+  ctx.fillStyle = color;
+  ctx.translate(tip[0], tip[1]);
+  ctx.rotate(angle);
+  ctx.beginPath();
+  ctx.moveTo(8, 0);
+  ctx.lineTo(-6, -7);
+  ctx.lineTo(-6, 7);
+  ctx.closePath();
+  ctx.fill();
+  ctx.restore();
+  return layout.place(text, tip, 18, { color: "#111111", sizePx: 11, angles: [angle + Math.PI] });
 }
