@@ -484,9 +484,9 @@ def echo_verdicts(bundles: dict, study: str, replications: int) -> None:
     from app.observers.simulated_study import run_instrument
     from app.study.bundle import BANK
 
-    _, observers, trials = simulation_inputs(study, None)
     out = get_settings().layout.instrument_report(study)
     for name, bundle in bundles.items():
+        _, observers, trials = simulation_inputs(study, None, bundle.root / BANK)
         summary = run_instrument(bundle.root / BANK, trials, out / f"bundle-{name}",
                                  observers=observers, replications=replications)
         verdicts = ", ".join(f"{world} {'pass' if ok else 'FAIL'} (pass rate "

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 import app
 from app.configio import load_yaml_model
@@ -142,8 +143,12 @@ def verified_manifest(root: Path) -> dict:
 def check_design(bundle: Bundle, config: StudyConfig, config_path: Path) -> None:
     """BundleError unless the live study config shapes the bank as the bundle's config did
     (texts, recruitment and scoring may change; trials, models and seeds may not)."""
-    frozen = bank_design(bundle.study_config().model_dump(mode="json"))
-    live = bank_design(config.model_dump(mode="json"))
+    live_keys = config.model_dump(mode="json")
+    # an older bundle's config may lack keys this version added (a new screen's text): the
+    # live config fills only those, so what the frozen file says is what is compared
+    written = yaml.safe_load((bundle.root / "configs" / f"{bundle.study_id}.yaml").read_text())
+    frozen = bank_design(live_keys | written) or {}
+    live = bank_design(live_keys)
     changed = sorted(key for key in live if frozen.get(key) != live[key])
     if changed:
         raise BundleError(f"{config_path}: differs from the bundle's config ({bundle.root}) in "
