@@ -4,18 +4,27 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-# Every dependency is pinned in requirements/dev.txt (runtime.txt: what the image installs);
-# `make lock` re-resolves both from pyproject.toml.
+# Every dependency is pinned in requirements/dev.txt (runtime.txt: what the image and
+# `make serve` install); `make lock` re-resolves both from pyproject.toml.
 LOCK := requirements/dev.txt
+RUNTIME_LOCK := requirements/runtime.txt
+RUNTIME_STAMP := $(VENV)/.installed-runtime
+# uv installs the pinned set in seconds where pip takes minutes (a fresh clone's first
+# `make serve` waits for it); torch goes first through pip, which reads this machine's
+# wheel sources (an unpinned resolve pulls gigabytes of CUDA wheels), and uv keeps it.
+UV := $(BIN)/uv pip install -q --python $(BIN)/python
 
 .PHONY: install serve test lint data bench pilot screens fuzz lock clean
 
-$(STAMP): pyproject.toml $(LOCK)
+$(RUNTIME_STAMP): pyproject.toml $(RUNTIME_LOCK)
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install -q pip==26.3
-	# torch first and pinned: an unpinned resolve pulls gigabytes of CUDA wheels
-	$(BIN)/pip install -q -c $(LOCK) torch==2.13.0
-	$(BIN)/pip install -q -c $(LOCK) -e '.[dev]'
+	$(BIN)/pip install -q pip==26.3 uv==0.13.9
+	$(BIN)/pip install -q -c $(RUNTIME_LOCK) torch==2.13.0
+	$(UV) -c $(RUNTIME_LOCK) -e .
+	touch $(RUNTIME_STAMP)
+
+$(STAMP): $(RUNTIME_STAMP) $(LOCK)
+	$(UV) -c $(LOCK) -e '.[dev]'
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -24,9 +33,9 @@ data: $(STAMP)
 	$(BIN)/tomstudy simulate highway --n 2000 --seed 0 --if-missing
 	$(BIN)/tomstudy simulate obstacle --n 2000 --seed 0 --if-missing
 
-# simulate both worlds, train Ours+VAE for both and build the trial bank where missing,
-# then serve the paper's study at http://127.0.0.1:8000/s/paper_study
-serve: $(STAMP)
+# serve the paper's study at http://127.0.0.1:8000/s/paper_study from its shipped bundle
+# (nothing to simulate or train); a `bundle: built` study is built first where missing
+serve: $(RUNTIME_STAMP)
 	$(BIN)/tomstudy serve --prepare --study paper_study $(SERVE_ARGS)
 
 test: $(STAMP)

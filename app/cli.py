@@ -360,6 +360,11 @@ def echo_grid(result: dict) -> None:
         needed = " ".join("-" if pd.isna(v) else f"{v:.0f}" for v in group["n_for_power_0.8"])
         typer.echo(f"{world:<10}{noise:<16}{rates:<32}{needed:<18}"
                    f"{favours(group, 'coarse', alpha):<17}{favours(group, 'precise', alpha)}")
+    if result.get("view_click_sd_deg"):
+        view = ", ".join(f"{world} {sd:.2f} deg" for world, sd in
+                         result["view_click_sd_deg"].items())
+        typer.echo(f"view = the prediction view's click spread ({view}) in quadrature with "
+                   "each preset's own")
     goal = result["goal"]
     met = all(w["met"] for w in goal["worlds"].values())
     shares = ", ".join(f"{world} {w['share_passing']:.0%}" for world, w in goal["worlds"].items())

@@ -70,3 +70,9 @@ def prediction_view(world_bank: Mapping) -> PredictionView:
 def click_resolution_deg(world_bank: Mapping) -> float:
     """Angular resolution of one click at the median true step (degrees per pixel of error)."""
     return prediction_view(world_bank).resolution_deg
+
+
+def click_direction_sd_deg(world_bank: Mapping, click_sd_px: float) -> float:
+    """Direction SD (deg) of a move at the median true step clicked with `click_sd_px` of
+    spread on screen."""
+    return math.degrees(math.atan2(click_sd_px, prediction_view(world_bank).median_step_px))

@@ -68,6 +68,7 @@ class ObserversConfig(StrictModel):
     inference: InferenceConfig
     coarse_noise: NoiseConfig
     precise_noise: NoiseConfig
+    click_sd_px: PositiveSourced  # a click's spread on screen: the instrument's "view" noise
 
 
 def load_observers(path: Path) -> ObserversConfig:

@@ -256,8 +256,12 @@ def run_instrument_grid(bank_path, trials_per_world: int, out_dir, observers: Ob
     from analysis.plots import plot_grid_pass_rates
     from app.fileio import write_json
     from app.observers.simulated_study import load_bank
+    from app.prediction_view import click_direction_sd_deg
 
     bank = load_bank(bank_path)
+    if view_deg is None:  # the noise the prediction view allows, from its pixel scale
+        view_deg = {world: click_direction_sd_deg(world_bank, observers.click_sd_px.value)
+                    for world, world_bank in bank["worlds"].items()}
     grid = run_grid(bank, trials_per_world, observers, n, seed, alpha, replications, view_deg)
     summary = summarise_grid(grid, alpha)
     out_dir = Path(out_dir)

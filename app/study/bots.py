@@ -32,6 +32,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 
+from app.fileio import read_bytes
 from app.observers.inverse_planning import PRESETS, predict
 from app.study.plan import PART_PHASES, TRIAL_PHASES, Phase
 from app.study.sessions import SESSION_HEADER, SESSION_PATH
@@ -67,7 +68,7 @@ def segment_key(segment_positions: list) -> str:
 
 def load_policy_actions(bank_path: Path) -> dict[str, np.ndarray]:
     """segment_key -> the world's own next actions [K, n, 2] from each start state."""
-    bank = json.loads(Path(bank_path).read_text())
+    bank = json.loads(read_bytes(bank_path))  # a bundle's bank is gzipped
     return {segment_key(t["segment"]["positions"]): np.asarray(t["policy_actions"],
                                                                dtype=np.float64)
             for w in bank["worlds"].values() for t in w["trials"]}

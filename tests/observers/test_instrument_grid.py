@@ -24,6 +24,7 @@ from app.observers.instrument_grid import (
     with_click_noise,
 )
 from app.observers.simulated_study import participant_diffs, simulate_participants
+from app.prediction_view import TARGET_STEP_PX, click_direction_sd_deg, prediction_view
 from tests.analysis.fixed_data import small_bank
 from tests.observers.test_observers import CONFIG, bank_with_examples
 
@@ -115,3 +116,15 @@ def test_the_goal_needs_enough_pairs_passing_in_a_world():
 def test_noise_levels_name_the_view_per_world_only_when_measured():
     assert list(noise_levels(None)) == [CONFIGURED, "2 deg", "5 deg", "10 deg", "20 deg"]
     assert noise_levels({"highway": 1.2})["view"] == {"highway": 1.2}
+
+
+def test_the_view_level_is_a_clicks_spread_at_the_views_own_scale():
+    bank = small_bank()
+    for world_bank in bank["worlds"].values():
+        view = prediction_view(world_bank)
+        # the view makes the median true step span TARGET_STEP_PX, whatever the world's metres
+        assert view.median_step_px == pytest.approx(TARGET_STEP_PX, rel=1e-3)
+        expected = math.degrees(math.atan2(CONFIG.click_sd_px.value, TARGET_STEP_PX))
+        assert click_direction_sd_deg(world_bank, CONFIG.click_sd_px.value) == pytest.approx(
+            expected, rel=1e-3)
+    assert CONFIG.click_sd_px.value == 3.0 and "Soukoreff" in CONFIG.click_sd_px.source

@@ -135,6 +135,10 @@ class Participant:
         headers = self.headers | kwargs.pop("headers", {})
         return self.client.post(self.url(what), headers=headers, **kwargs)
 
+    def put(self, what: str, body: dict, headers: dict | None = None):
+        """PUT to one of this session's routes (a draft); returns the response."""
+        return self.client.put(self.url(what), json=body, headers=self.headers | (headers or {}))
+
     def consent(self):
         """POST consent with the device info; returns the response."""
         return self.post("consent", {"submission_id": new_id(), "agree": True, "client": DEVICE})
@@ -173,7 +177,7 @@ class Participant:
     def save_draft(self, clicks: int = 2, seq: int = 1):
         """PUT a draft of the next trial: `clicks` straight clicks from its first start state."""
         trial = self.pass_screens()["step"]
-        return self.client.put(self.url("draft"), json=draft_body(trial, clicks, seq))
+        return self.put("draft", draft_body(trial, clicks, seq))
 
     def survey(self, strategy: str = "followed the lanes") -> dict:
         """POST the closing survey (`strategy` as the free-text answer); the answered state."""

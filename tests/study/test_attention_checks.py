@@ -12,6 +12,7 @@ from app.study.trial_builder import (
     NoStartStates,
     load_inputs,
     make_trial,
+    model_history,
     obviousness_deg,
     robot_step_percentile,
     segment_candidates,
@@ -54,7 +55,7 @@ def test_the_most_obvious_segments_get_start_states_like_any_other(small_study):
         max_step = config.prediction_input.max_step_factor * robot_step_percentile(
             inputs.trajs, inputs.held_out)
         segments = segment_candidates(config, inputs.world, inputs.trajs, inputs.held_out,
-                                      max(m.segment_len for m in inputs.models.values()), rng)
+                                      model_history(inputs), rng)
         scene = inputs.trajs.scene.model_dump()
         scored = []
         for src, start, end in segments[:24]:

@@ -32,7 +32,7 @@ def export(client, study_id: str, what: str) -> pd.DataFrame:
 
 def claim(p: Participant, tab: str, **flags):
     """POST .../tab for `tab`."""
-    return p.client.post(p.url("tab"), json={"tab_id": tab, "t_client_ms": 1.0, **flags})
+    return p.post("tab", {"tab_id": tab, "t_client_ms": 1.0, **flags})
 
 
 # ---------------------------------------------------------------- drafts
@@ -43,7 +43,7 @@ def test_a_draft_comes_back_with_its_trial_until_the_trial_is_stored(client, sma
     assert trial["draft"] is None
     assert p.save_draft(clicks=2, seq=3).json() == {"seq": 3}
     late = draft_body(trial, clicks=1, seq=2)  # an older save arriving late changes nothing
-    assert client.put(p.url("draft"), json=late).json() == {"seq": 3}
+    assert p.put("draft", late).json() == {"seq": 3}
     draft = p.state()["step"]["draft"]
     assert draft["seq"] == 3 and [len(points) for points in draft["points"]] == [2, 0, 0, 0, 0]
     assert draft["shown_at_ms"] == 1000.0 and draft["index"] == 0
@@ -55,15 +55,15 @@ def test_a_draft_must_fit_the_current_trial(client, small_study):
     p = at_first_trial(client, small_study.study_id)
     trial = p.state()["step"]
     wrong = draft_body(trial) | {"points": [[]]}
-    r = client.put(p.url("draft"), json=wrong)
+    r = p.put("draft", wrong)
     assert r.status_code == 422 and r.json()["detail"].startswith("points:")
     four = draft_body(trial, clicks=3)
     four["points"][0].append(four["points"][0][-1])
     four["click_times_ms"][0].append(9000.0)
-    assert client.put(p.url("draft"), json=four).json()["detail"].startswith("points.0:")
+    assert p.put("draft", four).json()["detail"].startswith("points.0:")
     p.answer_trial()
     p.pass_screens()
-    r = client.put(p.url("draft"), json=draft_body(trial))  # the practice, already stored
+    r = p.put("draft", draft_body(trial))  # the practice, already stored
     assert r.status_code == 409 and r.json()["detail"].startswith("trial_id:")
 
 
@@ -81,12 +81,11 @@ def test_a_second_tab_is_refused_until_it_takes_over(client, small_study):
     assert claim(p, TAB_A).status_code == 200  # the live tab's heartbeat
     assert claim(p, TAB_B, opened=True, takeover=True).status_code == 200
     trial = p.state()["step"]
-    stale = client.put(p.url("draft"), json=draft_body(trial, 3, seq=9),
-                       headers={"X-Tab-Id": TAB_A})
+    stale = p.put("draft", draft_body(trial, 3, seq=9), headers={"X-Tab-Id": TAB_A})
     assert stale.status_code == 409 and stale.json()["notice"]["action"] == "takeover"
     body = {"submission_id": new_id()}
-    assert p.client.post(p.url("consent"), json=body | {"agree": True},
-                         headers={"X-Tab-Id": TAB_A}).status_code == 409
+    assert p.post("consent", body | {"agree": True},
+                  headers={"X-Tab-Id": TAB_A}).status_code == 409
     assert claim(p, TAB_A).status_code == 409  # the old tab's heartbeat learns it
     events = export(client, small_study.study_id, "events")
     opened = events[events.kind.isin(["page_opened", "tab_takeover"])]
@@ -99,17 +98,18 @@ def test_a_released_tab_frees_the_session_and_a_write_without_a_tab_is_not_check
         client, small_study):
     p = at_first_trial(client, small_study.study_id)
     assert claim(p, TAB_A, opened=True).status_code == 200
-    assert client.post(p.url("tab/release"), json={"tab_id": TAB_A}).status_code == 204
+    assert p.post("tab/release", {"tab_id": TAB_A}).status_code == 204
     assert claim(p, TAB_B, opened=True).status_code == 200  # nobody is asked
     p.answer_trial()  # bots and API clients name no tab
 
 
 # ---------------------------------------------------------------- endings and refusals
 
-def test_a_finished_link_resumes_its_ending_and_another_attempt_is_told(client, small_study):
+def test_a_finished_link_resumes_its_ending_and_another_attempt_is_told(client, small_study,
+                                                                       bank):
     me = prolific("finisher")
     p = at_first_trial(client, small_study.study_id, **me)
-    p.finish()
+    p.finish(bank)  # passes the attention checks, so the session is kept: the approve code
     again = Participant(client, small_study.study_id)
     assert again.start(**me)["resumed"] is True and again.status == 200
     done = again.state()
