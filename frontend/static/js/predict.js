@@ -348,14 +348,13 @@ export class PredictionInput {
     drawTrace(ctx, view, robot, [this.startState.robot, ...this.current], { width: 3 });
     const rings = this.current.map((point) => drawRing(ctx, view, point));
     rings.forEach((box) => layout.block(box));
+    const outOfView = (box) => box.x1 < 0 || box.y1 < 0 || box.x0 > width || box.y0 > height;
     [human, robot].forEach((style, i) => {
-      const box = agents[i];
-      if (box.x1 < 0 || box.y1 < 0 || box.x0 > width || box.y0 > height) return; // an edge arrow points to it
-      placeTag(layout, style, box);
+      if (!outOfView(agents[i])) placeTag(layout, style, agents[i]); // else an edge arrow points to it
     });
     this.drawNumbers(layout, view);
     this.drawPreview(ctx, view);
-    this.drawPointers(ctx, view, layout);
+    this.drawPointers(ctx, view, layout, outOfView(agents[0]));
     this.canvas.layoutBoxes = { agents, rings, labels: layout.boxes };
     this.drawOverview(view);
   }
@@ -398,10 +397,11 @@ export class PredictionInput {
     });
   }
 
-  /** Arrows at the canvas edge towards the person and goals the zoomed view leaves out. */
-  drawPointers(ctx, view, layout) {
+  /** Arrows at the canvas edge towards the person (when none of it is in view: a part in view
+   * carries its own tag) and the goals the zoomed view leaves out. */
+  drawPointers(ctx, view, layout, humanOutOfView) {
     const human = agentStyle(this.scene, 1);
-    drawPointer(ctx, view, this.startState.human, "H", human.color, layout);
+    if (humanOutOfView) drawPointer(ctx, view, this.startState.human, "H", human.color, layout);
     (this.scene.goals || []).forEach((goal, k) => {
       drawPointer(ctx, view, [goal.x_m, goal.y_m], goal.label || `goal ${k + 1}`, GOAL_COLORS[k % GOAL_COLORS.length], layout);
     });
