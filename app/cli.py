@@ -472,8 +472,12 @@ def echo_bundle_diff(shipped: "Bundle", built: "Bundle", study: str, replication
                f"content {'identical' if diff['content_same'] else 'differs'}; files: "
                f"{len(files['same'])} same, {len(files['changed'])} changed, "
                f"{len(files['only_old'])} only shipped, {len(files['only_new'])} only built")
-    same = sum(row["same"] for row in diff["checkpoints"])
-    typer.echo(f"checkpoints: {same} of {len(diff['checkpoints'])} identical")
+    rows = diff["checkpoints"]
+    others = sorted({key for row in rows for key in row["other_keys_differ"]})
+    typer.echo(f"checkpoints: {sum(row['same'] for row in rows)} of {len(rows)} identical; "
+               f"{sum(row['same_weights'] for row in rows)} of {len(rows)} with the same "
+               f"weights" + (f" (other recorded keys that differ: {', '.join(others)})"
+                            if others else ""))
     for world, part in diff["worlds"].items():
         typer.echo(f"{world}: {part['main_same_clip']} of {part['main_trials'][0]} shipped main "
                    f"trials kept with the same clip; {part['trials_same_clip']} trials compared")

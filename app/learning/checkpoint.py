@@ -103,6 +103,12 @@ class TrainedModel:
     path: Path | None = None
     _state_dict: dict = field(default_factory=dict, repr=False)
 
+    def same_weights(self, other: "TrainedModel") -> bool:
+        """True when both checkpoints hold exactly the same parameters."""
+        mine, theirs = self._state_dict, other._state_dict
+        return mine.keys() == theirs.keys() and all(
+            np.array_equal(np.asarray(mine[k]), np.asarray(theirs[k])) for k in mine)
+
     def __post_init__(self) -> None:
         # per-call constants of the study server's fast path, computed once
         if self.levels:  # Ours: the quantiser's level set and code-index place values

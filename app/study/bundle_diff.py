@@ -19,7 +19,8 @@ def compare_bundles(old: Bundle, new: Bundle) -> dict:
             "content_same": old.manifest["content_sha256"] == new.manifest["content_sha256"],
             "bank_same": old.bank.sha256 == new.bank.sha256,
             "files": compare_files(old.manifest["files"], new.manifest["files"]),
-            "checkpoints": compare_checkpoints(old.manifest["models"], new.manifest["models"]),
+            "checkpoints": [row | same_weights(old, new, row) for row in
+                            compare_checkpoints(old.manifest["models"], new.manifest["models"])],
             "worlds": {world: compare_world(old, new, world)
                        for world in sorted(set(old.bank.data.worlds) & set(new.bank.data.worlds))}}
 
@@ -43,6 +44,17 @@ def compare_checkpoints(old: dict, new: dict) -> list[dict]:
                              "old": a.get(seed, ""), "new": b.get(seed, ""),
                              "same": a.get(seed) == b.get(seed)})
     return rows
+
+
+def same_weights(old: Bundle, new: Bundle, row: dict) -> dict:
+    """Whether a checkpoint pair holds the same weights, and which other recorded keys differ
+    (a content hash also covers what the data's simulation recorded, its wall time say)."""
+    if not (row["old"] and row["new"]):
+        return {"same_weights": False, "other_keys_differ": []}
+    a, b = (bundle.model(row["world"], row["model"], row["seed"]) for bundle in (old, new))
+    keys = ("data_meta", "data_hash", "train_config", "codes", "model_args")
+    return {"same_weights": a.same_weights(b),
+            "other_keys_differ": [k for k in keys if getattr(a, k) != getattr(b, k)]}
 
 
 def compare_world(old: Bundle, new: Bundle, world: str) -> dict:

@@ -160,7 +160,8 @@ def test_a_changed_answer_shows_in_the_comparison_of_two_bundles(small_study, tm
     refrozen_with(study, turn)
     diff = compare_bundles(open_bundle(bundle_root(small_study)), open_bundle(bundle_root(study)))
     assert not diff["content_same"] and diff["files"]["changed"] == [BANK]
-    assert all(row["same"] for row in diff["checkpoints"])
+    assert all(row["same"] and row["same_weights"] and not row["other_keys_differ"]
+               for row in diff["checkpoints"])
     gaps = {(r["model"], r["seed"]): r for r in diff["worlds"]["highway"]["answers"]}
     assert gaps[("ours", 0)]["max_degrees"] == pytest.approx(90.0, abs=1e-3)
     assert gaps[("ours", 1)]["max_degrees"] < 1e-5 and gaps[("vae", 0)]["max_metres"] == 0.0
@@ -218,3 +219,19 @@ def test_the_paper_studys_shipped_bundle_verifies_on_this_machine():
                if len(r) == 8 and r[2].isdigit()]
     assert len(checked) == 2 * 2 * len(config.models.seeds)
     assert all(r[-1] == "ok" for r in checked)
+
+
+def test_same_weights_tells_weights_from_what_else_a_checkpoint_records(small_study):
+    """A from-scratch build on one machine trains the same weights, but its content hash
+    also covers the data's recorded simulation wall time: the comparison says which."""
+    import copy
+    import dataclasses
+
+    model = open_bundle(bundle_root(small_study)).model("highway", "ours", 0)
+    timed = dataclasses.replace(model, data_meta=copy.deepcopy(model.data_meta) | {
+        "source": {**model.data_meta.get("source", {}), "wall_time_s": 1e6}})
+    assert model.same_weights(timed) and timed.data_meta != model.data_meta
+    nudged_state = {k: v.clone() for k, v in model._state_dict.items()}  # torch tensors
+    first = next(iter(nudged_state))
+    nudged_state[first].view(-1)[0] += 1e-3
+    assert not model.same_weights(dataclasses.replace(model, _state_dict=nudged_state))
