@@ -62,8 +62,7 @@ def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Iden
         _replace(db, existing)
     usage = balance.read_usage(db, ctx.study_id)
     if not who.pilot:
-        check_room(db, ctx)
-        _admit(ctx, usage)
+        _admit(db, ctx, usage)
     order, steps = assign_plan(ctx.config, ctx.bank, usage, rng)
     participant = Participant(
         study_id=ctx.study_id, recruitment=who.recruitment, external_id=who.external_id,
@@ -101,8 +100,10 @@ def live_participant(db: Session, study_id: str, external_id: str | None) -> Par
     return db.execute(query).scalars().first()
 
 
-def _admit(ctx: StudyContext, usage: Usage) -> None:
-    """Refuse a new participant while the study is closed or full (409 with a notice)."""
+def _admit(db: Session, ctx: StudyContext, usage: Usage) -> None:
+    """Refuse a new participant while the study runs its cap of unfinished sessions (503),
+    or is closed or full (409), each with a notice."""
+    check_room(db, ctx)
     recruitment = ctx.config.recruitment
     if recruitment.closed:
         raise Refused(409, "study_id: the study is closed to new participants "
