@@ -28,7 +28,7 @@
 # DATABASE_URL (psycopg 3), e.g. a line
 # DATABASE_URL=postgresql+psycopg://tomstudy:<password>@db-host:5432/tomstudy in the env
 # file, it can run several workers: append `--workers 4` to the run command (arguments are
-# serve options, see app/study/entrypoint.sh). The paper's study is served from the frozen
+# serve options, see app/server/entrypoint.sh). The paper's study is served from the frozen
 # bundle in study_configs/bundles/ (copied in below), so the first start trains nothing; a
 # study of your own with `bundle: built` is built into var/ on its first start (minutes, see
 # the README). HEALTHCHECK asks /healthz (which checks the database) on the host and port the
@@ -70,4 +70,4 @@ VOLUME ["/app/var"]
 # entrypoint writes the address the server listens on
 HEALTHCHECK --interval=30s --timeout=15s --start-period=10m \
   CMD ["python", "-c", "import urllib.request as u; a = open('/tmp/tomstudy-healthz').read().strip(); u.urlopen(a, timeout=12)"]
-ENTRYPOINT ["dumb-init", "--", "/app/app/study/entrypoint.sh"]
+ENTRYPOINT ["dumb-init", "--", "/app/app/server/entrypoint.sh"]

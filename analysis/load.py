@@ -1,7 +1,7 @@
 """Read the study's predictions, from the exported CSV or straight from the database.
 
 Both readers return the same tidy DataFrame: one row per (participant, trial, start state,
-step), the columns of the export contract (app/study/API.md) with fixed dtypes, sorted
+step), the columns of the export contract (app/server/API.md) with fixed dtypes, sorted
 by participant, trial, start state and step. `participant_id` is the session's random
 public id: the predictions carry no platform id.
 """

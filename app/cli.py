@@ -12,11 +12,11 @@ from app.settings import get_settings
 
 if TYPE_CHECKING:
     from analysis.report import StudyInputs
+    from app.bank.bundle import Bundle
     from app.observers.config import ObserversConfig
+    from app.server.context import StudyContext
+    from app.server.migrate import UpgradeReport
     from app.settings import Settings
-    from app.study.bundle import Bundle
-    from app.study.context import StudyContext
-    from app.study.migrate import UpgradeReport
 
 cli = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Worlds, models and the online study of how people predict a robot.")
@@ -176,7 +176,7 @@ def pilot(
     bank: Annotated[Path | None, typer.Option(help="trial bank (precise bots)")] = None,
 ) -> None:
     """Pilot the study: simulated participants take it through the real HTTP flow."""
-    from app.study.bots import PRESETS, run_pilot
+    from app.pilot.bots import PRESETS, run_pilot
 
     if preset not in PRESETS:
         fail(f"kind: unknown bot kind {preset!r}; choose one of {', '.join(PRESETS)}")
@@ -217,7 +217,7 @@ def analysis_inputs(study: str) -> "StudyInputs":
     """What `analyze` takes from the study config and its bundle, as plain values and paths
     (without a bundle on this machine the analysis runs on the export alone, and says so)."""
     from analysis.report import StudyInputs
-    from app.study.bundle import BANK, BundleError, load_bundle
+    from app.bank.bundle import BANK, BundleError, load_bundle
     from app.study.config import load_study_config
 
     settings = get_settings()
@@ -285,7 +285,7 @@ def check_display_cmd(
     = "paper_study",
 ) -> None:
     """Can a person click the robot's true moves, and is a behaviour one direction?"""
-    from app.study.display_check import check_display, format_table
+    from app.bank.display_check import check_display, format_table
 
     try:
         result = check_display(get_settings().data_dir, study, served_bank(study))
@@ -404,7 +404,7 @@ def echo_separation(rows: list[dict]) -> None:
 
 def served_bundle(study: str) -> "Bundle":
     """The bundle `study` is served from (every file checked); exit 2 if it cannot be."""
-    from app.study.bundle import BundleError, load_bundle
+    from app.bank.bundle import BundleError, load_bundle
     from app.study.config import load_study_config
 
     settings = get_settings()
@@ -417,7 +417,7 @@ def served_bundle(study: str) -> "Bundle":
 
 def served_bank(study: str) -> Path:
     """The trial bank file of the bundle `study` is served from."""
-    from app.study.bundle import BANK
+    from app.bank.bundle import BANK
 
     return served_bundle(study).root / BANK
 
@@ -441,8 +441,8 @@ def bundle_build(
     var/bundles/<study>/, and report how it differs from the shipped one."""
     import shutil
 
-    from app.study.bundle import BundleError, open_bundle, shipped_dir
-    from app.study.prepare import build_bundle
+    from app.bank.bundle import BundleError, open_bundle, shipped_dir
+    from app.bank.prepare import build_bundle
 
     settings = get_settings()
     try:
@@ -464,7 +464,7 @@ def bundle_build(
 
 def echo_bundle_diff(shipped: "Bundle", built: "Bundle", study: str, replications: int) -> None:
     """Print how the built bundle differs from the shipped one, and both instrument verdicts."""
-    from app.study.bundle_diff import compare_bundles
+    from app.bank.bundle_diff import compare_bundles
 
     diff = compare_bundles(shipped, built)
     files = diff["files"]
@@ -490,8 +490,8 @@ def echo_bundle_diff(shipped: "Bundle", built: "Bundle", study: str, replication
 
 def echo_verdicts(bundles: dict, study: str, replications: int) -> None:
     """The instrument check's verdict and pass rate per world on each bundle's bank."""
+    from app.bank.bundle import BANK
     from app.observers.simulated_study import run_instrument
-    from app.study.bundle import BANK
 
     out = get_settings().layout.instrument_report(study)
     for name, bundle in bundles.items():
@@ -512,8 +512,8 @@ def bundle_verify(
 ) -> None:
     """Check every file against the manifest and recompute every stored model answer on this
     machine; print the largest differences; exit 1 if any is beyond tolerance."""
-    from app.study.bundle import BundleError, open_bundle
-    from app.study.model_answers import ACTION_TOLERANCE_MPS, recompute
+    from app.bank.bundle import BundleError, open_bundle
+    from app.bank.model_answers import ACTION_TOLERANCE_MPS, recompute
 
     try:
         opened = open_bundle(bundle) if bundle else served_bundle(study)
@@ -541,9 +541,9 @@ def build_trials_cmd(
     study: Annotated[str, typer.Option(help="study_configs/<study>.yaml")] = "paper_study",
 ) -> None:
     """Build the study's trial bank from held-out trajectories into var/trials/<study>/."""
+    from app.bank.build import build_trials
     from app.learning.checkpoint import CheckpointError
     from app.study.config import load_study_config
-    from app.study.trial_builder import build_trials
 
     settings = get_settings()
     try:
@@ -569,12 +569,12 @@ def serve(
 
     import uvicorn
 
-    from app.study.main import STUDY_ENV
+    from app.main import STUDY_ENV
 
     settings = server_settings(host, workers, allow_bank_change)
     check_data_dir_writable(settings.data_dir)
     if prepare:
-        from app.study.prepare import prepare_study
+        from app.bank.prepare import prepare_study
 
         for study_id in study.split(","):
             prepare_study(settings, study_id, say=typer.echo)
@@ -583,16 +583,16 @@ def serve(
     docs = "off in production" if settings.production else "/docs"
     typer.echo(f"serving http://{host}:{port}/s/{study.split(',')[0]}  "
                f"(researcher dashboard: /researcher, API docs: {docs})")
-    uvicorn.run("app.study.main:app_from_env", factory=True, host=host, port=port,
+    uvicorn.run("app.main:app_from_env", factory=True, host=host, port=port,
                 workers=workers, log_level="warning")
 
 
 def loadable_study(settings: "Settings", study_id: str) -> "StudyContext":
     """The study as a server loads it (bundle verified, answers recomputed); exit 2 if it
     cannot be served, before any worker starts."""
-    from app.study.bundle import BundleError
-    from app.study.main import load_study
-    from app.study.model_answers import BankMismatch
+    from app.bank.bundle import BundleError
+    from app.bank.model_answers import BankMismatch
+    from app.main import load_study
 
     try:
         return load_study(settings, study_id)
@@ -619,9 +619,9 @@ def check_data_dir_writable(data_dir: Path) -> None:
 def check_database(settings: "Settings", studies: list["StudyContext"]) -> None:
     """Before any worker starts: make an empty database, and exit 2 on one that needs
     `tomstudy db upgrade` or whose sessions ran another trial bank (unless allowed)."""
-    from app.study.bank_guard import BankChanged, check_bank_unchanged
-    from app.study.db import create_tables, make_engine
-    from app.study.migrate import SchemaError
+    from app.server.bank_guard import BankChanged, check_bank_unchanged
+    from app.server.db import create_tables, make_engine
+    from app.server.migrate import SchemaError
 
     engine = make_engine(settings.resolved_database_url())
     try:
@@ -639,8 +639,8 @@ def server_settings(host: str, workers: int, allow_bank_change: bool = False) ->
     """Settings for `serve`: production off loopback; exit 2 if unsafe or unservable."""
     import os
 
-    from app.study.db import is_sqlite
-    from app.study.main import UnsafeSettings, check_production
+    from app.main import UnsafeSettings, check_production
+    from app.server.db import is_sqlite
 
     if allow_bank_change:  # the app factory (in each worker) reads the environment
         os.environ["TOMSTUDY_ALLOW_BANK_CHANGE"] = "1"
@@ -684,8 +684,8 @@ cli.add_typer(db_cli, name="db")
 @db_cli.command("upgrade")
 def db_upgrade() -> None:
     """Bring the database to this tomstudy's schema revision, keeping every row."""
-    from app.study.db import make_engine
-    from app.study.migrate import SchemaError, upgrade, where
+    from app.server.db import make_engine
+    from app.server.migrate import SchemaError, upgrade, where
 
     engine = make_engine(get_settings().resolved_database_url())
     try:
@@ -717,8 +717,8 @@ def upgrade_lines(report: "UpgradeReport", where: str) -> list[str]:
 @db_cli.command("current")
 def db_current() -> None:
     """Print the database's schema revision and this tomstudy's newest."""
-    from app.study.db import make_engine
-    from app.study.migrate import current, head, our_tables
+    from app.server.db import make_engine
+    from app.server.migrate import current, head, our_tables
 
     engine = make_engine(get_settings().resolved_database_url())
     try:
@@ -738,7 +738,7 @@ def preview_link_cmd(
     base_url: Annotated[str, typer.Option(help="where the study is served")] = "",
 ) -> None:
     """Print the study's researcher preview link: its sessions are pilots that never count."""
-    from app.study.recruitment import preview_key, preview_path
+    from app.server.recruitment import preview_key, preview_path
 
     token = get_settings().admin_token
     if not token.strip():
@@ -760,7 +760,7 @@ def export_cmd(
 
     from analysis.contracts import WHAT
     from analysis.csvsafe import write_csv
-    from app.study.exports import export_table
+    from app.researcher.exports import export_table
 
     if what not in WHAT:
         fail(f"--what: unknown export {what!r}; choose one of {', '.join(WHAT)}")
@@ -789,9 +789,9 @@ def withdraw(
 
     from sqlmodel import Session
 
-    from app.study import withdrawal
+    from app.researcher import withdrawal
+    from app.server.tables import WithdrawalByExternalId, WithdrawalByParticipantId
     from app.study.errors import Refused
-    from app.study.tables import WithdrawalByExternalId, WithdrawalByParticipantId
 
     if (external_id is None) == (participant_id is None):
         fail("give exactly one of --external-id and --participant-id")
@@ -818,9 +818,9 @@ def study_database(study: str):
     from sqlalchemy import inspect
     from sqlalchemy.engine import make_url
 
+    from app.server.db import make_engine, normalise_url
+    from app.server.migrate import SchemaError, check_at_head
     from app.study.config import load_study_config
-    from app.study.db import make_engine, normalise_url
-    from app.study.migrate import SchemaError, check_at_head
 
     settings = get_settings()
     try:

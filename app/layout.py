@@ -15,7 +15,7 @@
       study.db, pilot_<bots>.db                                         serve, make pilot
 
 A study's model family (its config's `models.seeds`) lives at `checkpoint(world, model, seed)`;
-the bundle a study is served from is frozen from those files (app/study/bundle.py).
+the bundle a study is served from is frozen from those files (app/bank/bundle.py).
 """
 
 from dataclasses import dataclass

@@ -24,7 +24,7 @@ class Settings(BaseSettings):
     data_dir: Path = Field(default=DEFAULT_DATA_DIR)
     configs_dir: Path = Field(default=REPO_ROOT / "study_configs")
     database_url: str = Field(default="", validation_alias="DATABASE_URL")
-    # no default anywhere: `serve` generates one when unset (app/study/main.py)
+    # no default anywhere: `serve` generates one when unset (app/main.py)
     admin_token: str = ""
     # secrets as files (compose secrets, /run/secrets/...): read when set
     admin_token_file: Path | None = None
@@ -36,11 +36,11 @@ class Settings(BaseSettings):
     rate_limit_requests: str = "300/minute"
     # how often each worker releases stale sessions' balance counts (balance.sweep_stale)
     stale_sweep_s: float = Field(default=30.0, gt=0)
-    # production: researcher token must be strong, API docs off (app/study/main.py)
+    # production: researcher token must be strong, API docs off (app/main.py)
     production: bool = False
     # bots answer faster than people and report a simulated clock; only `make pilot` sets this
     trust_client_clock: bool = False
-    # serve a study although sessions ran another trial bank (app/study/bank_guard.py)
+    # serve a study although sessions ran another trial bank (app/server/bank_guard.py)
     allow_bank_change: bool = False
 
     @model_validator(mode="after")

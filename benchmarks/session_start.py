@@ -32,9 +32,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from fastapi.testclient import TestClient  # noqa: E402
 
-from app.study.balance import STALE_BATCH, release_stale_batch  # noqa: E402
-from app.study.main import create_app  # noqa: E402
-from app.study.tables import Participant, utcnow  # noqa: E402
+from app.main import create_app  # noqa: E402
+from app.server.balance import STALE_BATCH, release_stale_batch  # noqa: E402
+from app.server.tables import Participant, utcnow  # noqa: E402
 from tests.conftest import cached_small_study  # noqa: E402
 from tests.study.flow import make_client, prolific  # noqa: E402
 

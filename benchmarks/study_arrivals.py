@@ -37,8 +37,8 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from app.layout import Layout  # noqa: E402
+from app.server.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
 from app.settings import Settings  # noqa: E402
-from app.study.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
 from benchmarks._rawhttp import RawClient  # noqa: E402
 from benchmarks.study_load import event, recruitment_params, write  # noqa: E402
 from tests.conftest import (  # noqa: E402

@@ -2,7 +2,7 @@
 
 Starts a real `tomstudy serve` on 127.0.0.1 (SQLite WAL, 1 worker, unless told) with the
 paper's study (its bundle ships with the code), else the small test study. Then N
-simulated participants (200) run the whole flow at once, as app/study/bots.py does: start
+simulated participants (200) run the whole flow at once, as app/pilot/bots.py does: start
 a session with Prolific-style parameters, read the state, consent, instructions, per trial
 post telemetry and predictions, then the survey. Before each step every participant also
 GETs the bare endpoint, so both see the same load: by default a path no route serves, i.e.
@@ -34,9 +34,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from app.study.bots import survey_answers  # noqa: E402
-from app.study.bundle import MANIFEST, shipped_dir  # noqa: E402
-from app.study.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
+from app.bank.bundle import MANIFEST, shipped_dir  # noqa: E402
+from app.pilot.bots import survey_answers  # noqa: E402
+from app.server.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
 from benchmarks._rawhttp import RawClient  # noqa: E402
 from tests.conftest import (  # noqa: E402
     REPO,
@@ -50,7 +50,7 @@ from tests.study.flow import DEVICE, prediction_body  # noqa: E402
 BARE = "GET bare"
 ROUTES = ("POST sessions", "GET state", "POST consent", "POST instructions", "POST continue",
           "POST events", "PUT draft", "POST predictions", "POST survey")
-PART_PHASES = ("world_intro", "practice_over")  # a part's screens (app/study/plan.py)
+PART_PHASES = ("world_intro", "practice_over")  # a part's screens (app/server/plan.py)
 EXPECTED_STATUS = {"POST sessions": (201,), "POST events": (202,), "POST predictions": (201,),
                    BARE: (200, 404)}  # any other route: (200,)
 MAX_STEPS = 200  # a participant that has not finished after this many steps is stuck

@@ -37,8 +37,8 @@ SMALL_TRAINING = {"max_epochs": 2, "patience_epochs": 2, "encoder_hidden": [32, 
                   "decoder_hidden": [32, 32], "windows_per_trajectory": 5,
                   "val_fraction": 0.15, "test_fraction": 0.45}
 SMALL_TRAJECTORIES = 70
-PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/study/trial_builder.py",
-                    "app/study/trials.py", "app/study/config.py", "app/study/bundle.py",
+PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/bank/build.py",
+                    "app/study/trials.py", "app/study/config.py", "app/bank/bundle.py",
                     "app/fileio.py", "study_configs"]
 
 
@@ -114,9 +114,9 @@ def build_small_study(root: Path) -> SmallStudy:
 
 def build_bundle_of(study: SmallStudy) -> None:
     """Build the study's bank from its data dir's checkpoints and freeze its bundle."""
+    from app.bank.build import build_trials
     from app.configio import load_yaml_model
     from app.study.config import StudyConfig
-    from app.study.trial_builder import build_trials
 
     config = load_yaml_model(study.configs_dir / f"{study.study_id}.yaml", StudyConfig)
     build_trials(config, study.study_id, study.data_dir)
@@ -126,9 +126,9 @@ def build_bundle_of(study: SmallStudy) -> None:
 def freeze_bundle_of(study: SmallStudy) -> None:
     """Freeze the study's bundle from its data dir's working bank as it is (after a test
     changed it, say)."""
+    from app.bank.bundle import freeze
     from app.configio import load_yaml_model
     from app.layout import Layout
-    from app.study.bundle import freeze
     from app.study.config import StudyConfig
 
     config = load_yaml_model(study.configs_dir / f"{study.study_id}.yaml", StudyConfig)

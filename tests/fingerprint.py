@@ -68,7 +68,7 @@ def bot_payload(bank, world, trial) -> dict:
 
 def click_digests(bank_path: Path, seed: int) -> dict[str, str]:
     """Every bot kind clicks every trial of the bank with a fixed seed; sha256 per kind."""
-    from app.study.bots import choose_clicks, load_policy_actions
+    from app.pilot.bots import choose_clicks, load_policy_actions
     from app.study.trials import BankFile
 
     bank = BankFile.model_validate_json(bank_path.read_text())

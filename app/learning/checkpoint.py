@@ -217,7 +217,7 @@ def _read_payload(path: Path) -> dict:
 
     if not path.is_file():
         raise CheckpointError(f"{path}: checkpoint file not found")
-    try:  # a bundle's checkpoints are gzipped (app/study/bundle.py)
+    try:  # a bundle's checkpoints are gzipped (app/bank/bundle.py)
         source = io.BytesIO(read_bytes(path)) if path.suffix == ".gz" else path
         payload = torch.load(source, map_location="cpu", weights_only=True)
     except Exception as err:  # torch raises many types for a damaged file

@@ -1,1 +1,1 @@
-"""The study server: trial bank, participant flow, storage, researcher side, pilot bots."""
+"""What a study is, for every side: its typed config, its trial bank and its write-path error."""

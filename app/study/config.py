@@ -14,7 +14,7 @@ from app.configio import ConfigError, StrictModel, load_yaml_model
 from app.settings import Settings
 
 WorldName = Literal["highway", "obstacle"]
-# where a study's frozen bundle is (app/study/bundle.py): `shipped` in the configs dir (in git,
+# where a study's frozen bundle is (app/bank/bundle.py): `shipped` in the configs dir (in git,
 # served as it is), `built` in the data dir (made by `tomstudy bundle build`)
 BundleSource = Literal["shipped", "built"]
 
@@ -203,7 +203,7 @@ class ModelFamily(StrictModel):
 
 
 class MainTrialSelection(StrictModel):
-    """Which held-out segments become main trials (app/study/trial_builder.py), in two arms.
+    """Which held-out segments become main trials (app/bank/build.py), in two arms.
 
     `random`: every main trial is in the random arm: the first usable segments, robot labels
     taking turns. `models_disagree`: the first `random_arm_trials` usable segments form the

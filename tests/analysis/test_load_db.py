@@ -8,9 +8,9 @@ from sqlmodel import Session
 
 from analysis.csvsafe import write_csv
 from analysis.load import load_csv, load_database
-from app.study.db import create_tables, make_engine
-from app.study.exports import predictions_frame
-from app.study.tables import Participant, PredictionRow, TrialResponse
+from app.researcher.exports import predictions_frame
+from app.server.db import create_tables, make_engine
+from app.server.tables import Participant, PredictionRow, TrialResponse
 from tests.analysis.fixed_data import fixed_predictions
 
 

@@ -9,8 +9,8 @@ import pytest
 from sqlalchemy import create_engine, func, select, text
 
 from analysis.load import load_csv, load_database
-from app.study.bots import run_bots
-from app.study.tables import Participant, PredictionRow, Submission, TrialResponse
+from app.pilot.bots import run_bots
+from app.server.tables import Participant, PredictionRow, Submission, TrialResponse
 from tests.conftest import free_port, fresh_database, start_server
 
 pytestmark = pytest.mark.slow

@@ -5,7 +5,7 @@ import re
 
 import pytest
 
-from app.study.bots import run_bots
+from app.pilot.bots import run_bots
 from tests.conftest import ADMIN_TOKEN, REPO
 from tests.e2e.conftest import BROWSER_STUDY
 

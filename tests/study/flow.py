@@ -8,10 +8,10 @@ from dataclasses import dataclass
 import numpy as np
 from fastapi.testclient import TestClient
 
-from app.study.bots import segment_key
-from app.study.main import create_app
-from app.study.plan import PART_PHASES, TRIAL_PHASES
-from app.study.sessions import SESSION_HEADER, SESSION_PATH
+from app.main import create_app
+from app.pilot.bots import segment_key
+from app.server.plan import PART_PHASES, TRIAL_PHASES
+from app.server.sessions import SESSION_HEADER, SESSION_PATH
 from tests.conftest import ADMIN_TOKEN
 
 TOKEN = ADMIN_TOKEN

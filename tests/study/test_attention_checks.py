@@ -5,10 +5,7 @@ import json
 
 import numpy as np
 
-from app.configio import load_yaml_model
-from app.layout import Layout
-from app.study.config import StudyConfig
-from app.study.trial_builder import (
+from app.bank.build import (
     NoStartStates,
     load_inputs,
     make_trial,
@@ -17,6 +14,9 @@ from app.study.trial_builder import (
     robot_step_percentile,
     segment_candidates,
 )
+from app.configio import load_yaml_model
+from app.layout import Layout
+from app.study.config import StudyConfig
 from tests.study.attention_spotter import THRESHOLD, hit_rates, reach
 
 DATA_KINDS = {"same_lane", "adjacent_lane", "near", "mid", "own"}

@@ -10,10 +10,10 @@ from fastapi.testclient import TestClient
 
 from app.fileio import sha256_file
 from app.layout import Layout
-from app.study.bank_guard import BankChanged, banks_run
-from app.study.db import make_engine
-from app.study.main import create_app
-from app.study.recruitment import preview_key
+from app.main import create_app
+from app.server.bank_guard import BankChanged, banks_run
+from app.server.db import make_engine
+from app.server.recruitment import preview_key
 from tests.conftest import TOMSTUDY, SmallStudy, free_port, freeze_bundle_of, start_server
 from tests.study.flow import TOKEN, Participant, make_client, new_id
 

@@ -10,10 +10,7 @@ import subprocess
 import pytest
 import yaml
 
-from app.configio import load_yaml_model
-from app.layout import Layout
-from app.settings import Settings
-from app.study.bundle import (
+from app.bank.bundle import (
     BANK,
     MANIFEST,
     BundleError,
@@ -23,10 +20,13 @@ from app.study.bundle import (
     open_bundle,
     shipped_dir,
 )
-from app.study.bundle_diff import compare_bundles
+from app.bank.bundle_diff import compare_bundles
+from app.bank.model_answers import BankMismatch, ModelAnswers
+from app.bank.prepare import bank_is_current, build_bundle, prepare_study
+from app.configio import load_yaml_model
+from app.layout import Layout
+from app.settings import Settings
 from app.study.config import StudyConfig, load_study_config
-from app.study.model_answers import BankMismatch, ModelAnswers
-from app.study.prepare import bank_is_current, build_bundle, prepare_study
 from tests.conftest import REPO, SMALL_SEEDS, TOMSTUDY, SmallStudy, freeze_bundle_of
 
 

@@ -15,22 +15,22 @@ from fastapi.testclient import TestClient
 from sqlalchemy.pool import StaticPool
 from sqlmodel import Session, create_engine, select
 
-from app.configio import ConfigError, load_yaml_model
-from app.fileio import sha256_file
-from app.layout import Layout
-from app.settings import Settings
-from app.study.config import MainTrialSelection, StudyConfig, load_study_config
-from app.study.db import create_tables
-from app.study.deps import get_db
-from app.study.main import UnsafeSettings, create_app
-from app.study.tables import Participant
-from app.study.trial_builder import (
+from app.bank.build import (
     NoStartStates,
     build_trials,
     main_trials,
     model_disagreement,
     take_turns,
 )
+from app.configio import ConfigError, load_yaml_model
+from app.fileio import sha256_file
+from app.layout import Layout
+from app.main import UnsafeSettings, create_app
+from app.server.db import create_tables
+from app.server.deps import get_db
+from app.server.tables import Participant
+from app.settings import Settings
+from app.study.config import MainTrialSelection, StudyConfig, load_study_config
 from app.study.trials import TrialBank, clip_sha256
 from tests.conftest import REPO, TOMSTUDY, SmallStudy, build_bundle_of
 from tests.study import flow

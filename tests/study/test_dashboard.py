@@ -10,7 +10,7 @@ import pytest
 from scipy import stats
 from sqlalchemy import update
 
-from app.study.tables import Participant, TrialResponse
+from app.server.tables import Participant, TrialResponse
 from tests.study.flow import ADMIN, at_first_trial, prediction_body, straight_clicks
 from tests.study.flow import Participant as Person
 

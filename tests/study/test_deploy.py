@@ -106,7 +106,7 @@ def test_compose_command_and_entrypoint_call_real_serve_options():
 
 def test_the_image_runs_the_entrypoint_and_the_build_context_leaves_secrets_out():
     dockerfile = (REPO / "Dockerfile").read_text()
-    assert 'ENTRYPOINT ["dumb-init", "--", "/app/app/study/entrypoint.sh"]' in dockerfile
+    assert 'ENTRYPOINT ["dumb-init", "--", "/app/app/server/entrypoint.sh"]' in dockerfile
     assert "COPY app ./app" in dockerfile  # the entrypoint comes with the package
     assert os.access(ENTRYPOINT, os.X_OK)
     ignored = (REPO / ".dockerignore").read_text().split()
@@ -117,7 +117,7 @@ def test_the_image_runs_the_entrypoint_and_the_build_context_leaves_secrets_out(
 
 @pytest.fixture
 def run_entrypoint(tmp_path):
-    """Run app/study/entrypoint.sh with a stand-in `tomstudy` that prints its arguments."""
+    """Run app/server/entrypoint.sh with a stand-in `tomstudy` that prints its arguments."""
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     fake = bin_dir / "tomstudy"

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from app.bank.display_check import against_share, same_label_spread, world_figures
 from app.data.scene import AgentShape, Bounds, Scene
 from app.data.trajectory import TrajectorySet
-from app.study.display_check import against_share, same_label_spread, world_figures
 
 SCENE = Scene(world="toy", dt_s=0.5, frame="toy", bounds=Bounds(x_min_m=-10, x_max_m=10,
               y_min_m=-10, y_max_m=10),

@@ -7,8 +7,8 @@ import io
 from sqlmodel import Session, select
 
 from analysis.exports import read_export
-from app.study.plan import Phase
-from app.study.tables import Event, Participant, Submission, TrialResponse
+from app.server.plan import Phase
+from app.server.tables import Event, Participant, Submission, TrialResponse
 from tests.study.flow import (
     ADMIN,
     fail_attention_checks,

@@ -16,9 +16,9 @@ from analysis.contracts import BOOL_COLUMNS, EXPORT_COLUMNS, INT_COLUMNS, SCHEMA
 from analysis.exports import read_export
 from analysis.load import load_csv, load_database
 from app.cli import cli
+from app.researcher.exports import export_table
+from app.server.tables import Participant, TrialResponse, utcnow
 from app.settings import get_settings
-from app.study.exports import export_table
-from app.study.tables import Participant, TrialResponse, utcnow
 from tests.conftest import TOMSTUDY
 from tests.study.flow import ADMIN, at_first_trial, new_id, prolific
 

@@ -12,9 +12,7 @@ from fastapi.testclient import TestClient
 from sqlalchemy.engine import make_url
 
 from app.cli import server_settings
-from app.settings import Settings, get_settings, is_loopback
-from app.study.db import CONNECT_TIMEOUT_S, make_engine, server_connect_args
-from app.study.main import (
+from app.main import (
     FRONTEND_DIR,
     MAX_BODY_BYTES,
     UnsafeSettings,
@@ -22,6 +20,8 @@ from app.study.main import (
     check_production,
     create_app,
 )
+from app.server.db import CONNECT_TIMEOUT_S, make_engine, server_connect_args
+from app.settings import Settings, get_settings, is_loopback
 from tests.conftest import ADMIN_TOKEN, REPO, TOMSTUDY, free_port
 from tests.study.flow import ADMIN, Participant
 
@@ -267,7 +267,7 @@ def test_schema_declares_the_error_statuses_and_bodies():
 
 
 def test_an_mturk_study_may_be_framed_by_mturk_only():
-    from app.study.headers import MTURK_FRAMERS, SecurityHeaders
+    from app.server.headers import MTURK_FRAMERS, SecurityHeaders
 
     framed = dict(SecurityHeaders(None, framed_by=MTURK_FRAMERS).app_headers)
     policy = framed[b"content-security-policy"].decode()

@@ -14,8 +14,8 @@ from alembic.runtime.migration import MigrationContext
 from sqlalchemy import MetaData, inspect, select, text
 from sqlmodel import SQLModel
 
-from app.study import migrate
-from app.study.db import create_tables, make_engine
+from app.server import migrate
+from app.server.db import create_tables, make_engine
 from tests.conftest import TOMSTUDY, fresh_database
 from tests.study.flow import Participant, make_client
 
@@ -106,7 +106,7 @@ def test_tables_py_and_the_head_revision_agree(db_url):
         assert migrate.current(conn) == migrate.head()
         differences = compare_metadata(context, SQLModel.metadata)
     assert differences == [], (f"tables.py differs from revision {migrate.head()}: add a "
-                               f"revision to app/study/migrations/versions/ ({differences})")
+                               f"revision to app/server/migrations/versions/ ({differences})")
     engine.dispose()
 
 

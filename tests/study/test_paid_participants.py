@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from app.prediction_view import TARGET_STEP_PX, click_resolution_deg, prediction_view
-from app.study.plan import Phase
+from app.server.plan import Phase
 from tests.study.flow import (
     ADMIN,
     Participant,

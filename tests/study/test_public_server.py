@@ -10,10 +10,10 @@ from sqlalchemy import update
 from sqlmodel import Session, select
 
 from analysis.load import load_csv
-from app.study import balance
-from app.study.plan import TRIAL_PHASES
-from app.study.recruitment import preview_key
-from app.study.tables import BalanceCount, Participant, TrialResponse, utcnow
+from app.server import balance
+from app.server.plan import TRIAL_PHASES
+from app.server.recruitment import preview_key
+from app.server.tables import BalanceCount, Participant, TrialResponse, utcnow
 from tests.study.flow import (
     ADMIN,
     TOKEN,

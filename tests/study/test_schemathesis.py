@@ -19,10 +19,10 @@ from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, settings
 from schemathesis.config import SchemathesisConfig
 
+from app.main import create_app
+from app.server.plan import PART_PHASES, TRIAL_PHASES, Phase
+from app.server.recruitment import preview_key
 from app.settings import Settings
-from app.study.main import create_app
-from app.study.plan import PART_PHASES, TRIAL_PHASES, Phase
-from app.study.recruitment import preview_key
 from tests.study.flow import ADMIN, TOKEN, Participant, new_id, prolific
 
 MAX_EXAMPLES = int(os.environ.get("SCHEMATHESIS_MAX_EXAMPLES", "15"))

@@ -11,7 +11,7 @@ import httpx
 import pandas as pd
 import pytest
 
-from app.study.plan import PART_PHASES, TRIAL_PHASES
+from app.server.plan import PART_PHASES, TRIAL_PHASES
 from tests.conftest import free_port, fresh_database, start_server
 from tests.study.flow import ADMIN, Participant, new_id, prediction_body, prolific
 

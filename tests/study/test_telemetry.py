@@ -7,12 +7,12 @@ import pytest
 from sqlalchemy import func, select
 from sqlmodel import Session
 
-from app.study import telemetry
+from app.server import telemetry
+from app.server.plan import Phase
+from app.server.sessions import participant_by_token
+from app.server.tables import EVENT_DATA, Event, EventsCreate
+from app.server.tables import Participant as ParticipantRow
 from app.study.errors import Refused
-from app.study.plan import Phase
-from app.study.sessions import participant_by_token
-from app.study.tables import EVENT_DATA, Event, EventsCreate
-from app.study.tables import Participant as ParticipantRow
 from tests.conftest import REPO
 from tests.study.flow import Participant, at_first_trial, new_id
 

@@ -12,10 +12,10 @@ from fastapi.testclient import TestClient
 from sqlalchemy import func, select, update
 from sqlmodel import Session
 
-from app.study import balance
-from app.study.main import create_app
-from app.study.recruitment import preview_key
-from app.study.tables import Participant, utcnow
+from app.main import create_app
+from app.server import balance
+from app.server.recruitment import preview_key
+from app.server.tables import Participant, utcnow
 from tests.conftest import free_port, start_server
 from tests.study.flow import TOKEN, new_id, prolific
 from tests.study.flow import Participant as Client
@@ -81,7 +81,7 @@ def test_the_limit_follows_the_address_a_local_proxy_forwards(small_study, tmp_p
 
 
 def test_production_refuses_to_run_without_rate_limits(small_study, tmp_path):
-    from app.study.main import UnsafeSettings
+    from app.main import UnsafeSettings
 
     settings = small_study.settings(f"sqlite:///{tmp_path / 'p.db'}", production=True,
                                     admin_token="x" * 40)

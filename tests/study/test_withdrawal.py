@@ -9,12 +9,12 @@ from sqlmodel import Session
 from typer.testing import CliRunner
 
 from app.cli import cli
-from app.settings import Settings, get_settings
-from app.study import balance
-from app.study.main import create_app
-from app.study.plan import Phase
-from app.study.recruitment import preview_key
-from app.study.tables import (
+from app.main import create_app
+from app.researcher.withdrawal import id_hash
+from app.server import balance
+from app.server.plan import Phase
+from app.server.recruitment import preview_key
+from app.server.tables import (
     Event,
     Participant,
     PredictionRow,
@@ -24,7 +24,7 @@ from app.study.tables import (
     WithdrawalAudit,
     utcnow,
 )
-from app.study.withdrawal import id_hash
+from app.settings import Settings, get_settings
 from tests.study.flow import (
     ADMIN,
     TOKEN,

@@ -20,7 +20,7 @@ const SAVE_RETRY_MAX_MS = 8000;
 const $ = (id) => document.getElementById(id);
 
 /**
- * One handler per phase the server sends (app/study/plan.py `Phase`; the page lists them in
+ * One handler per phase the server sends (app/server/plan.py `Phase`; the page lists them in
  * `data-phases`). `show` resolves with the next state once the participant's answer is
  * stored (or with null: read the state again); `ends` marks the phase that ends the session.
  */

@@ -1,0 +1,467 @@
+"""`tomstudy build-trials`: held-out trajectories -> the study's trial bank (JSON + meta.json).
+
+Per world: the test split every checkpoint held out (all seeds share the split); segments cut
+where the world says the robot's behaviour is still visible (`World.visible_ends`: before a
+Highway lane change completes, well before an Obstacle goal is reached); main trials kept by
+the config's `main_trial_selection` in two arms (the first usable ones; and of further ones,
+those where the Ours and VAE families disagree most, robot labels taking turns); `start_states`
+start states on the data near the robot; every seed of both models, a constant-velocity
+baseline and the world's own policy (`World.robot_policy_actions`) answered for every start
+state. Everything is computed from the rounded numbers the participant is shown. Nothing here
+depends on which world it is.
+
+Start states (K = the config's `start_states`, n = `steps_to_predict`, r = the reachable
+radius `max_step_m`). The first is the robot's own segment-end state (`own`). The other
+K - 1 are robot positions that occur in the data the models learned from: every step of
+every trajectory outside both checkpoints' test splits (their train and validation
+trajectories, so no held-out future), kept if
+- the point is at least r from every start already chosen (the robot's own included);
+- the world keeps it as one of its two start kinds within reach n r of the robot
+  (`World.data_start_candidates`: Highway `same_lane` / `adjacent_lane`, Obstacle
+  `near` / `mid`; the rules are in highway.py and obstacle.py).
+The two kinds take turns (the world's first kind first), each turn a uniform draw with
+the bank's rng among that kind's points, so each gets half of K - 1 (the first kind the
+odd one); a kind with no point left passes its turn to the other, and a segment where
+neither has one is skipped (meta.json counts it). Every start keeps the segment end's
+heading and speed: the question is what this robot, moving as the segment shows, does
+from there; a data state's own heading and speed belong to another trajectory's
+behaviour, would be drawn in the browser and would make the world's policy answer a
+situation the segment does not show. Attention checks get their start states by the same
+rule (so their geometry cannot give them away); they differ only in their segment. The
+worlds apply their rules to the scene the trajectories were simulated in.
+"""
+
+import platform
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+import app
+from analysis.contracts import alignment_error
+from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
+from app.fileio import sha256_file, write_json
+from app.layout import Layout
+from app.study.config import StudyConfig
+from app.study.trials import (
+    BankFile,
+    Clip,
+    ModelAnswer,
+    StartState,
+    TrialRecord,
+    WorldBank,
+    clip_sha256,
+)
+from app.worlds.registry import World, build_world
+
+POS_DECIMALS = 3
+HEADING_DECIMALS = 4
+STEP_PERCENTILE = 99.5
+EXTRA_CANDIDATES = 40  # segments tried as attention checks (the most obvious win)
+
+
+@dataclass
+class WorldInputs:
+    """What one world's bank is built from."""
+
+    world: World
+    trajs: TrajectorySet
+    models: dict[str, list]  # model name -> one TrainedModel per seed, the primary first
+    held_out: np.ndarray
+    trajectories_path: Path
+    covered: np.ndarray  # robot positions [M, 2] start states are drawn from
+    covered_trajectories: int
+    seeds: list[int]  # the model family's seeds, in the order of every models list
+    data_dir: Path  # meta.json names the inputs relative to it
+
+
+def build_trials(config: StudyConfig, study_id: str, data_dir: Path) -> Path:
+    """Build the study's bank.json and its meta.json; returns the bank path."""
+    started = time.perf_counter()
+    worlds, meta_worlds = {}, {}
+    for w_index, name in enumerate(config.worlds):
+        inputs = load_inputs(config, name, Path(data_dir))
+        rng = np.random.default_rng(np.random.SeedSequence([config.bank_seed, w_index]))
+        worlds[name], meta_worlds[name] = build_world_bank(config, inputs, rng)
+    bank = BankFile(study_id=study_id, steps_to_predict=config.steps_to_predict, worlds=worlds)
+    layout = Layout(data_dir)
+    bank_path = layout.bank(study_id)
+    write_json(bank_path, bank.model_dump())
+    write_json(layout.bank_meta(study_id), {
+        "study_id": study_id, "config": config.model_dump(mode="json"), "worlds": meta_worlds,
+        "bank_sha256": sha256_file(bank_path), "package_version": app.__version__,
+        "python": platform.python_version(), "numpy": np.__version__,
+        "wall_time_s": round(time.perf_counter() - started, 2),
+    })
+    return bank_path
+
+
+def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
+    """The world, its trajectories, every seed's checkpoints and the test split they share."""
+    from app.learning.checkpoint import (
+        CheckpointError,
+        check_matches_data,
+        load_model,
+        trajectory_hash,
+    )
+
+    layout = Layout(data_dir)
+    npz_path = layout.trajectories(name)
+    if not npz_path.is_file():
+        raise FileNotFoundError(f"{npz_path}: no trajectories; run `tomstudy simulate {name}`")
+    trajs = TrajectorySet.load(npz_path)
+    data_hash = trajectory_hash(trajs.positions, trajs.lengths, trajs.labels)
+    models, splits = {"ours": [], "vae": []}, []  # test trajectory sets
+    for kind, seed in ((k, s) for k in models for s in config.models.seeds):
+        path = layout.checkpoint(name, kind, seed)
+        model = load_model(path, world=name)
+        check_matches_data(model, name, trajs.dt_s, data_hash)
+        if model.n_actions != config.steps_to_predict:
+            raise CheckpointError(f"{path}: predicts {model.n_actions} steps, the study asks "
+                                  f"for {config.steps_to_predict}")
+        models[kind].append(model)
+        splits.append(set(model.data_meta["split_trajectories"]["test"]))
+    held_out = np.array(sorted(set.intersection(*splits)), dtype=np.int64)
+    learned = np.setdiff1d(np.arange(len(trajs)), sorted(set.union(*splits)))
+    return WorldInputs(build_world(name), trajs, models, held_out, npz_path,
+                       covered_states(trajs, learned), len(learned), list(config.models.seeds),
+                       layout.root)
+
+
+def covered_states(trajs: TrajectorySet, index: np.ndarray) -> np.ndarray:
+    """The robot's position at every valid step of trajectories `index` [M, 2] (m)."""
+    if not len(index):
+        raise ValueError(f"{trajs.world}: every trajectory is in a test split; no data "
+                         "to draw start states from")
+    return np.concatenate([trajs.positions[i, : trajs.lengths[i] + 1, ROBOT]
+                           for i in index]).astype(np.float64)
+
+
+def build_world_bank(config: StudyConfig, inputs: WorldInputs,
+                     rng: np.random.Generator) -> tuple[WorldBank, dict]:
+    """One world's trials: main pool, practice and attention checks."""
+    trajs, world = inputs.trajs, inputs.world
+    label_name = world.robot_label
+    max_step = config.prediction_input.max_step_factor * robot_step_percentile(
+        trajs, inputs.held_out)
+    candidates = segment_candidates(config, world, trajs, inputs.held_out,
+                                    model_history(inputs), rng)
+    selection = config.main_trial_selection
+    arms = selection.arm_sizes(config.bank_trials_per_world)
+    pool_size = arms["random"] + arms.get("models_disagree", 0) * selection.candidates_per_trial
+    needed = pool_size + config.practice_trials + config.attention_checks.per_world
+    if len(candidates) < needed:
+        raise ValueError(f"{world.name}: only {len(candidates)} held-out trajectories give a "
+                         f"usable segment, the bank needs {needed}; simulate more")
+    scene = trajs.scene.model_dump()
+    practice, used = regular_trials(config, inputs, candidates, config.practice_trials,
+                                    max_step, scene, rng)
+    pool, tried = regular_trials(config, inputs, candidates[used:], pool_size, max_step, scene,
+                                 rng)
+    main = main_trials(pool, arms)
+    used += tried
+    checks, straightness = attention_trials(config, inputs, candidates[used:], max_step,
+                                            scene, rng)
+    built = practice + main + checks
+    kinds = (["practice"] * len(practice) + ["main"] * len(main)
+             + ["attention"] * len(checks))
+    trials = [t.model_copy(update={"kind": kind, "trial_id": f"{world.name}-{kind}-{i:03d}"})
+              for kind in ("main", "practice", "attention")
+              for i, t in enumerate(t for t, k in zip(built, kinds, strict=True) if k == kind)]
+    bank = WorldBank(world=world.name, dt_s=trajs.dt_s, scene=scene,
+                     robot_label_name=label_name, label_names=trajs.label_names[label_name],
+                     max_step_m=round(max_step, 4),
+                     min_step_m=round(config.prediction_input.min_step_fraction * max_step, 4),
+                     trials=trials)
+    meta = world_meta(inputs, trials, straightness)
+    meta["segments_skipped_no_data_starts"] = used - len(practice) - len(pool)
+    meta["main_trial_selection"] = selection_meta(selection.rule, arms, pool, main)
+    return bank, meta
+
+
+def model_history(inputs: WorldInputs) -> int:
+    """Steps every model reads before a segment's end (the longest segment_len of them)."""
+    return max(m.segment_len for family in inputs.models.values() for m in family)
+
+
+def model_disagreement(trial: TrialRecord) -> float:
+    """Mean 1-cos between every Ours seed's and every VAE seed's answers, over the trial's start
+    states and steps: how far apart the two families are, not two checkpoints."""
+    return float(np.mean([alignment_error(np.asarray(ours.actions),
+                                          np.asarray(vae.actions)).mean()
+                          for ours in trial.predictions["ours"]
+                          for vae in trial.predictions["vae"]]))
+
+
+def main_trials(pool: list[TrialRecord], arms: dict[str, int]) -> list[TrialRecord]:
+    """The random arm (the pool's first trials), then the models_disagree arm: of the rest, per
+    robot label those where the families disagree most, robot labels taking turns."""
+    random_arm, rest = pool[: arms["random"]], pool[arms["random"]:]
+    by_label: dict[int, list[TrialRecord]] = {}
+    for trial in rest:
+        by_label.setdefault(trial.robot_label, []).append(trial)
+    ranked = {label: sorted(trials, key=model_disagreement, reverse=True)
+              for label, trials in by_label.items()}
+    disputed = interleave(ranked)[: arms.get("models_disagree", 0)]
+    return ([t.model_copy(update={"arm": "random"}) for t in random_arm]
+            + [t.model_copy(update={"arm": "models_disagree"}) for t in disputed])
+
+
+def selection_meta(rule: str, arms: dict[str, int], pool: list[TrialRecord],
+                   main: list[TrialRecord]) -> dict:
+    """meta.json's account of the main-trial selection: the arms, and the mean family
+    disagreement of each arm and of the candidates the models_disagree arm was chosen from."""
+    def mean_disagreement(trials: list[TrialRecord]) -> float | None:
+        return round(float(np.mean([model_disagreement(t) for t in trials])), 4) if trials \
+            else None
+
+    return {"rule": rule, "arms": arms, "candidates": len(pool) - arms["random"],
+            "ours_vs_vae_candidates": mean_disagreement(pool[arms["random"]:]),
+            **{f"ours_vs_vae_{arm}": mean_disagreement([t for t in main if t.arm == arm])
+               for arm in arms}}
+
+
+def regular_trials(config: StudyConfig, inputs: WorldInputs, candidates: list, count: int,
+                   max_step: float, scene: dict, rng: np.random.Generator
+                   ) -> tuple[list[TrialRecord], int]:
+    """The first `count` candidates that have data-covered start states; and how many were tried."""
+    built, tried = [], 0
+    progress = tqdm(total=count, desc=f"build-trials {inputs.world.name}", unit="trial")
+    for src, start, end in candidates:
+        if len(built) == count:
+            break
+        tried += 1
+        try:
+            built.append(make_trial(config, inputs, src, start, end, max_step, scene, rng))
+        except NoStartStates:
+            continue
+        progress.update(1)
+    progress.close()
+    if len(built) < count:
+        raise ValueError(f"{inputs.world.name}: only {len(built)} segments have "
+                         f"{config.start_states} start states on the data, the bank needs "
+                         f"{count}; simulate more")
+    return built, tried
+
+
+def world_meta(inputs: WorldInputs, trials: list[TrialRecord], straightness: dict) -> dict:
+    """Input hashes and counts for meta.json."""
+    labels = [t.robot_label for t in trials if t.kind == "main"]
+    starts = [s.start_kind for t in trials if t.kind == "main" for s in t.start_states]
+    def relative(path: Path) -> str:
+        return Path(path).relative_to(inputs.data_dir).as_posix()
+
+    return {
+        "trajectories": relative(inputs.trajectories_path),
+        "trajectories_sha256": sha256_file(inputs.trajectories_path),
+        "held_out_trajectories": len(inputs.held_out),
+        "checkpoints": {f"{kind}/seed{seed}": {"path": relative(m.path),
+                                               "content_hash": m.content_hash,
+                                               "file_sha256": sha256_file(m.path)}
+                        for kind, family in inputs.models.items()
+                        for seed, m in zip(inputs.seeds, family, strict=True)},
+        "trials": {kind: sum(t.kind == kind for t in trials)
+                   for kind in ("main", "practice", "attention")},
+        "main_robot_labels": {str(v): labels.count(v) for v in sorted(set(labels))},
+        "attention_max_angle_deg": straightness,
+        "start_states_from": {"trajectories": inputs.covered_trajectories,
+                              "robot_states": len(inputs.covered)},
+        "main_start_kinds": {k: starts.count(k) for k in sorted(set(starts))},
+    }
+
+
+def robot_step_percentile(trajs: TrajectorySet, index: np.ndarray) -> float:
+    """A high percentile of the robot's step length over the valid steps of `index`."""
+    steps = []
+    for i in index:
+        track = trajs.positions[i, : trajs.lengths[i] + 1, ROBOT]
+        steps.append(np.linalg.norm(np.diff(track, axis=0), axis=1))
+    return float(np.percentile(np.concatenate(steps), STEP_PERCENTILE))
+
+
+# ---------------------------------------------------------------- segments
+
+def segment_candidates(config: StudyConfig, world: World, trajs: TrajectorySet,
+                       held_out: np.ndarray, need_segment: int,
+                       rng: np.random.Generator) -> list[tuple[int, int, int]]:
+    """(trajectory, segment start, segment end) per usable trajectory, labels interleaved."""
+    by_label: dict[int, list] = {}
+    for i in rng.permutation(held_out):
+        length = int(rng.integers(config.segment_steps.min, config.segment_steps.max + 1))
+        ends = segment_ends(world, trajs, int(i), max(length, need_segment),
+                            config.steps_to_predict)
+        if len(ends):
+            end = int(rng.choice(ends))
+            by_label.setdefault(int(trajs.labels[world.robot_label][i]), []).append(
+                (int(i), end - length, end))
+    return interleave(by_label)
+
+
+def interleave(groups: dict[int, list]) -> list:
+    """Round-robin over groups, so any prefix covers the labels evenly."""
+    out, queues = [], [list(v) for _, v in sorted(groups.items())]
+    while any(queues):
+        for queue in queues:
+            if queue:
+                out.append(queue.pop(0))
+    return out
+
+
+def segment_ends(world: World, trajs: TrajectorySet, i: int, history: int,
+                 n_after: int) -> np.ndarray:
+    """End steps of trajectory i with `history` steps before and `n_after` after, where the
+    world shows the robot's behaviour under way but not finished."""
+    length = int(trajs.lengths[i])
+    ends = np.arange(history, length - n_after + 1)
+    if not len(ends):
+        return ends
+    return world.visible_ends(trajs.positions[i, : length + 1, ROBOT].astype(np.float64), ends)
+
+
+# ---------------------------------------------------------------- one trial
+
+def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, end: int,
+               max_step: float, scene: dict, rng: np.random.Generator) -> TrialRecord:
+    """Examples, segment, start states and every predictor's answers for one segment."""
+    trajs = inputs.trajs
+    label_name = inputs.world.robot_label
+    shown = clip_of(trajs, src, start, end, label_name)
+    model_input = clip_of(trajs, src, end - model_history(inputs), end, label_name).positions
+    segment = np.asarray(shown.positions)
+    states = start_states(config, inputs, src, end, segment, max_step, rng)
+    examples = [clip_of(trajs, e, 0, int(trajs.lengths[e]), label_name)
+                for e in pick_examples(trajs, inputs.held_out, src, label_name,
+                                       config.examples_per_trial, rng)]
+    joint = np.array([[s.robot, s.human] for s in states])
+    predictions = {kind: [model_answer(model, seed, model_input, joint)
+                          for seed, model in zip(inputs.seeds, family, strict=True)]
+                   for kind, family in inputs.models.items()}
+    dt = trajs.dt_s
+    cv = (segment[-1, ROBOT] - segment[-2, ROBOT]) / dt
+    labels = {k: int(v[src]) for k, v in trajs.labels.items()}
+    human_v = (segment[-1, HUMAN] - segment[-2, HUMAN]) / dt
+    policy = [inputs.world.robot_policy_actions(
+        np.asarray([s.robot, s.human]), s.robot_heading, s.robot_speed, human_v, labels,
+        config.steps_to_predict, rng) for s in states]
+    record = TrialRecord(
+        trial_id="", world=inputs.world.name, kind="", source_index=src, segment_start=start,
+        robot_label=labels[label_name], examples=examples, segment=shown, start_states=states,
+        model_input=model_input, predictions=predictions,
+        cv_actions=np.round(np.broadcast_to(cv, (len(states), config.steps_to_predict, 2)),
+                            5).tolist(),
+        policy_actions=np.round(np.asarray(policy), 5).tolist(), clip_sha256="")
+    return record.model_copy(update={"clip_sha256": clip_sha256(
+        scene, dt, record.browser_payload())})
+
+
+def model_answer(model, seed: int, model_input: list, joint: np.ndarray) -> ModelAnswer:
+    """One checkpoint's answer to a trial: its latent, code and actions from every start state
+    (rounded as stored; app/bank/model_answers.py recomputes them at start-up)."""
+    z, code, actions = model.trial(np.asarray(model_input), joint)
+    return ModelAnswer(seed=seed, z=[float(v) for v in z], code=int(code),
+                       actions=np.round(actions, 5).tolist(), content_hash=model.content_hash)
+
+
+def clip_of(trajs: TrajectorySet, i: int, start: int, end: int, label_name: str) -> Clip:
+    """Steps start..end of trajectory i, rounded as shown."""
+    return Clip(
+        positions=np.round(trajs.positions[i, start:end + 1], POS_DECIMALS).tolist(),
+        headings=np.round(trajs.headings[i, start:end + 1], HEADING_DECIMALS).tolist(),
+        robot_label=int(trajs.labels[label_name][i]), source_index=i)
+
+
+def pick_examples(trajs: TrajectorySet, held_out: np.ndarray, src: int, label_name: str,
+                  count: int, rng: np.random.Generator) -> list[int]:
+    """`count` other held-out trajectories, covering as many robot labels as possible."""
+    groups: dict[int, list] = {}
+    for i in rng.permutation(held_out[held_out != src]):
+        groups.setdefault(int(trajs.labels[label_name][i]), []).append(int(i))
+    order = list(groups)
+    rng.shuffle(order)
+    return interleave({k: groups[key] for k, key in enumerate(order)})[:count]
+
+
+class NoStartStates(ValueError):
+    """Too few points near the robot for the study's start states."""
+
+
+def start_states(config: StudyConfig, inputs: WorldInputs, src: int, end: int,
+                 segment: np.ndarray, max_step: float, rng: np.random.Generator
+                 ) -> list[StartState]:
+    """The robot's segment-end state plus K - 1 others by the module docstring's rule; the
+    human stays at its segment-end position."""
+    trajs, world = inputs.trajs, inputs.world
+    robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
+    pools = world.data_start_candidates(trajs.scene, segment, inputs.covered,
+                                        config.steps_to_predict * max_step)
+    points, kinds = take_turns(robot, pools, config.start_states - 1, max_step, rng)
+    heading = trajs.headings[src, end]
+    speed = float(trajs.speeds[src, end, ROBOT])
+    return [StartState(robot=np.round(p, POS_DECIMALS).tolist(),
+                       human=np.round(human, POS_DECIMALS).tolist(),
+                       robot_heading=round(float(heading[ROBOT]), HEADING_DECIMALS),
+                       human_heading=round(float(heading[HUMAN]), HEADING_DECIMALS),
+                       robot_speed=round(speed, 4), start_kind=kind)
+            for p, kind in zip([robot, *points], ["own", *kinds], strict=True)]
+
+
+def take_turns(robot: np.ndarray, pools: dict[str, np.ndarray], count: int, min_gap: float,
+               rng: np.random.Generator) -> tuple[list[np.ndarray], list[str]]:
+    """`count` points, the kinds taking turns; each a uniform draw among its kind's points at
+    least `min_gap` from every start chosen so far (a kind with none passes its turn)."""
+    chosen, kinds = [np.asarray(robot, dtype=np.float64)], []
+    order = list(pools)
+    for turn in range(count):
+        for kind in order[turn % len(order):] + order[: turn % len(order)]:
+            pts = pools[kind]
+            gaps = np.min([np.linalg.norm(pts - c, axis=1) for c in chosen], axis=0)
+            free = np.flatnonzero(gaps >= min_gap)
+            if len(free):
+                chosen.append(pts[int(rng.choice(free))])
+                kinds.append(kind)
+                break
+        else:
+            raise NoStartStates(f"only {turn} of {count} data-covered start states "
+                                "near the robot")
+    return chosen[1:], kinds
+
+
+# ---------------------------------------------------------------- kinds
+
+def obviousness_deg(trial: TrialRecord) -> float:
+    """Largest angle between the policy's first move and the constant-velocity move."""
+    policy = np.asarray(trial.policy_actions)[:, 0]
+    cv = np.asarray(trial.cv_actions)[:, 0]
+    cos = (policy * cv).sum(-1) / (np.linalg.norm(policy, axis=-1)
+                                   * np.linalg.norm(cv, axis=-1) + 1e-12)
+    return float(np.degrees(np.arccos(np.clip(cos, -1, 1))).max())
+
+
+def attention_trials(config: StudyConfig, inputs: WorldInputs, candidates: list, max_step: float,
+                     scene: dict, rng: np.random.Generator) -> tuple[list[TrialRecord], dict]:
+    """The most obvious of up to EXTRA_CANDIDATES segments, as attention checks.
+
+    Their start states come from the same rule and the same data as main trials', so
+    nothing the browser gets (where the starts lie, how far apart) tells a check from a
+    main trial; what makes one a check is a segment after which the robot's own policy
+    plainly keeps going the way it goes, from every start state.
+    """
+    rule = config.attention_checks
+    pool = []
+    for src, start, end in tqdm(candidates[:EXTRA_CANDIDATES],
+                                desc=f"attention checks {inputs.world.name}", unit="trial"):
+        try:
+            pool.append(make_trial(config, inputs, src, start, end, max_step, scene, rng))
+        except NoStartStates:
+            continue
+    angles = [obviousness_deg(t) for t in pool]
+    chosen = [int(i) for i in np.argsort(angles, kind="stable")[: rule.per_world]]
+    if len(chosen) < rule.per_world:
+        raise ValueError(f"{inputs.world.name}: not enough segments left for "
+                         f"{rule.per_world} attention check(s); simulate more")
+    picked = [round(angles[i], 2) for i in chosen]
+    return [pool[i] for i in chosen], {
+        "chosen": picked, "candidates": len(pool),
+        "meets_candidate_rule": all(a <= rule.candidate_max_angle_deg for a in picked)}

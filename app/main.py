@@ -1,0 +1,252 @@
+"""The study server: `create_app(settings)` with a lifespan that loads studies, banks and models.
+
+Per process state is read-only (configs, trial banks, model answers); everything that
+changes lives in the database, so several uvicorn workers can serve one study.
+"""
+
+import asyncio
+import gc
+import os
+from contextlib import asynccontextmanager, suppress
+
+from fastapi import FastAPI, Request
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from fastapi.staticfiles import StaticFiles
+from fastapi.templating import Jinja2Templates
+from starlette.middleware.trustedhost import TrustedHostMiddleware
+from starlette.types import ASGIApp, Receive, Scope, Send
+
+from app.bank.bundle import load_bundle
+from app.bank.model_answers import ModelAnswers
+from app.researcher import api as researcher
+from app.researcher import dashboard_api as dashboard
+from app.server import health
+from app.server.balance import ensure_rows, sweep_stale
+from app.server.bank_guard import check_bank_unchanged
+from app.server.context import StudyContext
+from app.server.db import create_tables, make_engine
+from app.server.headers import MTURK_FRAMERS, SecurityHeaders
+from app.server.openapi import declare_error_responses
+from app.server.ratelimit import RateLimit, parse_limit
+from app.server.recruitment import preview_key
+from app.server.routes import pages, participant
+from app.settings import REPO_ROOT, Settings, get_settings
+from app.study.config import StudyConfig, config_sha256, load_study_config
+from app.study.errors import Refused
+
+MAX_BODY_BYTES = 64 * 1024
+FRONTEND_DIR = REPO_ROOT / "frontend"
+STUDY_ENV = "TOMSTUDY_STUDY"
+MIN_ADMIN_TOKEN_CHARS = 32
+NEW_TOKEN_HINT = ("set one with TOMSTUDY_ADMIN_TOKEN=$(python -c 'import secrets;"
+                  "print(secrets.token_urlsafe(32))')")
+
+
+class UnsafeSettings(RuntimeError):
+    """The server must not start with these settings."""
+
+
+def check_production(settings: Settings) -> None:
+    """Refuse a server without a researcher token (there is no default), and production mode
+    with a weak token, client clocks trusted or rate limits off; unreadable limits too."""
+    rate_limits(settings)
+    token = settings.admin_token.strip()
+    problem = weak_token_problem(token) if settings.production or not token else None
+    if problem:
+        mode = (" in production mode (TOMSTUDY_PRODUCTION=1 or a --host other than loopback)"
+                if settings.production else "")
+        raise UnsafeSettings(f"refusing to start{mode}: TOMSTUDY_ADMIN_TOKEN {problem}; "
+                             f"{NEW_TOKEN_HINT}")
+    if not settings.production:
+        return
+    if settings.trust_client_clock:
+        raise UnsafeSettings("TOMSTUDY_TRUST_CLIENT_CLOCK is for pilots with bots; a "
+                             "production server times trials itself; refusing to start")
+    for name in ("rate_limit_starts", "rate_limit_requests"):
+        if not getattr(settings, name).strip():
+            raise UnsafeSettings(f"TOMSTUDY_{name.upper()} is empty (no limit); a production "
+                                 "server limits anonymous traffic; refusing to start")
+
+
+def weak_token_problem(token: str) -> str | None:
+    """What makes `token` unfit to guard a public server, or None."""
+    token = token.strip()
+    if not token:
+        return "is not set (there is no default; `tomstudy serve` on loopback makes one)"
+    if len(token) < MIN_ADMIN_TOKEN_CHARS:
+        return f"has {len(token)} characters, fewer than {MIN_ADMIN_TOKEN_CHARS}"
+    return None
+
+
+def load_study(settings: Settings, study_id: str) -> StudyContext:
+    """Config, bundle (bank and every checkpoint, verified against its manifest and each other)
+    of one study; BundleError or BankMismatch if it cannot be served as it is."""
+    config = load_study_config(settings, study_id)
+    bundle = load_bundle(config, study_id, settings.configs_dir, settings.data_dir)
+    return StudyContext(study_id, config, bundle.bank, ModelAnswers(bundle),
+                        config_sha256=config_sha256(config),
+                        preview_key=preview_key(settings.admin_token, study_id),
+                        trust_client_clock=settings.trust_client_clock)
+
+
+def create_app(settings: Settings | None = None, studies: list[str] | None = None) -> FastAPI:
+    """The FastAPI app serving `studies` (default: $TOMSTUDY_STUDY or paper_study)."""
+    settings = settings or get_settings()
+    check_production(settings)
+    studies = studies or os.environ.get(STUDY_ENV, "paper_study").split(",")
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        app.state.engine = make_engine(settings.resolved_database_url())
+        create_tables(app.state.engine)
+        app.state.studies = {sid: load_study(settings, sid) for sid in studies}
+        for ctx in app.state.studies.values():
+            if not settings.allow_bank_change:
+                check_bank_unchanged(app.state.engine, ctx.study_id, ctx.bank.sha256)
+            ensure_rows(app.state.engine, ctx)
+        # The loaded banks, models and torch make ~330k long-lived objects: a full garbage
+        # collection over them took 140 ms, a pause every request in flight would wait for.
+        # They live as long as the process, so the collector stops scanning them.
+        gc.collect()
+        gc.freeze()
+        sweep = asyncio.create_task(sweep_stale(app.state.engine, list(app.state.studies.values()),
+                                                settings.stale_sweep_s))
+        yield
+        sweep.cancel()
+        with suppress(asyncio.CancelledError):
+            await sweep
+        app.state.engine.dispose()
+
+    app = FastAPI(title="tomstudy", lifespan=lifespan, **docs_urls(settings),
+                  description="Online study of how people predict a robot (app/server/API.md).")
+    app.state.settings = settings
+    app.state.default_study = studies[0]
+    app.state.templates = Jinja2Templates(directory=FRONTEND_DIR / "templates")
+    app.mount("/static", StaticFiles(directory=FRONTEND_DIR / "static"), name="static")
+    for router in (pages.router, participant.router, researcher.router, dashboard.router,
+                   health.router):
+        app.include_router(router)
+    add_error_handlers(app)
+    declare_error_responses(app)
+    app.add_middleware(BodyLimit, max_bytes=MAX_BODY_BYTES)
+    app.add_middleware(RateLimit, **rate_limits(settings))
+    app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.trusted_hosts,
+                       www_redirect=False)
+    configs = [load_study_config(settings, sid) for sid in studies]
+    app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app),  # outermost: 413s too
+                       framed_by=framing_origins(configs), form_targets=form_targets(configs))
+    return app
+
+
+def rate_limits(settings: Settings) -> dict:
+    """The RateLimit middleware's limits from the settings; UnsafeSettings if unreadable."""
+    try:
+        return {"starts": parse_limit("TOMSTUDY_RATE_LIMIT_STARTS", settings.rate_limit_starts),
+                "requests": parse_limit("TOMSTUDY_RATE_LIMIT_REQUESTS",
+                                        settings.rate_limit_requests)}
+    except ValueError as err:
+        raise UnsafeSettings(f"refusing to start: {err}") from None
+
+
+def framing_origins(configs: list[StudyConfig]) -> tuple[str, ...]:
+    """Origins that may frame the pages: MTurk's when any served study recruits there."""
+    platforms = {config.recruitment.platform for config in configs}
+    return MTURK_FRAMERS if "mturk" in platforms else ()
+
+
+def form_targets(configs: list[StudyConfig]) -> tuple[str, ...]:
+    """Where a page may post a form: the MTurk submit hosts of the served MTurk studies."""
+    hosts = {host for config in configs if config.recruitment.platform == "mturk"
+             for host in config.recruitment.mturk_submit_hosts}
+    return tuple(sorted(hosts))
+
+
+def docs_urls(settings: Settings) -> dict:
+    """FastAPI's defaults (/docs, /redoc, /openapi.json), or none of them in production."""
+    if settings.production:  # a public map of every route helps nobody but a scanner
+        return {"docs_url": None, "redoc_url": None, "openapi_url": None}
+    return {}
+
+
+def docs_paths(app: FastAPI) -> tuple[str, ...]:
+    """The paths of the interactive API docs pages this app serves."""
+    paths = (app.docs_url, app.redoc_url, app.swagger_ui_oauth2_redirect_url)
+    return tuple(p for p in paths if p)
+
+
+def add_error_handlers(app: FastAPI) -> None:
+    """Refusals and validation errors become 4xx JSON naming the field; never echo input."""
+
+    @app.exception_handler(Refused)
+    async def refused(_: Request, err: Refused) -> JSONResponse:
+        headers = {"WWW-Authenticate": "Bearer"} if err.status == 401 else {}
+        body = {"detail": err.detail}
+        if err.notice is not None:  # what the participant's page shows instead of `detail`
+            body["notice"] = err.notice.as_dict()
+        return JSONResponse(body, status_code=err.status, headers=headers | err.headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def invalid(_: Request, err: RequestValidationError) -> JSONResponse:
+        # FastAPI's default echoes the input, and a NaN in it cannot be written as JSON
+        items = [{"loc": list(e["loc"]), "msg": e["msg"], "type": e["type"]}
+                 for e in err.errors()]
+        message = "; ".join(f"{'.'.join(str(p) for p in i['loc'][1:]) or 'body'}: {i['msg']}"
+                            for i in items)
+        return JSONResponse(jsonable_encoder({"detail": items, "message": message}),
+                            status_code=422)
+
+
+class BodyLimit:
+    """Answer 413 to request bodies over `max_bytes`, declared or streamed.
+
+    The body (at most `max_bytes`) is read before the app runs and replayed to it, so an
+    oversized chunked upload is refused before any handler sees it.
+    """
+
+    def __init__(self, app: ASGIApp, max_bytes: int) -> None:
+        self.app = app
+        self.max_bytes = max_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        declared = dict(scope.get("headers", [])).get(b"content-length")
+        if declared is not None and (not declared.isdigit() or int(declared) > self.max_bytes):
+            return await self._too_large(scope, send)
+        chunks, size, more = [], 0, True
+        while more:
+            message = await receive()
+            if message["type"] != "http.request":  # client went away
+                return None
+            chunks.append(message.get("body", b""))
+            size += len(chunks[-1])
+            more = message.get("more_body", False)
+            if size > self.max_bytes:
+                return await self._too_large(scope, send)
+        body = b"".join(chunks)
+        replayed = False
+
+        async def replay() -> dict:
+            nonlocal replayed
+            if not replayed:
+                replayed = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        await self.app(scope, replay, send)
+
+    async def _too_large(self, scope: Scope, send: Send) -> None:
+        response = JSONResponse({"detail": f"body: request body larger than {self.max_bytes} "
+                                           f"bytes"}, status_code=413)
+        await response(scope, _no_receive, send)
+
+
+async def _no_receive() -> dict:
+    return {"type": "http.disconnect"}
+
+
+def app_from_env() -> FastAPI:
+    """Factory for `uvicorn --factory` (several workers): settings from the environment."""
+    return create_app(get_settings())

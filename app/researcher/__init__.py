@@ -1,0 +1,1 @@
+"""The researcher side: dashboard, exports, replay, withdrawal and progress (behind the token)."""

@@ -1,0 +1,178 @@
+"""The researcher dashboard's read side: sessions, study versions, live alignment and fields.
+
+Numbers come from the analysis package on the export rows (the same exclusion rules,
+per-participant means, t intervals and field tables as `tomstudy analyze`); this module
+only selects rows and shapes JSON for the browser. Replays are in app/researcher/replay.py.
+"""
+
+import math
+from datetime import datetime
+
+import numpy as np
+import pandas as pd
+from sqlalchemy import func, select
+from sqlmodel import Session
+
+from app import __version__
+from app.researcher.exports import checks_answered, predictions_frame
+from app.researcher.progress import exclusion_rules, progress_counts, study_sessions
+from app.server.balance import in_progress_cutoff
+from app.server.context import StudyContext
+from app.server.sessions import as_utc, session_status
+from app.server.state import progress_of
+from app.server.tables import Participant
+
+FIELD_CODES = 3  # most common codes per model, as the report's figures
+
+
+def _iso(moment: datetime | None) -> str | None:
+    return as_utc(moment).isoformat() if moment else None
+
+
+def _finite(value: float) -> float | None:
+    """JSON has no NaN: an undefined number (a CI of one participant) is null."""
+    return float(value) if value is not None and math.isfinite(value) else None
+
+
+# ---------------------------------------------------------------- sessions
+
+def participant_row(p: Participant, ctx: StudyContext, cutoff: datetime, checks_seen: int,
+                    external_ids: bool) -> dict:
+    """One session as the table shows it (the external id only when asked for)."""
+    end = p.ended_at or p.updated_at
+    row = {
+        "public_id": p.public_id, "platform": p.recruitment, "pilot": p.pilot,
+        "status": session_status(p, cutoff),
+        "outcome": p.outcome,
+        "started_at": _iso(p.created_at), "last_seen": _iso(p.updated_at),
+        "ended_at": _iso(p.ended_at), "world_order": p.world_order,
+        "attention": {"failed": p.attention_failed, "seen": checks_seen},
+        "duration_s": round((as_utc(end) - as_utc(p.created_at)).total_seconds(), 1),
+        "progress": progress_of(p),
+        "config_current": p.config_sha256 == ctx.config_sha256,
+        "bank_current": p.bank_sha256 == ctx.bank.sha256,
+    }
+    if external_ids:
+        row["external_id"] = p.external_id
+    return row
+
+
+def participant_rows(db: Session, ctx: StudyContext, people: list[Participant],
+                     external_ids: bool = False) -> list[dict]:
+    """Every session of the study (progress.study_sessions: pilots and replaced ones
+    included, in order of start) as the table shows it."""
+    cutoff = in_progress_cutoff(ctx.config)
+    seen = checks_answered(db, ctx.study_id)
+    return [participant_row(p, ctx, cutoff, seen.get(p.id, 0), external_ids) for p in people]
+
+
+# ---------------------------------------------------------------- versions
+
+def hash_counts(db: Session, study_id: str, column) -> dict[str, int]:
+    """Sessions per stored hash ('' = stored before the hashes were)."""
+    query = (select(column, func.count()).where(Participant.study_id == study_id)
+             .group_by(column))
+    return {sha or "": n for sha, n in db.execute(query).all()}
+
+
+def versions(db: Session, ctx: StudyContext) -> dict:
+    """Sessions per config and bank hash, and a warning when any ran other than the loaded."""
+    out: dict = {"app_version": __version__, "warnings": []}
+    loaded = {"config": ctx.config_sha256, "bank": ctx.bank.sha256}
+    columns = {"config": Participant.config_sha256, "bank": Participant.bank_sha256}
+    for what, column in columns.items():
+        counts = hash_counts(db, ctx.study_id, column)
+        out[what] = {"loaded": loaded[what], "sessions": [
+            {"sha256": sha, "sessions": n, "loaded": sha == loaded[what]}
+            for sha, n in sorted(counts.items(), key=lambda kv: (kv[0] != loaded[what], kv[0]))]}
+        other = sum(n for sha, n in counts.items() if sha != loaded[what])
+        if other:
+            out["warnings"].append(
+                f"{other} of {sum(counts.values())} sessions ran under a {what} other than the "
+                f"one this server has loaded ({loaded[what][:12]}): compare their numbers "
+                f"with care")
+    return out
+
+
+# ---------------------------------------------------------------- alignment
+
+def kept_rows(frame: pd.DataFrame, ctx: StudyContext, rule_set: str) -> tuple[pd.DataFrame, dict]:
+    """The rows the analysis keeps (of predictions_frame's, already normalised), with
+    alignment errors, and what each rule removed."""
+    from analysis.metrics import add_alignment_errors, apply_exclusions
+
+    result = apply_exclusions(frame, exclusion_rules(ctx, rule_set))
+    return add_alignment_errors(result.kept), result.counts()
+
+
+def world_errors(kept: pd.DataFrame) -> dict:
+    """Per world and model: mean of per-participant means, its 95% t interval, the means."""
+    from analysis.contracts import MODELS
+    from analysis.metrics import participant_means
+    from analysis.stats import compare_per_world, mean_ci95
+
+    if kept.empty:
+        return {}
+    means = participant_means(kept)
+    paired = compare_per_world(means, "ours", "vae")
+    out = {}
+    for world, group in means.groupby("world", sort=True):
+        models = {}
+        for model in MODELS:
+            values = group[f"err_{model}"].to_numpy()
+            mean, low, high = mean_ci95(values)
+            models[model] = {"mean": _finite(mean), "ci95": [_finite(low), _finite(high)],
+                             "participants": [round(float(v), 5) for v in values]}
+        test = paired[world]
+        out[world] = {"n": int(len(group)), "models": models, "ours_vs_vae": {
+            k: _finite(getattr(test, k))
+            for k in ("mean_diff", "ci95_low", "ci95_high", "t", "p_two_sided", "d_z")}}
+    return out
+
+
+def world_fields(kept: pd.DataFrame, ctx: StudyContext, k: int = FIELD_CODES) -> dict:
+    """Per world, the report's field panels: for Ours' and the VAE's k most common codes,
+    each start state's position, participants' mean first move and the model's (unit)."""
+    from analysis.fields import FIELD_MODELS, arrow_length, code_panels, state_table
+
+    out = {}
+    for world in sorted(kept["world"].unique()) if len(kept) else []:
+        scene = ctx.bank.world(world).scene
+        states_w = state_table(kept[kept["world"] == world])
+        arrow_m = arrow_length(scene)
+        panels = [_panel(model, code, states, arrow_m)
+                  for model in FIELD_MODELS for code, states in code_panels(states_w, model, k)]
+        out[world] = {"scene": scene, "arrow_m": arrow_m, "panels": panels,
+                      "x_range_m": [float(states_w["x"].min()), float(states_w["x"].max())]}
+    return out
+
+
+def _panel(model: str, code: int, states: pd.DataFrame, arrow_m: float) -> dict:
+    from analysis.fields import panel_error, unit
+
+    hx, hy = unit(states["human_vx"].to_numpy(), states["human_vy"].to_numpy())
+    mx, my = unit(states[f"{model}_vx"].to_numpy(), states[f"{model}_vy"].to_numpy())
+    points = np.column_stack([states["x"], states["y"], hx, hy, mx, my]).round(4)
+    return {"model": model, "code": int(code), "trials": int(states["trial_id"].nunique()),
+            "error": _finite(panel_error(states, model)),
+            "states": [{"at": [r[0], r[1]], "human": [r[2], r[3]], "model": [r[4], r[5]]}
+                       for r in points.tolist()]}
+
+
+def alignment(db: Session, ctx: StudyContext, rule_set: str) -> dict:
+    """Exclusions, per-world error CIs and field panels under one rule set."""
+    frame = predictions_frame(db, ctx.study_id)
+    if frame.empty:
+        return {"rules": rule_set, "exclusions": {}, "worlds": {}, "fields": {}}
+    kept, counts = kept_rows(frame, ctx, rule_set)
+    return {"rules": rule_set, "exclusions": counts, "worlds": world_errors(kept),
+            "fields": world_fields(kept, ctx)}
+
+
+def dashboard(db: Session, ctx: StudyContext, rule_set: str = "kept",
+              external_ids: bool = False) -> dict:
+    """Everything the dashboard's live part shows, in one answer."""
+    people = study_sessions(db, ctx.study_id)  # loaded once for both
+    return {"study_id": ctx.study_id, "progress": progress_counts(ctx, people),
+            "participants": participant_rows(db, ctx, people, external_ids),
+            "versions": versions(db, ctx), "alignment": alignment(db, ctx, rule_set)}

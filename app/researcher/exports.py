@@ -1,0 +1,252 @@
+"""The researcher's four exports as typed DataFrames and spreadsheet-safe CSV (read-only).
+
+- `predictions`: the analysis table, one row per (participant, trial, start state, step);
+- `survey`: one row per (participant, answered question);
+- `events`: telemetry events and each trial's undo/reset presses, one long table;
+- `participants`: the payment and approval sheet, one row per session, with whether the
+  analysis excludes it and why.
+
+The analysis exports carry the session's random `public_id` as `participant_id`, never
+the platform's id; only `participants` links the two. Every row carries the config and
+bank hashes of its own session, so a study changed mid-way shows it per row. Columns
+and dtypes: analysis/load.py (predictions) and analysis/exports.py (the others).
+"""
+
+import io
+import json
+from collections import defaultdict
+from datetime import datetime
+
+import pandas as pd
+from sqlalchemy import func, select
+from sqlmodel import Session
+
+from analysis.contracts import EVENTS, EXPORT_COLUMNS, PARTICIPANTS, SURVEY, WHAT, ExclusionRules
+from analysis.csvsafe import write_csv
+from analysis.exports import typed
+from analysis.load import normalise
+from app.server.balance import exclusion_reasons, in_progress_cutoff, trial_speeds
+from app.server.plan import trial_steps
+from app.server.sessions import as_utc, session_status
+from app.server.tables import (
+    SERVER_EVENTS,
+    Event,
+    Participant,
+    PredictionRow,
+    Submission,
+    TrialResponse,
+)
+from app.study.config import StudyConfig
+
+_FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields
+              and c != "participant_id"]
+
+
+def export_table(db: Session, config: StudyConfig, study_id: str, what: str) -> pd.DataFrame:
+    """One of the exports (`WHAT`) of a study as a typed DataFrame."""
+    if what == "predictions":
+        return predictions_frame(db, study_id)
+    if what == "survey":
+        return survey_frame(db, config, study_id)
+    if what == "events":
+        return events_frame(db, study_id)
+    if what == "participants":
+        return participants_frame(db, config, study_id)
+    raise ValueError(f"what: unknown export {what!r}; choose one of {', '.join(WHAT)}")
+
+
+def export_csv(db: Session, config: StudyConfig, study_id: str, what: str) -> str:
+    """An export as CSV text; text cells a spreadsheet would run as a formula start with a
+    quote (analysis/csvsafe.py), which analysis.exports.read_export removes."""
+    buffer = io.StringIO()
+    write_csv(export_table(db, config, study_id, what), buffer)
+    return buffer.getvalue()
+
+
+# ---------------------------------------------------------------- predictions
+
+def predictions_frame(db: Session, study_id: str) -> pd.DataFrame:
+    """One row per (participant, trial, start state, step), columns as in API.md."""
+    pred, trial, part = PredictionRow.__table__, TrialResponse.__table__, Participant.__table__
+    query = (
+        select(part.c.study_id, part.c.public_id.label("participant_id"), part.c.recruitment,
+               part.c.completed, part.c.outcome,
+               part.c.replaced_at.is_not(None).label("replaced"),
+               (part.c.attention_failed == 0).label("attention_passed"), trial.c.world,
+               trial.c.world_position, trial.c.trial_index, trial.c.is_practice,
+               trial.c.attention_check, trial.c.arm, trial.c.clip_sha256,
+               trial.c.duration_ms.label("trial_duration_ms"), trial.c.replays,
+               trial.c.received_at.label("submitted_at"), part.c.config_sha256,
+               part.c.bank_sha256, *[pred.c[c] for c in _FROM_ROWS])
+        .select_from(pred.join(trial, trial.c.submission_id == pred.c.submission_id)
+                     .join(part, part.c.id == pred.c.participant_id))
+        .where(part.c.study_id == study_id)
+        .order_by(pred.c.participant_id, trial.c.id, pred.c.start_index, pred.c.step))
+    rows = [dict(r) for r in db.execute(query).mappings()]
+    frame = pd.DataFrame(rows, columns=list(EXPORT_COLUMNS))
+    frame["submitted_at"] = [as_utc(t).isoformat() for t in frame["submitted_at"]]
+    return normalise(frame)
+
+
+# ---------------------------------------------------------------- the sessions
+
+def _sessions(db: Session, study_id: str) -> list[Participant]:
+    query = select(Participant).where(Participant.study_id == study_id).order_by(Participant.id)
+    return list(db.execute(query).scalars().all())
+
+
+def _models(db: Session, study_id: str) -> dict[int, str]:
+    """Session id -> JSON of the model hashes its answers came from, per world."""
+    pred, trial, part = PredictionRow.__table__, TrialResponse.__table__, Participant.__table__
+    rows = db.execute(
+        select(pred.c.participant_id, trial.c.world, pred.c.ours_sha256, pred.c.vae_sha256)
+        .distinct()
+        .select_from(pred.join(trial, trial.c.submission_id == pred.c.submission_id)
+                     .join(part, part.c.id == pred.c.participant_id))
+        .where(part.c.study_id == study_id))
+    models: dict[int, dict] = defaultdict(dict)
+    for session, world, ours, vae in rows:
+        models[session][world] = {"ours": ours, "vae": vae}
+    return {k: json.dumps(v, sort_keys=True, separators=(",", ":")) for k, v in models.items()}
+
+
+def _versions(sessions: list[Participant], models: dict[int, str]) -> dict[int, dict]:
+    """Session id -> the public id and the study version columns of its rows."""
+    return {p.id: {"study_id": p.study_id, "participant_id": p.public_id,
+                   "config_sha256": p.config_sha256, "bank_sha256": p.bank_sha256,
+                   "models_sha256": models.get(p.id, "{}")} for p in sessions}
+
+
+def _of_study(query, table, study_id: str):
+    """`query` over `table`'s rows of the study's sessions."""
+    return query.join(Participant, Participant.id == table.participant_id).where(
+        Participant.study_id == study_id)
+
+
+def _utc(moment: datetime | None) -> datetime | None:
+    return None if moment is None else as_utc(moment)
+
+
+# ---------------------------------------------------------------- survey
+
+def survey_frame(db: Session, config: StudyConfig, study_id: str) -> pd.DataFrame:
+    """One row per (participant, answered question), in the config's question order."""
+    sessions = _sessions(db, study_id)
+    versions = _versions(sessions, _models(db, study_id))
+    kinds = {q.key: q.kind for q in config.survey}
+    order = {key: i for i, key in enumerate(kinds)}
+    found = db.execute(_of_study(select(Submission.participant_id, Submission.payload,
+                                        Submission.received_at), Submission, study_id)
+                       .where(Submission.kind == "survey").order_by(Submission.participant_id))
+    rows = []
+    for session, payload, received in found:
+        answers = payload.get("answers", {})
+        for key in sorted(answers, key=lambda k: order.get(k, len(order))):
+            rows.append({**versions[session], "question": key, "kind": kinds.get(key, ""),
+                         "answer": str(answers[key]), "answered_at": _utc(received)})
+    return typed(pd.DataFrame(rows), SURVEY)
+
+
+# ---------------------------------------------------------------- events
+
+def events_frame(db: Session, study_id: str) -> pd.DataFrame:
+    """Telemetry events and undo/reset presses of every session, by session and client time."""
+    sessions = _sessions(db, study_id)
+    versions = _versions(sessions, _models(db, study_id))
+    bank_ids = {p.id: {step.ref: step.trial_id for _, step in trial_steps(p)} for p in sessions}
+    rows = (_telemetry_rows(db, study_id, versions, bank_ids)
+            + _history_rows(db, study_id, versions))
+    frame = typed(pd.DataFrame(rows), EVENTS)
+    return frame.sort_values(["participant_id", "t_client_ms"], kind="stable",
+                             ignore_index=True)
+
+
+def _telemetry_rows(db: Session, study_id: str, versions: dict[int, dict],
+                    bank_ids: dict[int, dict[str, str]]) -> list[dict]:
+    found = db.execute(_of_study(select(Event.participant_id, Event.kind, Event.t_client_ms,
+                                        Event.data, Event.received_at), Event, study_id)
+                       .order_by(Event.id))
+    rows = []
+    for session, kind, t_client_ms, data, received in found:
+        ref = data.get("trial_id")  # the browser's opaque id of the trial on screen
+        rows.append({**versions[session], "source": _source(kind), "kind": kind,
+                     "t_client_ms": t_client_ms, "received_at": _utc(received),
+                     "trial_id": bank_ids[session].get(ref, ref), "replays": data.get("replays"),
+                     "start_index": data.get("start_index"), "clicks": data.get("clicks"),
+                     "w": data.get("w"), "h": data.get("h")})
+    return rows
+
+
+def _source(kind: str) -> str:
+    """`telemetry` for what the browser reports, `server` for what the server saw (tabs.py)."""
+    return "server" if kind in SERVER_EVENTS else "telemetry"
+
+
+def _history_rows(db: Session, study_id: str, versions: dict[int, dict]) -> list[dict]:
+    found = db.execute(_of_study(select(TrialResponse.participant_id, TrialResponse.trial_id,
+                                        TrialResponse.shown_at_ms, TrialResponse.history,
+                                        TrialResponse.received_at), TrialResponse, study_id)
+                       .order_by(TrialResponse.id))
+    rows = []
+    for session, trial_id, shown_at_ms, history, received in found:
+        for press in history or []:
+            rows.append({**versions[session], "source": "trial_history",
+                         "kind": press["action"], "t_client_ms": shown_at_ms + press["t_ms"],
+                         "t_trial_ms": press["t_ms"], "received_at": _utc(received),
+                         "trial_id": trial_id, "start_index": press["start_index"]})
+    return rows
+
+
+# ---------------------------------------------------------------- participants
+
+def participants_frame(db: Session, config: StudyConfig, study_id: str) -> pd.DataFrame:
+    """The payment and approval sheet: one row per session (replaced and pilot ones too)."""
+    sessions = _sessions(db, study_id)
+    versions = _versions(sessions, _models(db, study_id))
+    checks = checks_answered(db, study_id)
+    cutoff = in_progress_cutoff(config)
+    speeds = trial_speeds(db, config.exclusions, Participant.study_id == study_id)
+    rows = [_participant_row(p, versions[p.id], checks.get(p.id, 0), cutoff)
+            | _exclusion(config.exclusions, p, speeds.get(p.id, (0, 0))) for p in sessions]
+    return typed(pd.DataFrame(rows), PARTICIPANTS)
+
+
+def _exclusion(rules: ExclusionRules, p: Participant, speeds: tuple[int, int]) -> dict:
+    """Whether the analysis leaves the session out, and why (the same rules, `;`-joined)."""
+    reasons = exclusion_reasons(rules, p.attention_failed, *speeds)
+    if rules.incomplete and not p.completed:
+        reasons.append("incomplete")
+    reasons += [why for why, applies in (("pilot", p.pilot),
+                                         ("replaced", p.replaced_at is not None)) if applies]
+    return {"excluded": bool(reasons), "exclusion_reasons": ";".join(reasons)}
+
+
+def checks_answered(db: Session, study_id: str) -> dict[int, int]:
+    """Attention-check trials answered, per participant row id."""
+    query = _of_study(select(TrialResponse.participant_id, func.count()), TrialResponse,
+                      study_id)
+    rows = db.execute(query.where(TrialResponse.attention_check.is_(True))
+                      .group_by(TrialResponse.participant_id))
+    return dict(rows.all())
+
+
+def _participant_row(p: Participant, version: dict, checks: int, cutoff: datetime) -> dict:
+    started, last_seen = as_utc(p.created_at), as_utc(p.updated_at)
+    ended = _utc(p.ended_at)
+    return {**version, "external_id": p.external_id, "recruitment": p.recruitment,
+            "outcome": p.outcome, "completion_code": p.completion_code,
+            "status": session_status(p, cutoff), "started_at": started, "ended_at": ended,
+            "duration_min": None if ended is None else (ended - started).total_seconds() / 60,
+            "last_seen": last_seen, "world_order": p.world_order,
+            "steps_done": p.position, "steps_total": len(p.plan), "attention_checks": checks,
+            "attention_failed": p.attention_failed,
+            "attention_verdict": attention_verdict(checks, p.attention_failed),
+            "pilot": p.pilot, "replaced": p.replaced_at is not None,
+            "app_version": p.app_version}
+
+
+def attention_verdict(checks: int, failed: int) -> str:
+    """failed (any check failed: review before rejecting), passed, or none (no check yet)."""
+    if failed:
+        return "failed"
+    return "passed" if checks else "none"

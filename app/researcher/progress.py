@@ -1,0 +1,100 @@
+"""Where a study stands, for researchers: progress counts, the exclusion rules in force and the
+live alignment summary (the CSV exports are in exports.py)."""
+
+from collections import Counter
+
+import pandas as pd
+from sqlalchemy import select
+from sqlmodel import Session
+
+from analysis.contracts import MODELS
+from app.researcher.exports import predictions_frame
+from app.server.balance import in_progress_cutoff
+from app.server.context import StudyContext
+from app.server.recruitment import preview_path
+from app.server.sessions import session_status
+from app.server.tables import Participant
+
+
+def progress(db: Session, ctx: StudyContext) -> dict:
+    """progress_counts of the study's stored sessions."""
+    return progress_counts(ctx, study_sessions(db, ctx.study_id))
+
+
+def study_sessions(db: Session, study_id: str) -> list[Participant]:
+    """Every session of the study, pilots and replaced ones included, in order of start."""
+    return list(db.execute(select(Participant).where(Participant.study_id == study_id)
+                           .order_by(Participant.created_at, Participant.id)).scalars().all())
+
+
+def progress_counts(ctx: StudyContext, everyone: list[Participant]) -> dict:
+    """Session counts: started, completed, in progress, ended early (declined, screened
+    out), stale, by outcome and per world order.
+
+    Pilot (preview) sessions and sessions replaced by a new attempt are counted apart
+    and never in the study's progress.
+    """
+    cutoff = in_progress_cutoff(ctx.config)
+    people = [p for p in everyone if not p.pilot and p.replaced_at is None]
+    status = {p.id: session_status(p, cutoff) for p in people}  # ended, in_progress, stale
+    completed = [p for p in people if p.completed]
+    orders: dict[str, dict[str, int]] = {}
+    for p in people:
+        entry = orders.setdefault(p.world_order, {"completed": 0, "in_progress": 0})
+        if p.completed:
+            entry["completed"] += 1
+        elif status[p.id] == "in_progress":
+            entry["in_progress"] += 1
+    counts = Counter(status.values())
+    return {"target_sample_size": ctx.config.target_sample_size, "started": len(people),
+            "completed": len(completed), "in_progress": counts["in_progress"],
+            "ended_early": counts["ended"] - len(completed), "stale": counts["stale"],
+            "outcomes": dict(Counter(p.outcome for p in people if p.outcome)),
+            "failed_attention_check": sum(p.attention_failed > 0 for p in completed),
+            "pilot_sessions": sum(p.pilot for p in everyone),
+            "replaced_sessions": sum(p.replaced_at is not None for p in everyone),
+            "world_orders": orders}
+
+
+def exclusion_rules(ctx: StudyContext, rule_set: str):
+    """The study's exclusion rules (`kept`), or (`live`) the same with `incomplete` waived."""
+    rules = ctx.config.exclusions
+    return rules if rule_set == "kept" else rules.model_copy(update={"incomplete": False})
+
+
+def alignment_summary(frame: pd.DataFrame, ctx: StudyContext) -> dict:
+    """Running mean alignment error per world and model, with the analysis' exclusion rules.
+
+    `kept` applies every rule (so only completed sessions); `live` waives the
+    `incomplete` rule to show sessions still running. `frame` is predictions_frame's
+    (already normalised).
+    """
+    from analysis.metrics import apply_exclusions, participant_means
+
+    if frame.empty:
+        return {"kept": {}, "live": {}, "exclusions": {}}
+    out = {}
+    for name in ("kept", "live"):
+        result = apply_exclusions(frame, exclusion_rules(ctx, name))
+        out[name] = _world_means(participant_means(result.kept)) if len(result.kept) else {}
+        if name == "kept":
+            out["exclusions"] = result.counts()
+    return out
+
+
+def _world_means(means: pd.DataFrame) -> dict:
+    summary = {}
+    for world, group in means.groupby("world", sort=True):
+        summary[world] = {"participants": int(len(group)), **{
+            model: round(float(group[f"err_{model}"].mean()), 4)
+            for model in MODELS}}
+    return summary
+
+
+def summary(db: Session, ctx: StudyContext) -> dict:
+    """The dashboard's JSON: progress, exclusions and running alignment error."""
+    frame = predictions_frame(db, ctx.study_id)
+    return {"study_id": ctx.study_id, "title": ctx.config.title,
+            "preview_link": preview_path(ctx.study_id, ctx.preview_key),
+            "progress": progress(db, ctx), "alignment_error": alignment_summary(frame, ctx),
+            "rows": int(len(frame))}

@@ -1,0 +1,1 @@
+"""The participant server: session flow, storage, validation, recruitment and endings."""

@@ -1,0 +1,34 @@
+"""What every participant request needs besides the database: one loaded study."""
+
+from dataclasses import dataclass, field
+
+from app.bank.model_answers import ModelAnswers
+from app.prediction_view import PredictionView, prediction_view
+from app.study.config import StudyConfig
+from app.study.trials import TrialBank
+
+# what of a world's bank the prediction view's scale reads (app/prediction_view.py)
+VIEW_FIELDS = {"dt_s": True, "trials": {"__all__": {"kind": True, "policy_actions": True}}}
+
+
+@dataclass(frozen=True)
+class StudyContext:
+    """A study's config, bank and models, and the server's per-study secrets and rules."""
+
+    study_id: str
+    config: StudyConfig
+    bank: TrialBank
+    model_answers: ModelAnswers
+    config_sha256: str = ""  # of the validated config (config.config_sha256)
+    preview_key: str = field(default="", repr=False)  # opens pilot sessions (recruitment.py)
+    trust_client_clock: bool = False  # pilots with bots only; never in production
+    # trial id -> the trial's static browser JSON, encoded once (see app/server/state.py)
+    trial_json: dict[str, str] = field(default_factory=dict, compare=False, repr=False)
+    views: dict[str, PredictionView] = field(default_factory=dict, compare=False, repr=False)
+
+    def view(self, world: str) -> PredictionView:
+        """The prediction screen's scale of `world`, from its bank (computed once)."""
+        if world not in self.views:
+            self.views[world] = prediction_view(
+                self.bank.world(world).model_dump(include=VIEW_FIELDS))
+        return self.views[world]

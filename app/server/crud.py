@@ -1,0 +1,327 @@
+"""Database transactions of a participant's steps: each write, and the reads it depends on.
+
+What a step is and whether an answer is acceptable are decided elsewhere (plan.py,
+validation.py); this module stores. A step is advanced by a conditional UPDATE
+(`WHERE position = expected`), so two workers racing on one participant cannot both
+advance it, and a client UUID (`submission_id`, unique, bound to its submission kind
+and body hash) makes a retried request a no-op that answers the current state. Every
+write commits before the route answers, so a 2xx means the answer is stored.
+"""
+
+import hashlib
+from collections.abc import Callable
+from contextlib import contextmanager
+
+import numpy as np
+from sqlalchemy import delete, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlmodel import Session
+
+from app.server import balance
+from app.server.context import StudyContext
+from app.server.drafts import discard_draft
+from app.server.plan import BEFORE_TRIALS, Phase, TrialStep, expect_phase, expect_trial
+from app.server.sessions import as_utc
+from app.server.tables import (
+    ConsentCreate,
+    ContinueCreate,
+    DeclineCreate,
+    Event,
+    Participant,
+    PredictionCreate,
+    PredictionRow,
+    ScreenOutCreate,
+    Submission,
+    SubmissionBody,
+    SurveyCreate,
+    TrialResponse,
+    utcnow,
+)
+from app.server.validation import (
+    attention_passed,
+    human_actions,
+    validate_points,
+    validate_survey,
+)
+from app.study.config import StudyConfig
+from app.study.errors import Refused
+from app.study.trials import TrialRecord
+
+# outcomes of a session that did every trial
+FINISHED = ("completed", "failed_checks", "excluded")
+
+
+# ---------------------------------------------------------------- step writes
+
+def body_hash(body: SubmissionBody) -> str:
+    """SHA-256 of the body as the server parsed it: a retry must send the same one."""
+    return hashlib.sha256(body.model_dump_json().encode()).hexdigest()
+
+
+def already_stored(db: Session, participant: Participant, body: SubmissionBody,
+                   submission_kind: str) -> bool:
+    """True if this UUID was stored for this same request (a retry); else 409 or 422."""
+    stored = db.execute(select(Submission.participant_id, Submission.kind,
+                               Submission.body_sha256)
+                        .where(Submission.submission_id == str(body.submission_id))).first()
+    if stored is None:
+        return False
+    if stored.participant_id != participant.id:
+        raise Refused(409, "submission_id: already used by another session")
+    if stored.kind != submission_kind or stored.body_sha256 != body_hash(body):
+        raise Refused(422, f"submission_id: already used for a different {stored.kind} "
+                           "request; a retry must resend the same body, a new answer needs "
+                           "a new submission_id")
+    return True
+
+
+def advance(db: Session, participant: Participant, body: SubmissionBody, submission_kind: str,
+            payload: dict, extra_inserts: list[tuple[object, list[dict]]] = (),
+            ending: dict | None = None,
+            before_commit: Callable[[], None] | None = None,
+            updates: dict | None = None) -> bool:
+    """Store the submission and its rows and move one step on, in one transaction.
+
+    With `ending` (ending_values) the session is done and the ending's receipt is stored
+    in the same commit, before the browser is told where to go; `updates` are other
+    Participant columns to set with the step. A replaced session moves no more. An ending
+    before the plan is through (declined, screened out) leaves the position at the step
+    that ended it, so the session counts only the steps it took (plan.current_step shows it
+    done).
+    Returns False when a concurrent retry of the same UUID won the race (nothing stored).
+    """
+    expected = participant.position
+    now = utcnow()
+    values = {**(updates or {}), "position": expected + 1, "updated_at": now}
+    if ending is not None:
+        values.update(ending, ended_at=now)
+        if ending["completed"]:
+            values["completed_at"] = now
+        else:
+            values["position"] = expected
+    if payload.get("attention_ok") is False:
+        values["attention_failed"] = Participant.attention_failed + 1
+    conn = db.connection()
+    try:
+        conn.execute(Submission.__table__.insert(), [{
+            "submission_id": str(body.submission_id), "participant_id": participant.id,
+            "kind": submission_kind, "body_sha256": body_hash(body), "step_index": expected,
+            "payload": payload, "received_at": now}])
+        for table, rows in extra_inserts:
+            conn.execute(table.__table__.insert(), rows)
+        moved = conn.execute(update(Participant.__table__)
+                             .where(Participant.id == participant.id,
+                                    Participant.position == expected,
+                                    Participant.replaced_at.is_(None)).values(**values))
+        if moved.rowcount != 1:
+            raise Refused(409, "position: the session moved on in another request; reload")
+        _mirror(participant, values)
+        if before_commit is not None:
+            before_commit()
+        db.commit()
+    except IntegrityError:
+        db.rollback()
+        if already_stored(db, participant, body, submission_kind):
+            return False
+        raise
+    except BaseException:
+        db.rollback()
+        raise
+    return True
+
+
+def ending_values(config: StudyConfig, outcome: str) -> dict:
+    """The Participant columns an ending sets: outcome, its completion code, completed."""
+    return {"outcome": outcome, "completion_code": config.recruitment.ending(outcome)
+            .completion_code, "completed": outcome in FINISHED}
+
+
+def finished_outcome(config: StudyConfig, participant: Participant, excluded: bool) -> str:
+    """failed_checks once `endings.min_failed` attention checks failed, else excluded when
+    the study's exclusion rules remove the session, else completed."""
+    if participant.attention_failed >= config.recruitment.endings.min_failed:
+        return "failed_checks"
+    return "excluded" if excluded else "completed"
+
+
+def _mirror(participant: Participant, values: dict) -> None:
+    """Keep the loaded row in step with the UPDATE instead of reading it back."""
+    for key, value in values.items():
+        if key != "attention_failed":
+            setattr(participant, key, value)
+    if "attention_failed" in values:
+        participant.attention_failed += 1
+
+
+def record_consent(db: Session, participant: Participant, body: ConsentCreate) -> None:
+    """The participant agreed to take part; their device info is stored from now on."""
+    with replay_if_stored(db, participant, body, "consent") as fresh:
+        expect_phase(participant, Phase.CONSENT)
+        fresh.stored = advance(db, participant, body, "consent", {"agree": True},
+                               updates={"client": body.client.model_dump()})
+
+
+def record_instructions(db: Session, participant: Participant, body: SubmissionBody) -> None:
+    """The participant has read the instructions."""
+    with replay_if_stored(db, participant, body, "instructions") as fresh:
+        expect_phase(participant, Phase.INSTRUCTIONS)
+        fresh.stored = advance(db, participant, body, "instructions", {})
+
+
+def record_continue(db: Session, participant: Participant, body: ContinueCreate) -> None:
+    """The participant read a part's screen (its world's introduction, or practice over)."""
+    with replay_if_stored(db, participant, body, "continue") as fresh:
+        expect_phase(participant, Phase(body.phase))
+        fresh.stored = advance(db, participant, body, "continue", {"phase": body.phase})
+
+
+def record_survey(db: Session, ctx: StudyContext, participant: Participant,
+                  body: SurveyCreate) -> None:
+    """Closing answers; the session is then complete and settles its balance counts."""
+    with replay_if_stored(db, participant, body, "survey") as fresh:
+        expect_phase(participant, Phase.SURVEY)
+        answers = validate_survey(ctx.config.survey, body.answers)
+        excluded = balance.is_excluded(db, ctx.config, participant)
+        ending = ending_values(ctx.config, finished_outcome(ctx.config, participant, excluded))
+        fresh.stored = advance(
+            db, participant, body, "survey", {"answers": answers}, ending=ending,
+            before_commit=lambda: balance.settle_completion(db, participant, excluded))
+
+
+def record_decline(db: Session, ctx: StudyContext, participant: Participant,
+                   body: DeclineCreate) -> None:
+    """The participant does not consent: the session ends and keeps only its receipt."""
+    with replay_if_stored(db, participant, body, "decline") as fresh:
+        expect_phase(participant, Phase.CONSENT)
+        fresh.stored = advance(db, participant, body, "decline", {},
+                               ending=ending_values(ctx.config, "declined_consent"),
+                               before_commit=lambda: _forget(db, participant))
+
+
+def record_screen_out(db: Session, ctx: StudyContext, participant: Participant,
+                      body: ScreenOutCreate) -> None:
+    """The device check failed before any trial: the session ends with that outcome."""
+    with replay_if_stored(db, participant, body, "screen_out") as fresh:
+        expect_phase(participant, *BEFORE_TRIALS)
+        fresh.stored = advance(db, participant, body, "screen_out", {"reason": body.reason},
+                               ending=ending_values(ctx.config, "screened_out"),
+                               before_commit=lambda: _forget(db, participant))
+
+
+def _forget(db: Session, participant: Participant) -> None:
+    """Keep nothing of a session that ends before taking part but its receipt."""
+    db.execute(delete(Event.__table__).where(Event.participant_id == participant.id))
+    db.execute(update(Participant.__table__).where(Participant.id == participant.id)
+               .values(client={}, events_stored=0))
+    participant.client, participant.events_stored = {}, 0
+    balance.release(db, participant)
+
+
+class _Outcome:
+    stored = False
+
+
+@contextmanager
+def replay_if_stored(db: Session, participant: Participant, body: SubmissionBody,
+                     submission_kind: str):
+    """Run a write; if it is refused, a retry of a stored UUID is not an error.
+
+    The common first-time path costs no lookup: a retry is recognised only when the
+    write is refused (the session has moved on), and a concurrent duplicate by the
+    unique key inside `advance`.
+    """
+    outcome = _Outcome()
+    try:
+        yield outcome
+    except Refused:
+        if already_stored(db, participant, body, submission_kind):
+            outcome.stored = False
+            return
+        raise
+
+
+# ---------------------------------------------------------------- predictions
+
+def record_predictions(db: Session, ctx: StudyContext, participant: Participant,
+                       body: PredictionCreate) -> bool:
+    """Validate and store one trial's clicks with every predictor's actions. True if new."""
+    with replay_if_stored(db, participant, body, "predictions") as fresh:
+        fresh.stored = _store_predictions(db, ctx, participant, body)
+    return fresh.stored
+
+
+def _store_predictions(db: Session, ctx: StudyContext, participant: Participant,
+                       body: PredictionCreate) -> bool:
+    step = expect_trial(participant, body.trial_id)
+    trial = ctx.bank.by_id[step.trial_id]
+    points = validate_points(ctx.bank, trial, body)
+    rows = prediction_rows(ctx, participant, trial, body, points)
+    attention_ok = (attention_passed(ctx.config.attention_checks, trial, points)
+                    if step.attention_check else None)
+    response = trial_response(ctx, participant, step, trial, body, attention_ok)
+    payload = {"trial_id": trial.trial_id, "attention_ok": attention_ok}
+    return advance(db, participant, body, "predictions", payload,
+                   [(TrialResponse, [response]), (PredictionRow, rows)],
+                   before_commit=lambda: discard_draft(db, participant))
+
+
+def trial_response(ctx: StudyContext, participant: Participant, step: TrialStep,
+                   trial: TrialRecord, body: PredictionCreate,
+                   attention_ok: bool | None) -> dict:
+    """The TrialResponse row of one answered trial: timings, replays, undo history, verdict."""
+    return {
+        "submission_id": str(body.submission_id), "participant_id": participant.id,
+        "trial_id": trial.trial_id, "world": trial.world,
+        "world_position": step.world_position, "trial_index": step.trial_index,
+        "is_practice": step.phase == Phase.PRACTICE, "attention_check": step.attention_check,
+        "attention_ok": attention_ok, "shown_at_ms": body.shown_at_ms,
+        "submitted_at_ms": body.submitted_at_ms, "replays": body.replays,
+        "clip_sha256": trial.clip_sha256, "arm": trial.arm, "received_at": utcnow(),
+        "history": [entry.model_dump() for entry in body.history],
+        **trial_durations(ctx, participant, body),
+    }
+
+
+def trial_durations(ctx: StudyContext, participant: Participant, body: PredictionCreate) -> dict:
+    """Client and server durations of a trial, and the one the too-fast rule reads.
+
+    The server's clock runs from its acknowledgement of the previous step, so it can only
+    overstate the time a person had; taking the smaller of the two catches a client
+    that claims to have taken longer than it did.
+    """
+    client_ms = body.submitted_at_ms - body.shown_at_ms
+    server_ms = (utcnow() - as_utc(participant.updated_at)).total_seconds() * 1000
+    used = client_ms if ctx.trust_client_clock else min(client_ms, server_ms)
+    return {"client_duration_ms": client_ms, "server_duration_ms": server_ms,
+            "duration_ms": used}
+
+
+def prediction_rows(ctx: StudyContext, participant: Participant, trial: TrialRecord,
+                    body: PredictionCreate, points: np.ndarray) -> list[dict]:
+    """Long rows: one per (start state, step), human action beside each predictor's."""
+    dt_s = ctx.bank.world(trial.world).dt_s
+    human = human_actions(trial, points, dt_s)
+    answers = ctx.model_answers.answers(trial.trial_id)
+    ours, vae = answers["ours"], answers["vae"]
+    cv = np.asarray(trial.cv_actions)
+    policy = np.asarray(trial.policy_actions)
+    rows = []
+    for i, start in enumerate(trial.start_states):
+        for j in range(points.shape[1]):
+            rows.append({
+                "submission_id": str(body.submission_id), "participant_id": participant.id,
+                "trial_id": trial.trial_id, "start_index": i, "start_kind": start.start_kind,
+                "step": j,
+                "start_x": start.robot[0], "start_y": start.robot[1],
+                "human_x": start.human[0], "human_y": start.human[1],
+                "click_x": float(points[i, j, 0]), "click_y": float(points[i, j, 1]),
+                "human_vx": float(human[i, j, 0]), "human_vy": float(human[i, j, 1]),
+                "ours_vx": float(ours.actions[i, j, 0]), "ours_vy": float(ours.actions[i, j, 1]),
+                "vae_vx": float(vae.actions[i, j, 0]), "vae_vy": float(vae.actions[i, j, 1]),
+                "cv_vx": float(cv[i, j, 0]), "cv_vy": float(cv[i, j, 1]),
+                "policy_vx": float(policy[i, j, 0]), "policy_vy": float(policy[i, j, 1]),
+                "ours_code": ours.code, "vae_code": vae.code,
+                "ours_sha256": ours.content_hash, "vae_sha256": vae.content_hash,
+                "click_time_ms": float(body.click_times_ms[i][j]),
+            })
+    return rows

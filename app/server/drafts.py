@@ -1,0 +1,77 @@
+"""A trial's answer in progress, kept on the server so that a reload resumes it.
+
+The page saves the current trial's clicks, their times, the undo history, the start state
+being answered and when the trial was first shown after every change (PUT .../draft), and
+GET .../state hands the draft back with the trial. It is kept on the server rather than in
+the browser because a server copy survives a crash, a cleared browser or a change of
+device, can be handed to the tab that takes over (tabs.py), and shows the researcher what
+was resumed. One row per session; a save with a lower `seq` than the stored one (a late
+retry) changes nothing, and the row goes in the transaction that stores the trial.
+"""
+
+from sqlalchemy import delete, or_, select, update
+from sqlmodel import Session
+
+from app.server.context import StudyContext
+from app.server.db import insert_skipping_duplicates
+from app.server.plan import TrialStep, current_step, expect_trial
+from app.server.tables import DraftSave, Participant, TrialDraft, utcnow
+from app.study.errors import Refused
+
+
+def save_draft(db: Session, ctx: StudyContext, participant: Participant, body: DraftSave) -> int:
+    """Keep `body` as the current trial's draft unless a newer one is stored; the stored seq."""
+    step = expect_trial(participant, body.trial_id)
+    check_shape(ctx, step, body)
+    table = TrialDraft.__table__
+    values = {"trial_ref": step.ref, "seq": body.seq, "saved_at": utcnow(),
+              "data": body.model_dump(exclude={"trial_id", "seq"})}
+    conn = db.connection()
+    try:
+        moved = conn.execute(update(table).where(
+            table.c.participant_id == participant.id,
+            or_(table.c.trial_ref != step.ref, table.c.seq < body.seq)).values(**values))
+        if moved.rowcount == 0:
+            conn.execute(insert_skipping_duplicates(conn, table)
+                         .values(participant_id=participant.id, **values))
+        stored = conn.execute(select(table.c.seq).where(
+            table.c.participant_id == participant.id)).scalar_one()
+        db.commit()
+    except BaseException:
+        db.rollback()
+        raise
+    return stored
+
+
+def check_shape(ctx: StudyContext, step: TrialStep, body: DraftSave) -> None:
+    """The draft fits the trial: a list of clicks per start state, at most the steps to
+    predict each, a time per click, and a start state that exists (422 naming the field)."""
+    states = len(ctx.bank.by_id[step.trial_id].start_states)
+    steps = ctx.bank.data.steps_to_predict
+    if len(body.points) != states or len(body.click_times_ms) != states:
+        raise Refused(422, f"points: one list of clicks per start state ({states}) is needed, "
+                           "also in click_times_ms")
+    for i, (points, times) in enumerate(zip(body.points, body.click_times_ms, strict=True)):
+        if len(points) > steps or len(times) != len(points):
+            raise Refused(422, f"points.{i}: at most {steps} clicks, each with its time in "
+                               f"click_times_ms.{i}")
+    if body.index >= states:
+        raise Refused(422, f"index: the trial has {states} start states")
+
+
+def current_draft(db: Session, participant: Participant) -> dict | None:
+    """The draft of the trial the participant is at (with its `seq`), or None."""
+    step = current_step(participant)
+    if not isinstance(step, TrialStep):
+        return None
+    row = db.execute(select(TrialDraft.seq, TrialDraft.data).where(
+        TrialDraft.participant_id == participant.id, TrialDraft.trial_ref == step.ref)).first()
+    db.commit()  # end the read transaction
+    return None if row is None else {**row.data, "seq": row.seq}
+
+
+def discard_draft(db: Session, participant: Participant) -> None:
+    """Delete the session's draft (inside the caller's transaction: the trial it belonged to
+    is being stored)."""
+    db.execute(delete(TrialDraft.__table__).where(
+        TrialDraft.participant_id == participant.id))

@@ -1,0 +1,59 @@
+"""HTML pages: landing, the participant app and the researcher dashboard (jinja2)."""
+
+from fastapi import APIRouter, Request
+from fastapi.responses import HTMLResponse
+
+from app.prediction_view import MIN_WINDOW_PX
+from app.server import notices
+from app.server.deps import study_context
+from app.server.plan import BEFORE_TRIALS, Phase
+from app.server.recruitment import MTURK_PREVIEW
+from app.study.errors import Notice
+
+router = APIRouter(tags=["pages"], include_in_schema=False)
+# what the participant page is told about phases (app.js keeps one handler per phase)
+PHASES = {"phases": [phase.value for phase in Phase],
+          "screen_out_phases": [phase.value for phase in BEFORE_TRIALS],
+          "min_window": MIN_WINDOW_PX}
+
+
+def _render(request: Request, name: str, study_id: str, **extra) -> HTMLResponse:
+    ctx = study_context(request, study_id)
+    return request.app.state.templates.TemplateResponse(
+        request, name, {"study_id": study_id, "title": ctx.config.title,
+                        "description": ctx.config.description,
+                        "static_url": "/static", "studies": sorted(request.app.state.studies),
+                        **extra})
+
+
+@router.get("/", response_class=HTMLResponse)
+def show_index(request: Request) -> HTMLResponse:
+    """Landing page: the served studies and a link to the default one."""
+    return _render(request, "index.html", request.app.state.default_study)
+
+
+@router.get("/s/{study_id}", response_class=HTMLResponse)
+def show_study(study_id: str, request: Request) -> HTMLResponse:
+    """The participant app (one page; recruitment parameters stay in the URL).
+
+    MTurk's HIT preview (assignmentId=ASSIGNMENT_ID_NOT_AVAILABLE) gets a page that
+    describes the study and loads no script, so no session can start from it.
+    """
+    if study_id not in request.app.state.studies:
+        return notice_page(request, notices.unknown_study(), status_code=404)
+    if request.query_params.get("assignmentId") == MTURK_PREVIEW:
+        return _render(request, "mturk_preview.html", study_id)
+    return _render(request, "study.html", study_id, **PHASES)
+
+
+def notice_page(request: Request, notice: Notice, status_code: int) -> HTMLResponse:
+    """A plain-language page that turns a participant away (no script, nothing starts)."""
+    return request.app.state.templates.TemplateResponse(
+        request, "notice.html", {"title": "Online study", "notice": notice,
+                                 "static_url": "/static"}, status_code=status_code)
+
+
+@router.get("/researcher", response_class=HTMLResponse)
+def show_researcher(request: Request) -> HTMLResponse:
+    """The researcher dashboard (asks for the token, then calls the JSON routes)."""
+    return _render(request, "researcher.html", request.app.state.default_study)

@@ -1,0 +1,139 @@
+"""What a participant's browser is told at each step (GET .../state and every write's answer).
+
+A trial's static part (scene, clips, start states: ~15 KB of numbers) is encoded to JSON
+once per process and spliced into each answer: encoding it per request through FastAPI's
+`jsonable_encoder` cost ~5 ms, most of a state request.
+"""
+
+import json
+
+from app.server.context import StudyContext
+from app.server.plan import (
+    PartStep,
+    Phase,
+    Step,
+    TrialStep,
+    current_step,
+    part_steps,
+    trial_steps,
+)
+from app.server.recruitment import MTURK_SUBMIT_PATH
+from app.server.tables import Participant
+from app.study.config import StudyConfig
+
+
+def progress_of(participant: Participant) -> dict:
+    """Trials (practice included) done and in total."""
+    trial_positions = [i for i, _ in trial_steps(participant)]
+    done = sum(1 for i in trial_positions if i < participant.position)
+    return {"done": done, "total": len(trial_positions)}
+
+
+def step_payload(ctx: StudyContext, participant: Participant, step: Step) -> dict:
+    """What a non-trial phase needs: texts, the survey or the completion code."""
+    cfg = ctx.config
+    if step.phase == Phase.CONSENT:
+        return {"title": cfg.title, "text": cfg.consent_text}
+    if step.phase == Phase.INSTRUCTIONS:
+        return {"title": cfg.title, "text": cfg.instructions_text,
+                "world_order": participant.world_order.split(",")}
+    if step.phase == Phase.SURVEY:
+        return {"questions": [q.model_dump() for q in cfg.survey]}
+    if isinstance(step, PartStep):
+        return part_payload(ctx, participant, step)
+    return done_payload(cfg, participant)
+
+
+def part_payload(ctx: StudyContext, participant: Participant, step: PartStep) -> dict:
+    """A part's screen: which part of how many, its world explained, and its trial counts."""
+    intro = ctx.config.world_intros[step.world]
+    trials = part_steps(participant, step.world_position)
+    return {**part_numbers(participant, step.world_position), "world": step.world,
+            "title": intro.title, "text": intro.text,
+            "scene": ctx.bank.world(step.world).scene,
+            "practice_trials": sum(t.phase == Phase.PRACTICE for t in trials),
+            "trials": sum(t.phase == Phase.TRIAL for t in trials)}
+
+
+def part_numbers(participant: Participant, world_position: int) -> dict:
+    """`part` (1-based) of `parts`: how the page names a world's place in the session."""
+    return {"part": world_position + 1, "parts": len(participant.world_order.split(","))}
+
+
+def done_payload(cfg: StudyConfig, participant: Participant) -> dict:
+    """The stored ending: its outcome, code, message, and where the page sends the person.
+
+    An MTurk assignment is handed in by a form posted to MTurk (`mturk_submit`) instead
+    of a redirect.
+    """
+    outcome = participant.outcome  # set by every ending; migration 0002 set the older ones
+    code = participant.completion_code
+    if code is None:  # completed before endings existed: the code of today's config
+        code = cfg.recruitment.ending(outcome).completion_code
+    return {"outcome": outcome, "completion_code": code,
+            "message": cfg.recruitment.ending(outcome).message,
+            "redirect_url": redirect_url(cfg, participant.recruitment, code),
+            "mturk_submit": mturk_submit(participant, outcome, code)}
+
+
+def mturk_submit(participant: Participant, outcome: str, code: str) -> dict | None:
+    """The ExternalQuestion hand-in form: action `turkSubmitTo`/mturk/externalSubmit."""
+    params = participant.recruitment_params or {}
+    if participant.recruitment != "mturk" or not params.get("turkSubmitTo"):
+        return None
+    return {"action": f"{params['turkSubmitTo']}{MTURK_SUBMIT_PATH}",
+            "fields": {"assignmentId": params["assignmentId"], "outcome": outcome,
+                       "completion_code": code}}
+
+
+def step_fields(participant: Participant, step: TrialStep) -> dict:
+    """The parts of a trial payload that depend on the participant's plan.
+
+    The browser gets the step's random `ref` as `trial_id` and no attention-check flag:
+    nothing in the payload tells a script which trial is the check. `number` of `of` counts
+    the part's practice trials, or its scored trials (checks included), from 1.
+    """
+    same_kind = [t for t in part_steps(participant, step.world_position) if t.phase == step.phase]
+    return {"trial_id": step.ref, "world": step.world,
+            "index_in_world": step.trial_index, "world_position": step.world_position,
+            "is_practice": step.phase == Phase.PRACTICE,
+            **part_numbers(participant, step.world_position),
+            "number": step.trial_index + 1, "of": len(same_kind)}
+
+
+def static_trial(ctx: StudyContext, trial_id: str) -> dict:
+    """The parts of a trial payload that are the same for everyone."""
+    trial = ctx.bank.by_id[trial_id]
+    world = ctx.bank.world(trial.world)
+    return {"scene": world.scene, "dt_s": world.dt_s,
+            **trial.browser_payload(), "steps_to_predict": ctx.bank.data.steps_to_predict,
+            "max_step_m": world.max_step_m, "min_step_m": world.min_step_m,
+            "view": ctx.view(trial.world).payload()}
+
+
+def state_json(ctx: StudyContext, participant: Participant, draft: dict | None = None) -> str:
+    """`{phase, progress: {done, total}, step}` as JSON; a trial's static part is encoded once.
+
+    `draft` is the trial's in-progress answer (drafts.py), handed back so a reloaded page
+    resumes where it was.
+    """
+    step = current_step(participant)
+    state = {"phase": step.phase, "progress": progress_of(participant)}
+    if not isinstance(step, TrialStep):
+        return json.dumps({**state, "step": step_payload(ctx, participant, step)})
+    static = ctx.trial_json.get(step.trial_id)
+    if static is None:
+        static = json.dumps(static_trial(ctx, step.trial_id))
+        ctx.trial_json[step.trial_id] = static
+    head = json.dumps({**state, "step": {**step_fields(participant, step), "draft": draft}})
+    return f"{head[:-2]}, {static[1:]}}}"
+
+
+def redirect_url(cfg: StudyConfig, recruitment: str, code: str) -> str:
+    """Where the done page sends the participant ('' = show the code only)."""
+    if not code:
+        return ""
+    template = {"prolific": cfg.recruitment.prolific_redirect_url,
+                "mturk": cfg.recruitment.mturk_redirect_url}.get(
+        recruitment, cfg.recruitment.open_redirect_url)
+    return template.format(completion_code=code)
