@@ -790,7 +790,7 @@ def withdraw(
     from sqlmodel import Session
 
     from app.researcher import withdrawal
-    from app.server.tables import WithdrawalByExternalId, WithdrawalByParticipantId
+    from app.server.schemas import WithdrawalByExternalId, WithdrawalByParticipantId
     from app.study.errors import Refused
 
     if (external_id is None) == (participant_id is None):

@@ -7,7 +7,7 @@ from fastapi.responses import Response
 
 from app.researcher import exports, progress, withdrawal
 from app.server.deps import AdminDep, SessionDep, study_context
-from app.server.tables import WithdrawalCreate
+from app.server.schemas import WithdrawalCreate
 
 router = APIRouter(prefix="/api/researcher", tags=["researcher"])
 

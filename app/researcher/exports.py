@@ -27,15 +27,9 @@ from analysis.exports import typed
 from analysis.load import normalise
 from app.server.balance import exclusion_reasons, in_progress_cutoff, trial_speeds
 from app.server.plan import trial_steps
+from app.server.schemas import SERVER_EVENTS
 from app.server.sessions import as_utc, session_status
-from app.server.tables import (
-    SERVER_EVENTS,
-    Event,
-    Participant,
-    PredictionRow,
-    Submission,
-    TrialResponse,
-)
+from app.server.tables import Event, Participant, PredictionRow, Submission, TrialResponse
 from app.study.config import StudyConfig
 
 _FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields

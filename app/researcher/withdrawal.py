@@ -27,6 +27,7 @@ from sqlmodel import Session
 
 from app.server import balance
 from app.server.recruitment import normalise_external_id
+from app.server.schemas import WithdrawalByExternalId, WithdrawalCreate
 from app.server.sessions import as_utc
 from app.server.tables import (
     Event,
@@ -36,8 +37,6 @@ from app.server.tables import (
     TrialDraft,
     TrialResponse,
     WithdrawalAudit,
-    WithdrawalByExternalId,
-    WithdrawalCreate,
 )
 from app.study.errors import Refused
 

@@ -21,22 +21,17 @@ from app.server import balance
 from app.server.context import StudyContext
 from app.server.drafts import discard_draft
 from app.server.plan import BEFORE_TRIALS, Phase, TrialStep, expect_phase, expect_trial
-from app.server.sessions import as_utc
-from app.server.tables import (
+from app.server.schemas import (
     ConsentCreate,
     ContinueCreate,
     DeclineCreate,
-    Event,
-    Participant,
     PredictionCreate,
-    PredictionRow,
     ScreenOutCreate,
-    Submission,
     SubmissionBody,
     SurveyCreate,
-    TrialResponse,
-    utcnow,
 )
+from app.server.sessions import as_utc
+from app.server.tables import Event, Participant, PredictionRow, Submission, TrialResponse, utcnow
 from app.server.validation import (
     attention_passed,
     human_actions,

@@ -15,7 +15,8 @@ from sqlmodel import Session
 from app.server.context import StudyContext
 from app.server.db import insert_skipping_duplicates
 from app.server.plan import TrialStep, current_step, expect_trial
-from app.server.tables import DraftSave, Participant, TrialDraft, utcnow
+from app.server.schemas import DraftSave
+from app.server.tables import Participant, TrialDraft, utcnow
 from app.study.errors import Refused
 
 

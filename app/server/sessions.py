@@ -22,7 +22,8 @@ from app.server import balance, notices
 from app.server.context import StudyContext
 from app.server.plan import Usage, assign_plan, dump_plan
 from app.server.recruitment import ATTEMPT_KEYS, Identity, identify
-from app.server.tables import Participant, SessionCreate, utcnow
+from app.server.schemas import SessionCreate
+from app.server.tables import Participant, utcnow
 from app.study.config import live_session_cap
 from app.study.errors import Refused
 

@@ -17,15 +17,9 @@ from sqlmodel import Session
 
 from app.server import notices, telemetry
 from app.server.plan import TrialStep, current_step
+from app.server.schemas import PAGE_OPENED, TAB_TAKEOVER, TabClaim, TabRelease
 from app.server.sessions import as_utc
-from app.server.tables import (
-    PAGE_OPENED,
-    TAB_TAKEOVER,
-    Participant,
-    TabClaim,
-    TabRelease,
-    utcnow,
-)
+from app.server.tables import Participant, utcnow
 from app.study.errors import Refused
 
 TAB_HEADER = "X-Tab-Id"

@@ -14,8 +14,9 @@ from sqlalchemy.engine import Connection
 from sqlmodel import Session
 
 from app.server.db import insert_skipping_duplicates
+from app.server.schemas import EventsCreate
 from app.server.sessions import has_ended
-from app.server.tables import Event, EventsCreate, Participant, utcnow
+from app.server.tables import Event, Participant, utcnow
 from app.study.errors import Refused
 
 MAX_EVENTS_PER_SESSION = 1000  # the browser sends about 3 per trial; 1000 is far above that

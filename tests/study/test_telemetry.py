@@ -9,8 +9,9 @@ from sqlmodel import Session
 
 from app.server import telemetry
 from app.server.plan import Phase
+from app.server.schemas import EVENT_DATA, EventsCreate
 from app.server.sessions import participant_by_token
-from app.server.tables import EVENT_DATA, Event, EventsCreate
+from app.server.tables import Event
 from app.server.tables import Participant as ParticipantRow
 from app.study.errors import Refused
 from tests.conftest import REPO

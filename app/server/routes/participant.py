@@ -8,9 +8,7 @@ from fastapi import APIRouter, Request, Response, status
 
 from app.server import crud, drafts, sessions, tabs, telemetry
 from app.server.deps import ContextDep, ParticipantDep, SessionDep, WriterDep, study_context
-from app.server.sessions import SESSION_PATH
-from app.server.state import state_json
-from app.server.tables import (
+from app.server.schemas import (
     ConsentCreate,
     ContinueCreate,
     DeclineCreate,
@@ -25,6 +23,8 @@ from app.server.tables import (
     TabClaim,
     TabRelease,
 )
+from app.server.sessions import SESSION_PATH
+from app.server.state import state_json
 
 router = APIRouter(tags=["participant"])
 STATE_DOC = "`{phase, progress: {done, total}, step}` (app/server/API.md)"
