@@ -1,46 +1,36 @@
 """Database transactions of a participant's steps: each write, and the reads it depends on.
 
 What a step is and whether an answer is acceptable are decided elsewhere (plan.py,
-validation.py); this module stores. A step is advanced by a conditional UPDATE
-(`WHERE position = expected`), so two workers racing on one participant cannot both
-advance it, and a client UUID (`submission_id`, unique, bound to its submission kind
-and body hash) makes a retried request a no-op that answers the current state. Every
-write commits before the route answers, so a 2xx means the answer is stored.
+validation.py); this module stores (a trial's answer: predictions.py). A step is
+advanced by a conditional UPDATE (`WHERE position = expected`), so two workers racing on
+one participant cannot both advance it, and a client UUID (`submission_id`, unique, bound
+to its submission kind and body hash) makes a retried request a no-op that answers the
+current state. Every write commits before the route answers, so a 2xx means the answer is stored.
 """
 
 import hashlib
 from collections.abc import Callable
 from contextlib import contextmanager
 
-import numpy as np
 from sqlalchemy import delete, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlmodel import Session
 
 from app.server import balance
 from app.server.context import StudyContext
-from app.server.drafts import discard_draft
-from app.server.plan import BEFORE_TRIALS, Phase, TrialStep, expect_phase, expect_trial
+from app.server.plan import BEFORE_TRIALS, Phase, expect_phase
 from app.server.schemas import (
     ConsentCreate,
     ContinueCreate,
     DeclineCreate,
-    PredictionCreate,
     ScreenOutCreate,
     SubmissionBody,
     SurveyCreate,
 )
-from app.server.sessions import as_utc
-from app.server.tables import Event, Participant, PredictionRow, Submission, TrialResponse, utcnow
-from app.server.validation import (
-    attention_passed,
-    human_actions,
-    validate_points,
-    validate_survey,
-)
+from app.server.tables import Event, Participant, Submission, utcnow
+from app.server.validation import validate_survey
 from app.study.config import StudyConfig
 from app.study.errors import Refused
-from app.study.trials import TrialRecord
 
 # outcomes of a session that did every trial
 FINISHED = ("completed", "failed_checks", "excluded")
@@ -233,90 +223,3 @@ def replay_if_stored(db: Session, participant: Participant, body: SubmissionBody
             outcome.stored = False
             return
         raise
-
-
-# ---------------------------------------------------------------- predictions
-
-def record_predictions(db: Session, ctx: StudyContext, participant: Participant,
-                       body: PredictionCreate) -> bool:
-    """Validate and store one trial's clicks with every predictor's actions. True if new."""
-    with replay_if_stored(db, participant, body, "predictions") as fresh:
-        fresh.stored = _store_predictions(db, ctx, participant, body)
-    return fresh.stored
-
-
-def _store_predictions(db: Session, ctx: StudyContext, participant: Participant,
-                       body: PredictionCreate) -> bool:
-    step = expect_trial(participant, body.trial_id)
-    trial = ctx.bank.by_id[step.trial_id]
-    points = validate_points(ctx.bank, trial, body)
-    rows = prediction_rows(ctx, participant, trial, body, points)
-    attention_ok = (attention_passed(ctx.config.attention_checks, trial, points)
-                    if step.attention_check else None)
-    response = trial_response(ctx, participant, step, trial, body, attention_ok)
-    payload = {"trial_id": trial.trial_id, "attention_ok": attention_ok}
-    return advance(db, participant, body, "predictions", payload,
-                   [(TrialResponse, [response]), (PredictionRow, rows)],
-                   before_commit=lambda: discard_draft(db, participant))
-
-
-def trial_response(ctx: StudyContext, participant: Participant, step: TrialStep,
-                   trial: TrialRecord, body: PredictionCreate,
-                   attention_ok: bool | None) -> dict:
-    """The TrialResponse row of one answered trial: timings, replays, undo history, verdict."""
-    return {
-        "submission_id": str(body.submission_id), "participant_id": participant.id,
-        "trial_id": trial.trial_id, "world": trial.world,
-        "world_position": step.world_position, "trial_index": step.trial_index,
-        "is_practice": step.phase == Phase.PRACTICE, "attention_check": step.attention_check,
-        "attention_ok": attention_ok, "shown_at_ms": body.shown_at_ms,
-        "submitted_at_ms": body.submitted_at_ms, "replays": body.replays,
-        "clip_sha256": trial.clip_sha256, "arm": trial.arm, "received_at": utcnow(),
-        "history": [entry.model_dump() for entry in body.history],
-        **trial_durations(ctx, participant, body),
-    }
-
-
-def trial_durations(ctx: StudyContext, participant: Participant, body: PredictionCreate) -> dict:
-    """Client and server durations of a trial, and the one the too-fast rule reads.
-
-    The server's clock runs from its acknowledgement of the previous step, so it can only
-    overstate the time a person had; taking the smaller of the two catches a client
-    that claims to have taken longer than it did.
-    """
-    client_ms = body.submitted_at_ms - body.shown_at_ms
-    server_ms = (utcnow() - as_utc(participant.updated_at)).total_seconds() * 1000
-    used = client_ms if ctx.trust_client_clock else min(client_ms, server_ms)
-    return {"client_duration_ms": client_ms, "server_duration_ms": server_ms,
-            "duration_ms": used}
-
-
-def prediction_rows(ctx: StudyContext, participant: Participant, trial: TrialRecord,
-                    body: PredictionCreate, points: np.ndarray) -> list[dict]:
-    """Long rows: one per (start state, step), human action beside each predictor's."""
-    dt_s = ctx.bank.world(trial.world).dt_s
-    human = human_actions(trial, points, dt_s)
-    answers = ctx.model_answers.answers(trial.trial_id)
-    ours, vae = answers["ours"], answers["vae"]
-    cv = np.asarray(trial.cv_actions)
-    policy = np.asarray(trial.policy_actions)
-    rows = []
-    for i, start in enumerate(trial.start_states):
-        for j in range(points.shape[1]):
-            rows.append({
-                "submission_id": str(body.submission_id), "participant_id": participant.id,
-                "trial_id": trial.trial_id, "start_index": i, "start_kind": start.start_kind,
-                "step": j,
-                "start_x": start.robot[0], "start_y": start.robot[1],
-                "human_x": start.human[0], "human_y": start.human[1],
-                "click_x": float(points[i, j, 0]), "click_y": float(points[i, j, 1]),
-                "human_vx": float(human[i, j, 0]), "human_vy": float(human[i, j, 1]),
-                "ours_vx": float(ours.actions[i, j, 0]), "ours_vy": float(ours.actions[i, j, 1]),
-                "vae_vx": float(vae.actions[i, j, 0]), "vae_vy": float(vae.actions[i, j, 1]),
-                "cv_vx": float(cv[i, j, 0]), "cv_vy": float(cv[i, j, 1]),
-                "policy_vx": float(policy[i, j, 0]), "policy_vy": float(policy[i, j, 1]),
-                "ours_code": ours.code, "vae_code": vae.code,
-                "ours_sha256": ours.content_hash, "vae_sha256": vae.content_hash,
-                "click_time_ms": float(body.click_times_ms[i][j]),
-            })
-    return rows

@@ -20,6 +20,7 @@ from app.server.plan import (
 from app.server.recruitment import MTURK_SUBMIT_PATH
 from app.server.tables import Participant
 from app.study.config import StudyConfig
+from app.study.trial_payload import trial_payload
 
 
 def progress_of(participant: Participant) -> dict:
@@ -102,13 +103,9 @@ def step_fields(participant: Participant, step: TrialStep) -> dict:
 
 
 def static_trial(ctx: StudyContext, trial_id: str) -> dict:
-    """The parts of a trial payload that are the same for everyone."""
+    """The parts of a trial payload that are the same for everyone, with the prediction view."""
     trial = ctx.bank.by_id[trial_id]
-    world = ctx.bank.world(trial.world)
-    return {"scene": world.scene, "dt_s": world.dt_s,
-            **trial.browser_payload(), "steps_to_predict": ctx.bank.data.steps_to_predict,
-            "max_step_m": world.max_step_m, "min_step_m": world.min_step_m,
-            "view": ctx.view(trial.world).payload()}
+    return {**trial_payload(ctx.bank, trial), "view": ctx.view(trial.world).payload()}
 
 
 def state_json(ctx: StudyContext, participant: Participant, draft: dict | None = None) -> str:

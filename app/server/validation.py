@@ -1,13 +1,15 @@
-"""What a participant's answer must satisfy: clicks, attention checks, survey answers.
+"""What a participant's answer must satisfy: its shape and times, attention checks, survey answers.
 
 Pure functions of the request, the bank and the study config (no database): each
-refusal is a `Refused(422, "field: message")` naming the offending field.
+refusal is a `Refused(422, "field: message")` naming the offending field. Where a click may
+land is app/study/clicks.py's rule, shared with the simulated study.
 """
 
 import numpy as np
 
 from analysis.contracts import alignment_error
 from app.server.schemas import PredictionCreate
+from app.study.clicks import check_points, robot_starts, step_moves
 from app.study.config import AttentionChecks, SurveyQuestion
 from app.study.errors import Refused
 from app.study.trials import TrialBank, TrialRecord
@@ -26,20 +28,7 @@ def validate_points(bank: TrialBank, trial: TrialRecord, body: PredictionCreate)
     check_times(body)
     check_history(body, k)
     points = np.asarray(body.points, dtype=np.float64)
-    bounds = world.scene["bounds"]
-    for i, j in np.argwhere(~_inside(points, bounds)):
-        x, y = points[i, j]
-        raise Refused(422, f"points.{i}.{j}: ({x:g}, {y:g}) is outside the scene "
-                           f"x [{bounds['x_min_m']:g}, {bounds['x_max_m']:g}] "
-                           f"y [{bounds['y_min_m']:g}, {bounds['y_max_m']:g}] m")
-    moves = step_moves(trial, points)
-    lengths = np.hypot(moves[..., 0], moves[..., 1])
-    for i, j in np.argwhere(lengths < world.min_step_m):
-        raise Refused(422, f"points.{i}.{j}: move of {lengths[i, j]:.3g} m is shorter than "
-                           f"the minimum {world.min_step_m:.3g} m")
-    for i, j in np.argwhere(lengths > world.max_step_m * (1 + 1e-6)):
-        raise Refused(422, f"points.{i}.{j}: move of {lengths[i, j]:.3g} m is longer than "
-                           f"the reachable {world.max_step_m:.3g} m")
+    check_points(world, robot_starts(trial), points)
     return points
 
 
@@ -81,28 +70,11 @@ def _check_counts(field: str, values: list, k: int, n: int) -> None:
             raise Refused(422, f"{field}.{i}: expected {n} steps, got {len(row)}")
 
 
-def _inside(points: np.ndarray, bounds: dict) -> np.ndarray:
-    x, y = points[..., 0], points[..., 1]
-    return ((x >= bounds["x_min_m"]) & (x <= bounds["x_max_m"])
-            & (y >= bounds["y_min_m"]) & (y <= bounds["y_max_m"]))
-
-
-def step_moves(trial: TrialRecord, points: np.ndarray) -> np.ndarray:
-    """Clicked positions [K, n, 2] -> moves [K, n, 2] (m) from each start state, step by step."""
-    starts = np.asarray([s.robot for s in trial.start_states], dtype=np.float64)
-    return np.diff(np.concatenate([starts[:, None], points], axis=1), axis=1)
-
-
-def human_actions(trial: TrialRecord, points: np.ndarray, dt_s: float) -> np.ndarray:
-    """Clicked positions [K, n, 2] -> actions [K, n, 2] = position differences / dt."""
-    return step_moves(trial, points) / dt_s
-
-
 # ---------------------------------------------------------------- attention checks
 
 def attention_passed(rule: AttentionChecks, trial: TrialRecord, points: np.ndarray) -> bool:
     """Passed if enough first moves point within the allowed angle of the robot's true move."""
-    first = step_moves(trial, points)[:, 0]
+    first = step_moves(robot_starts(trial), points)[:, 0]
     truth = np.asarray(trial.policy_actions, dtype=np.float64)[:, 0]
     max_error = 1.0 - np.cos(np.deg2rad(rule.max_angle_deg))  # alignment error of that angle
     within = alignment_error(first, truth) <= max_error

@@ -6,7 +6,7 @@ URL: request lines end up in proxy access logs and browser history.
 
 from fastapi import APIRouter, Request, Response, status
 
-from app.server import crud, drafts, sessions, tabs, telemetry
+from app.server import crud, drafts, predictions, sessions, tabs, telemetry
 from app.server.deps import ContextDep, ParticipantDep, SessionDep, WriterDep, study_context
 from app.server.schemas import (
     ConsentCreate,
@@ -130,7 +130,7 @@ async def submit_continue(body: ContinueCreate, participant: WriterDep, ctx: Con
 async def submit_predictions(body: PredictionCreate, participant: WriterDep,
                              ctx: ContextDep, db: SessionDep) -> Response:
     """Store one trial's clicked positions (start states x steps); answers the next state."""
-    stored = crud.record_predictions(db, ctx, participant, body)
+    stored = predictions.record_predictions(db, ctx, participant, body)
     return state_response(ctx, participant, 201 if stored else 200)
 
 

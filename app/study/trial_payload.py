@@ -1,0 +1,17 @@
+"""What a browser, a pilot bot and a simulated participant are shown and told for one trial.
+
+The part that is the same for everyone: the scene, dt, the example clips and the segment,
+the start states (without how each was chosen) and the click limits. The server adds the
+participant's step fields (a random `trial_id` ref, numbering) and the prediction view; the
+simulated study adds the bank's trial id and world.
+"""
+
+from app.study.trials import TrialBank, TrialRecord
+
+
+def trial_payload(bank: TrialBank, trial: TrialRecord) -> dict:
+    """Scene, clips, start states and click limits of one trial, as the page receives them."""
+    world = bank.world(trial.world)
+    return {"scene": world.scene, "dt_s": world.dt_s, **trial.browser_payload(),
+            "steps_to_predict": bank.data.steps_to_predict,
+            "max_step_m": world.max_step_m, "min_step_m": world.min_step_m}
