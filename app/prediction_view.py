@@ -22,6 +22,8 @@ import numpy as np
 TARGET_STEP_PX = 60.0  # a typical robot step spans this many CSS pixels
 MIN_WINDOW_PX = {"width": 900, "height": 600}  # the smallest window the study runs in
 SCORED_KIND = "main"  # the trials whose answers are analysed
+# what of a world's bank (a WorldBank's model_dump(include=...)) the view's scale reads
+VIEW_FIELDS = {"dt_s": True, "trials": {"__all__": {"kind": True, "policy_actions": True}}}
 
 
 @dataclass(frozen=True)

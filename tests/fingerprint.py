@@ -59,28 +59,22 @@ def bank_digest(scratch: Path, source: Path) -> tuple[str, Path]:
     return hashlib.sha256(bank.read_bytes()).hexdigest(), bank
 
 
-def bot_payload(bank, world, trial) -> dict:
-    """The fields of the server's trial payload that a bot reads."""
-    return {"scene": world.scene, "dt_s": world.dt_s, **trial.browser_payload(),
-            "steps_to_predict": bank.steps_to_predict, "max_step_m": world.max_step_m,
-            "min_step_m": world.min_step_m, "trial_id": trial.trial_id}
-
-
 def click_digests(bank_path: Path, seed: int) -> dict[str, str]:
     """Every bot kind clicks every trial of the bank with a fixed seed; sha256 per kind."""
     from app.pilot.bots import choose_clicks, load_policy_actions
-    from app.study.trials import BankFile
+    from app.study.trial_payload import trial_payload
+    from app.study.trials import TrialBank
 
-    bank = BankFile.model_validate_json(bank_path.read_text())
+    bank = TrialBank.read(bank_path)
     policy = load_policy_actions(bank_path)
     out = {}
     for kind in BOT_KINDS:
         rng = np.random.default_rng(seed)
         digest = hashlib.sha256()
-        for world in bank.worlds.values():
-            for trial in world.trials:
-                clicks = choose_clicks(kind, bot_payload(bank, world, trial), rng, policy)
-                digest.update(np.asarray(clicks, dtype=np.float64).tobytes())
+        for trial in bank.by_id.values():
+            payload = {**trial_payload(bank, trial), "trial_id": trial.trial_id}
+            clicks = choose_clicks(kind, payload, rng, policy)
+            digest.update(np.asarray(clicks, dtype=np.float64).tobytes())
         out[f"clicks/{kind}"] = digest.hexdigest()
     return out
 

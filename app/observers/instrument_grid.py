@@ -28,13 +28,14 @@ from scipy import stats
 from tqdm import tqdm
 
 from analysis.contracts import alignment_error
-from app.observers import inverse_planning
 from app.observers.config import ObserversConfig
 from app.observers.simulated_study import (
     INSTRUMENT_POPULATIONS,
     INSTRUMENT_ROWS,
     simulated_trials,
 )
+from app.study.clicks import clicks_to_actions, robot_starts
+from app.study.trials import TrialBank
 
 NOISE_LEVELS_DEG = (2.0, 5.0, 10.0, 20.0)
 CONFIGURED = "observers.yaml"  # the noise label of the observers config as it is
@@ -58,20 +59,18 @@ def with_click_noise(observers: ObserversConfig, sd_deg: float) -> ObserversConf
     return observers.model_copy(update=update)
 
 
-def seed_pairs(bank: dict) -> list[int]:
+def seed_pairs(bank: TrialBank) -> list[int]:
     """Seed-pair indices of a bank: Ours seed k with VAE seed k, k over the family."""
-    trial = next(t for w in bank["worlds"].values() for t in w["trials"])
-    return list(range(min(len(trial["predictions"]["ours"]),
-                          len(trial["predictions"]["vae"]))))
+    trial = next(t for w in bank.data.worlds.values() for t in w.trials)
+    return list(range(min(len(trial.predictions["ours"]), len(trial.predictions["vae"]))))
 
 
-def family_answers(bank: dict) -> tuple[dict[str, int], dict[tuple[str, int], np.ndarray]]:
+def family_answers(bank: TrialBank) -> tuple[dict[str, int], dict[tuple[str, int], np.ndarray]]:
     """Main trial id -> row index, and per (model, pair) the answers [trials, K, n, 2]."""
-    trials = [t for w in sorted(bank["worlds"]) for t in bank["worlds"][w]["trials"]
-              if t["kind"] == "main"]
-    index = {t["trial_id"]: i for i, t in enumerate(trials)}
-    answers = {(model, pair): np.array([t["predictions"][model][pair]["actions"]
-                                       for t in trials], dtype=np.float64)
+    trials = [t for w in sorted(bank.data.worlds) for t in bank.trials_of(w, "main")]
+    index = {t.trial_id: i for i, t in enumerate(trials)}
+    answers = {(model, pair): np.array([t.predictions[model][pair].actions for t in trials],
+                                       dtype=np.float64)
                for model in ("ours", "vae") for pair in seed_pairs(bank)}
     return index, answers
 
@@ -86,7 +85,7 @@ class PopulationAnswers:
     human: np.ndarray  # [B, K, n, 2] the simulated participants' actions (m/s)
 
 
-def population_answers(bank: dict, preset: str, n: int, trials_per_world: int, seed: int,
+def population_answers(bank: TrialBank, preset: str, n: int, trials_per_world: int, seed: int,
                        observers: ObserversConfig, index: dict[str, int],
                        readings: dict | None = None) -> PopulationAnswers:
     """n simulated participants of one preset (`simulated_trials`: the server's assignment, no
@@ -96,8 +95,8 @@ def population_answers(bank: dict, preset: str, n: int, trials_per_world: int, s
     return PopulationAnswers(
         participant=np.array([a.participant for a in answered]),
         world=np.array([a.payload["world"] for a in answered]),
-        trial=np.array([index[a.trial["trial_id"]] for a in answered]),
-        human=np.stack([inverse_planning.clicks_to_actions(a.payload, a.clicks)
+        trial=np.array([index[a.trial.trial_id] for a in answered]),
+        human=np.stack([clicks_to_actions(robot_starts(a.trial), a.clicks, a.payload["dt_s"])
                         for a in answered]))
 
 
@@ -151,15 +150,15 @@ def noise_levels(view_deg: dict[str, float] | None) -> dict[str, dict[str, float
     return levels
 
 
-def level_rows(bank: dict, trials_per_world: int, observers: ObserversConfig, n: int, seed: int,
-               alpha: float, replications: int, label: str,
+def level_rows(bank: TrialBank, trials_per_world: int, observers: ObserversConfig, n: int,
+               seed: int, alpha: float, replications: int, label: str,
                per_world: dict[str, float] | None) -> list[dict]:
     """Every (replication, seed pair, world, reading) check at one noise level."""
     index, family = family_answers(bank)
     readings = {preset: {} for preset in INSTRUMENT_POPULATIONS}  # not noise-dependent
     rows = []
     for r in range(replications + 1):
-        for world in sorted(bank["worlds"]):
+        for world in sorted(bank.data.worlds):
             sd = None if per_world is None else per_world.get(world, per_world.get("*"))
             noisy = observers if sd is None else with_click_noise(observers, sd)
             populations = {
@@ -171,7 +170,7 @@ def level_rows(bank: dict, trials_per_world: int, observers: ObserversConfig, n:
     return rows
 
 
-def run_grid(bank: dict, trials_per_world: int, observers: ObserversConfig, n: int = 22,
+def run_grid(bank: TrialBank, trials_per_world: int, observers: ObserversConfig, n: int = 22,
              seed: int = 0, alpha: float = 0.01, replications: int = 50,
              view_deg: dict[str, float] | None = None, workers: int = 2) -> pd.DataFrame:
     """Every (noise level, replication, seed pair, world, reading) check, one row each; the
@@ -196,9 +195,10 @@ def run_grid(bank: dict, trials_per_world: int, observers: ObserversConfig, n: i
     return pd.DataFrame([row for label in levels for row in rows[label]])
 
 
-def only_world(bank: dict, world: str) -> dict:
+def only_world(bank: TrialBank, world: str) -> TrialBank:
     """The bank with one world (each world gets its own click noise)."""
-    return {**bank, "worlds": {world: bank["worlds"][world]}}
+    return TrialBank(bank.data.model_copy(update={"worlds": {world: bank.world(world)}}),
+                     bank.sha256)
 
 
 def summarise_grid(grid: pd.DataFrame, alpha: float) -> pd.DataFrame:
@@ -256,12 +256,13 @@ def run_instrument_grid(bank_path, trials_per_world: int, out_dir, observers: Ob
     from analysis.plots import plot_grid_pass_rates
     from app.fileio import write_json
     from app.observers.simulated_study import load_bank
-    from app.prediction_view import click_direction_sd_deg
+    from app.prediction_view import VIEW_FIELDS, click_direction_sd_deg
 
     bank = load_bank(bank_path)
     if view_deg is None:  # the noise the prediction view allows, from its pixel scale
-        view_deg = {world: click_direction_sd_deg(world_bank, observers.click_sd_px.value)
-                    for world, world_bank in bank["worlds"].items()}
+        view_deg = {world: click_direction_sd_deg(world_bank.model_dump(include=VIEW_FIELDS),
+                                                  observers.click_sd_px.value)
+                    for world, world_bank in bank.data.worlds.items()}
     grid = run_grid(bank, trials_per_world, observers, n, seed, alpha, replications, view_deg)
     summary = summarise_grid(grid, alpha)
     out_dir = Path(out_dir)

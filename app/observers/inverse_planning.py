@@ -159,13 +159,31 @@ def valid_move(payload: dict, origin: np.ndarray, direction: np.ndarray,
     inward = np.array([(b["x_min_m"] + b["x_max_m"]) / 2, (b["y_min_m"] + b["y_max_m"]) / 2]
                       ) - origin
     inward = inward / (math.hypot(inward[0], inward[1]) + 1e-9)
+    wanted = unit
     for _ in range(11):  # 12 directions tried in all
         unit = unit + inward
         unit = unit / (math.hypot(unit[0], unit[1]) + 1e-9)
         point = origin + length * unit
         if inside_bounds(payload, point):
             return point
-    return origin + length * inward
+    return turned_inside(payload, origin, wanted, length)
+
+
+def turned_inside(payload: dict, origin: np.ndarray, unit: np.ndarray, length: float
+                  ) -> np.ndarray:
+    """The move of `length` turned least from `unit` that stays in the scene (10 deg steps).
+
+    A move towards the centre can overshoot the far edge of a narrow scene (a road is a
+    few lanes wide); the server refuses such a click, so no simulated participant makes it.
+    """
+    for angle in np.radians(np.arange(10, 181, 10)):
+        for sign in (1.0, -1.0):
+            point = origin + length * rotate(unit, sign * angle)
+            if inside_bounds(payload, point):
+                return point
+    b = payload["scene"]["bounds"]
+    return np.clip(origin + length * unit, [b["x_min_m"], b["y_min_m"]],
+                   [b["x_max_m"], b["y_max_m"]])
 
 
 def start_positions(payload: dict) -> np.ndarray:
@@ -259,10 +277,3 @@ def predict(preset: str, payload: dict, rng: np.random.Generator,
         return predict_from_actions(payload, np.asarray(policy_actions), rng,
                                     config.precise_noise)
     return predict_random(payload, rng)
-
-
-def clicks_to_actions(payload: dict, clicks: np.ndarray) -> np.ndarray:
-    """Actions [S, K, 2] (m/s) of clicked positions: differences from the start state / dt."""
-    starts = start_positions(payload)[:, None, :]
-    path = np.concatenate([starts, clicks], axis=1)
-    return np.diff(path, axis=1) / payload["dt_s"]

@@ -14,7 +14,6 @@ the coarse population's difference is lower (alpha 0.01), plus the same test for
 relative lane reading (`coarse_relative`) as a sensitivity row.
 """
 
-import json
 from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -31,70 +30,52 @@ from analysis.load import normalise
 from analysis.metrics import add_alignment_errors, participant_means
 from analysis.plots import plot_power, plot_trial_contrast
 from app.assignment import least_used, pick_by_arm
-from app.fileio import read_bytes, sha256_bytes, write_json
+from app.fileio import write_json
 from app.observers import inverse_planning
 from app.observers.config import ObserversConfig, default_observers
+from app.study.clicks import check_points, clicks_to_actions, robot_starts
+from app.study.prediction_rows import MODELS, prediction_columns
+from app.study.trial_payload import trial_payload
+from app.study.trials import TrialBank, TrialRecord
 
 SIMULATED_TRIAL_MS = 20000.0
 INSTRUMENT_POPULATIONS = ("coarse", "precise", "coarse_relative")
 INSTRUMENT_ROWS = (("absolute", "coarse"), ("relative", "coarse_relative"))  # reading, preset
 
 
-def load_bank(path: Path) -> dict:
-    """A trial bank (a working bank.json, or a bundle's bank.json.gz) as plain JSON."""
-    return json.loads(read_bytes(path))
+def load_bank(path: Path) -> TrialBank:
+    """A trial bank (bank.json, or a bundle's bank.json.gz), read as the server reads it."""
+    return TrialBank.read(path)
 
 
-def trial_payload(world_bank: dict, trial: dict, steps_to_predict: int) -> dict:
-    """What the browser (and a bot) receives for a trial: scene, clips, start states, limits."""
-    examples = [{"positions": c["positions"], "headings": c["headings"]}
-                for c in trial.get("examples", [])]  # hand-made test banks may have none
-    return {
-        "trial_id": trial["trial_id"], "world": world_bank["world"], "scene": world_bank["scene"],
-        "dt_s": world_bank["dt_s"], "examples": examples, "segment": trial["segment"],
-        "start_states": trial["start_states"], "steps_to_predict": steps_to_predict,
-        "max_step_m": world_bank["max_step_m"], "min_step_m": world_bank["min_step_m"],
-    }
+def simulated_payload(bank: TrialBank, trial: TrialRecord) -> dict:
+    """What the server sends for a trial (`trial_payload`), with the bank's trial id and world."""
+    return {**trial_payload(bank, trial), "trial_id": trial.trial_id, "world": trial.world}
 
 
-def trial_rows(participant: str, world_position: int, trial_index: int, payload: dict,
-               trial: dict, clicks: np.ndarray) -> dict[str, np.ndarray]:
+def answer_columns(bank: TrialBank, trial: TrialRecord, clicks: np.ndarray
+                   ) -> dict[str, np.ndarray]:
+    """A simulated answer checked and turned into rows as the server checks and stores a live
+    one (the primary seed's answers, as the server stores)."""
+    world = bank.world(trial.world)
+    check_points(world, robot_starts(trial), clicks)
+    answers = {model: trial.primary(model) for model in MODELS}
+    return prediction_columns(trial, answers, clicks, world.dt_s)
+
+
+def trial_rows(participant: str, answered: "SimulatedTrial", bank: TrialBank
+               ) -> dict[str, np.ndarray]:
     """Export-shaped columns for one answered trial (K x n rows)."""
-    k, n = clicks.shape[:2]
-    starts = inverse_planning.start_positions(payload)
-    humans = np.array([s["human"] for s in payload["start_states"]], dtype=np.float64)
-    human_v = inverse_planning.clicks_to_actions(payload, clicks)
-    cols = {
-        "participant_id": np.full(k * n, participant),
-        "world": np.full(k * n, payload["world"]),
-        "world_position": np.full(k * n, world_position),
-        "trial_id": np.full(k * n, trial["trial_id"]), "arm": np.full(k * n, trial.get("arm", "")),
-        "trial_index": np.full(k * n, trial_index), "start_index": np.repeat(np.arange(k), n),
-        "start_kind": np.repeat([s["start_kind"] for s in trial["start_states"]], n),
-        "step": np.tile(np.arange(n), k), "start_x": np.repeat(starts[:, 0], n),
-        "start_y": np.repeat(starts[:, 1], n), "human_x": np.repeat(humans[:, 0], n),
-        "human_y": np.repeat(humans[:, 1], n), "click_x": clicks[..., 0].ravel(),
-        "click_y": clicks[..., 1].ravel(), "human_vx": human_v[..., 0].ravel(),
-        "human_vy": human_v[..., 1].ravel(),
-        "click_time_ms": np.arange(1, k * n + 1) * SIMULATED_TRIAL_MS / (k * n),
-        "clip_sha256": np.full(k * n, trial["clip_sha256"]),
-    }
-    answers = {"ours": primary_answer(trial, "ours")["actions"],
-               "vae": primary_answer(trial, "vae")["actions"],
-               "cv": trial["cv_actions"], "policy": trial["policy_actions"]}
-    for model, actions in answers.items():
-        actions = np.asarray(actions, dtype=np.float64)[:, :n]
-        cols[f"{model}_vx"] = actions[..., 0].ravel()
-        cols[f"{model}_vy"] = actions[..., 1].ravel()
-    for model in ("ours", "vae"):
-        cols[f"{model}_code"] = np.full(k * n, primary_answer(trial, model)["code"])
-        cols[f"{model}_sha256"] = np.full(k * n, primary_answer(trial, model)["content_hash"])
-    return cols
-
-
-def primary_answer(trial: dict, model: str) -> dict:
-    """The primary seed's answer of `model` to a bank trial (what the server stores)."""
-    return trial["predictions"][model][0]
+    trial, clicks = answered.trial, answered.clicks
+    cols = answer_columns(bank, trial, clicks)
+    size = clicks.shape[0] * clicks.shape[1]
+    return cols | {
+        "participant_id": np.full(size, participant), "world": np.full(size, trial.world),
+        "world_position": np.full(size, answered.world_position),
+        "trial_id": np.full(size, trial.trial_id), "arm": np.full(size, trial.arm),
+        "trial_index": np.full(size, answered.trial_index),
+        "click_time_ms": np.arange(1, size + 1) * SIMULATED_TRIAL_MS / size,
+        "clip_sha256": np.full(size, trial.clip_sha256)}
 
 
 @dataclass(frozen=True)
@@ -104,20 +85,19 @@ class SimulatedTrial:
     participant: int
     world_position: int
     trial_index: int
-    trial: dict  # the bank's trial
-    payload: dict  # what the server would send (trial_payload)
+    trial: TrialRecord  # the bank's trial
+    payload: dict  # what the server would send (simulated_payload)
     clicks: np.ndarray  # [K, n, 2] clicked positions
 
 
-def main_trials(bank: dict) -> dict[str, dict[str, tuple[dict, dict]]]:
+def main_trials(bank: TrialBank) -> dict[str, dict[str, tuple[TrialRecord, dict]]]:
     """Per world, main trial id -> (trial, payload), in bank order."""
-    return {world: {t["trial_id"]: (t, trial_payload(bank["worlds"][world], t,
-                                                    bank["steps_to_predict"]))
-                    for t in bank["worlds"][world]["trials"] if t["kind"] == "main"}
-            for world in sorted(bank["worlds"])}
+    return {world: {t.trial_id: (t, simulated_payload(bank, t))
+                    for t in bank.trials_of(world, "main")}
+            for world in sorted(bank.data.worlds)}
 
 
-def simulated_trials(bank: dict, preset: str, n: int, trials_per_world: int, seed: int = 0,
+def simulated_trials(bank: TrialBank, preset: str, n: int, trials_per_world: int, seed: int = 0,
                      show_progress: bool = True, observers: ObserversConfig | None = None,
                      readings: dict | None = None) -> Iterator[SimulatedTrial]:
     """Every main trial `n` simulated participants of one observer preset answer, in order.
@@ -137,7 +117,7 @@ def simulated_trials(bank: dict, preset: str, n: int, trials_per_world: int, see
         order = least_used(orders, order_use, 1, rng)[0]
         order_use[order] += 1
         for position, world in enumerate(order):
-            arms = [(tid, trial.get("arm", "")) for tid, (trial, _) in main[world].items()]
+            arms = [(tid, trial.arm) for tid, (trial, _) in main[world].items()]
             chosen = pick_by_arm(arms, exposure, trials_per_world, rng)
             exposure.update(chosen)
             for index, trial_id in enumerate(chosen):
@@ -145,21 +125,20 @@ def simulated_trials(bank: dict, preset: str, n: int, trials_per_world: int, see
                 if preset.startswith("coarse") and trial_id not in readings:
                     readings[trial_id] = inverse_planning.trial_reading(payload, observers,
                                                                         relative)
-                clicks = inverse_planning.predict(preset, payload, rng, trial["policy_actions"],
+                clicks = inverse_planning.predict(preset, payload, rng, trial.policy_actions,
                                                   observers, readings.get(trial_id))
                 yield SimulatedTrial(p, position, index, trial, payload, clicks)
 
 
-def simulate_participants(bank: dict, preset: str, n: int, trials_per_world: int, seed: int = 0,
-                          show_progress: bool = True,
+def simulate_participants(bank: TrialBank, preset: str, n: int, trials_per_world: int,
+                          seed: int = 0, show_progress: bool = True,
                           observers: ObserversConfig | None = None) -> pd.DataFrame:
     """Rows of `n` simulated participants of one observer preset, in the export CSV's columns
     (`simulated_trials`)."""
-    parts = [trial_rows(f"sim-{s.participant:05d}", s.world_position, s.trial_index, s.payload,
-                        s.trial, s.clicks)
+    parts = [trial_rows(f"sim-{s.participant:05d}", s, bank)
              for s in simulated_trials(bank, preset, n, trials_per_world, seed, show_progress,
                                        observers)]
-    return export_frame(parts, bank["study_id"], preset)
+    return export_frame(parts, bank.data.study_id, preset)
 
 
 def export_frame(parts: list[dict[str, np.ndarray]], study_id: str, preset: str) -> pd.DataFrame:
@@ -228,7 +207,7 @@ def _smallest_n(group: pd.DataFrame, target: float) -> int | None:
     return int(reached["n"].min()) if len(reached) else None
 
 
-def population_frames(bank: dict, n: int, trials_per_world: int, seed: int,
+def population_frames(bank: TrialBank, n: int, trials_per_world: int, seed: int,
                       observers: ObserversConfig, show_progress: bool = True
                       ) -> dict[str, pd.DataFrame]:
     """Rows, with each model's alignment error, of n simulated participants per population."""
@@ -272,7 +251,7 @@ def welch_table(frames: dict[str, pd.DataFrame], alpha: float) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def instrument_check(bank: dict, trials_per_world: int, n: int = 22, seed: int = 0,
+def instrument_check(bank: TrialBank, trials_per_world: int, n: int = 22, seed: int = 0,
                      alpha: float = 0.01, observers: ObserversConfig | None = None,
                      show_progress: bool = True) -> pd.DataFrame:
     """Per world and lane reading: can err_ours - err_vae tell coarse from precise observers?"""
@@ -281,7 +260,7 @@ def instrument_check(bank: dict, trials_per_world: int, n: int = 22, seed: int =
     return welch_table(frames, alpha)
 
 
-def replicate_check(bank: dict, trials_per_world: int, n: int, seed: int, alpha: float,
+def replicate_check(bank: TrialBank, trials_per_world: int, n: int, seed: int, alpha: float,
                     observers: ObserversConfig, replications: int) -> pd.DataFrame:
     """The check rerun on `replications` fresh sets of simulated participants (new seeds):
     one row per replication, world and reading. Its pass rate is the check's power."""
@@ -309,26 +288,25 @@ def trial_contrast(frames: dict[str, pd.DataFrame]) -> pd.DataFrame:
     return table.assign(contrast=table["coarse_diff"] - table["precise_diff"])
 
 
-def start_state_answers(bank: dict, seed: int, observers: ObserversConfig) -> pd.DataFrame:
+def start_state_answers(bank: TrialBank, seed: int, observers: ObserversConfig) -> pd.DataFrame:
     """Per main-trial start state: each model's and each observer preset's actions [n, 2]."""
     rows = []
-    for world in sorted(bank["worlds"]):
-        world_bank = bank["worlds"][world]
-        for trial in (t for t in world_bank["trials"] if t["kind"] == "main"):
-            payload = trial_payload(world_bank, trial, bank["steps_to_predict"])
+    for world in sorted(bank.data.worlds):
+        dt_s = bank.world(world).dt_s
+        for trial in bank.trials_of(world, "main"):
+            payload = simulated_payload(bank, trial)
             clicks = {preset: inverse_planning.predict(
-                preset, payload, np.random.default_rng(seed), trial["policy_actions"], observers)
+                preset, payload, np.random.default_rng(seed), trial.policy_actions, observers)
                 for preset in ("coarse", "precise")}
-            acts = {p: inverse_planning.clicks_to_actions(payload, c) for p, c in clicks.items()}
-            acts |= {m: np.asarray(primary_answer(trial, m)["actions"], dtype=np.float64)
-                     for m in ("ours", "vae")}
-            for k, state in enumerate(trial["start_states"]):
-                rows.append({"world": world, "start_kind": state["start_kind"],
+            acts = {p: clicks_to_actions(robot_starts(trial), c, dt_s) for p, c in clicks.items()}
+            acts |= {m: np.asarray(trial.primary(m).actions, dtype=np.float64) for m in MODELS}
+            for k, state in enumerate(trial.start_states):
+                rows.append({"world": world, "start_kind": state.start_kind,
                              **{name: a[k] for name, a in acts.items()}})
     return pd.DataFrame(rows)
 
 
-def separation(bank: dict, seed: int = 0, observers: ObserversConfig | None = None
+def separation(bank: TrialBank, seed: int = 0, observers: ObserversConfig | None = None
                ) -> pd.DataFrame:
     """What the metric can tell apart, per world and start kind (and `all`): how far apart the
     two models' answers are, how far apart the two observers' clicks are (mean 1-cos), and each
@@ -361,8 +339,7 @@ def run_instrument(bank_path: Path, trials_per_world: int, out_dir: Path, n: int
     figure of where the contrast is."""
     observers = observers or default_observers()
     bank_path = Path(bank_path)
-    bank_bytes = read_bytes(bank_path)  # the JSON, whose hash sessions record
-    bank = json.loads(bank_bytes)
+    bank = load_bank(bank_path)
     frames = population_frames(bank, n, trials_per_world, seed, observers)
     table = welch_table(frames, alpha)
     by_trial = trial_contrast(frames)
@@ -380,7 +357,7 @@ def run_instrument(bank_path: Path, trials_per_world: int, out_dir: Path, n: int
     main = table[table["reading"] == "absolute"]
     summary = {"n_per_population": n, "seed": seed, "alpha": alpha,
                "trials_per_world": trials_per_world, "bank": str(bank_path),
-               "bank_sha256": sha256_bytes(bank_bytes),
+               "bank_sha256": bank.sha256,  # of the JSON, as sessions record it
                "test": "Welch t, one-sided: coarse err_ours-err_vae < precise err_ours-err_vae",
                "passed": {row["world"]: row["passed"] for _, row in main.iterrows()},
                "replications": replications,

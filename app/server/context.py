@@ -3,12 +3,9 @@
 from dataclasses import dataclass, field
 
 from app.bank.model_answers import ModelAnswers
-from app.prediction_view import PredictionView, prediction_view
+from app.prediction_view import VIEW_FIELDS, PredictionView, prediction_view
 from app.study.config import StudyConfig
 from app.study.trials import TrialBank
-
-# what of a world's bank the prediction view's scale reads (app/prediction_view.py)
-VIEW_FIELDS = {"dt_s": True, "trials": {"__all__": {"kind": True, "policy_actions": True}}}
 
 
 @dataclass(frozen=True)

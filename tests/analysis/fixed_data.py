@@ -9,6 +9,7 @@ import pandas as pd
 
 from analysis.contracts import EXPORT_COLUMNS
 from analysis.load import normalise
+from app.study.trials import BankFile, TrialBank
 
 DT_S = 0.5
 START_KINDS = {"highway": ("own", "same_lane", "adjacent_lane", "same_lane", "adjacent_lane"),
@@ -142,22 +143,33 @@ def small_bank(trials: int = 6, seed: int = 0) -> dict:
                       "vae": [(np.asarray(ours) + rng.normal(scale=1.2, size=(5, 3, 2))
                                * speed).tolist() for _ in range(2)]}
             records.append({
-                "trial_id": f"{world}-{t}", "kind": "main", "clip_sha256": f"clip{t}",
+                "trial_id": f"{world}-{t}", "world": world, "kind": "main",
+                "clip_sha256": f"clip{t}",
+                "source_index": t, "segment_start": 0, "robot_label": code, "examples": [],
+                "model_input": segment,
                 "segment": {"positions": segment, "headings": [[0.0, 0.0]] * len(segment)},
                 "start_states": [{"robot": s, "human": segment[-1][1], "robot_heading": 0.0,
                                   "human_heading": 0.0, "robot_speed": speed, "start_kind": kind}
                                  for s, kind in zip(starts, START_KINDS[world], strict=True)],
                 "arm": ("random", "models_disagree")[t % 2],
-                "predictions": {model: [{"seed": s, "code": code if model == "ours" else t % 3,
+                "predictions": {model: [{"seed": s, "z": [],
+                                         "code": code if model == "ours" else t % 3,
                                          "actions": actions, "content_hash": f"{model[0]}{s}"}
                                         for s, actions in enumerate(answers)]
                                 for model, answers in family.items()},
                 "cv_actions": [[[speed, 0.0]] * 3] * 5, "policy_actions": ours,
             })
         worlds[world] = {"world": world, "dt_s": 0.5, "scene": scene,
+                         "robot_label_name": "intent", "label_names": ["a", "b", "c", "d"],
                          "max_step_m": 8.0 if scene["lanes"] else 0.6,
                          "min_step_m": 0.8 if scene["lanes"] else 0.06, "trials": records}
     return {"study_id": "paper_study", "steps_to_predict": 3, "worlds": worlds}
+
+
+def trial_bank(bank: dict) -> TrialBank:
+    """A bank.json-shaped dict, read as the server and the simulated study read a bank file."""
+    raw = json.dumps(bank).encode()
+    return TrialBank(BankFile.model_validate_json(raw), hashlib.sha256(raw).hexdigest())
 
 
 def with_seeds(bank: dict, n_seeds: int = 3, seed: int = 0) -> dict:

@@ -12,7 +12,7 @@ from analysis.contracts import ExclusionRules
 from analysis.metrics import add_alignment_errors
 from analysis.report import AnalysisError, StudyInputs, run_analyze, start_kind_table
 from app.observers.simulated_study import simulate_participants
-from tests.analysis.fixed_data import fixed_predictions, small_bank, with_seeds
+from tests.analysis.fixed_data import fixed_predictions, small_bank, trial_bank, with_seeds
 
 RULES = ExclusionRules(failed_attention_check=True, incomplete=True, too_fast_trial_ms=4000,
                        too_fast_max_fraction=0.25)
@@ -37,7 +37,8 @@ def inputs(tmp_path) -> StudyInputs:
 
 def simulated_export(kind: str, n: int, seed: int):
     """Simulated participants on the bank's primary answers, as the server exports them."""
-    frame = simulate_participants(small_bank(), kind, n, 5, seed=seed, show_progress=False)
+    frame = simulate_participants(trial_bank(small_bank()), kind, n, 5, seed=seed,
+                                  show_progress=False)
     frame["arm"] = frame["trial_id"].str[-1].astype(int).mod(2).map(
         {0: "random", 1: "models_disagree"})
     return frame.assign(bank_sha256=BANK_SHA)

@@ -25,7 +25,7 @@ from app.observers.instrument_grid import (
 )
 from app.observers.simulated_study import participant_diffs, simulate_participants
 from app.prediction_view import TARGET_STEP_PX, click_direction_sd_deg, prediction_view
-from tests.analysis.fixed_data import small_bank
+from tests.analysis.fixed_data import small_bank, trial_bank
 from tests.observers.test_observers import CONFIG, bank_with_examples
 
 
@@ -45,13 +45,13 @@ def test_click_noise_adds_in_quadrature_to_each_presets_own():
 
 @pytest.mark.parametrize("pair", [0, 1])
 def test_the_grid_scores_simulated_participants_as_the_export_path_does(pair):
-    bank = bank_with_examples()
+    bank = trial_bank(bank_with_examples())
     index, family = family_answers(bank)
     lean = population_answers(bank, "coarse", 5, 4, 3, CONFIG, index)
     frame = simulate_participants(bank, "coarse", 5, 4, 3, False, CONFIG)
     for model in ("ours", "vae"):  # the export path, re-scored with this pair's answers
-        answer = {t["trial_id"]: np.asarray(t["predictions"][model][pair]["actions"])
-                  for w in bank["worlds"].values() for t in w["trials"]}
+        answer = {t.trial_id: np.asarray(t.predictions[model][pair].actions)
+                  for t in bank.by_id.values()}
         actions = np.stack([answer[t][s, j] for t, s, j in
                             frame[["trial_id", "start_index", "step"]].itertuples(index=False)])
         frame[f"{model}_vx"], frame[f"{model}_vy"] = actions[:, 0], actions[:, 1]
@@ -62,7 +62,7 @@ def test_the_grid_scores_simulated_participants_as_the_export_path_does(pair):
 
 
 def test_the_grid_has_a_row_per_level_rerun_pair_world_and_reading():
-    bank = small_bank(trials=4)
+    bank = trial_bank(small_bank(trials=4))
     grid = run_grid(bank, 3, CONFIG, n=4, replications=2, view_deg={"highway": 3.0,
                                                                     "obstacle": 9.0},
                     workers=1)

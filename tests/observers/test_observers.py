@@ -19,8 +19,8 @@ from app.observers.simulated_study import (
     run_instrument,
     separation,
     simulate_participants,
+    simulated_payload,
     trial_contrast,
-    trial_payload,
 )
 from app.settings import REPO_ROOT
 from app.worlds.intents import forward_speed
@@ -31,6 +31,7 @@ from tests.analysis.fixed_data import (
     obstacle_segment,
     payload,
     small_bank,
+    trial_bank,
 )
 
 CONFIG = default_observers(REPO_ROOT / "study_configs")
@@ -218,13 +219,15 @@ def test_observers_never_read_the_models_answers():
                 answer["actions"] = rng.normal(size=(5, 3, 2)).tolist()
                 answer["code"] = -1
             trial["cv_actions"] = rng.normal(size=(5, 3, 2)).tolist()
-    for world in bank["worlds"].values():
-        p = trial_payload(world, world["trials"][0], 3)
+    read = trial_bank(bank)
+    for world in read.data.worlds.values():
+        p = simulated_payload(read, world.trials[0])
         assert not {"predictions", "cv_actions", "policy_actions"} & set(p)
     clicks = ["participant_id", "trial_id", "click_x", "click_y"]
     for preset in inverse_planning.PRESETS:
-        clean = simulate_participants(bank, preset, 4, 5, seed=3, show_progress=False)
-        dirty = simulate_participants(poisoned, preset, 4, 5, seed=3, show_progress=False)
+        clean = simulate_participants(read, preset, 4, 5, seed=3, show_progress=False)
+        dirty = simulate_participants(trial_bank(poisoned), preset, 4, 5, seed=3,
+                                      show_progress=False)
         assert clean[clicks].equals(dirty[clicks])
         assert not clean["ours_vx"].equals(dirty["ours_vx"])
 
@@ -262,7 +265,7 @@ def test_config_typos_and_missing_sources_are_rejected(tmp_path):
 
 
 def test_power_grows_with_n_for_coarse_bots():
-    frame = simulate_participants(bank_with_examples(), "coarse", 40, 5, seed=0,
+    frame = simulate_participants(trial_bank(bank_with_examples()), "coarse", 40, 5, seed=0,
                                   show_progress=False, observers=MAP)
     assert len(frame) == 40 * 2 * 5 * 5 * 3
     means = participant_means(frame)
@@ -274,7 +277,7 @@ def test_power_grows_with_n_for_coarse_bots():
 
 
 def test_instrument_check_runs_and_writes_its_files(tmp_path):
-    table = instrument_check(bank_with_examples(), 5, n=6, seed=1, show_progress=False)
+    table = instrument_check(trial_bank(bank_with_examples()), 5, n=6, seed=1, show_progress=False)
     assert list(table[["world", "reading"]].itertuples(index=False, name=None)) == [
         ("highway", "absolute"), ("highway", "relative"),
         ("obstacle", "absolute"), ("obstacle", "relative")]
@@ -294,7 +297,7 @@ def test_instrument_check_runs_and_writes_its_files(tmp_path):
 
 def test_simulated_participants_are_assigned_trials_as_the_server_assigns_them():
     bank = bank_with_examples()
-    frame = simulate_participants(bank, "random", 7, 2, seed=3, show_progress=False)
+    frame = simulate_participants(trial_bank(bank), "random", 7, 2, seed=3, show_progress=False)
     for world, rows in frame.groupby("world"):
         seen = rows.groupby("trial_id")["participant_id"].nunique()
         mains = [t["trial_id"] for t in bank["worlds"][world]["trials"] if t["kind"] == "main"]
@@ -306,7 +309,7 @@ def test_simulated_participants_are_assigned_trials_as_the_server_assigns_them()
 
 
 def test_trial_contrast_counts_every_participant_who_saw_a_trial():
-    frames = population_frames(bank_with_examples(), 6, 5, seed=2, observers=CONFIG,
+    frames = population_frames(trial_bank(bank_with_examples()), 6, 5, seed=2, observers=CONFIG,
                                show_progress=False)
     table = trial_contrast(frames)
     for _world, rows in table.groupby("world"):
@@ -320,7 +323,7 @@ def test_trial_contrast_counts_every_participant_who_saw_a_trial():
 
 
 def test_separation_says_where_models_and_observers_differ():
-    gaps = separation(bank_with_examples(), seed=0).set_index(["world", "start_kind"])
+    gaps = separation(trial_bank(bank_with_examples()), seed=0).set_index(["world", "start_kind"])
     for world in ("highway", "obstacle"):
         kinds = gaps.loc[world]
         parts = kinds.drop(index="all")
@@ -334,7 +337,7 @@ def test_separation_says_where_models_and_observers_differ():
     for world in same["worlds"].values():
         for trial in world["trials"]:
             trial["predictions"]["vae"][0]["actions"] = trial["predictions"]["ours"][0]["actions"]
-    alike = separation(same, seed=0)
+    alike = separation(trial_bank(same), seed=0)
     assert np.allclose(alike[["ours_vs_vae", "coarse_diff", "precise_diff"]], 0.0)
 
 
@@ -364,3 +367,13 @@ def test_instrument_command_prints_the_table(tmp_path, monkeypatch):
     for world in ("highway", "obstacle"):
         for level in grid["noise_levels"]:
             assert f"{world:<10}{level:<16}" in result.output
+
+
+def test_a_move_that_would_overshoot_a_narrow_scene_turns_along_it():
+    # towards the centre from below it, 8 m overshoots the road's far edge (y 10): before the
+    # server's click check ran on simulated answers, such a click was made and never refused
+    scene = {"bounds": {"x_min_m": -10.0, "x_max_m": 60.0, "y_min_m": -2.0, "y_max_m": 10.0}}
+    origin = np.array([25.0, 2.5])
+    point = inverse_planning.valid_move({"scene": scene}, origin, np.array([0.0, 1.0]), 8.0)
+    assert inverse_planning.inside_bounds({"scene": scene}, point)
+    assert np.hypot(*(point - origin)) == pytest.approx(8.0)
