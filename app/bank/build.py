@@ -9,26 +9,7 @@ start states on the data near the robot; every seed of both models, a constant-v
 baseline and the world's own policy (`World.robot_policy_actions`) answered for every start
 state. Everything is computed from the rounded numbers the participant is shown. Nothing here
 depends on which world it is.
-
-Start states (K = the config's `start_states`, n = `steps_to_predict`, r = the reachable
-radius `max_step_m`). The first is the robot's own segment-end state (`own`). The other
-K - 1 are robot positions that occur in the data the models learned from: every step of
-every trajectory outside both checkpoints' test splits (their train and validation
-trajectories, so no held-out future), kept if
-- the point is at least r from every start already chosen (the robot's own included);
-- the world keeps it as one of its two start kinds within reach n r of the robot
-  (`World.data_start_candidates`: Highway `same_lane` / `adjacent_lane`, Obstacle
-  `near` / `mid`; the rules are in highway.py and obstacle.py).
-The two kinds take turns (the world's first kind first), each turn a uniform draw with
-the bank's rng among that kind's points, so each gets half of K - 1 (the first kind the
-odd one); a kind with no point left passes its turn to the other, and a segment where
-neither has one is skipped (meta.json counts it). Every start keeps the segment end's
-heading and speed: the question is what this robot, moving as the segment shows, does
-from there; a data state's own heading and speed belong to another trajectory's
-behaviour, would be drawn in the browser and would make the world's policy answer a
-situation the segment does not show. Attention checks get their start states by the same
-rule (so their geometry cannot give them away); they differ only in their segment. The
-worlds apply their rules to the scene the trajectories were simulated in.
+Start states are chosen by start_states.py.
 """
 
 import platform
@@ -41,23 +22,23 @@ from tqdm import tqdm
 
 import app
 from analysis.contracts import alignment_error
+from app.bank.start_states import NoStartStates, covered_states, start_states
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 from app.fileio import sha256_file, write_json
 from app.layout import Layout
 from app.study.config import StudyConfig
 from app.study.trials import (
+    HEADING_DECIMALS,
+    POS_DECIMALS,
     BankFile,
     Clip,
     ModelAnswer,
-    StartState,
     TrialRecord,
     WorldBank,
     clip_sha256,
 )
 from app.worlds.registry import World, build_world
 
-POS_DECIMALS = 3
-HEADING_DECIMALS = 4
 STEP_PERCENTILE = 99.5
 EXTRA_CANDIDATES = 40  # segments tried as attention checks (the most obvious win)
 
@@ -128,15 +109,6 @@ def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
     return WorldInputs(build_world(name), trajs, models, held_out, npz_path,
                        covered_states(trajs, learned), len(learned), list(config.models.seeds),
                        layout.root)
-
-
-def covered_states(trajs: TrajectorySet, index: np.ndarray) -> np.ndarray:
-    """The robot's position at every valid step of trajectories `index` [M, 2] (m)."""
-    if not len(index):
-        raise ValueError(f"{trajs.world}: every trajectory is in a test split; no data "
-                         "to draw start states from")
-    return np.concatenate([trajs.positions[i, : trajs.lengths[i] + 1, ROBOT]
-                           for i in index]).astype(np.float64)
 
 
 def build_world_bank(config: StudyConfig, inputs: WorldInputs,
@@ -330,7 +302,8 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
     shown = clip_of(trajs, src, start, end, label_name)
     model_input = clip_of(trajs, src, end - model_history(inputs), end, label_name).positions
     segment = np.asarray(shown.positions)
-    states = start_states(config, inputs, src, end, segment, max_step, rng)
+    states = start_states(inputs.world, inputs.trajs, inputs.covered, (src, end), segment,
+                          config.start_states, config.steps_to_predict, max_step, rng)
     examples = [clip_of(trajs, e, 0, int(trajs.lengths[e]), label_name)
                 for e in pick_examples(trajs, inputs.held_out, src, label_name,
                                        config.examples_per_trial, rng)]
@@ -381,51 +354,6 @@ def pick_examples(trajs: TrajectorySet, held_out: np.ndarray, src: int, label_na
     order = list(groups)
     rng.shuffle(order)
     return interleave({k: groups[key] for k, key in enumerate(order)})[:count]
-
-
-class NoStartStates(ValueError):
-    """Too few points near the robot for the study's start states."""
-
-
-def start_states(config: StudyConfig, inputs: WorldInputs, src: int, end: int,
-                 segment: np.ndarray, max_step: float, rng: np.random.Generator
-                 ) -> list[StartState]:
-    """The robot's segment-end state plus K - 1 others by the module docstring's rule; the
-    human stays at its segment-end position."""
-    trajs, world = inputs.trajs, inputs.world
-    robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
-    pools = world.data_start_candidates(trajs.scene, segment, inputs.covered,
-                                        config.steps_to_predict * max_step)
-    points, kinds = take_turns(robot, pools, config.start_states - 1, max_step, rng)
-    heading = trajs.headings[src, end]
-    speed = float(trajs.speeds[src, end, ROBOT])
-    return [StartState(robot=np.round(p, POS_DECIMALS).tolist(),
-                       human=np.round(human, POS_DECIMALS).tolist(),
-                       robot_heading=round(float(heading[ROBOT]), HEADING_DECIMALS),
-                       human_heading=round(float(heading[HUMAN]), HEADING_DECIMALS),
-                       robot_speed=round(speed, 4), start_kind=kind)
-            for p, kind in zip([robot, *points], ["own", *kinds], strict=True)]
-
-
-def take_turns(robot: np.ndarray, pools: dict[str, np.ndarray], count: int, min_gap: float,
-               rng: np.random.Generator) -> tuple[list[np.ndarray], list[str]]:
-    """`count` points, the kinds taking turns; each a uniform draw among its kind's points at
-    least `min_gap` from every start chosen so far (a kind with none passes its turn)."""
-    chosen, kinds = [np.asarray(robot, dtype=np.float64)], []
-    order = list(pools)
-    for turn in range(count):
-        for kind in order[turn % len(order):] + order[: turn % len(order)]:
-            pts = pools[kind]
-            gaps = np.min([np.linalg.norm(pts - c, axis=1) for c in chosen], axis=0)
-            free = np.flatnonzero(gaps >= min_gap)
-            if len(free):
-                chosen.append(pts[int(rng.choice(free))])
-                kinds.append(kind)
-                break
-        else:
-            raise NoStartStates(f"only {turn} of {count} data-covered start states "
-                                "near the robot")
-    return chosen[1:], kinds
 
 
 # ---------------------------------------------------------------- kinds

@@ -16,7 +16,7 @@ from sqlalchemy import delete, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlmodel import Session
 
-from app.server import balance
+from app.server import balance, endings
 from app.server.context import StudyContext
 from app.server.plan import BEFORE_TRIALS, Phase, expect_phase
 from app.server.schemas import (
@@ -29,12 +29,7 @@ from app.server.schemas import (
 )
 from app.server.tables import Event, Participant, Submission, utcnow
 from app.server.validation import validate_survey
-from app.study.config import StudyConfig
 from app.study.errors import Refused
-
-# outcomes of a session that did every trial
-FINISHED = ("completed", "failed_checks", "excluded")
-
 
 # ---------------------------------------------------------------- step writes
 
@@ -115,20 +110,6 @@ def advance(db: Session, participant: Participant, body: SubmissionBody, submiss
     return True
 
 
-def ending_values(config: StudyConfig, outcome: str) -> dict:
-    """The Participant columns an ending sets: outcome, its completion code, completed."""
-    return {"outcome": outcome, "completion_code": config.recruitment.ending(outcome)
-            .completion_code, "completed": outcome in FINISHED}
-
-
-def finished_outcome(config: StudyConfig, participant: Participant, excluded: bool) -> str:
-    """failed_checks once `endings.min_failed` attention checks failed, else excluded when
-    the study's exclusion rules remove the session, else completed."""
-    if participant.attention_failed >= config.recruitment.endings.min_failed:
-        return "failed_checks"
-    return "excluded" if excluded else "completed"
-
-
 def _mirror(participant: Participant, values: dict) -> None:
     """Keep the loaded row in step with the UPDATE instead of reading it back."""
     for key, value in values.items():
@@ -166,8 +147,7 @@ def record_survey(db: Session, ctx: StudyContext, participant: Participant,
     with replay_if_stored(db, participant, body, "survey") as fresh:
         expect_phase(participant, Phase.SURVEY)
         answers = validate_survey(ctx.config.survey, body.answers)
-        excluded = balance.is_excluded(db, ctx.config, participant)
-        ending = ending_values(ctx.config, finished_outcome(ctx.config, participant, excluded))
+        ending, excluded = endings.survey_ending(db, ctx.config, participant)
         fresh.stored = advance(
             db, participant, body, "survey", {"answers": answers}, ending=ending,
             before_commit=lambda: balance.settle_completion(db, participant, excluded))
@@ -179,7 +159,7 @@ def record_decline(db: Session, ctx: StudyContext, participant: Participant,
     with replay_if_stored(db, participant, body, "decline") as fresh:
         expect_phase(participant, Phase.CONSENT)
         fresh.stored = advance(db, participant, body, "decline", {},
-                               ending=ending_values(ctx.config, "declined_consent"),
+                               ending=endings.ending_values(ctx.config, "declined_consent"),
                                before_commit=lambda: _forget(db, participant))
 
 
@@ -189,7 +169,7 @@ def record_screen_out(db: Session, ctx: StudyContext, participant: Participant,
     with replay_if_stored(db, participant, body, "screen_out") as fresh:
         expect_phase(participant, *BEFORE_TRIALS)
         fresh.stored = advance(db, participant, body, "screen_out", {"reason": body.reason},
-                               ending=ending_values(ctx.config, "screened_out"),
+                               ending=endings.ending_values(ctx.config, "screened_out"),
                                before_commit=lambda: _forget(db, participant))
 
 

@@ -8,6 +8,7 @@ once per process and spliced into each answer: encoding it per request through F
 import json
 
 from app.server.context import StudyContext
+from app.server.endings import done_payload
 from app.server.plan import (
     PartStep,
     Phase,
@@ -17,9 +18,7 @@ from app.server.plan import (
     part_steps,
     trial_steps,
 )
-from app.server.recruitment import MTURK_SUBMIT_PATH
 from app.server.tables import Participant
-from app.study.config import StudyConfig
 from app.study.trial_payload import trial_payload
 
 
@@ -61,32 +60,6 @@ def part_numbers(participant: Participant, world_position: int) -> dict:
     return {"part": world_position + 1, "parts": len(participant.world_order.split(","))}
 
 
-def done_payload(cfg: StudyConfig, participant: Participant) -> dict:
-    """The stored ending: its outcome, code, message, and where the page sends the person.
-
-    An MTurk assignment is handed in by a form posted to MTurk (`mturk_submit`) instead
-    of a redirect.
-    """
-    outcome = participant.outcome  # set by every ending; migration 0002 set the older ones
-    code = participant.completion_code
-    if code is None:  # completed before endings existed: the code of today's config
-        code = cfg.recruitment.ending(outcome).completion_code
-    return {"outcome": outcome, "completion_code": code,
-            "message": cfg.recruitment.ending(outcome).message,
-            "redirect_url": redirect_url(cfg, participant.recruitment, code),
-            "mturk_submit": mturk_submit(participant, outcome, code)}
-
-
-def mturk_submit(participant: Participant, outcome: str, code: str) -> dict | None:
-    """The ExternalQuestion hand-in form: action `turkSubmitTo`/mturk/externalSubmit."""
-    params = participant.recruitment_params or {}
-    if participant.recruitment != "mturk" or not params.get("turkSubmitTo"):
-        return None
-    return {"action": f"{params['turkSubmitTo']}{MTURK_SUBMIT_PATH}",
-            "fields": {"assignmentId": params["assignmentId"], "outcome": outcome,
-                       "completion_code": code}}
-
-
 def step_fields(participant: Participant, step: TrialStep) -> dict:
     """The parts of a trial payload that depend on the participant's plan.
 
@@ -126,11 +99,3 @@ def state_json(ctx: StudyContext, participant: Participant, draft: dict | None =
     return f"{head[:-2]}, {static[1:]}}}"
 
 
-def redirect_url(cfg: StudyConfig, recruitment: str, code: str) -> str:
-    """Where the done page sends the participant ('' = show the code only)."""
-    if not code:
-        return ""
-    template = {"prolific": cfg.recruitment.prolific_redirect_url,
-                "mturk": cfg.recruitment.mturk_redirect_url}.get(
-        recruitment, cfg.recruitment.open_redirect_url)
-    return template.format(completion_code=code)

@@ -63,7 +63,7 @@ class Participant(ParticipantBase, table=True):
     updated_at: datetime = Field(default_factory=utcnow)
     completed_at: datetime | None = None
     events_stored: int = 0  # telemetry rows; app/server/telemetry.py keeps it under its cap
-    # the ending's receipt, stored before the browser is told where to go (OUTCOMES)
+    # the ending's receipt, stored before the browser is told where to go (endings.OUTCOMES)
     outcome: str | None = Field(default=None, max_length=20)
     completion_code: str | None = Field(default=None, max_length=64)
     ended_at: datetime | None = None
@@ -76,10 +76,6 @@ class Participant(ParticipantBase, table=True):
     # the one browser tab that may write (tabs.py), and when it was last heard from
     live_tab: str | None = Field(default=None, max_length=64)
     live_tab_seen_at: datetime | None = None
-
-
-# How a session ends; each has its own completion code (config.Endings).
-OUTCOMES = ("completed", "failed_checks", "excluded", "declined_consent", "screened_out")
 
 
 class BalanceCount(SQLModel, table=True):

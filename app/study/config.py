@@ -143,7 +143,7 @@ class RecruitmentConfig(StrictModel):
         return self
 
     def ending(self, outcome: str) -> Ending:
-        """The code and message of `outcome` (one of tables.OUTCOMES)."""
+        """The code and message of `outcome` (one of app/server/endings.py's OUTCOMES)."""
         if outcome == "completed":
             return Ending(completion_code=self.completion_code)
         chosen = getattr(self.endings, outcome)
@@ -260,7 +260,7 @@ class StudyConfig(StrictModel):
     trials_per_world: int = Field(ge=1)
     examples_per_trial: int = Field(ge=0)
     segment_steps: SegmentSteps
-    start_states: int = Field(ge=1)  # per trial: the robot's own + data-covered (trial_builder)
+    start_states: int = Field(ge=1)  # per trial: own + data-covered (bank/start_states.py)
     steps_to_predict: int = Field(ge=1)
     practice_trials: int = Field(default=1, ge=0)  # per world, before its scored trials
     bank_trials_per_world: int = Field(ge=1)

@@ -23,6 +23,10 @@ from app.configio import StrictModel
 from app.fileio import read_bytes, sha256_bytes
 from app.layout import Layout
 
+# what the participant is shown, and so what every model and baseline answers from
+POS_DECIMALS = 3  # positions in m
+HEADING_DECIMALS = 4  # headings in rad
+
 
 class Clip(StrictModel):
     """An animation: positions [steps+1, 2, 2] and headings [steps+1, 2]."""
@@ -39,7 +43,7 @@ class StartState(StrictModel):
     `start_kind`: `own` (the robot's segment end), or how a data-covered start relates to
     it (Highway `same_lane` / `adjacent_lane`, Obstacle `near` / `mid`); banks built
     before issue 22 also have `offset` (a step beside or behind the robot, their attention
-    checks). See trial_builder.start_states.
+    checks). See app/bank/start_states.py.
     """
 
     robot: list[float]

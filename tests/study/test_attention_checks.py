@@ -6,7 +6,6 @@ import json
 import numpy as np
 
 from app.bank.build import (
-    NoStartStates,
     load_inputs,
     make_trial,
     model_history,
@@ -14,6 +13,7 @@ from app.bank.build import (
     robot_step_percentile,
     segment_candidates,
 )
+from app.bank.start_states import NoStartStates
 from app.configio import load_yaml_model
 from app.layout import Layout
 from app.study.config import StudyConfig

@@ -16,12 +16,11 @@ from sqlalchemy.pool import StaticPool
 from sqlmodel import Session, create_engine, select
 
 from app.bank.build import (
-    NoStartStates,
     build_trials,
     main_trials,
     model_disagreement,
-    take_turns,
 )
+from app.bank.start_states import NoStartStates, take_turns
 from app.configio import ConfigError, load_yaml_model
 from app.fileio import sha256_file
 from app.layout import Layout
