@@ -13,6 +13,9 @@ from app.study.errors import Refused
 from app.study.trials import TrialBank, TrialRecord
 
 MAX_TRIAL_MS = 6 * 3600 * 1000  # a trial "shown" longer than this is a broken clock
+# a move up to this share longer than max_step_m counts: a click on the reach circle's edge
+# may come out a rounding error longer
+MAX_STEP_TOLERANCE = 1e-6
 
 
 # ---------------------------------------------------------------- clicks
@@ -37,7 +40,7 @@ def validate_points(bank: TrialBank, trial: TrialRecord, body: PredictionCreate)
     for i, j in np.argwhere(lengths < world.min_step_m):
         raise Refused(422, f"points.{i}.{j}: move of {lengths[i, j]:.3g} m is shorter than "
                            f"the minimum {world.min_step_m:.3g} m")
-    for i, j in np.argwhere(lengths > world.max_step_m * (1 + 1e-6)):
+    for i, j in np.argwhere(lengths > world.max_step_m * (1 + MAX_STEP_TOLERANCE)):
         raise Refused(422, f"points.{i}.{j}: move of {lengths[i, j]:.3g} m is longer than "
                            f"the reachable {world.max_step_m:.3g} m")
     return points

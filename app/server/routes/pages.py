@@ -1,20 +1,44 @@
 """HTML pages: landing, the participant app and the researcher dashboard (jinja2)."""
 
+from typing import get_args
+
 from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 
 from app.prediction_view import MIN_WINDOW_PX
 from app.server import notices
+from app.server.crud import FINISHED
 from app.server.deps import study_context
 from app.server.plan import BEFORE_TRIALS, Phase
 from app.server.recruitment import MTURK_PREVIEW
+from app.server.schemas import (
+    EVENTS_PER_REQUEST,
+    HISTORY_MAX_ENTRIES,
+    USER_AGENT_MAX_CHARS,
+    EventKind,
+    ScreenOutReason,
+    UrlParams,
+)
+from app.server.validation import MAX_STEP_TOLERANCE
 from app.study.errors import Notice
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
-# what the participant page is told about phases (app.js keeps one handler per phase)
-PHASES = {"phases": [phase.value for phase in Phase],
-          "screen_out_phases": [phase.value for phase in BEFORE_TRIALS],
-          "min_window": MIN_WINDOW_PX}
+# Every rule the participant page applies, from the server's one definition of it (study.html
+# hands it to app.js as #page-rules). app.js keeps one handler per phase and one device
+# check per screen-out reason; a trial's own limits (steps, reach, scene) come with the trial.
+PAGE_RULES = {
+    "phases": [phase.value for phase in Phase],
+    "screen_out_phases": [phase.value for phase in BEFORE_TRIALS],
+    "screen_out_reasons": list(get_args(ScreenOutReason)),
+    "min_window": MIN_WINDOW_PX,
+    "recruitment_params": list(UrlParams.model_fields),
+    "event_kinds": list(get_args(EventKind)),
+    "events_per_request": EVENTS_PER_REQUEST,
+    "user_agent_max_chars": USER_AGENT_MAX_CHARS,
+    "finished_outcomes": list(FINISHED),
+    "predictions": {"max_step_tolerance": MAX_STEP_TOLERANCE,
+                    "history_max_entries": HISTORY_MAX_ENTRIES},
+}
 
 
 def _render(request: Request, name: str, study_id: str, **extra) -> HTMLResponse:
@@ -43,7 +67,7 @@ def show_study(study_id: str, request: Request) -> HTMLResponse:
         return notice_page(request, notices.unknown_study(), status_code=404)
     if request.query_params.get("assignmentId") == MTURK_PREVIEW:
         return _render(request, "mturk_preview.html", study_id)
-    return _render(request, "study.html", study_id, **PHASES)
+    return _render(request, "study.html", study_id, page_rules=PAGE_RULES)
 
 
 def notice_page(request: Request, notice: Notice, status_code: int) -> HTMLResponse:

@@ -45,10 +45,11 @@ function wait(ms) {
   return new Promise((resolve) => setTimeout(resolve, ms));
 }
 
-/** Plays the illustration once: a clip, then three clicks from a start state. */
+/** Plays the illustration once: a clip, then three clicks from a start state (`rules` as PredictionInput takes them). */
 export class InstructionsDemo {
-  constructor(canvas, { onCaption = () => {} } = {}) {
+  constructor(canvas, { rules, onCaption = () => {} }) {
     this.canvas = canvas;
+    this.rules = rules;
     this.onCaption = onCaption;
     this.clip = demoClip();
     this.player = new ClipPlayer(canvas, DEMO_SCENE, [
@@ -71,7 +72,7 @@ export class InstructionsDemo {
       start_states: [{ robot: this.clip.positions[5][0], human: end[1] }],
       max_step_m: 1.6, min_step_m: 0.2,
     };
-    const input = new PredictionInput(this.canvas, trial, { onMessage: () => {} });
+    const input = new PredictionInput(this.canvas, trial, { rules: this.rules, onMessage: () => {} });
     input.shownAtPerf = performance.now();
     this.onCaption("Then you click where the robot will be after each of the next 3 steps, inside the shaded circle");
     input.render();

@@ -1,0 +1,105 @@
+"""Every rule the browser applies comes from the server's one definition, as phases do.
+
+The study page carries the rules (app/server/routes/pages.py `PAGE_RULES`, as #page-rules)
+and the scripts in frontend/static/js keep no copy of them.
+"""
+
+import re
+
+import pytest
+
+from app.prediction_view import MIN_WINDOW_PX
+from app.server.crud import FINISHED
+from app.server.schemas import (
+    ClientInfo,
+    DraftSave,
+    EventIn,
+    EventsCreate,
+    PredictionCreate,
+    ScreenOutCreate,
+    UrlParams,
+)
+from app.server.validation import MAX_STEP_TOLERANCE
+from tests.conftest import REPO
+from tests.study.flow import at_first_trial, page_json, prediction_body, straight_clicks
+
+JS = REPO / "frontend" / "static" / "js"
+
+
+def schema_of(body, field: str) -> dict:
+    """The JSON schema pydantic validates `body.field` with (its enum, its size limits)."""
+    return body.model_json_schema()["properties"][field]
+
+
+def study_rules(client, study_id: str) -> dict:
+    """The rules the study page hands app.js."""
+    return page_json(client.get(f"/s/{study_id}").text, "page-rules")
+
+
+def table_keys(source: str, name: str) -> list[str]:
+    """The top-level keys of the object literal `const name = {...};` in a script."""
+    table = re.search(rf"^const {name} = \{{\n(.*?)^\}};", source, re.M | re.S)
+    assert table, f"{name} table not found"
+    return re.findall(r"^  (\w+): ", table.group(1), re.M)
+
+
+def quoted(value: str) -> re.Pattern:
+    """`value` as a string literal in a script, in any quotes."""
+    return re.compile(rf"""["'`]{re.escape(value)}["'`]""", re.I)
+
+
+# ---------------------------------------------------------------- the study page's rules
+
+def test_the_study_page_carries_each_rule_as_the_server_defines_it(client, small_study):
+    rules = study_rules(client, small_study.study_id)
+    assert rules["recruitment_params"] == list(UrlParams.model_fields)
+    assert rules["screen_out_reasons"] == schema_of(ScreenOutCreate, "reason")["enum"]
+    assert rules["event_kinds"] == schema_of(EventIn, "kind")["enum"]
+    assert rules["events_per_request"] == schema_of(EventsCreate, "events")["maxItems"]
+    assert rules["user_agent_max_chars"] == schema_of(ClientInfo, "user_agent")["maxLength"]
+    assert rules["finished_outcomes"] == list(FINISHED)
+    assert rules["min_window"] == MIN_WINDOW_PX
+    for body in (PredictionCreate, DraftSave):
+        history = schema_of(body, "history")
+        assert rules["predictions"]["history_max_entries"] == history["maxItems"], body
+    assert rules["predictions"]["max_step_tolerance"] == MAX_STEP_TOLERANCE
+
+
+def test_the_click_tolerance_the_page_uses_is_where_the_server_refuses(client, small_study):
+    tolerance = study_rules(client, small_study.study_id)["predictions"]["max_step_tolerance"]
+    p = at_first_trial(client, small_study.study_id)
+    trial = p.state()["step"]
+
+    def moves_past_reach(share: float) -> list:
+        reach = trial["max_step_m"] * (1 + share)
+        return straight_clicks(dict(trial, min_step_m=reach, max_step_m=reach))
+
+    over = p.post("predictions", prediction_body(trial, moves_past_reach(2 * tolerance)))
+    assert over.status_code == 422 and "longer than the reachable" in over.text
+    within = p.post("predictions", prediction_body(trial, moves_past_reach(tolerance / 2)))
+    assert within.status_code == 201, within.text
+
+
+def test_app_js_has_one_device_check_per_screen_out_reason():
+    keys = table_keys((JS / "app.js").read_text(), "DEVICE_CHECKS")
+    assert keys == schema_of(ScreenOutCreate, "reason")["enum"]
+
+
+def test_app_js_logs_exactly_the_event_kinds_the_server_takes():
+    calls = re.findall(r"telemetry\.log\(([^,)]*)", (JS / "app.js").read_text())
+    logged = {kind for call in calls for kind in re.findall(r'"(\w+)"', call)}
+    assert logged == set(schema_of(EventIn, "kind")["enum"])
+
+
+# ---------------------------------------------------------------- no second copy in the scripts
+
+SERVER_NAMES = [*UrlParams.model_fields, *FINISHED]  # each only ever read from the rules
+
+
+@pytest.mark.parametrize("script", sorted(p.name for p in JS.glob("*.js")))
+def test_no_script_writes_a_copy_of_a_server_rule(script):
+    source = (JS / script).read_text()
+    copies = [name for name in SERVER_NAMES if quoted(name).search(source)]
+    copies += [old for old in ("RECRUITMENT_PARAMS", "max_chars ??", "slice(-500)",
+                               "splice(0, 100)") if old in source]
+    assert copies == [], f"{script}: take these from the page's rules"
