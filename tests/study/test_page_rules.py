@@ -1,13 +1,17 @@
 """Every rule the browser applies comes from the server's one definition, as phases do.
 
-The study page carries the rules (app/server/routes/pages.py `PAGE_RULES`, as #page-rules)
-and the scripts in frontend/static/js keep no copy of them.
+The pages carry the rules (app/server/routes/pages.py: `PAGE_RULES` as #page-rules on the
+study page, the scene palette as #scene-palette on every page that draws a scene and as
+/palette.css for the legend, the models' names and colours as #model-style on the
+dashboard) and the scripts in frontend/static/js keep no copy of them.
 """
 
 import re
 
 import pytest
 
+from analysis.contracts import MODEL_COLORS, MODEL_LABELS
+from app.data.scene import BROWSER_PALETTE
 from app.prediction_view import MIN_WINDOW_PX
 from app.server.crud import FINISHED
 from app.server.schemas import (
@@ -24,6 +28,7 @@ from tests.conftest import REPO
 from tests.study.flow import at_first_trial, page_json, prediction_body, straight_clicks
 
 JS = REPO / "frontend" / "static" / "js"
+CSS = REPO / "frontend" / "static" / "css" / "style.css"
 
 
 def schema_of(body, field: str) -> dict:
@@ -45,7 +50,7 @@ def table_keys(source: str, name: str) -> list[str]:
 
 def quoted(value: str) -> re.Pattern:
     """`value` as a string literal in a script, in any quotes."""
-    return re.compile(rf"""["'`]{re.escape(value)}["'`]""", re.I)
+    return re.compile(rf"""["'`]{re.escape(value)}["'`]""")
 
 
 # ---------------------------------------------------------------- the study page's rules
@@ -91,15 +96,51 @@ def test_app_js_logs_exactly_the_event_kinds_the_server_takes():
     assert logged == set(schema_of(EventIn, "kind")["enum"])
 
 
+# ---------------------------------------------------------------- the scene palette
+
+@pytest.mark.parametrize("path", ["/", "/s/{study}", "/researcher"])
+def test_every_page_that_draws_a_scene_carries_the_palette(client, small_study, path):
+    page = client.get(path.format(study=small_study.study_id)).text
+    assert page_json(page, "scene-palette") == BROWSER_PALETTE
+    assert '<link rel="stylesheet" href="/palette.css">' in page
+
+
+def test_the_legend_css_takes_the_agents_colours_from_the_palette(client):
+    css = client.get("/palette.css")
+    assert css.headers["content-type"].startswith("text/css")
+    declared = dict(re.findall(r"--(\w+): ([^;]+);", css.text))
+    assert declared == {"robot": BROWSER_PALETTE["robot"], "human": BROWSER_PALETTE["human"]}
+    assert not re.search(r"--(robot|human)\s*:", CSS.read_text())
+
+
+# ---------------------------------------------------------------- the dashboard's models
+
+def test_the_dashboard_names_and_colours_models_as_the_figures_do(client):
+    style = page_json(client.get("/researcher").text, "model-style")
+    assert style == {"colors": MODEL_COLORS, "labels": MODEL_LABELS}
+    assert not re.search(r"\.swatch-\w+\s*\{", CSS.read_text())  # the legend takes them too
+
+
 # ---------------------------------------------------------------- no second copy in the scripts
 
+def defined_colours() -> list[str]:
+    """Every colour of the scene palette and of the models but black (which any script may
+    draw with)."""
+    palette = BROWSER_PALETTE
+    flat = [v for v in palette.values() if isinstance(v, str)]
+    scene = flat + list(palette["ground"].values()) + palette["goals"]
+    return scene + [colour for colour in MODEL_COLORS.values() if colour != "#000000"]
+
+
 SERVER_NAMES = [*UrlParams.model_fields, *FINISHED]  # each only ever read from the rules
+MODEL_NAMES = [label for model, label in MODEL_LABELS.items() if label.lower() != model]  # not keys
 
 
 @pytest.mark.parametrize("script", sorted(p.name for p in JS.glob("*.js")))
 def test_no_script_writes_a_copy_of_a_server_rule(script):
     source = (JS / script).read_text()
-    copies = [name for name in SERVER_NAMES if quoted(name).search(source)]
+    copies = [name for name in SERVER_NAMES + MODEL_NAMES if quoted(name).search(source)]
+    copies += [colour for colour in defined_colours() if colour.lower() in source.lower()]
     copies += [old for old in ("RECRUITMENT_PARAMS", "max_chars ??", "slice(-500)",
-                               "splice(0, 100)") if old in source]
-    assert copies == [], f"{script}: take these from the page's rules"
+                               "splice(0, 100)", "0, 114, 178") if old in source]
+    assert copies == [], f"{script}: take these from what the page carries"

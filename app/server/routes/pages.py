@@ -3,8 +3,10 @@
 from typing import get_args
 
 from fastapi import APIRouter, Request
-from fastapi.responses import HTMLResponse
+from fastapi.responses import HTMLResponse, Response
 
+from analysis.contracts import MODEL_COLORS, MODEL_LABELS
+from app.data.scene import BROWSER_PALETTE
 from app.prediction_view import MIN_WINDOW_PX
 from app.server import notices
 from app.server.crud import FINISHED
@@ -39,6 +41,8 @@ PAGE_RULES = {
     "predictions": {"max_step_tolerance": MAX_STEP_TOLERANCE,
                     "history_max_entries": HISTORY_MAX_ENTRIES},
 }
+# how the dashboard names and colours each model: as the analysis' figures do
+MODEL_STYLE = {"colors": MODEL_COLORS, "labels": MODEL_LABELS}
 
 
 def _render(request: Request, name: str, study_id: str, **extra) -> HTMLResponse:
@@ -47,7 +51,14 @@ def _render(request: Request, name: str, study_id: str, **extra) -> HTMLResponse
         request, name, {"study_id": study_id, "title": ctx.config.title,
                         "description": ctx.config.description,
                         "static_url": "/static", "studies": sorted(request.app.state.studies),
-                        **extra})
+                        "scene_palette": BROWSER_PALETTE, **extra})
+
+
+@router.get("/palette.css")
+def palette_css() -> Response:
+    """The scene palette's agent colours as CSS variables: the legend keys match the canvas."""
+    css = f":root {{ --robot: {BROWSER_PALETTE['robot']}; --human: {BROWSER_PALETTE['human']}; }}\n"
+    return Response(css, media_type="text/css")
 
 
 @router.get("/", response_class=HTMLResponse)
@@ -66,7 +77,7 @@ def show_study(study_id: str, request: Request) -> HTMLResponse:
     if study_id not in request.app.state.studies:
         return notice_page(request, notices.unknown_study(), status_code=404)
     if request.query_params.get("assignmentId") == MTURK_PREVIEW:
-        return _render(request, "mturk_preview.html", study_id)
+        return _render(request, "mturk_preview.html", study_id, scene_palette=None)
     return _render(request, "study.html", study_id, page_rules=PAGE_RULES)
 
 
@@ -80,4 +91,5 @@ def notice_page(request: Request, notice: Notice, status_code: int) -> HTMLRespo
 @router.get("/researcher", response_class=HTMLResponse)
 def show_researcher(request: Request) -> HTMLResponse:
     """The researcher dashboard (asks for the token, then calls the JSON routes)."""
-    return _render(request, "researcher.html", request.app.state.default_study)
+    return _render(request, "researcher.html", request.app.state.default_study,
+                   model_style=MODEL_STYLE)

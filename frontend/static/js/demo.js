@@ -18,8 +18,8 @@ const DEMO_SCENE = {
     { x_m: 11, y_m: 5, radius_m: 0.6, label: "goal B" },
   ],
   agents: [
-    { name: "robot", kind: "disc", length_m: 0.6, width_m: 0.6, color: "#0072B2" },
-    { name: "human", kind: "disc", length_m: 0.6, width_m: 0.6, color: "#E69F00" },
+    { name: "robot", kind: "disc", length_m: 0.6, width_m: 0.6 },
+    { name: "human", kind: "disc", length_m: 0.6, width_m: 0.6 },
   ],
 };
 

@@ -373,13 +373,15 @@ export class PredictionInput {
     ctx.beginPath();
     ctx.rect(x0, y0, x1 - x0, y1 - y0);
     ctx.clip();
-    ctx.fillStyle = "rgba(0, 114, 178, 0.10)";
+    ctx.fillStyle = ROBOT_COLOR;
     ctx.strokeStyle = ROBOT_COLOR;
     ctx.lineWidth = 1.5;
     ctx.setLineDash([5, 4]);
     ctx.beginPath();
     ctx.arc(cx, cy, this.trial.max_step_m * view.scale, 0, 2 * Math.PI);
+    ctx.globalAlpha = 0.1; // a light tint of the robot's colour
     ctx.fill();
+    ctx.globalAlpha = 1;
     ctx.stroke();
     ctx.fillStyle = "rgba(60, 60, 60, 0.35)";
     ctx.setLineDash([]);
