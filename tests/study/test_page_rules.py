@@ -6,6 +6,7 @@ study page, the scene palette as #scene-palette on every page that draws a scene
 dashboard) and the scripts in frontend/static/js keep no copy of them.
 """
 
+import dataclasses
 import re
 
 import pytest
@@ -83,6 +84,18 @@ def test_the_click_tolerance_the_page_uses_is_where_the_server_refuses(client, s
     assert over.status_code == 422 and "longer than the reachable" in over.text
     within = p.post("predictions", prediction_body(trial, moves_past_reach(tolerance / 2)))
     assert within.status_code == 201, within.text
+
+
+def test_the_instructions_count_the_served_studys_clicks_and_start_positions(client, small_study):
+    ctx = client.app.state.studies[small_study.study_id]
+    bank = dataclasses.replace(ctx.bank, data=ctx.bank.data.model_copy(
+        update={"steps_to_predict": 2}))
+    config = ctx.config.model_copy(update={"start_states": 4})
+    client.app.state.studies[small_study.study_id] = dataclasses.replace(
+        ctx, bank=bank, config=config)
+    page = " ".join(client.get(f"/s/{small_study.study_id}").text.split())
+    assert "after each of the next 2 steps" in page
+    assert "When all 2 positions are placed" in page and "(4 in each trial)" in page
 
 
 def test_app_js_has_one_device_check_per_screen_out_reason():

@@ -78,7 +78,10 @@ def show_study(study_id: str, request: Request) -> HTMLResponse:
         return notice_page(request, notices.unknown_study(), status_code=404)
     if request.query_params.get("assignmentId") == MTURK_PREVIEW:
         return _render(request, "mturk_preview.html", study_id, scene_palette=None)
-    return _render(request, "study.html", study_id, page_rules=PAGE_RULES)
+    ctx = study_context(request, study_id)  # the instructions say how many clicks, from where
+    return _render(request, "study.html", study_id, page_rules=PAGE_RULES,
+                   steps_to_predict=ctx.bank.data.steps_to_predict,
+                   start_states=ctx.config.start_states)
 
 
 def notice_page(request: Request, notice: Notice, status_code: int) -> HTMLResponse:

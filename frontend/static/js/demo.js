@@ -74,7 +74,7 @@ export class InstructionsDemo {
     };
     const input = new PredictionInput(this.canvas, trial, { rules: this.rules, onMessage: () => {} });
     input.shownAtPerf = performance.now();
-    this.onCaption("Then you click where the robot will be after each of the next 3 steps, inside the shaded circle");
+    this.onCaption("Then you click where the robot will be after each of the next steps, inside the shaded circle");
     input.render();
     const start = trial.start_states[0].robot;
     const clicks = [[start[0] + 1.2, start[1] - 0.6], [start[0] + 2.4, start[1] - 1.0], [start[0] + 3.6, start[1] - 1.2]];
@@ -83,6 +83,6 @@ export class InstructionsDemo {
       if (run !== this.run) return;
       input.place(point);
     }
-    this.onCaption("Three positions placed: in the study you then press Next (or Submit after the fifth start position)");
+    this.onCaption("Positions placed: in the study you then press Next (or Submit after the last start position)");
   }
 }
