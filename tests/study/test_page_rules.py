@@ -25,6 +25,7 @@ from app.server.schemas import (
     UrlParams,
 )
 from app.server.validation import MAX_STEP_TOLERANCE
+from app.study.config import SurveyQuestion
 from tests.conftest import REPO
 from tests.study.flow import at_first_trial, page_json, prediction_body, straight_clicks
 
@@ -64,6 +65,7 @@ def test_the_study_page_carries_each_rule_as_the_server_defines_it(client, small
     assert rules["events_per_request"] == schema_of(EventsCreate, "events")["maxItems"]
     assert rules["user_agent_max_chars"] == schema_of(ClientInfo, "user_agent")["maxLength"]
     assert rules["finished_outcomes"] == list(FINISHED)
+    assert rules["survey_kinds"] == schema_of(SurveyQuestion, "kind")["enum"]
     assert rules["min_window"] == MIN_WINDOW_PX
     for body in (PredictionCreate, DraftSave):
         history = schema_of(body, "history")
@@ -101,6 +103,11 @@ def test_the_instructions_count_the_served_studys_clicks_and_start_positions(cli
 def test_app_js_has_one_device_check_per_screen_out_reason():
     keys = table_keys((JS / "app.js").read_text(), "DEVICE_CHECKS")
     assert keys == schema_of(ScreenOutCreate, "reason")["enum"]
+
+
+def test_app_js_has_one_input_per_survey_question_kind():
+    keys = table_keys((JS / "app.js").read_text(), "QUESTION_INPUTS")
+    assert keys == schema_of(SurveyQuestion, "kind")["enum"]
 
 
 def test_app_js_logs_exactly_the_event_kinds_the_server_takes():

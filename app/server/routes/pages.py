@@ -22,12 +22,14 @@ from app.server.schemas import (
     UrlParams,
 )
 from app.server.validation import MAX_STEP_TOLERANCE
+from app.study.config import SurveyQuestion
 from app.study.errors import Notice
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
 # Every rule the participant page applies, from the server's one definition of it (study.html
-# hands it to app.js as #page-rules). app.js keeps one handler per phase and one device
-# check per screen-out reason; a trial's own limits (steps, reach, scene) come with the trial.
+# hands it to app.js as #page-rules). app.js keeps one handler per phase, one device check
+# per screen-out reason and one input per survey question kind; a trial's own limits (steps,
+# reach, scene) come with the trial.
 PAGE_RULES = {
     "phases": [phase.value for phase in Phase],
     "screen_out_phases": [phase.value for phase in BEFORE_TRIALS],
@@ -38,6 +40,7 @@ PAGE_RULES = {
     "events_per_request": EVENTS_PER_REQUEST,
     "user_agent_max_chars": USER_AGENT_MAX_CHARS,
     "finished_outcomes": list(FINISHED),
+    "survey_kinds": list(get_args(SurveyQuestion.model_fields["kind"].annotation)),
     "predictions": {"max_step_tolerance": MAX_STEP_TOLERANCE,
                     "history_max_entries": HISTORY_MAX_ENTRIES},
 }

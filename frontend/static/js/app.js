@@ -229,6 +229,7 @@ class ParticipantApp {
     show("loading");
     this.handlers = entriesFor(PHASE_HANDLERS, this.rules.phases, "handler of phase");
     this.deviceChecks = entriesFor(DEVICE_CHECKS, this.rules.screen_out_reasons, "device check of screen-out reason");
+    this.questionInputs = entriesFor(QUESTION_INPUTS, this.rules.survey_kinds, "input of survey question kind");
     const started = await this.ensureSession();
     if (!started) return;
     this.watchPage();
@@ -526,13 +527,13 @@ class ParticipantApp {
   showSurvey(step) {
     const questions = step?.questions ?? [];
     const container = $("survey-questions");
-    container.replaceChildren(...questions.map(questionElement));
+    container.replaceChildren(...questions.map((question) => questionElement(question, this.questionInputs)));
     show("survey");
     const form = $("survey-form");
     return new Promise((resolve, reject) => {
       form.onsubmit = (event) => {
         event.preventDefault();
-        const { answers, missing } = collectAnswers(form, questions);
+        const { answers, missing } = collectAnswers(form, questions, this.questionInputs);
         if (missing.length) {
           $("survey-message").textContent = `Please answer: ${missing.join("; ")}`;
           return;
@@ -823,26 +824,43 @@ function setProse(element, text) {
   element.replaceChildren(...paragraphs.filter((p) => p.textContent));
 }
 
-function questionElement(question) {
+/**
+ * One input per kind of survey question the server has (app/study/config.py
+ * `SurveyQuestion.kind`; the page lists them in its rules): its element, and the answer
+ * from the form's value.
+ */
+const QUESTION_INPUTS = {
+  likert: {
+    element: (question) => choiceRow(question, "likert", Array.from(
+      { length: question.scale_max - question.scale_min + 1 }, (_, i) => String(question.scale_min + i))),
+    answer: Number,
+  },
+  text: { element: textArea, answer: String },
+  choice: { element: (question) => choiceRow(question, "choices", question.options), answer: String },
+};
+
+function questionElement(question, inputs) {
   const fieldset = document.createElement("fieldset");
   fieldset.className = "question";
   const legend = document.createElement("legend");
   legend.textContent = question.text + (question.required === false ? " (optional)" : "");
-  fieldset.append(legend);
-  if (question.kind === "text") {
-    const area = document.createElement("textarea");
-    area.name = question.key;
-    area.rows = 3;
-    area.maxLength = question.max_chars;
-    area.setAttribute("aria-label", question.text);
-    fieldset.append(area);
-    return fieldset;
-  }
-  const values = question.kind === "likert"
-    ? Array.from({ length: question.scale_max - question.scale_min + 1 }, (_, i) => String(question.scale_min + i))
-    : question.options;
+  fieldset.append(legend, inputs.get(question.kind).element(question));
+  return fieldset;
+}
+
+function textArea(question) {
+  const area = document.createElement("textarea");
+  area.name = question.key;
+  area.rows = 3;
+  area.maxLength = question.max_chars;
+  area.setAttribute("aria-label", question.text);
+  return area;
+}
+
+/** One radio button per value, in a row of class `className`. */
+function choiceRow(question, className, values) {
   const row = document.createElement("div");
-  row.className = question.kind === "likert" ? "likert" : "choices";
+  row.className = className;
   for (const value of values) {
     const label = document.createElement("label");
     const radio = document.createElement("input");
@@ -852,11 +870,10 @@ function questionElement(question) {
     label.append(radio, ` ${value}`);
     row.append(label);
   }
-  fieldset.append(row);
-  return fieldset;
+  return row;
 }
 
-function collectAnswers(form, questions) {
+function collectAnswers(form, questions, inputs) {
   const data = new FormData(form);
   const answers = {};
   const missing = [];
@@ -866,7 +883,7 @@ function collectAnswers(form, questions) {
       if (question.required !== false) missing.push(question.text);
       continue;
     }
-    answers[question.key] = question.kind === "likert" ? Number(raw) : raw;
+    answers[question.key] = inputs.get(question.kind).answer(raw);
   }
   return { answers, missing };
 }
