@@ -2,7 +2,8 @@
 
 - the export columns and their types (predictions, survey, events, participants);
 - alignment error, the study's one metric;
-- the exclusion rules a study config names and the analysis applies.
+- the exclusion rules a study config names and the analysis applies;
+- how the figures and the researcher dashboard name and colour each model.
 
 Both `app` and `analysis` import this module; it imports neither, so the packages
 depend one way. Only numpy and pydantic.
@@ -69,6 +70,12 @@ SCHEMAS = {"survey": SURVEY, "events": EVENTS, "participants": PARTICIPANTS}
 WHAT = ("predictions", *SCHEMAS)
 
 MODELS = ("ours", "vae", "cv", "policy")
+# Okabe-Ito, safe for colour-blind readers; `human` is the participants' answers
+MODEL_COLORS = {"ours": "#E69F00", "vae": "#0072B2", "cv": "#009E73", "policy": "#CC79A7",
+                "human": "#000000"}
+MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy",
+                "human": "Participants"}
+
 ZERO_SPEED_MPS = 1e-6
 
 

@@ -10,6 +10,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
+from analysis.contracts import MODEL_COLORS, MODEL_LABELS  # noqa: E402
 from analysis.fields import (  # noqa: E402
     FIELD_MODELS,
     arrow_length,
@@ -21,12 +22,6 @@ from analysis.fields import (  # noqa: E402
 )
 from analysis.scene_plot import draw_scene  # noqa: E402
 from analysis.stats import PairedResult, mean_ci95  # noqa: E402
-
-# Okabe-Ito, as in analysis/scene_plot.py: safe for colour-blind readers.
-MODEL_COLORS = {"ours": "#E69F00", "vae": "#0072B2", "cv": "#009E73", "policy": "#CC79A7",
-                "human": "#000000"}
-MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy",
-                "human": "Participants"}
 
 
 def save(fig, base: Path) -> list[Path]:

@@ -59,6 +59,24 @@ class Scene(StrictModel):
 
 
 # Okabe-Ito colours (distinguishable for colour-blind readers); label colours for plots are
-# in analysis/scene_plot.py.
+# in analysis/scene_plot.py. Plots and each scene's `agents[].color` use these.
 ROBOT_COLOR = "#0072B2"
 HUMAN_COLOR = "#E69F00"
+
+# What the browser draws a scene with (frontend/static/js/scene.js; the pages get it from
+# app/server/routes/pages.py, which also serves the legend's two as CSS). Every agent, trace,
+# marker and goal is at least 3:1 against the ground it is drawn on (WCAG 2.1 SC 1.4.11;
+# tests/e2e measures it on the canvas), which a plot on white paper does not have to meet:
+# - the person is a darker orange than HUMAN_COLOR, which is 2.2:1 on white; the browser
+#   ignores a scene's `agents[].color` and draws the robot and the person with these;
+# - the road is light enough for both agents (dark asphalt left the blue robot at 1.2:1);
+# - goal rings are distinct from both agents, each >= 5:1 on the field, where plots cycle
+#   through analysis/scene_plot.py LABEL_COLORS on white.
+BROWSER_PALETTE = {
+    "robot": ROBOT_COLOR,
+    "human": "#B35C00",
+    "human_text": "#7a4000",  # the person's tag, on a white label
+    "ground": {"field": "#fbfbf8", "road": "#e8eaed", "shoulder": "#cfd8c8"},
+    "lane_mark": "#5f6368",
+    "goals": ["#007A5A", "#6A3D9A", "#A0306A", "#333333"],
+}

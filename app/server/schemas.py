@@ -11,6 +11,13 @@ from pydantic import ConfigDict, ValidationInfo, field_validator
 from pydantic import Field as PydField
 from sqlmodel import SQLModel
 
+# Limits the participant page applies too (app/server/routes/pages.py hands them over).
+USER_AGENT_MAX_CHARS = 512  # the page cuts navigator.userAgent to this
+HISTORY_MAX_ENTRIES = 500  # undo and reset presses kept with a trial (the newest)
+EVENTS_PER_REQUEST = 100  # telemetry events in one POST .../events
+ScreenOutReason = Literal["touch_only", "window_too_small"]  # app.js checks each on the device
+EventKind = Literal["visibility_hidden", "visibility_shown", "resize", "clip_finished", "replay"]
+
 # ---------------------------------------------------------------- request bodies
 
 class _Body(SQLModel):
@@ -37,7 +44,7 @@ class ClientInfo(_Body):
     screen_w: int = PydField(default=0, ge=0, le=100_000)
     screen_h: int = PydField(default=0, ge=0, le=100_000)
     touch_only: bool = False
-    user_agent: str = PydField(default="", max_length=512)
+    user_agent: str = PydField(default="", max_length=USER_AGENT_MAX_CHARS)
 
 
 class SessionCreate(_Body):
@@ -82,7 +89,7 @@ class PredictionCreate(SubmissionBody):
     shown_at_ms: float = PydField(ge=0)
     submitted_at_ms: float = PydField(ge=0)
     replays: int = PydField(default=0, ge=0, le=10_000)
-    history: list[HistoryEntry] = PydField(default=[], max_length=500)
+    history: list[HistoryEntry] = PydField(default=[], max_length=HISTORY_MAX_ENTRIES)
 
 
 class DraftSave(_Body):
@@ -93,7 +100,7 @@ class DraftSave(_Body):
     index: int = PydField(ge=0, le=100)  # the start state being answered
     points: list[list[Point]] = PydField(max_length=100)
     click_times_ms: list[list[float]] = PydField(max_length=100)
-    history: list[HistoryEntry] = PydField(default=[], max_length=500)
+    history: list[HistoryEntry] = PydField(default=[], max_length=HISTORY_MAX_ENTRIES)
     shown_at_ms: float = PydField(ge=0)  # when the trial was first shown (browser epoch ms)
     replays: int = PydField(default=0, ge=0, le=10_000)
     predicting: bool = True  # false while the clips are still being watched
@@ -127,7 +134,7 @@ class DeclineCreate(SubmissionBody):
 class ScreenOutCreate(SubmissionBody):
     """POST .../screen-out: the device check failed and the participant cannot switch."""
 
-    reason: Literal["touch_only", "window_too_small"]
+    reason: ScreenOutReason
 
 
 class SurveyCreate(SubmissionBody):
@@ -158,7 +165,7 @@ class EventIn(_Body):
     """One telemetry event: a kind the browser sends, with that kind's `data` (EVENT_DATA)."""
 
     submission_id: uuid.UUID
-    kind: Literal["visibility_hidden", "visibility_shown", "resize", "clip_finished", "replay"]
+    kind: EventKind
     t_client_ms: float = PydField(ge=0)
     data: dict = {}
 
@@ -175,7 +182,7 @@ class EventIn(_Body):
 class EventsCreate(_Body):
     """POST .../events (at most 100 per request)."""
 
-    events: list[EventIn] = PydField(min_length=1, max_length=100)
+    events: list[EventIn] = PydField(min_length=1, max_length=EVENTS_PER_REQUEST)
 
 
 class NoEventData(_Body):

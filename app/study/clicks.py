@@ -11,7 +11,8 @@ import numpy as np
 from app.study.errors import Refused
 from app.study.trials import TrialRecord, WorldBank
 
-# a move may exceed the reachable length by this fraction: the page rounds what it sends
+# a move up to this share longer than max_step_m counts: a click on the reach circle's edge
+# may come out a rounding error longer (the page applies the same, from the page rules)
 MAX_STEP_TOLERANCE = 1e-6
 
 

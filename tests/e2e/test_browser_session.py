@@ -16,6 +16,7 @@ import pytest
 import yaml
 
 from app.configio import load_yaml_model
+from app.server.routes.pages import PAGE_RULES
 from app.study.config import StudyConfig
 from tests.conftest import ADMIN_TOKEN, REPO
 from tests.e2e.conftest import BROWSER_STUDY
@@ -333,7 +334,7 @@ MODULE_CHECKS = """async () => {
     const trial = { trial_id: "t", scene: { bounds, lanes: [], obstacles: [], goals: [],
                     agents: [] }, segment: clip, start_states: [start, start],
                     steps_to_predict: 3, max_step_m: 4, min_step_m: 0.4 };
-    const input = new PredictionInput(canvas, trial);
+    const input = new PredictionInput(canvas, trial, { rules: PREDICTION_RULES });
     input.shownAtPerf = performance.now();
     const refusals = [[0.1, 4], [5, 4], [2, 6], [0, 11.5]].map((p) => input.refusal(p));
     const placed = [[3, 4], [6, 4], [9, 4], [12, 4]].map((p) => input.place(p));
@@ -342,7 +343,7 @@ MODULE_CHECKS = """async () => {
     const metreX = view.toPx([1, 0])[0] - view.toPx([0, 0])[0];
     return { scale: view.scale, metreX, metreY, corner, back, mid, refusals, placed,
              done: input.stateDone(), next: input.next(), index: input.index };
-}"""
+}""".replace("PREDICTION_RULES", json.dumps(PAGE_RULES["predictions"]))
 
 
 def test_frontend_modules_scale_interpolate_and_refuse(chromium, browser_server):

@@ -2,6 +2,8 @@
 
 import dataclasses
 import hashlib
+import json
+import re
 import uuid
 from dataclasses import dataclass
 
@@ -245,3 +247,11 @@ def make_client(small_study, db_url: str, trust_client_clock: bool = True) -> Te
     """
     settings = small_study.settings(db_url, trust_client_clock=trust_client_clock)
     return TestClient(create_app(settings, [small_study.study_id]))
+
+
+def page_json(html: str, element_id: str):
+    """What a page carries in its `<script type="application/json" id=element_id>`."""
+    block = re.search(rf'<script type="application/json" id="{element_id}">(.*?)</script>',
+                      html, re.S)
+    assert block, f"no #{element_id} on the page"
+    return json.loads(block.group(1))

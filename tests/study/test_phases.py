@@ -8,7 +8,7 @@ from sqlmodel import Session, select
 from app.server.plan import BEFORE_TRIALS, Phase, dump_plan, parse_plan
 from app.server.tables import Participant
 from tests.conftest import REPO
-from tests.study.flow import at_first_trial
+from tests.study.flow import at_first_trial, page_json
 
 APP_JS = REPO / "frontend" / "static" / "js" / "app.js"
 # a phase compared with a literal, in either order, or a literal `case` label
@@ -36,11 +36,9 @@ def test_app_js_compares_no_phase_with_a_literal():
 
 
 def test_the_study_page_embeds_the_phases(client, small_study):
-    page = client.get(f"/s/{small_study.study_id}").text
-    phases = re.search(r"data-phases='([^']*)'", page).group(1)
-    screen_out = re.search(r"data-screen-out-phases='([^']*)'", page).group(1)
-    assert json.loads(phases) == [phase.value for phase in Phase]
-    assert json.loads(screen_out) == [phase.value for phase in BEFORE_TRIALS]
+    rules = page_json(client.get(f"/s/{small_study.study_id}").text, "page-rules")
+    assert rules["phases"] == [phase.value for phase in Phase]
+    assert rules["screen_out_phases"] == [phase.value for phase in BEFORE_TRIALS]
 
 
 def test_a_stored_plan_reads_back_to_the_same_json(client, small_study):

@@ -1,20 +1,51 @@
 """HTML pages: landing, the participant app and the researcher dashboard (jinja2)."""
 
-from fastapi import APIRouter, Request
-from fastapi.responses import HTMLResponse
+from typing import get_args
 
+from fastapi import APIRouter, Request
+from fastapi.responses import HTMLResponse, Response
+
+from analysis.contracts import MODEL_COLORS, MODEL_LABELS
+from app.data.scene import BROWSER_PALETTE
 from app.prediction_view import MIN_WINDOW_PX
 from app.server import notices
+from app.server.crud import FINISHED
 from app.server.deps import study_context
 from app.server.plan import BEFORE_TRIALS, Phase
 from app.server.recruitment import MTURK_PREVIEW
+from app.server.schemas import (
+    EVENTS_PER_REQUEST,
+    HISTORY_MAX_ENTRIES,
+    USER_AGENT_MAX_CHARS,
+    EventKind,
+    ScreenOutReason,
+    UrlParams,
+)
+from app.study.clicks import MAX_STEP_TOLERANCE
+from app.study.config import SurveyQuestion
 from app.study.errors import Notice
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
-# what the participant page is told about phases (app.js keeps one handler per phase)
-PHASES = {"phases": [phase.value for phase in Phase],
-          "screen_out_phases": [phase.value for phase in BEFORE_TRIALS],
-          "min_window": MIN_WINDOW_PX}
+# Every rule the participant page applies, from the server's one definition of it (study.html
+# hands it to app.js as #page-rules). app.js keeps one handler per phase, one device check
+# per screen-out reason and one input per survey question kind; a trial's own limits (steps,
+# reach, scene) come with the trial.
+PAGE_RULES = {
+    "phases": [phase.value for phase in Phase],
+    "screen_out_phases": [phase.value for phase in BEFORE_TRIALS],
+    "screen_out_reasons": list(get_args(ScreenOutReason)),
+    "min_window": MIN_WINDOW_PX,
+    "recruitment_params": list(UrlParams.model_fields),
+    "event_kinds": list(get_args(EventKind)),
+    "events_per_request": EVENTS_PER_REQUEST,
+    "user_agent_max_chars": USER_AGENT_MAX_CHARS,
+    "finished_outcomes": list(FINISHED),
+    "survey_kinds": list(get_args(SurveyQuestion.model_fields["kind"].annotation)),
+    "predictions": {"max_step_tolerance": MAX_STEP_TOLERANCE,
+                    "history_max_entries": HISTORY_MAX_ENTRIES},
+}
+# how the dashboard names and colours each model: as the analysis' figures do
+MODEL_STYLE = {"colors": MODEL_COLORS, "labels": MODEL_LABELS}
 
 
 def _render(request: Request, name: str, study_id: str, **extra) -> HTMLResponse:
@@ -23,7 +54,14 @@ def _render(request: Request, name: str, study_id: str, **extra) -> HTMLResponse
         request, name, {"study_id": study_id, "title": ctx.config.title,
                         "description": ctx.config.description,
                         "static_url": "/static", "studies": sorted(request.app.state.studies),
-                        **extra})
+                        "scene_palette": BROWSER_PALETTE, **extra})
+
+
+@router.get("/palette.css")
+def palette_css() -> Response:
+    """The scene palette's agent colours as CSS variables: the legend keys match the canvas."""
+    css = f":root {{ --robot: {BROWSER_PALETTE['robot']}; --human: {BROWSER_PALETTE['human']}; }}\n"
+    return Response(css, media_type="text/css")
 
 
 @router.get("/", response_class=HTMLResponse)
@@ -42,8 +80,11 @@ def show_study(study_id: str, request: Request) -> HTMLResponse:
     if study_id not in request.app.state.studies:
         return notice_page(request, notices.unknown_study(), status_code=404)
     if request.query_params.get("assignmentId") == MTURK_PREVIEW:
-        return _render(request, "mturk_preview.html", study_id)
-    return _render(request, "study.html", study_id, **PHASES)
+        return _render(request, "mturk_preview.html", study_id, scene_palette=None)
+    ctx = study_context(request, study_id)  # the instructions say how many clicks, from where
+    return _render(request, "study.html", study_id, page_rules=PAGE_RULES,
+                   steps_to_predict=ctx.bank.data.steps_to_predict,
+                   start_states=ctx.config.start_states)
 
 
 def notice_page(request: Request, notice: Notice, status_code: int) -> HTMLResponse:
@@ -56,4 +97,5 @@ def notice_page(request: Request, notice: Notice, status_code: int) -> HTMLRespo
 @router.get("/researcher", response_class=HTMLResponse)
 def show_researcher(request: Request) -> HTMLResponse:
     """The researcher dashboard (asks for the token, then calls the JSON routes)."""
-    return _render(request, "researcher.html", request.app.state.default_study)
+    return _render(request, "researcher.html", request.app.state.default_study,
+                   model_style=MODEL_STYLE)

@@ -5,7 +5,6 @@ import { ClipPlayer, trialClips } from "./player.js";
 import { PredictionInput } from "./predict.js";
 import { drawBackground, label, prepareCanvas } from "./scene.js";
 
-const RECRUITMENT_PARAMS = ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID", "workerId", "assignmentId", "hitId", "turkSubmitTo"];
 const REDIRECT_DELAY_MS = 5000;
 const SCREENS = ["loading", "unsupported", "consent", "instructions", "world", "practice-over", "trial", "pause",
   "survey", "done", "notice", "error"];
@@ -21,7 +20,7 @@ const $ = (id) => document.getElementById(id);
 
 /**
  * One handler per phase the server sends (app/server/plan.py `Phase`; the page lists them in
- * `data-phases`). `show` resolves with the next state once the participant's answer is
+ * its rules). `show` resolves with the next state once the participant's answer is
  * stored (or with null: read the state again); `ends` marks the phase that ends the session.
  */
 const PHASE_HANDLERS = {
@@ -35,31 +34,40 @@ const PHASE_HANDLERS = {
   done: { show: (app, state) => app.showDone(state), ends: true },
 };
 
-/** The handler of every phase the page lists; throws on a phase this script cannot show. */
-function handlerTable(phases) {
-  const missing = phases.filter((phase) => !Object.hasOwn(PHASE_HANDLERS, phase));
-  if (missing.length) throw new Error(`no handler for phase ${missing.join(", ")}`);
-  return new Map(phases.map((phase) => [phase, PHASE_HANDLERS[phase]]));
+/**
+ * One check per reason the server takes for a screen-out (app/server/schemas.py
+ * `ScreenOutReason`; the page lists them in its rules): given the smallest window the
+ * server's prediction view is made for, why this device cannot run the study, or null.
+ */
+const DEVICE_CHECKS = {
+  touch_only: () => (matchMedia("(any-pointer: coarse)").matches && !matchMedia("(any-pointer: fine)").matches
+    ? "This study needs a mouse or touchpad: touch-only devices are not supported." : null),
+  window_too_small: (min) => (innerWidth < min.width || innerHeight < min.height
+    ? `Your browser window is ${innerWidth} × ${innerHeight} pixels; the study needs at least ${min.width} × ${min.height}.`
+    : null),
+};
+
+/** The entries of `table` for `names`, in their order; throws on a name this script has none for. */
+function entriesFor(table, names, what) {
+  const missing = names.filter((name) => !Object.hasOwn(table, name));
+  if (missing.length) throw new Error(`no ${what} for ${missing.join(", ")}`);
+  return new Map(names.map((name) => [name, table[name]]));
+}
+
+/** The rules the server hands this page (app/server/routes/pages.py `PAGE_RULES`). */
+function pageRules() {
+  return JSON.parse($("page-rules").textContent);
 }
 
 function show(screen) {
   for (const name of SCREENS) $(`screen-${name}`).hidden = name !== screen;
 }
 
-/**
- * Why this device cannot run the study ({code, text}: code as POST /screen-out takes it), or
- * null. `min` is the smallest window the server's prediction view is made for.
- */
-function unsupportedReason(min) {
-  const touchOnly = matchMedia("(any-pointer: coarse)").matches && !matchMedia("(any-pointer: fine)").matches;
-  if (touchOnly) {
-    return { code: "touch_only", text: "This study needs a mouse or touchpad: touch-only devices are not supported." };
-  }
-  if (innerWidth < min.width || innerHeight < min.height) {
-    return {
-      code: "window_too_small",
-      text: `Your browser window is ${innerWidth} × ${innerHeight} pixels; the study needs at least ${min.width} × ${min.height}.`,
-    };
+/** Why this device cannot run the study ({code, text}: code as POST /screen-out takes it), or null. */
+function unsupportedReason(checks, minWindow) {
+  for (const [code, check] of checks) {
+    const text = check(minWindow);
+    if (text) return { code, text };
   }
   return null;
 }
@@ -147,15 +155,21 @@ class DraftSaver {
   }
 }
 
-/** Batches telemetry events and posts them; kept in memory until the server takes them. */
+/**
+ * Batches telemetry events and posts them, at most `perRequest` at a time; kept in memory
+ * until the server takes them. `kinds` are the event kinds the server takes.
+ */
 class Telemetry {
-  constructor(api) {
+  constructor(api, { kinds, perRequest }) {
     this.api = api;
+    this.kinds = new Set(kinds);
+    this.perRequest = perRequest;
     this.queue = [];
     this.timer = null;
   }
 
   log(kind, data = {}) {
+    if (!this.kinds.has(kind)) throw new Error(`the server takes no event ${kind}`);
     this.queue.push({ submission_id: newUuid(), kind, t_client_ms: Date.now(), data });
     clearTimeout(this.timer);
     this.timer = setTimeout(() => this.flush(), 1000);
@@ -163,7 +177,7 @@ class Telemetry {
 
   async flush({ keepalive = false } = {}) {
     if (!this.api.token || !this.queue.length) return;
-    const batch = this.queue.splice(0, 100);
+    const batch = this.queue.splice(0, this.perRequest);
     try {
       const response = await this.api.events(batch, { keepalive });
       if (response.status >= 500) this.queue.unshift(...batch);
@@ -173,10 +187,11 @@ class Telemetry {
   }
 }
 
-function recruitmentFromUrl() {
+/** The URL's recruitment parameters among `names` (those the server takes). */
+function recruitmentFromUrl(names) {
   const params = new URLSearchParams(location.search);
   const recruitment = {};
-  for (const key of RECRUITMENT_PARAMS) if (params.get(key)) recruitment[key] = params.get(key);
+  for (const key of names) if (params.get(key)) recruitment[key] = params.get(key);
   return recruitment;
 }
 
@@ -190,31 +205,31 @@ function forPeople(detail) {
   return String(detail).replace(/^[\w.-]+: /, "");
 }
 
-function clientInfo() {
+function clientInfo(userAgentMaxChars) {
   return {
     screen_w: innerWidth,
     screen_h: innerHeight,
     touch_only: false,
-    user_agent: navigator.userAgent,
+    user_agent: navigator.userAgent.slice(0, userAgentMaxChars),
   };
 }
 
 class ParticipantApp {
   constructor(root) {
     const studyId = root.dataset.studyId;
+    this.rules = pageRules();
     this.api = new StudyApi(studyId);
-    this.telemetry = new Telemetry(this.api);
+    this.telemetry = new Telemetry(this.api, { kinds: this.rules.event_kinds, perRequest: this.rules.events_per_request });
     this.storageKey = `tomstudy.${studyId}.session`;
-    this.phases = JSON.parse(root.dataset.phases);
-    this.screenOutPhases = JSON.parse(root.dataset.screenOutPhases);
-    this.minWindow = JSON.parse(root.dataset.minWindow);
     this.heartbeat = null;
     this.lost = false;
   }
 
   async run() {
     show("loading");
-    this.handlers = handlerTable(this.phases);
+    this.handlers = entriesFor(PHASE_HANDLERS, this.rules.phases, "handler of phase");
+    this.deviceChecks = entriesFor(DEVICE_CHECKS, this.rules.screen_out_reasons, "device check of screen-out reason");
+    this.questionInputs = entriesFor(QUESTION_INPUTS, this.rules.survey_kinds, "input of survey question kind");
     const started = await this.ensureSession();
     if (!started) return;
     this.watchPage();
@@ -330,10 +345,10 @@ class ParticipantApp {
    * screened-out ending and the promise resolves with the done state.
    */
   checkDevice(state) {
-    const canEnd = this.screenOutPhases.includes(state.phase);
+    const canEnd = this.rules.screen_out_phases.includes(state.phase);
     return new Promise((resolve, reject) => {
       const check = () => {
-        const reason = unsupportedReason(this.minWindow);
+        const reason = unsupportedReason(this.deviceChecks, this.rules.min_window);
         if (!reason) {
           removeEventListener("resize", check);
           resolve(state);
@@ -355,7 +370,7 @@ class ParticipantApp {
 
   /** Resume the token kept in sessionStorage (same recruitment), else start or resume on the server. */
   async ensureSession() {
-    const recruitment = recruitmentFromUrl();
+    const recruitment = recruitmentFromUrl(this.rules.recruitment_params);
     const preview = previewFromUrl();
     const recruitmentKey = JSON.stringify({ recruitment, preview });
     const stored = JSON.parse(sessionStorage.getItem(this.storageKey) || "null");
@@ -435,7 +450,7 @@ class ParticipantApp {
       button.onclick = () => {
         button.disabled = true;
         decline.disabled = true;
-        this.api.consent(clientInfo()).then(resolve, reject);
+        this.api.consent(clientInfo(this.rules.user_agent_max_chars)).then(resolve, reject);
       };
       decline.onclick = () => {
         button.disabled = true;
@@ -449,6 +464,7 @@ class ParticipantApp {
     setProse($("instructions-text"), step?.text ?? step?.instructions_text ?? "");
     show("instructions");
     const player = new InstructionsDemo($("demo-canvas"), {
+      rules: this.rules.predictions,
       onCaption: (text) => { $("demo-caption").textContent = text; },
     });
     player.play();
@@ -511,13 +527,13 @@ class ParticipantApp {
   showSurvey(step) {
     const questions = step?.questions ?? [];
     const container = $("survey-questions");
-    container.replaceChildren(...questions.map(questionElement));
+    container.replaceChildren(...questions.map((question) => questionElement(question, this.questionInputs)));
     show("survey");
     const form = $("survey-form");
     return new Promise((resolve, reject) => {
       form.onsubmit = (event) => {
         event.preventDefault();
-        const { answers, missing } = collectAnswers(form, questions);
+        const { answers, missing } = collectAnswers(form, questions, this.questionInputs);
         if (missing.length) {
           $("survey-message").textContent = `Please answer: ${missing.join("; ")}`;
           return;
@@ -538,7 +554,7 @@ class ParticipantApp {
   showDone(state) {
     if (state.progress) this.updateProgress(state.progress);
     const step = state.step || {};
-    const finished = ["completed", "failed_checks", "excluded"].includes(step.outcome);
+    const finished = this.rules.finished_outcomes.includes(step.outcome);
     $("done-heading").textContent = finished ? "Thank you!" : "The study has ended";
     $("done-message").textContent = step.message || (finished ? "You have finished the study." : "");
     $("completion-code").textContent = step.completion_code ?? "";
@@ -712,6 +728,7 @@ class TrialScreen {
     $("replay").disabled = false;
     if (!this.input) {
       this.input = new PredictionInput(this.canvas, this.trial, {
+        rules: this.app.rules.predictions,
         onChange: (input, options) => this.changed(input, options),
         onMessage: (text, kind) => this.setMessage(text, kind),
         overview: $("overview-canvas"),
@@ -807,26 +824,43 @@ function setProse(element, text) {
   element.replaceChildren(...paragraphs.filter((p) => p.textContent));
 }
 
-function questionElement(question) {
+/**
+ * One input per kind of survey question the server has (app/study/config.py
+ * `SurveyQuestion.kind`; the page lists them in its rules): its element, and the answer
+ * from the form's value.
+ */
+const QUESTION_INPUTS = {
+  likert: {
+    element: (question) => choiceRow(question, "likert", Array.from(
+      { length: question.scale_max - question.scale_min + 1 }, (_, i) => String(question.scale_min + i))),
+    answer: Number,
+  },
+  text: { element: textArea, answer: String },
+  choice: { element: (question) => choiceRow(question, "choices", question.options), answer: String },
+};
+
+function questionElement(question, inputs) {
   const fieldset = document.createElement("fieldset");
   fieldset.className = "question";
   const legend = document.createElement("legend");
   legend.textContent = question.text + (question.required === false ? " (optional)" : "");
-  fieldset.append(legend);
-  if (question.kind === "text") {
-    const area = document.createElement("textarea");
-    area.name = question.key;
-    area.rows = 3;
-    area.maxLength = question.max_chars ?? 2000;
-    area.setAttribute("aria-label", question.text);
-    fieldset.append(area);
-    return fieldset;
-  }
-  const values = question.kind === "likert"
-    ? Array.from({ length: question.scale_max - question.scale_min + 1 }, (_, i) => String(question.scale_min + i))
-    : question.options;
+  fieldset.append(legend, inputs.get(question.kind).element(question));
+  return fieldset;
+}
+
+function textArea(question) {
+  const area = document.createElement("textarea");
+  area.name = question.key;
+  area.rows = 3;
+  area.maxLength = question.max_chars;
+  area.setAttribute("aria-label", question.text);
+  return area;
+}
+
+/** One radio button per value, in a row of class `className`. */
+function choiceRow(question, className, values) {
   const row = document.createElement("div");
-  row.className = question.kind === "likert" ? "likert" : "choices";
+  row.className = className;
   for (const value of values) {
     const label = document.createElement("label");
     const radio = document.createElement("input");
@@ -836,11 +870,10 @@ function questionElement(question) {
     label.append(radio, ` ${value}`);
     row.append(label);
   }
-  fieldset.append(row);
-  return fieldset;
+  return row;
 }
 
-function collectAnswers(form, questions) {
+function collectAnswers(form, questions, inputs) {
   const data = new FormData(form);
   const answers = {};
   const missing = [];
@@ -850,7 +883,7 @@ function collectAnswers(form, questions) {
       if (question.required !== false) missing.push(question.text);
       continue;
     }
-    answers[question.key] = question.kind === "likert" ? Number(raw) : raw;
+    answers[question.key] = inputs.get(question.kind).answer(raw);
   }
   return { answers, missing };
 }

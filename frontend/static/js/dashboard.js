@@ -1,9 +1,10 @@
 // Researcher dashboard views: sessions table, study versions, error plots (SVG), field panels.
 import { drawBackground, prepareCanvas } from "./scene.js";
 
-// Okabe-Ito, as analysis/plots.py MODEL_COLORS.
-export const MODEL_COLORS = { ours: "#E69F00", vae: "#0072B2", cv: "#009E73", policy: "#CC79A7", human: "#000000" };
-export const MODEL_LABELS = { ours: "Ours", vae: "VAE", cv: "Const. vel.", policy: "Policy", human: "Participants" };
+// The analysis' figures' names and colours (analysis/contracts.py), as the page carries them.
+const MODEL_STYLE = JSON.parse(document.getElementById("model-style").textContent);
+export const MODEL_COLORS = MODEL_STYLE.colors;
+export const MODEL_LABELS = MODEL_STYLE.labels;
 const PLOT_MODELS = ["ours", "vae", "cv", "policy"];
 const SVG = "http://www.w3.org/2000/svg";
 

@@ -18,8 +18,8 @@ const DEMO_SCENE = {
     { x_m: 11, y_m: 5, radius_m: 0.6, label: "goal B" },
   ],
   agents: [
-    { name: "robot", kind: "disc", length_m: 0.6, width_m: 0.6, color: "#0072B2" },
-    { name: "human", kind: "disc", length_m: 0.6, width_m: 0.6, color: "#E69F00" },
+    { name: "robot", kind: "disc", length_m: 0.6, width_m: 0.6 },
+    { name: "human", kind: "disc", length_m: 0.6, width_m: 0.6 },
   ],
 };
 
@@ -45,10 +45,11 @@ function wait(ms) {
   return new Promise((resolve) => setTimeout(resolve, ms));
 }
 
-/** Plays the illustration once: a clip, then three clicks from a start state. */
+/** Plays the illustration once: a clip, then three clicks from a start state (`rules` as PredictionInput takes them). */
 export class InstructionsDemo {
-  constructor(canvas, { onCaption = () => {} } = {}) {
+  constructor(canvas, { rules, onCaption = () => {} }) {
     this.canvas = canvas;
+    this.rules = rules;
     this.onCaption = onCaption;
     this.clip = demoClip();
     this.player = new ClipPlayer(canvas, DEMO_SCENE, [
@@ -71,9 +72,9 @@ export class InstructionsDemo {
       start_states: [{ robot: this.clip.positions[5][0], human: end[1] }],
       max_step_m: 1.6, min_step_m: 0.2,
     };
-    const input = new PredictionInput(this.canvas, trial, { onMessage: () => {} });
+    const input = new PredictionInput(this.canvas, trial, { rules: this.rules, onMessage: () => {} });
     input.shownAtPerf = performance.now();
-    this.onCaption("Then you click where the robot will be after each of the next 3 steps, inside the shaded circle");
+    this.onCaption("Then you click where the robot will be after each of the next steps, inside the shaded circle");
     input.render();
     const start = trial.start_states[0].robot;
     const clicks = [[start[0] + 1.2, start[1] - 0.6], [start[0] + 2.4, start[1] - 1.0], [start[0] + 3.6, start[1] - 1.2]];
@@ -82,6 +83,6 @@ export class InstructionsDemo {
       if (run !== this.run) return;
       input.place(point);
     }
-    this.onCaption("Three positions placed: in the study you then press Next (or Submit after the fifth start position)");
+    this.onCaption("Positions placed: in the study you then press Next (or Submit after the last start position)");
   }
 }

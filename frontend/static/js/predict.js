@@ -50,15 +50,18 @@ function availableHeight(canvas) {
 /**
  * Collects `steps_to_predict` clicks for each start state of a trial.
  * Calls `onChange(input)` after every change and `onMessage(text, kind)` for feedback.
+ * `rules` are the server's for every trial (app/server/routes/pages.py PAGE_RULES
+ * `predictions`); a trial's own limits (steps, reach, scene bounds) come with the trial.
  *
  * The view is drawn at the server's scale for this world (`trial.view.px_per_m`,
  * app/prediction_view.py), the same on every screen, around the robot; `overview`, when
  * given, is a canvas that shows the whole scene with the zoomed frame on it.
  */
 export class PredictionInput {
-  constructor(canvas, trial, { onChange = () => {}, onMessage = () => {}, overview = null } = {}) {
+  constructor(canvas, trial, { rules, onChange = () => {}, onMessage = () => {}, overview = null }) {
     this.canvas = canvas;
     this.trial = trial;
+    this.rules = rules;
     this.scene = trial.scene;
     this.overview = overview;
     this.onChange = onChange;
@@ -91,7 +94,7 @@ export class PredictionInput {
       index: this.index,
       points: this.points,
       click_times_ms: this.clickTimes,
-      history: this.history.slice(-500),
+      history: this.history.slice(-this.rules.history_max_entries),
       shown_at_ms: this.shownAtEpoch,
     };
   }
@@ -183,7 +186,7 @@ export class PredictionInput {
     if (d < this.trial.min_step_m) {
       return `Too short: a move must be at least ${fmt(this.trial.min_step_m)}; click farther away.`;
     }
-    if (d > this.trial.max_step_m) {
+    if (d > this.trial.max_step_m * (1 + this.rules.max_step_tolerance)) {
       return `Too far: at most ${fmt(this.trial.max_step_m)} per step; click inside the shaded circle.`;
     }
     return null;
@@ -294,7 +297,7 @@ export class PredictionInput {
       shown_at_ms: this.shownAtEpoch,
       submitted_at_ms: Date.now(),
       replays,
-      history: this.history.slice(-500),
+      history: this.history.slice(-this.rules.history_max_entries),
     };
   }
 
@@ -370,13 +373,15 @@ export class PredictionInput {
     ctx.beginPath();
     ctx.rect(x0, y0, x1 - x0, y1 - y0);
     ctx.clip();
-    ctx.fillStyle = "rgba(0, 114, 178, 0.10)";
+    ctx.fillStyle = ROBOT_COLOR;
     ctx.strokeStyle = ROBOT_COLOR;
     ctx.lineWidth = 1.5;
     ctx.setLineDash([5, 4]);
     ctx.beginPath();
     ctx.arc(cx, cy, this.trial.max_step_m * view.scale, 0, 2 * Math.PI);
+    ctx.globalAlpha = 0.1; // a light tint of the robot's colour
     ctx.fill();
+    ctx.globalAlpha = 1;
     ctx.stroke();
     ctx.fillStyle = "rgba(60, 60, 60, 0.35)";
     ctx.setLineDash([]);

@@ -78,7 +78,7 @@ export function drawAnswers(canvas, replay, tMs, only = null) {
   let drawn = 0;
   for (const start of shown) {
     const made = start.clicks.filter((c) => c.t_ms <= tMs);
-    drawTrace(ctx, view, { color: "#000000", hatched: false }, [start.robot, ...made.map((c) => c.at)], { alpha: 1, width: 3 });
+    drawTrace(ctx, view, { color: MODEL_COLORS.human, hatched: false }, [start.robot, ...made.map((c) => c.at)], { alpha: 1, width: 3 });
     for (const click of made) drawClickMarker(ctx, view, click.at, String(rank.get(`${start.start_index}:${click.step}`)));
     drawn += made.length;
   }
@@ -146,7 +146,8 @@ export class ReplayView {
     const slider = $("replay-time");
     slider.max = String(Math.ceil(this.endMs()));
     $("replay-legend").replaceChildren(...["human", ...REPLAY_MODELS].map((m) => {
-      const swatch = el("span", { className: `swatch swatch-${m}` });
+      const swatch = el("span", { className: "swatch" });
+      swatch.style.background = MODEL_COLORS[m];
       return el("span", { className: "legend-item" }, swatch, m === "human" ? "Participant's clicks (numbered in the order made)" : MODEL_LABELS[m]);
     }));
     this.renderTables();

@@ -1,19 +1,15 @@
 // Draw a world from its scene JSON (app/data/scene.py) on a canvas.
 // Scene metres map to CSS pixels with one uniform scale; y grows downward in both.
 
-// Every agent, trace, marker and goal is at least 3:1 against the ground it is drawn on
-// (WCAG 2.1 SC 1.4.11; tests/e2e measures it on the canvas): the robot is Okabe-Ito blue,
-// the person a darker orange than Okabe-Ito's (which is 2.2:1 on white), and the road light
-// enough for both (dark asphalt left the blue robot at 1.2:1).
-export const ROBOT_COLOR = "#0072B2";
-export const HUMAN_COLOR = "#B35C00";
-const HUMAN_TEXT = "#7a4000";
-export const GROUND = { field: "#fbfbf8", road: "#e8eaed", shoulder: "#cfd8c8" };
-const LANE_MARK = "#5f6368";
-// Goal rings: distinct from both agents' colours, each >= 5:1 on the field.
-export const GOAL_COLORS = ["#007A5A", "#6A3D9A", "#A0306A", "#333333"];
-// Okabe-Ito, as in analysis/scene_plot.py LABEL_COLORS (the researcher's plots).
-export const LABEL_COLORS = ["#009E73", "#D55E00", "#CC79A7", "#56B4E9", "#F0E442", "#000000"];
+// The colours are the server's (app/data/scene.py BROWSER_PALETTE, where their contrast
+// rule is explained), which every page that draws a scene carries as #scene-palette.
+const PALETTE = JSON.parse(document.getElementById("scene-palette").textContent);
+export const ROBOT_COLOR = PALETTE.robot;
+export const HUMAN_COLOR = PALETTE.human;
+const HUMAN_TEXT = PALETTE.human_text;
+export const GROUND = PALETTE.ground;
+const LANE_MARK = PALETTE.lane_mark;
+export const GOAL_COLORS = PALETTE.goals;
 const MARGIN_PX = 24;
 
 /** Uniform metres->CSS-pixel transform that fits `bounds` in a w x h box with margins. */
