@@ -14,9 +14,7 @@ if TYPE_CHECKING:
     from analysis.report import StudyInputs
     from app.bank.bundle import Bundle
     from app.observers.config import ObserversConfig
-    from app.server.context import StudyContext
     from app.server.migrate import UpgradeReport
-    from app.settings import Settings
 
 cli = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Worlds, models and the online study of how people predict a robot.")
@@ -565,115 +563,23 @@ def serve(
         "--allow-bank-change", help="serve although sessions ran another trial bank")] = False,
 ) -> None:
     """Serve the study (participant app, API, researcher dashboard) with uvicorn."""
-    import os
-
     import uvicorn
 
-    from app.main import STUDY_ENV
+    from app.main import ready_to_serve
+    from app.server.preflight import NotServable, hand_to_workers
 
-    settings = server_settings(host, workers, allow_bank_change)
-    check_data_dir_writable(settings.data_dir)
-    if prepare:
-        from app.bank.prepare import prepare_study
-
-        for study_id in study.split(","):
-            prepare_study(settings, study_id, say=typer.echo)
-    check_database(settings, [loadable_study(settings, sid) for sid in study.split(",")])
-    os.environ[STUDY_ENV] = study
+    study_ids = study.split(",")
+    try:
+        settings = ready_to_serve(get_settings(), host, workers, study_ids, allow_bank_change,
+                                  prepare, say=typer.echo)
+    except NotServable as err:
+        fail(str(err))
+    hand_to_workers(settings, study_ids)
     docs = "off in production" if settings.production else "/docs"
-    typer.echo(f"serving http://{host}:{port}/s/{study.split(',')[0]}  "
+    typer.echo(f"serving http://{host}:{port}/s/{study_ids[0]}  "
                f"(researcher dashboard: /researcher, API docs: {docs})")
     uvicorn.run("app.main:app_from_env", factory=True, host=host, port=port,
                 workers=workers, log_level="warning")
-
-
-def loadable_study(settings: "Settings", study_id: str) -> "StudyContext":
-    """The study as a server loads it (bundle verified, answers recomputed); exit 2 if it
-    cannot be served, before any worker starts."""
-    from app.bank.bundle import BundleError
-    from app.bank.model_answers import BankMismatch
-    from app.main import load_study
-
-    try:
-        return load_study(settings, study_id)
-    except (BundleError, BankMismatch) as err:
-        fail(str(err))
-
-
-def check_data_dir_writable(data_dir: Path) -> None:
-    """Exit 2 with what to do when this user cannot write the data dir (a bind mount owned
-    by another user, typically), instead of a traceback from the first file written."""
-    import os
-    import tempfile
-
-    try:
-        data_dir.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=data_dir):
-            pass
-    except OSError as err:
-        fail(f"TOMSTUDY_DATA_DIR: {data_dir} is not writable by this user (uid {os.getuid()}): "
-             f"{err.strerror}. Give it to this user (on the host of a bind mount: "
-             f"`sudo chown -R {os.getuid()} <the mounted folder>`), or use a volume")
-
-
-def check_database(settings: "Settings", studies: list["StudyContext"]) -> None:
-    """Before any worker starts: make an empty database, and exit 2 on one that needs
-    `tomstudy db upgrade` or whose sessions ran another trial bank (unless allowed)."""
-    from app.server.bank_guard import BankChanged, check_bank_unchanged
-    from app.server.db import create_tables, make_engine
-    from app.server.migrate import SchemaError
-
-    engine = make_engine(settings.resolved_database_url())
-    try:
-        create_tables(engine)  # once, before workers race to create them
-        if not settings.allow_bank_change:
-            for ctx in studies:
-                check_bank_unchanged(engine, ctx.study_id, ctx.bank.sha256)
-    except (SchemaError, BankChanged) as err:
-        fail(str(err))
-    finally:
-        engine.dispose()
-
-
-def server_settings(host: str, workers: int, allow_bank_change: bool = False) -> "Settings":
-    """Settings for `serve`: production off loopback; exit 2 if unsafe or unservable."""
-    import os
-
-    from app.main import UnsafeSettings, check_production
-    from app.server.db import is_sqlite
-
-    if allow_bank_change:  # the app factory (in each worker) reads the environment
-        os.environ["TOMSTUDY_ALLOW_BANK_CHANGE"] = "1"
-        get_settings.cache_clear()
-    settings = get_settings().for_host(host)
-    if not settings.admin_token.strip() and not settings.production:
-        settings = with_generated_token(settings)
-    try:
-        check_production(settings)
-    except UnsafeSettings as err:
-        fail(str(err))
-    if workers > 1 and is_sqlite(settings.resolved_database_url()):
-        fail(f"--workers {workers} needs a database several processes can share: set "
-             f"DATABASE_URL to PostgreSQL (postgresql+psycopg://user:password@host:5432/db), "
-             f"or serve SQLite with --workers 1")
-    if settings.production:  # the app factory (in each worker) reads the environment
-        os.environ["TOMSTUDY_PRODUCTION"] = "1"
-        get_settings.cache_clear()
-    return settings
-
-
-def with_generated_token(settings: "Settings") -> "Settings":
-    """A loopback server without a researcher token gets a strong one for this run, printed
-    once; every worker reads it from the environment."""
-    import os
-    import secrets
-
-    token = secrets.token_urlsafe(32)
-    os.environ["TOMSTUDY_ADMIN_TOKEN"] = token
-    get_settings.cache_clear()
-    typer.echo(f"researcher token for this run (TOMSTUDY_ADMIN_TOKEN is not set; set it to "
-               f"keep one across restarts): {token}")
-    return settings.model_copy(update={"admin_token": token})
 
 
 db_cli = typer.Typer(no_args_is_help=True,
