@@ -14,7 +14,6 @@ if TYPE_CHECKING:
     from analysis.report import StudyInputs
     from app.bank.bundle import Bundle
     from app.observers.config import ObserversConfig
-    from app.server.migrate import UpgradeReport
 
 cli = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Worlds, models and the online study of how people predict a robot.")
@@ -591,7 +590,7 @@ cli.add_typer(db_cli, name="db")
 def db_upgrade() -> None:
     """Bring the database to this tomstudy's schema revision, keeping every row."""
     from app.server.db import make_engine
-    from app.server.migrate import SchemaError, upgrade, where
+    from app.server.migrate import SchemaError, upgrade, upgrade_lines, where
 
     engine = make_engine(get_settings().resolved_database_url())
     try:
@@ -604,38 +603,18 @@ def db_upgrade() -> None:
         typer.echo(line)
 
 
-def upgrade_lines(report: "UpgradeReport", where: str) -> list[str]:
-    """What `db upgrade` did: from -> to revision, then rows per table before and after."""
-    if report.stamped:
-        before = f"no revision (made before migrations; its tables match {report.stamped})"
-    else:
-        before = report.before or "empty database"
-    verb = "already at" if report.before == report.after else "upgraded to"
-    lines = [f"{where}: {before} -> {verb} {report.after}",
-             f"{'table':<16}{'rows before':>12}{'rows after':>12}"]
-    for name in sorted(set(report.rows_before) | set(report.rows_after)):
-        rows = [str(counts[name]) if name in counts else "-"
-                for counts in (report.rows_before, report.rows_after)]
-        lines.append(f"{name:<16}{rows[0]:>12}{rows[1]:>12}")
-    return lines
-
-
 @db_cli.command("current")
 def db_current() -> None:
     """Print the database's schema revision and this tomstudy's newest."""
     from app.server.db import make_engine
-    from app.server.migrate import current, head, our_tables
+    from app.server.migrate import revision_lines
 
     engine = make_engine(get_settings().resolved_database_url())
     try:
-        with engine.connect() as conn:
-            revision, tables = current(conn), our_tables(conn)
+        lines = revision_lines(engine)
     finally:
         engine.dispose()
-    shown = revision or ("none (made before migrations)" if tables else "none (empty database)")
-    typer.echo(f"revision: {shown}\nhead: {head()}")
-    if tables and revision != head():
-        typer.echo("back up the database, then run `tomstudy db upgrade` before serving it")
+    typer.echo("\n".join(lines))
 
 
 @cli.command("preview-link")
@@ -719,13 +698,10 @@ def withdraw(
 
 
 def study_database(study: str):
-    """(study config, engine on DATABASE_URL) for a study's stored data; exit 2 if either is
-    missing, or the database needs `tomstudy db upgrade`."""
-    from sqlalchemy import inspect
-    from sqlalchemy.engine import make_url
-
-    from app.server.db import make_engine, normalise_url
-    from app.server.migrate import SchemaError, check_at_head
+    """(study config, engine on DATABASE_URL) for a study's stored data; exit 2 naming the
+    option or variable to fix."""
+    from app.server.db import NoDatabase, open_existing
+    from app.server.migrate import SchemaError
     from app.study.config import load_study_config
 
     settings = get_settings()
@@ -733,21 +709,10 @@ def study_database(study: str):
         config = load_study_config(settings, study)
     except ConfigError as err:
         fail(f"--study: unknown study {study!r} ({err})")
-    url = normalise_url(settings.resolved_database_url())
-    parsed = make_url(url)
-    if parsed.get_backend_name() == "sqlite" and not Path(parsed.database or "").is_file():
-        fail(f"DATABASE_URL: no database file at {parsed.database}")
-    engine = make_engine(url)
-    where = parsed.render_as_string(hide_password=True)
-    if not inspect(engine).has_table("participant"):
-        engine.dispose()
-        fail(f"DATABASE_URL: {where} holds no study tables")
     try:
-        check_at_head(engine)
-    except SchemaError as err:
-        engine.dispose()
+        return config, open_existing(settings.resolved_database_url())
+    except (NoDatabase, SchemaError) as err:
         fail(str(err))
-    return config, engine
 
 
 @cli.command()
