@@ -1,6 +1,7 @@
 """The `tomstudy` command line: each subcommand parses options and calls one function."""
 
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -11,9 +12,7 @@ from app.configio import ConfigError
 from app.settings import get_settings
 
 if TYPE_CHECKING:
-    from analysis.report import StudyInputs
-    from app.bank.bundle import Bundle
-    from app.observers.config import ObserversConfig
+    from app.bank.served import SimulationInputs
 
 cli = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Worlds, models and the online study of how people predict a robot.")
@@ -173,11 +172,16 @@ def pilot(
     bank: Annotated[Path | None, typer.Option(help="trial bank (precise bots)")] = None,
 ) -> None:
     """Pilot the study: simulated participants take it through the real HTTP flow."""
+    from app.bank.bundle import BundleError
+    from app.bank.served import served_bank
     from app.pilot.bots import PRESETS, run_pilot
 
     if preset not in PRESETS:
         fail(f"kind: unknown bot kind {preset!r}; choose one of {', '.join(PRESETS)}")
-    bank = bank or served_bank(study)
+    try:
+        bank = bank or served_bank(get_settings(), study)
+    except BundleError as err:
+        fail(str(err))
     if preset == "precise" and not bank.is_file():
         fail(f"bank: {bank} not found (precise bots read the policy's moves from it)")
     failed = run_pilot(url, study, preset, n, concurrency, seed, bank)
@@ -196,6 +200,7 @@ def analyze(
 ) -> None:
     """Alignment error, paired tests, figures and a self-contained report."""
     from analysis.report import AnalysisError, run_analyze
+    from app.bank.served import analysis_inputs
 
     if csv is not None and database_url is not None:
         fail("give either --csv or --database-url, not both")
@@ -205,29 +210,14 @@ def analyze(
     out = out or settings.layout.report_dir(study)
     try:
         run_analyze(study, out, csv, database_url or settings.resolved_database_url(),
-                    analysis_inputs(study), tuple(waive or ()))
+                    analysis_inputs(settings, study, warn=warn), tuple(waive or ()))
     except AnalysisError as err:
         fail(str(err))
 
 
-def analysis_inputs(study: str) -> "StudyInputs":
-    """What `analyze` takes from the study config and its bundle, as plain values and paths
-    (without a bundle on this machine the analysis runs on the export alone, and says so)."""
-    from analysis.report import StudyInputs
-    from app.bank.bundle import BANK, BundleError, load_bundle
-    from app.study.config import load_study_config
-
-    settings = get_settings()
-    config = load_study_config(settings, study)
-    try:
-        bundle = load_bundle(config, study, settings.configs_dir, settings.data_dir)
-    except BundleError as err:
-        typer.echo(f"warning: {err}; per-seed and family results need the bundle", err=True)
-        models, bank = {}, settings.layout.bundle_dir(study) / BANK
-    else:
-        models, bank = bundle.manifest["models"], bundle.root / BANK
-    return StudyInputs(config=config.model_dump(mode="json"), rules=config.exclusions,
-                       models=models, bank=bank)
+def warn(message: str) -> None:
+    """Print a warning to stderr; the command goes on."""
+    typer.echo(f"warning: {message}", err=True)
 
 
 @cli.command()
@@ -248,32 +238,27 @@ def power(
 
     if preset not in PRESETS:
         fail(f"kind: unknown bot kind {preset!r}; choose one of {', '.join(PRESETS)}")
-    settings = get_settings()
-    bank, observers, trials = simulation_inputs(study, None)
-    out = out or settings.layout.power_report(study, preset)
-    summary = run_power(bank, preset, trials, out, n_max, pool, reps, alpha, seed, observers)
+    inputs = study_simulation(study)
+    out = out or get_settings().layout.power_report(study, preset)
+    summary = run_power(inputs.bank, preset, inputs.trials_per_world, out, n_max, pool, reps,
+                        alpha, seed, inputs.observers)
     for world, needed in summary["n_for_power_0.8"].items():
         typer.echo(f"{world}: d_z = {summary['d_z'][world]:.3f}, n for power 0.8 = {needed}")
     typer.echo(f"wrote {out}")
 
 
-def simulation_inputs(study: str, observers: Path | None, bank: Path | None = None
-                      ) -> tuple[Path, "ObserversConfig", int]:
-    """(bank path, observers config, trials per world) for simulated participants of `study`
-    (its served bank unless `bank` names another)."""
-    from app.observers.config import default_observers, load_observers
-    from app.study.config import load_study_config
+def study_simulation(study: str, observers: Path | None = None,
+                     bank: Path | None = None) -> "SimulationInputs":
+    """What simulated participants of `study` run on; exit 2 naming what is missing."""
+    from app.bank.bundle import BundleError
+    from app.bank.served import simulation_inputs
 
-    settings = get_settings()
     if bank is not None and not bank.is_file():
         fail(f"--bank: {bank} not found")
-    bank = bank or served_bank(study)
     try:
-        config = load_observers(observers) if observers else default_observers(settings.configs_dir)
-    except ConfigError as err:
+        return simulation_inputs(get_settings(), study, observers, bank)
+    except (BundleError, ConfigError) as err:
         fail(str(err))
-    trials = load_study_config(settings, study).trials_per_world
-    return bank, config, trials
 
 
 @cli.command("check-display")
@@ -282,11 +267,14 @@ def check_display_cmd(
     = "paper_study",
 ) -> None:
     """Can a person click the robot's true moves, and is a behaviour one direction?"""
+    from app.bank.bundle import BundleError
     from app.bank.display_check import check_display, format_table
+    from app.bank.served import served_bank
 
+    settings = get_settings()
     try:
-        result = check_display(get_settings().data_dir, study, served_bank(study))
-    except FileNotFoundError as err:
+        result = check_display(settings.data_dir, study, served_bank(settings, study))
+    except (FileNotFoundError, BundleError) as err:
         fail(str(err))
     typer.echo(format_table(result))
 
@@ -316,107 +304,30 @@ def instrument(
     `replications` reruns (fresh participants) that pass: the check's power. Writes
     instrument.json, CSVs and by_trial.png (where the contrast is); exits 1 if a world fails.
     """
+    from app.observers.instrument_tables import instrument_table, separation_table
     from app.observers.simulated_study import run_instrument
 
-    bank, config, trials = simulation_inputs(study, observers, bank)
+    inputs = study_simulation(study, observers, bank)
     out = out or get_settings().layout.instrument_report(study)
-    summary = run_instrument(bank, trials, out, n, seed, alpha, config, replications)
-    typer.echo(f"{'world':<10}{'reading':<10}{'coarse':>9}{'precise':>9}{'t':>8}{'p':>10}"
-               f"  result  pass rate")
-    for row in summary["rows"]:
-        verdict = "pass" if row["passed"] else "FAIL"
-        typer.echo(f"{row['world']:<10}{row['reading']:<10}{row['coarse_mean_diff']:>+9.3f}"
-                   f"{row['precise_mean_diff']:>+9.3f}{row['welch_t']:>8.2f}"
-                   f"{row['p_one_sided']:>10.2g}  {verdict:<6}  {pass_rate(row['pass_rate'])}")
-    typer.echo("coarse/precise = mean err_ours - err_vae per population; "
-               f"pass = Welch one-sided p < {alpha};\npass rate = share of {replications} "
-               "reruns with fresh simulated participants that pass")
-    echo_separation(summary["separation"])
+    summary = run_instrument(inputs.bank, inputs.trials_per_world, out, n, seed, alpha,
+                             inputs.observers, replications)
+    echo_lines(instrument_table(summary, alpha, replications))
+    echo_lines(separation_table(summary["separation"]))
     if grid:
-        from app.observers.instrument_grid import run_instrument_grid
+        from app.observers.instrument_grid import grid_table, run_instrument_grid
 
-        echo_grid(run_instrument_grid(bank, trials, out, config, n, seed, alpha, replications))
+        echo_lines(grid_table(run_instrument_grid(inputs.bank, inputs.trials_per_world, out,
+                                                  inputs.observers, n, seed, alpha,
+                                                  replications)))
     typer.echo(f"wrote {out}")
     if not all(summary["passed"].values()):
         raise typer.Exit(1)
 
 
-def echo_grid(result: dict) -> None:
-    """Print the grid per world and noise level: each seed pair's pass rate and n for 80%
-    power, and which model each population favours on its own."""
-    import pandas as pd
-
-    cells = pd.DataFrame(result["cells"])
-    cells = cells[cells["reading"] == "absolute"]
-    alpha = result["alpha"]
-    typer.echo(f"\n{'world':<10}{'noise':<16}{'pass rate per seed pair':<32}{'n for 80%':<18}"
-               f"coarse favours   precise favours")
-    for (world, noise), group in cells.groupby(["world", "noise"], sort=False):
-        group = group.sort_values("pair")
-        rates = " ".join(f"{r:.2f}" for r in group["pass_rate"])
-        needed = " ".join("-" if pd.isna(v) else f"{v:.0f}" for v in group["n_for_power_0.8"])
-        typer.echo(f"{world:<10}{noise:<16}{rates:<32}{needed:<18}"
-                   f"{favours(group, 'coarse', alpha):<17}{favours(group, 'precise', alpha)}")
-    if result.get("view_click_sd_deg"):
-        view = ", ".join(f"{world} {sd:.2f} deg" for world, sd in
-                         result["view_click_sd_deg"].items())
-        typer.echo(f"view = the prediction view's click spread ({view}) in quadrature with "
-                   "each preset's own")
-    goal = result["goal"]
-    met = all(w["met"] for w in goal["worlds"].values())
-    shares = ", ".join(f"{world} {w['share_passing']:.0%}" for world, w in goal["worlds"].items())
-    typer.echo(f"pass rate = share of {result['replications']} reruns where Welch p < {alpha}; "
-               f"n for 80% = participants per population for 80% power at the observed effect;"
-               f"\nfavours = seed pairs whose population alone prefers Ours / the VAE / neither "
-               f"(p < {alpha}, first run)\ngoal (pass rate >= {goal['pass_rate']} for >= "
-               f"{goal['share_of_pairs']:.0%} of seed pairs in every world, at noise "
-               f"{goal['noise']}): {'met' if met else 'NOT met'} ({shares})")
-
-
-def favours(group, population: str, alpha: float) -> str:
-    """'Ours/VAE/neither' counts of seed pairs by a population's own Ours-vs-VAE test."""
-    significant = group[f"{population}_own_p"] < alpha
-    ours = int((significant & (group[f"{population}_mean_diff"] < 0)).sum())
-    vae = int((significant & (group[f"{population}_mean_diff"] > 0)).sum())
-    return f"{ours}/{vae}/{len(group) - ours - vae}"
-
-
-def pass_rate(rate: float | None) -> str:
-    """A pass rate for the instrument table ("-" without replications)."""
-    return f"{rate:>9.2f}" if rate is not None else f"{'-':>9}"
-
-
-def echo_separation(rows: list[dict]) -> None:
-    """Print what the metric can tell apart, per world and start kind."""
-    typer.echo(f"\n{'world':<10}{'start kind':<15}{'starts':>7}{'ours-vae':>10}"
-               f"{'obs gap':>9}{'coarse':>9}{'precise':>9}")
-    for row in rows:
-        typer.echo(f"{row['world']:<10}{row['start_kind']:<15}{row['n_starts']:>7}"
-                   f"{row['ours_vs_vae']:>10.3f}{row['coarse_vs_precise']:>9.3f}"
-                   f"{row['coarse_diff']:>+9.4f}{row['precise_diff']:>+9.4f}")
-    typer.echo("ours-vae / obs gap = mean 1-cos between the two models' answers / the two "
-               "observers' clicks\nat the same start states; coarse/precise = each observer's "
-               "err_ours - err_vae there")
-
-
-def served_bundle(study: str) -> "Bundle":
-    """The bundle `study` is served from (every file checked); exit 2 if it cannot be."""
-    from app.bank.bundle import BundleError, load_bundle
-    from app.study.config import load_study_config
-
-    settings = get_settings()
-    try:
-        return load_bundle(load_study_config(settings, study), study, settings.configs_dir,
-                           settings.data_dir)
-    except BundleError as err:
-        fail(str(err))
-
-
-def served_bank(study: str) -> Path:
-    """The trial bank file of the bundle `study` is served from."""
-    from app.bank.bundle import BANK
-
-    return served_bundle(study).root / BANK
+def echo_lines(lines: Iterable[str]) -> None:
+    """Print each line."""
+    for line in lines:
+        typer.echo(line)
 
 
 bundle_cli = typer.Typer(no_args_is_help=True,
@@ -436,69 +347,22 @@ def bundle_build(
 ) -> None:
     """Simulate, train every seed and build the bank where missing, freeze the bundle into
     var/bundles/<study>/, and report how it differs from the shipped one."""
-    import shutil
-
-    from app.bank.bundle import BundleError, open_bundle, shipped_dir
+    from app.bank.bundle import BundleError
+    from app.bank.bundle_diff import compare_with_shipped
     from app.bank.prepare import build_bundle
+    from app.bank.prepare import replace_shipped as replace
 
     settings = get_settings()
     try:
         built = build_bundle(settings, study, workers, say=typer.echo)
     except (FileNotFoundError, ValueError, BundleError) as err:
         fail(str(err))
-    shipped = shipped_dir(settings.configs_dir, study)
-    if (shipped / "manifest.json").is_file():
-        try:
-            echo_bundle_diff(open_bundle(shipped), built, study, replications)
-        except BundleError as err:
-            typer.echo(f"the shipped bundle cannot be compared: {err}")
+    try:
+        echo_lines(compare_with_shipped(settings, study, built, replications))
+    except BundleError as err:
+        typer.echo(f"the shipped bundle cannot be compared: {err}")
     if replace_shipped:
-        shutil.rmtree(shipped, ignore_errors=True)
-        shutil.copytree(built.root, shipped)
-        open_bundle(shipped)
-        typer.echo(f"replaced {shipped}")
-
-
-def echo_bundle_diff(shipped: "Bundle", built: "Bundle", study: str, replications: int) -> None:
-    """Print how the built bundle differs from the shipped one, and both instrument verdicts."""
-    from app.bank.bundle_diff import compare_bundles
-
-    diff = compare_bundles(shipped, built)
-    files = diff["files"]
-    typer.echo(f"\nagainst the shipped bundle {shipped.root}:\n"
-               f"content {'identical' if diff['content_same'] else 'differs'}; files: "
-               f"{len(files['same'])} same, {len(files['changed'])} changed, "
-               f"{len(files['only_old'])} only shipped, {len(files['only_new'])} only built")
-    rows = diff["checkpoints"]
-    others = sorted({key for row in rows for key in row["other_keys_differ"]})
-    typer.echo(f"checkpoints: {sum(row['same'] for row in rows)} of {len(rows)} identical; "
-               f"{sum(row['same_weights'] for row in rows)} of {len(rows)} with the same "
-               f"weights" + (f" (other recorded keys that differ: {', '.join(others)})"
-                            if others else ""))
-    for world, part in diff["worlds"].items():
-        typer.echo(f"{world}: {part['main_same_clip']} of {part['main_trials'][0]} shipped main "
-                   f"trials kept with the same clip; {part['trials_same_clip']} trials compared")
-        for row in part["answers"]:
-            typer.echo(f"  {row['model']:<5} seed {row['seed']}: largest angle "
-                       f"{row['max_degrees']:.3g} deg, {row['max_metres']:.3g} m per step, "
-                       f"{row['codes_differ']} of {row['trials']} codes differ")
-    echo_verdicts({"shipped": shipped, "built": built}, study, replications)
-
-
-def echo_verdicts(bundles: dict, study: str, replications: int) -> None:
-    """The instrument check's verdict and pass rate per world on each bundle's bank."""
-    from app.bank.bundle import BANK
-    from app.observers.simulated_study import run_instrument
-
-    out = get_settings().layout.instrument_report(study)
-    for name, bundle in bundles.items():
-        _, observers, trials = simulation_inputs(study, None, bundle.root / BANK)
-        summary = run_instrument(bundle.root / BANK, trials, out / f"bundle-{name}",
-                                 observers=observers, replications=replications)
-        verdicts = ", ".join(f"{world} {'pass' if ok else 'FAIL'} (pass rate "
-                             f"{pass_rate(summary['pass_rate'][world]).strip()})"
-                             for world, ok in summary["passed"].items())
-        typer.echo(f"instrument on the {name} bank: {verdicts}")
+        typer.echo(f"replaced {replace(built, settings.configs_dir, study)}")
 
 
 @bundle_cli.command("verify")
@@ -511,9 +375,10 @@ def bundle_verify(
     machine; print the largest differences; exit 1 if any is beyond tolerance."""
     from app.bank.bundle import BundleError, open_bundle
     from app.bank.model_answers import ACTION_TOLERANCE_MPS, recompute
+    from app.bank.served import served_bundle
 
     try:
-        opened = open_bundle(bundle) if bundle else served_bundle(study)
+        opened = open_bundle(bundle) if bundle else served_bundle(get_settings(), study)
     except BundleError as err:
         fail(str(err))
     files = opened.manifest["files"]

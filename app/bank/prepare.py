@@ -9,11 +9,12 @@ interrupted build resumes. A bundle that exists is served as it is: rebuilding i
 """
 
 import json
+import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-from app.bank.bundle import MANIFEST, Bundle, bundle_dir, freeze
+from app.bank.bundle import MANIFEST, Bundle, bundle_dir, freeze, open_bundle, shipped_dir
 from app.fileio import sha256_file
 from app.layout import Layout
 from app.settings import Settings
@@ -57,6 +58,16 @@ def build_bundle(settings: Settings, study_id: str, workers: int = 2, n_trajecto
                     round(time.perf_counter() - started, 1))
     say(f"froze {out} ({len(bundle.manifest['files'])} files)")
     return bundle
+
+
+def replace_shipped(built: Bundle, configs_dir: Path, study_id: str) -> Path:
+    """Copy a built bundle over the one that ships in the configs dir; returns its folder
+    once the copy opens as a bundle (maintainers commit it with the numbers it changes)."""
+    shipped = shipped_dir(configs_dir, study_id)
+    shutil.rmtree(shipped, ignore_errors=True)
+    shutil.copytree(built.root, shipped)
+    open_bundle(shipped)
+    return shipped
 
 
 def ensure_trajectories(layout: Layout, world: str, n: int, seed: int, say) -> None:
