@@ -56,14 +56,9 @@ def simulate(
     typer.echo(f"wrote {result.npz_path} ({meta['n']} kept, {sum(meta['rejected'].values())} "
                f"rejected, {meta['wall_time_s']} s)")
     if plot:
-        from app.data.trajectory import TrajectorySet
-        from app.worlds.plots import plot_trajectories
-        from app.worlds.registry import build_world
+        from app.worlds.plots import plot_simulated
 
-        label = build_world(world, config, policy).robot_label
-        png = plot_trajectories(TrajectorySet.load(result.npz_path),
-                                layout.trajectories_plot(world), label)
-        typer.echo(f"wrote {png}")
+        typer.echo(f"wrote {plot_simulated(layout, world, config, policy)}")
 
 
 @cli.command()
@@ -537,9 +532,7 @@ def withdraw(
     """Delete every row of one participant (all sessions, one transaction); print the audit."""
     import json
 
-    from sqlmodel import Session
-
-    from app.researcher import withdrawal
+    from app.researcher.withdrawal import withdraw_and_erase
     from app.server.schemas import WithdrawalByExternalId, WithdrawalByParticipantId
     from app.study.errors import Refused
 
@@ -550,10 +543,7 @@ def withdraw(
            WithdrawalByParticipantId(study_id=study, participant_id=participant_id))
     config, engine = study_database(study)
     try:
-        with Session(engine) as db:
-            audit = withdrawal.withdraw(db, study, who, config.recruitment.platform, via="cli")
-            line = withdrawal.audit_line(audit)
-        line["storage"] = withdrawal.erase_from_files(engine)
+        line = withdraw_and_erase(engine, study, who, config.recruitment.platform, via="cli")
     except Refused as err:
         kind = err.detail.split(":", 1)[0]
         fail(err.detail.replace(f"{kind}:", f"--{kind.replace('_', '-')}:", 1), 1)
