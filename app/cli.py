@@ -49,7 +49,7 @@ def simulate(
         typer.echo(f"{npz_path} exists; skipping")
         return
     try:
-        result = run(world, n, seed, layout.root, config, policy, workers)
+        result = run(world, n, seed, layout, config, policy, workers)
     except ConfigError as err:
         fail(str(err))
     meta = result.meta
@@ -268,7 +268,7 @@ def check_display_cmd(
 
     settings = get_settings()
     try:
-        result = check_display(settings.data_dir, study, served_bank(settings, study))
+        result = check_display(settings.layout, study, served_bank(settings, study))
     except (FileNotFoundError, BundleError) as err:
         fail(str(err))
     typer.echo(format_table(result))
@@ -404,7 +404,7 @@ def build_trials_cmd(
 
     settings = get_settings()
     try:
-        path = build_trials(load_study_config(settings, study), study, settings.data_dir)
+        path = build_trials(load_study_config(settings, study), study, settings.layout)
     except (FileNotFoundError, CheckpointError, ValueError) as err:
         fail(str(err))
     typer.echo(f"wrote {path}")
@@ -596,7 +596,7 @@ def interaction(
             from app.interaction.synthetic import generate as write_generated
 
             write_generated(data, scenario, generate)
-        summary = run_command(data, scenario, get_settings().data_dir, config, train_config,
+        summary = run_command(data, scenario, get_settings().layout, config, train_config,
                               seeds, max_epochs, frame_seeds=frame_seeds)
     except (TrackFileError, InteractionError, MapError, ValueError) as err:
         fail(str(err))

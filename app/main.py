@@ -95,7 +95,7 @@ def load_study(settings: Settings, study_id: str) -> StudyContext:
     """Config, bundle (bank and every checkpoint, verified against its manifest and each other)
     of one study; BundleError or BankMismatch if it cannot be served as it is."""
     config = load_study_config(settings, study_id)
-    bundle = load_bundle(config, study_id, settings.configs_dir, settings.data_dir)
+    bundle = load_bundle(config, study_id, settings.configs_dir, settings.layout)
     return StudyContext(study_id, config, bundle.bank, ModelAnswers(bundle),
                         config_sha256=config_sha256(config),
                         preview_key=preview_key(settings.admin_token, study_id),
@@ -122,7 +122,7 @@ def ready_to_serve(settings: Settings, host: str, workers: int, study_ids: list[
             f"keep one across restarts): {settings.admin_token}")
     check_production(settings)
     check_workers(settings, workers)
-    check_data_dir_writable(settings.data_dir)
+    check_data_dir_writable(settings.layout)
     if prepare:
         for study_id in study_ids:
             prepare_study(settings, study_id, say=say)

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 def served_bundle(settings: Settings, study_id: str) -> Bundle:
     """The verified bundle `study_id` is served from (BundleError if it cannot be)."""
     config = load_study_config(settings, study_id)
-    return load_bundle(config, study_id, settings.configs_dir, settings.data_dir)
+    return load_bundle(config, study_id, settings.configs_dir, settings.layout)
 
 
 def served_bank(settings: Settings, study_id: str) -> Path:
@@ -38,7 +38,7 @@ def analysis_inputs(settings: Settings, study_id: str,
 
     config = load_study_config(settings, study_id)
     try:
-        bundle = load_bundle(config, study_id, settings.configs_dir, settings.data_dir)
+        bundle = load_bundle(config, study_id, settings.configs_dir, settings.layout)
     except BundleError as err:
         warn(f"{err}; per-seed and family results need the bundle")
         models, bank = {}, settings.layout.bundle_dir(study_id) / BANK

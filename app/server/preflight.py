@@ -7,8 +7,8 @@ unservable study fails once, clearly, instead of in every worker's traceback.
 import os
 import secrets
 import tempfile
-from pathlib import Path
 
+from app.layout import Layout
 from app.server.bank_guard import BankChanged, check_bank_unchanged
 from app.server.context import StudyContext
 from app.server.db import create_tables, is_sqlite, make_engine
@@ -50,9 +50,10 @@ def check_workers(settings: Settings, workers: int) -> None:
             f"or serve SQLite with --workers 1")
 
 
-def check_data_dir_writable(data_dir: Path) -> None:
+def check_data_dir_writable(layout: Layout) -> None:
     """Refuse a data dir this user cannot write (a bind mount owned by another user,
     typically), saying what to do, instead of a traceback from the first file written."""
+    data_dir = layout.root
     try:
         data_dir.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=data_dir):
