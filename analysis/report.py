@@ -5,7 +5,7 @@ figures embedded as base64 PNG), summary.json, per_participant.csv, by_start_kin
 per_seed.csv, family.csv, by_arm.csv, mixed_model.csv and leave_one_trial_out.csv (every
 number the report shows), the figures as PNG and SVG, and meta.json (data and bank hashes,
 the model family's content hashes, study config). The study config is read by the caller
-(app/cli.py) and arrives as plain values and paths (`StudyInputs`).
+(app/bank/served.py) and arrives as plain values and paths (`StudyInputs`).
 
 Besides the primary answers (the primary seed's, in the export), the report reads every
 seed's answers from the trial bank (analysis/seeds.py) and treats trials as a random factor

@@ -1,6 +1,7 @@
 """The `tomstudy` command line: each subcommand parses options and calls one function."""
 
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -11,12 +12,7 @@ from app.configio import ConfigError
 from app.settings import get_settings
 
 if TYPE_CHECKING:
-    from analysis.report import StudyInputs
-    from app.bank.bundle import Bundle
-    from app.observers.config import ObserversConfig
-    from app.server.context import StudyContext
-    from app.server.migrate import UpgradeReport
-    from app.settings import Settings
+    from app.bank.served import SimulationInputs
 
 cli = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Worlds, models and the online study of how people predict a robot.")
@@ -53,21 +49,16 @@ def simulate(
         typer.echo(f"{npz_path} exists; skipping")
         return
     try:
-        result = run(world, n, seed, layout.root, config, policy, workers)
+        result = run(world, n, seed, layout, config, policy, workers)
     except ConfigError as err:
         fail(str(err))
     meta = result.meta
     typer.echo(f"wrote {result.npz_path} ({meta['n']} kept, {sum(meta['rejected'].values())} "
                f"rejected, {meta['wall_time_s']} s)")
     if plot:
-        from app.data.trajectory import TrajectorySet
-        from app.worlds.plots import plot_trajectories
-        from app.worlds.registry import build_world
+        from app.worlds.plots import plot_simulated
 
-        label = build_world(world, config, policy).robot_label
-        png = plot_trajectories(TrajectorySet.load(result.npz_path),
-                                layout.trajectories_plot(world), label)
-        typer.echo(f"wrote {png}")
+        typer.echo(f"wrote {plot_simulated(layout, world, config, policy)}")
 
 
 @cli.command()
@@ -176,11 +167,16 @@ def pilot(
     bank: Annotated[Path | None, typer.Option(help="trial bank (precise bots)")] = None,
 ) -> None:
     """Pilot the study: simulated participants take it through the real HTTP flow."""
+    from app.bank.bundle import BundleError
+    from app.bank.served import served_bank
     from app.pilot.bots import PRESETS, run_pilot
 
     if preset not in PRESETS:
         fail(f"kind: unknown bot kind {preset!r}; choose one of {', '.join(PRESETS)}")
-    bank = bank or served_bank(study)
+    try:
+        bank = bank or served_bank(get_settings(), study)
+    except BundleError as err:
+        fail(str(err))
     if preset == "precise" and not bank.is_file():
         fail(f"bank: {bank} not found (precise bots read the policy's moves from it)")
     failed = run_pilot(url, study, preset, n, concurrency, seed, bank)
@@ -199,6 +195,7 @@ def analyze(
 ) -> None:
     """Alignment error, paired tests, figures and a self-contained report."""
     from analysis.report import AnalysisError, run_analyze
+    from app.bank.served import analysis_inputs
 
     if csv is not None and database_url is not None:
         fail("give either --csv or --database-url, not both")
@@ -208,29 +205,14 @@ def analyze(
     out = out or settings.layout.report_dir(study)
     try:
         run_analyze(study, out, csv, database_url or settings.resolved_database_url(),
-                    analysis_inputs(study), tuple(waive or ()))
+                    analysis_inputs(settings, study, warn=warn), tuple(waive or ()))
     except AnalysisError as err:
         fail(str(err))
 
 
-def analysis_inputs(study: str) -> "StudyInputs":
-    """What `analyze` takes from the study config and its bundle, as plain values and paths
-    (without a bundle on this machine the analysis runs on the export alone, and says so)."""
-    from analysis.report import StudyInputs
-    from app.bank.bundle import BANK, BundleError, load_bundle
-    from app.study.config import load_study_config
-
-    settings = get_settings()
-    config = load_study_config(settings, study)
-    try:
-        bundle = load_bundle(config, study, settings.configs_dir, settings.data_dir)
-    except BundleError as err:
-        typer.echo(f"warning: {err}; per-seed and family results need the bundle", err=True)
-        models, bank = {}, settings.layout.bundle_dir(study) / BANK
-    else:
-        models, bank = bundle.manifest["models"], bundle.root / BANK
-    return StudyInputs(config=config.model_dump(mode="json"), rules=config.exclusions,
-                       models=models, bank=bank)
+def warn(message: str) -> None:
+    """Print a warning to stderr; the command goes on."""
+    typer.echo(f"warning: {message}", err=True)
 
 
 @cli.command()
@@ -251,32 +233,27 @@ def power(
 
     if preset not in PRESETS:
         fail(f"kind: unknown bot kind {preset!r}; choose one of {', '.join(PRESETS)}")
-    settings = get_settings()
-    bank, observers, trials = simulation_inputs(study, None)
-    out = out or settings.layout.power_report(study, preset)
-    summary = run_power(bank, preset, trials, out, n_max, pool, reps, alpha, seed, observers)
+    inputs = study_simulation(study)
+    out = out or get_settings().layout.power_report(study, preset)
+    summary = run_power(inputs.bank, preset, inputs.trials_per_world, out, n_max, pool, reps,
+                        alpha, seed, inputs.observers)
     for world, needed in summary["n_for_power_0.8"].items():
         typer.echo(f"{world}: d_z = {summary['d_z'][world]:.3f}, n for power 0.8 = {needed}")
     typer.echo(f"wrote {out}")
 
 
-def simulation_inputs(study: str, observers: Path | None, bank: Path | None = None
-                      ) -> tuple[Path, "ObserversConfig", int]:
-    """(bank path, observers config, trials per world) for simulated participants of `study`
-    (its served bank unless `bank` names another)."""
-    from app.observers.config import default_observers, load_observers
-    from app.study.config import load_study_config
+def study_simulation(study: str, observers: Path | None = None,
+                     bank: Path | None = None) -> "SimulationInputs":
+    """What simulated participants of `study` run on; exit 2 naming what is missing."""
+    from app.bank.bundle import BundleError
+    from app.bank.served import simulation_inputs
 
-    settings = get_settings()
     if bank is not None and not bank.is_file():
         fail(f"--bank: {bank} not found")
-    bank = bank or served_bank(study)
     try:
-        config = load_observers(observers) if observers else default_observers(settings.configs_dir)
-    except ConfigError as err:
+        return simulation_inputs(get_settings(), study, observers, bank)
+    except (BundleError, ConfigError) as err:
         fail(str(err))
-    trials = load_study_config(settings, study).trials_per_world
-    return bank, config, trials
 
 
 @cli.command("check-display")
@@ -285,11 +262,14 @@ def check_display_cmd(
     = "paper_study",
 ) -> None:
     """Can a person click the robot's true moves, and is a behaviour one direction?"""
+    from app.bank.bundle import BundleError
     from app.bank.display_check import check_display, format_table
+    from app.bank.served import served_bank
 
+    settings = get_settings()
     try:
-        result = check_display(get_settings().data_dir, study, served_bank(study))
-    except FileNotFoundError as err:
+        result = check_display(settings.layout, study, served_bank(settings, study))
+    except (FileNotFoundError, BundleError) as err:
         fail(str(err))
     typer.echo(format_table(result))
 
@@ -319,107 +299,30 @@ def instrument(
     `replications` reruns (fresh participants) that pass: the check's power. Writes
     instrument.json, CSVs and by_trial.png (where the contrast is); exits 1 if a world fails.
     """
+    from app.observers.instrument_tables import instrument_table, separation_table
     from app.observers.simulated_study import run_instrument
 
-    bank, config, trials = simulation_inputs(study, observers, bank)
+    inputs = study_simulation(study, observers, bank)
     out = out or get_settings().layout.instrument_report(study)
-    summary = run_instrument(bank, trials, out, n, seed, alpha, config, replications)
-    typer.echo(f"{'world':<10}{'reading':<10}{'coarse':>9}{'precise':>9}{'t':>8}{'p':>10}"
-               f"  result  pass rate")
-    for row in summary["rows"]:
-        verdict = "pass" if row["passed"] else "FAIL"
-        typer.echo(f"{row['world']:<10}{row['reading']:<10}{row['coarse_mean_diff']:>+9.3f}"
-                   f"{row['precise_mean_diff']:>+9.3f}{row['welch_t']:>8.2f}"
-                   f"{row['p_one_sided']:>10.2g}  {verdict:<6}  {pass_rate(row['pass_rate'])}")
-    typer.echo("coarse/precise = mean err_ours - err_vae per population; "
-               f"pass = Welch one-sided p < {alpha};\npass rate = share of {replications} "
-               "reruns with fresh simulated participants that pass")
-    echo_separation(summary["separation"])
+    summary = run_instrument(inputs.bank, inputs.trials_per_world, out, n, seed, alpha,
+                             inputs.observers, replications)
+    echo_lines(instrument_table(summary, alpha, replications))
+    echo_lines(separation_table(summary["separation"]))
     if grid:
-        from app.observers.instrument_grid import run_instrument_grid
+        from app.observers.instrument_grid import grid_table, run_instrument_grid
 
-        echo_grid(run_instrument_grid(bank, trials, out, config, n, seed, alpha, replications))
+        echo_lines(grid_table(run_instrument_grid(inputs.bank, inputs.trials_per_world, out,
+                                                  inputs.observers, n, seed, alpha,
+                                                  replications)))
     typer.echo(f"wrote {out}")
     if not all(summary["passed"].values()):
         raise typer.Exit(1)
 
 
-def echo_grid(result: dict) -> None:
-    """Print the grid per world and noise level: each seed pair's pass rate and n for 80%
-    power, and which model each population favours on its own."""
-    import pandas as pd
-
-    cells = pd.DataFrame(result["cells"])
-    cells = cells[cells["reading"] == "absolute"]
-    alpha = result["alpha"]
-    typer.echo(f"\n{'world':<10}{'noise':<16}{'pass rate per seed pair':<32}{'n for 80%':<18}"
-               f"coarse favours   precise favours")
-    for (world, noise), group in cells.groupby(["world", "noise"], sort=False):
-        group = group.sort_values("pair")
-        rates = " ".join(f"{r:.2f}" for r in group["pass_rate"])
-        needed = " ".join("-" if pd.isna(v) else f"{v:.0f}" for v in group["n_for_power_0.8"])
-        typer.echo(f"{world:<10}{noise:<16}{rates:<32}{needed:<18}"
-                   f"{favours(group, 'coarse', alpha):<17}{favours(group, 'precise', alpha)}")
-    if result.get("view_click_sd_deg"):
-        view = ", ".join(f"{world} {sd:.2f} deg" for world, sd in
-                         result["view_click_sd_deg"].items())
-        typer.echo(f"view = the prediction view's click spread ({view}) in quadrature with "
-                   "each preset's own")
-    goal = result["goal"]
-    met = all(w["met"] for w in goal["worlds"].values())
-    shares = ", ".join(f"{world} {w['share_passing']:.0%}" for world, w in goal["worlds"].items())
-    typer.echo(f"pass rate = share of {result['replications']} reruns where Welch p < {alpha}; "
-               f"n for 80% = participants per population for 80% power at the observed effect;"
-               f"\nfavours = seed pairs whose population alone prefers Ours / the VAE / neither "
-               f"(p < {alpha}, first run)\ngoal (pass rate >= {goal['pass_rate']} for >= "
-               f"{goal['share_of_pairs']:.0%} of seed pairs in every world, at noise "
-               f"{goal['noise']}): {'met' if met else 'NOT met'} ({shares})")
-
-
-def favours(group, population: str, alpha: float) -> str:
-    """'Ours/VAE/neither' counts of seed pairs by a population's own Ours-vs-VAE test."""
-    significant = group[f"{population}_own_p"] < alpha
-    ours = int((significant & (group[f"{population}_mean_diff"] < 0)).sum())
-    vae = int((significant & (group[f"{population}_mean_diff"] > 0)).sum())
-    return f"{ours}/{vae}/{len(group) - ours - vae}"
-
-
-def pass_rate(rate: float | None) -> str:
-    """A pass rate for the instrument table ("-" without replications)."""
-    return f"{rate:>9.2f}" if rate is not None else f"{'-':>9}"
-
-
-def echo_separation(rows: list[dict]) -> None:
-    """Print what the metric can tell apart, per world and start kind."""
-    typer.echo(f"\n{'world':<10}{'start kind':<15}{'starts':>7}{'ours-vae':>10}"
-               f"{'obs gap':>9}{'coarse':>9}{'precise':>9}")
-    for row in rows:
-        typer.echo(f"{row['world']:<10}{row['start_kind']:<15}{row['n_starts']:>7}"
-                   f"{row['ours_vs_vae']:>10.3f}{row['coarse_vs_precise']:>9.3f}"
-                   f"{row['coarse_diff']:>+9.4f}{row['precise_diff']:>+9.4f}")
-    typer.echo("ours-vae / obs gap = mean 1-cos between the two models' answers / the two "
-               "observers' clicks\nat the same start states; coarse/precise = each observer's "
-               "err_ours - err_vae there")
-
-
-def served_bundle(study: str) -> "Bundle":
-    """The bundle `study` is served from (every file checked); exit 2 if it cannot be."""
-    from app.bank.bundle import BundleError, load_bundle
-    from app.study.config import load_study_config
-
-    settings = get_settings()
-    try:
-        return load_bundle(load_study_config(settings, study), study, settings.configs_dir,
-                           settings.data_dir)
-    except BundleError as err:
-        fail(str(err))
-
-
-def served_bank(study: str) -> Path:
-    """The trial bank file of the bundle `study` is served from."""
-    from app.bank.bundle import BANK
-
-    return served_bundle(study).root / BANK
+def echo_lines(lines: Iterable[str]) -> None:
+    """Print each line."""
+    for line in lines:
+        typer.echo(line)
 
 
 bundle_cli = typer.Typer(no_args_is_help=True,
@@ -439,69 +342,22 @@ def bundle_build(
 ) -> None:
     """Simulate, train every seed and build the bank where missing, freeze the bundle into
     var/bundles/<study>/, and report how it differs from the shipped one."""
-    import shutil
-
-    from app.bank.bundle import BundleError, open_bundle, shipped_dir
+    from app.bank.bundle import BundleError
+    from app.bank.bundle_diff import compare_with_shipped
     from app.bank.prepare import build_bundle
+    from app.bank.prepare import replace_shipped as replace
 
     settings = get_settings()
     try:
         built = build_bundle(settings, study, workers, say=typer.echo)
     except (FileNotFoundError, ValueError, BundleError) as err:
         fail(str(err))
-    shipped = shipped_dir(settings.configs_dir, study)
-    if (shipped / "manifest.json").is_file():
-        try:
-            echo_bundle_diff(open_bundle(shipped), built, study, replications)
-        except BundleError as err:
-            typer.echo(f"the shipped bundle cannot be compared: {err}")
+    try:
+        echo_lines(compare_with_shipped(settings, study, built, replications))
+    except BundleError as err:
+        typer.echo(f"the shipped bundle cannot be compared: {err}")
     if replace_shipped:
-        shutil.rmtree(shipped, ignore_errors=True)
-        shutil.copytree(built.root, shipped)
-        open_bundle(shipped)
-        typer.echo(f"replaced {shipped}")
-
-
-def echo_bundle_diff(shipped: "Bundle", built: "Bundle", study: str, replications: int) -> None:
-    """Print how the built bundle differs from the shipped one, and both instrument verdicts."""
-    from app.bank.bundle_diff import compare_bundles
-
-    diff = compare_bundles(shipped, built)
-    files = diff["files"]
-    typer.echo(f"\nagainst the shipped bundle {shipped.root}:\n"
-               f"content {'identical' if diff['content_same'] else 'differs'}; files: "
-               f"{len(files['same'])} same, {len(files['changed'])} changed, "
-               f"{len(files['only_old'])} only shipped, {len(files['only_new'])} only built")
-    rows = diff["checkpoints"]
-    others = sorted({key for row in rows for key in row["other_keys_differ"]})
-    typer.echo(f"checkpoints: {sum(row['same'] for row in rows)} of {len(rows)} identical; "
-               f"{sum(row['same_weights'] for row in rows)} of {len(rows)} with the same "
-               f"weights" + (f" (other recorded keys that differ: {', '.join(others)})"
-                            if others else ""))
-    for world, part in diff["worlds"].items():
-        typer.echo(f"{world}: {part['main_same_clip']} of {part['main_trials'][0]} shipped main "
-                   f"trials kept with the same clip; {part['trials_same_clip']} trials compared")
-        for row in part["answers"]:
-            typer.echo(f"  {row['model']:<5} seed {row['seed']}: largest angle "
-                       f"{row['max_degrees']:.3g} deg, {row['max_metres']:.3g} m per step, "
-                       f"{row['codes_differ']} of {row['trials']} codes differ")
-    echo_verdicts({"shipped": shipped, "built": built}, study, replications)
-
-
-def echo_verdicts(bundles: dict, study: str, replications: int) -> None:
-    """The instrument check's verdict and pass rate per world on each bundle's bank."""
-    from app.bank.bundle import BANK
-    from app.observers.simulated_study import run_instrument
-
-    out = get_settings().layout.instrument_report(study)
-    for name, bundle in bundles.items():
-        _, observers, trials = simulation_inputs(study, None, bundle.root / BANK)
-        summary = run_instrument(bundle.root / BANK, trials, out / f"bundle-{name}",
-                                 observers=observers, replications=replications)
-        verdicts = ", ".join(f"{world} {'pass' if ok else 'FAIL'} (pass rate "
-                             f"{pass_rate(summary['pass_rate'][world]).strip()})"
-                             for world, ok in summary["passed"].items())
-        typer.echo(f"instrument on the {name} bank: {verdicts}")
+        typer.echo(f"replaced {replace(built, settings.configs_dir, study)}")
 
 
 @bundle_cli.command("verify")
@@ -514,9 +370,10 @@ def bundle_verify(
     machine; print the largest differences; exit 1 if any is beyond tolerance."""
     from app.bank.bundle import BundleError, open_bundle
     from app.bank.model_answers import ACTION_TOLERANCE_MPS, recompute
+    from app.bank.served import served_bundle
 
     try:
-        opened = open_bundle(bundle) if bundle else served_bundle(study)
+        opened = open_bundle(bundle) if bundle else served_bundle(get_settings(), study)
     except BundleError as err:
         fail(str(err))
     files = opened.manifest["files"]
@@ -547,7 +404,7 @@ def build_trials_cmd(
 
     settings = get_settings()
     try:
-        path = build_trials(load_study_config(settings, study), study, settings.data_dir)
+        path = build_trials(load_study_config(settings, study), study, settings.layout)
     except (FileNotFoundError, CheckpointError, ValueError) as err:
         fail(str(err))
     typer.echo(f"wrote {path}")
@@ -565,115 +422,23 @@ def serve(
         "--allow-bank-change", help="serve although sessions ran another trial bank")] = False,
 ) -> None:
     """Serve the study (participant app, API, researcher dashboard) with uvicorn."""
-    import os
-
     import uvicorn
 
-    from app.main import STUDY_ENV
+    from app.main import ready_to_serve
+    from app.server.preflight import NotServable, hand_to_workers
 
-    settings = server_settings(host, workers, allow_bank_change)
-    check_data_dir_writable(settings.data_dir)
-    if prepare:
-        from app.bank.prepare import prepare_study
-
-        for study_id in study.split(","):
-            prepare_study(settings, study_id, say=typer.echo)
-    check_database(settings, [loadable_study(settings, sid) for sid in study.split(",")])
-    os.environ[STUDY_ENV] = study
+    study_ids = study.split(",")
+    try:
+        settings = ready_to_serve(get_settings(), host, workers, study_ids, allow_bank_change,
+                                  prepare, say=typer.echo)
+    except NotServable as err:
+        fail(str(err))
+    hand_to_workers(settings, study_ids)
     docs = "off in production" if settings.production else "/docs"
-    typer.echo(f"serving http://{host}:{port}/s/{study.split(',')[0]}  "
+    typer.echo(f"serving http://{host}:{port}/s/{study_ids[0]}  "
                f"(researcher dashboard: /researcher, API docs: {docs})")
     uvicorn.run("app.main:app_from_env", factory=True, host=host, port=port,
                 workers=workers, log_level="warning")
-
-
-def loadable_study(settings: "Settings", study_id: str) -> "StudyContext":
-    """The study as a server loads it (bundle verified, answers recomputed); exit 2 if it
-    cannot be served, before any worker starts."""
-    from app.bank.bundle import BundleError
-    from app.bank.model_answers import BankMismatch
-    from app.main import load_study
-
-    try:
-        return load_study(settings, study_id)
-    except (BundleError, BankMismatch) as err:
-        fail(str(err))
-
-
-def check_data_dir_writable(data_dir: Path) -> None:
-    """Exit 2 with what to do when this user cannot write the data dir (a bind mount owned
-    by another user, typically), instead of a traceback from the first file written."""
-    import os
-    import tempfile
-
-    try:
-        data_dir.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=data_dir):
-            pass
-    except OSError as err:
-        fail(f"TOMSTUDY_DATA_DIR: {data_dir} is not writable by this user (uid {os.getuid()}): "
-             f"{err.strerror}. Give it to this user (on the host of a bind mount: "
-             f"`sudo chown -R {os.getuid()} <the mounted folder>`), or use a volume")
-
-
-def check_database(settings: "Settings", studies: list["StudyContext"]) -> None:
-    """Before any worker starts: make an empty database, and exit 2 on one that needs
-    `tomstudy db upgrade` or whose sessions ran another trial bank (unless allowed)."""
-    from app.server.bank_guard import BankChanged, check_bank_unchanged
-    from app.server.db import create_tables, make_engine
-    from app.server.migrate import SchemaError
-
-    engine = make_engine(settings.resolved_database_url())
-    try:
-        create_tables(engine)  # once, before workers race to create them
-        if not settings.allow_bank_change:
-            for ctx in studies:
-                check_bank_unchanged(engine, ctx.study_id, ctx.bank.sha256)
-    except (SchemaError, BankChanged) as err:
-        fail(str(err))
-    finally:
-        engine.dispose()
-
-
-def server_settings(host: str, workers: int, allow_bank_change: bool = False) -> "Settings":
-    """Settings for `serve`: production off loopback; exit 2 if unsafe or unservable."""
-    import os
-
-    from app.main import UnsafeSettings, check_production
-    from app.server.db import is_sqlite
-
-    if allow_bank_change:  # the app factory (in each worker) reads the environment
-        os.environ["TOMSTUDY_ALLOW_BANK_CHANGE"] = "1"
-        get_settings.cache_clear()
-    settings = get_settings().for_host(host)
-    if not settings.admin_token.strip() and not settings.production:
-        settings = with_generated_token(settings)
-    try:
-        check_production(settings)
-    except UnsafeSettings as err:
-        fail(str(err))
-    if workers > 1 and is_sqlite(settings.resolved_database_url()):
-        fail(f"--workers {workers} needs a database several processes can share: set "
-             f"DATABASE_URL to PostgreSQL (postgresql+psycopg://user:password@host:5432/db), "
-             f"or serve SQLite with --workers 1")
-    if settings.production:  # the app factory (in each worker) reads the environment
-        os.environ["TOMSTUDY_PRODUCTION"] = "1"
-        get_settings.cache_clear()
-    return settings
-
-
-def with_generated_token(settings: "Settings") -> "Settings":
-    """A loopback server without a researcher token gets a strong one for this run, printed
-    once; every worker reads it from the environment."""
-    import os
-    import secrets
-
-    token = secrets.token_urlsafe(32)
-    os.environ["TOMSTUDY_ADMIN_TOKEN"] = token
-    get_settings.cache_clear()
-    typer.echo(f"researcher token for this run (TOMSTUDY_ADMIN_TOKEN is not set; set it to "
-               f"keep one across restarts): {token}")
-    return settings.model_copy(update={"admin_token": token})
 
 
 db_cli = typer.Typer(no_args_is_help=True,
@@ -685,7 +450,7 @@ cli.add_typer(db_cli, name="db")
 def db_upgrade() -> None:
     """Bring the database to this tomstudy's schema revision, keeping every row."""
     from app.server.db import make_engine
-    from app.server.migrate import SchemaError, upgrade, where
+    from app.server.migrate import SchemaError, upgrade, upgrade_lines, where
 
     engine = make_engine(get_settings().resolved_database_url())
     try:
@@ -698,38 +463,18 @@ def db_upgrade() -> None:
         typer.echo(line)
 
 
-def upgrade_lines(report: "UpgradeReport", where: str) -> list[str]:
-    """What `db upgrade` did: from -> to revision, then rows per table before and after."""
-    if report.stamped:
-        before = f"no revision (made before migrations; its tables match {report.stamped})"
-    else:
-        before = report.before or "empty database"
-    verb = "already at" if report.before == report.after else "upgraded to"
-    lines = [f"{where}: {before} -> {verb} {report.after}",
-             f"{'table':<16}{'rows before':>12}{'rows after':>12}"]
-    for name in sorted(set(report.rows_before) | set(report.rows_after)):
-        rows = [str(counts[name]) if name in counts else "-"
-                for counts in (report.rows_before, report.rows_after)]
-        lines.append(f"{name:<16}{rows[0]:>12}{rows[1]:>12}")
-    return lines
-
-
 @db_cli.command("current")
 def db_current() -> None:
     """Print the database's schema revision and this tomstudy's newest."""
     from app.server.db import make_engine
-    from app.server.migrate import current, head, our_tables
+    from app.server.migrate import revision_lines
 
     engine = make_engine(get_settings().resolved_database_url())
     try:
-        with engine.connect() as conn:
-            revision, tables = current(conn), our_tables(conn)
+        lines = revision_lines(engine)
     finally:
         engine.dispose()
-    shown = revision or ("none (made before migrations)" if tables else "none (empty database)")
-    typer.echo(f"revision: {shown}\nhead: {head()}")
-    if tables and revision != head():
-        typer.echo("back up the database, then run `tomstudy db upgrade` before serving it")
+    typer.echo("\n".join(lines))
 
 
 @cli.command("preview-link")
@@ -787,9 +532,7 @@ def withdraw(
     """Delete every row of one participant (all sessions, one transaction); print the audit."""
     import json
 
-    from sqlmodel import Session
-
-    from app.researcher import withdrawal
+    from app.researcher.withdrawal import withdraw_and_erase
     from app.server.schemas import WithdrawalByExternalId, WithdrawalByParticipantId
     from app.study.errors import Refused
 
@@ -800,10 +543,7 @@ def withdraw(
            WithdrawalByParticipantId(study_id=study, participant_id=participant_id))
     config, engine = study_database(study)
     try:
-        with Session(engine) as db:
-            audit = withdrawal.withdraw(db, study, who, config.recruitment.platform, via="cli")
-            line = withdrawal.audit_line(audit)
-        line["storage"] = withdrawal.erase_from_files(engine)
+        line = withdraw_and_erase(engine, study, who, config.recruitment.platform, via="cli")
     except Refused as err:
         kind = err.detail.split(":", 1)[0]
         fail(err.detail.replace(f"{kind}:", f"--{kind.replace('_', '-')}:", 1), 1)
@@ -813,13 +553,10 @@ def withdraw(
 
 
 def study_database(study: str):
-    """(study config, engine on DATABASE_URL) for a study's stored data; exit 2 if either is
-    missing, or the database needs `tomstudy db upgrade`."""
-    from sqlalchemy import inspect
-    from sqlalchemy.engine import make_url
-
-    from app.server.db import make_engine, normalise_url
-    from app.server.migrate import SchemaError, check_at_head
+    """(study config, engine on DATABASE_URL) for a study's stored data; exit 2 naming the
+    option or variable to fix."""
+    from app.server.db import NoDatabase, open_existing
+    from app.server.migrate import SchemaError
     from app.study.config import load_study_config
 
     settings = get_settings()
@@ -827,21 +564,10 @@ def study_database(study: str):
         config = load_study_config(settings, study)
     except ConfigError as err:
         fail(f"--study: unknown study {study!r} ({err})")
-    url = normalise_url(settings.resolved_database_url())
-    parsed = make_url(url)
-    if parsed.get_backend_name() == "sqlite" and not Path(parsed.database or "").is_file():
-        fail(f"DATABASE_URL: no database file at {parsed.database}")
-    engine = make_engine(url)
-    where = parsed.render_as_string(hide_password=True)
-    if not inspect(engine).has_table("participant"):
-        engine.dispose()
-        fail(f"DATABASE_URL: {where} holds no study tables")
     try:
-        check_at_head(engine)
-    except SchemaError as err:
-        engine.dispose()
+        return config, open_existing(settings.resolved_database_url())
+    except (NoDatabase, SchemaError) as err:
         fail(str(err))
-    return config, engine
 
 
 @cli.command()
@@ -870,7 +596,7 @@ def interaction(
             from app.interaction.synthetic import generate as write_generated
 
             write_generated(data, scenario, generate)
-        summary = run_command(data, scenario, get_settings().data_dir, config, train_config,
+        summary = run_command(data, scenario, get_settings().layout, config, train_config,
                               seeds, max_epochs, frame_seeds=frame_seeds)
     except (TrackFileError, InteractionError, MapError, ValueError) as err:
         fail(str(err))

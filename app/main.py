@@ -7,6 +7,7 @@ changes lives in the database, so several uvicorn workers can serve one study.
 import asyncio
 import gc
 import os
+from collections.abc import Callable
 from contextlib import asynccontextmanager, suppress
 
 from fastapi import FastAPI, Request
@@ -18,8 +19,9 @@ from fastapi.templating import Jinja2Templates
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from app.bank.bundle import load_bundle
-from app.bank.model_answers import ModelAnswers
+from app.bank.bundle import BundleError, load_bundle
+from app.bank.model_answers import BankMismatch, ModelAnswers
+from app.bank.prepare import prepare_study
 from app.researcher import api as researcher
 from app.researcher import dashboard_api as dashboard
 from app.server import health
@@ -29,6 +31,16 @@ from app.server.context import StudyContext
 from app.server.db import create_tables, make_engine
 from app.server.headers import MTURK_FRAMERS, SecurityHeaders
 from app.server.openapi import declare_error_responses
+from app.server.preflight import (
+    STUDY_ENV,
+    NotServable,
+    check_data_dir_writable,
+    check_database,
+    check_workers,
+    needs_generated_token,
+    serve_settings,
+    with_generated_token,
+)
 from app.server.ratelimit import RateLimit, parse_limit
 from app.server.recruitment import preview_key
 from app.server.routes import pages, participant
@@ -38,13 +50,12 @@ from app.study.errors import Refused
 
 MAX_BODY_BYTES = 64 * 1024
 FRONTEND_DIR = REPO_ROOT / "frontend"
-STUDY_ENV = "TOMSTUDY_STUDY"
 MIN_ADMIN_TOKEN_CHARS = 32
 NEW_TOKEN_HINT = ("set one with TOMSTUDY_ADMIN_TOKEN=$(python -c 'import secrets;"
                   "print(secrets.token_urlsafe(32))')")
 
 
-class UnsafeSettings(RuntimeError):
+class UnsafeSettings(NotServable):
     """The server must not start with these settings."""
 
 
@@ -84,11 +95,39 @@ def load_study(settings: Settings, study_id: str) -> StudyContext:
     """Config, bundle (bank and every checkpoint, verified against its manifest and each other)
     of one study; BundleError or BankMismatch if it cannot be served as it is."""
     config = load_study_config(settings, study_id)
-    bundle = load_bundle(config, study_id, settings.configs_dir, settings.data_dir)
+    bundle = load_bundle(config, study_id, settings.configs_dir, settings.layout)
     return StudyContext(study_id, config, bundle.bank, ModelAnswers(bundle),
                         config_sha256=config_sha256(config),
                         preview_key=preview_key(settings.admin_token, study_id),
                         trust_client_clock=settings.trust_client_clock)
+
+
+def servable_study(settings: Settings, study_id: str) -> StudyContext:
+    """`load_study`, refusing (NotServable) a study whose bundle or answers do not hold."""
+    try:
+        return load_study(settings, study_id)
+    except (BundleError, BankMismatch) as err:
+        raise NotServable(str(err)) from err
+
+
+def ready_to_serve(settings: Settings, host: str, workers: int, study_ids: list[str],
+                   allow_bank_change: bool = False, prepare: bool = False,
+                   say: Callable[[str], None] = print) -> Settings:
+    """The settings `tomstudy serve` runs with, once every check before the workers start
+    passed (NotServable names what to fix); `prepare` first builds a missing bundle."""
+    settings = serve_settings(settings, host, allow_bank_change)
+    if needs_generated_token(settings):
+        settings = with_generated_token(settings)
+        say(f"researcher token for this run (TOMSTUDY_ADMIN_TOKEN is not set; set it to "
+            f"keep one across restarts): {settings.admin_token}")
+    check_production(settings)
+    check_workers(settings, workers)
+    check_data_dir_writable(settings.layout)
+    if prepare:
+        for study_id in study_ids:
+            prepare_study(settings, study_id, say=say)
+    check_database(settings, [servable_study(settings, sid) for sid in study_ids])
+    return settings
 
 
 def create_app(settings: Settings | None = None, studies: list[str] | None = None) -> FastAPI:

@@ -16,8 +16,9 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.report import run_analyze
-from app.cli import analysis_inputs, served_bank
+from app.bank.served import analysis_inputs, served_bank
 from app.observers.simulated_study import load_bank, simulate_participants
+from app.settings import get_settings
 
 TARGET_S = 10.0
 
@@ -28,8 +29,9 @@ def main() -> None:
     parser.add_argument("--participants", type=int, default=1000)
     parser.add_argument("--study", default="paper_study")
     args = parser.parse_args()
-    frame = simulate_participants(load_bank(served_bank(args.study)), "coarse", args.participants,
-                                  10, seed=0)
+    settings = get_settings()
+    frame = simulate_participants(load_bank(served_bank(settings, args.study)), "coarse",
+                                  args.participants, 10, seed=0)
     with tempfile.TemporaryDirectory() as tmp:
         csv = Path(tmp) / "export.csv"
         frame.to_csv(csv, index=False)
@@ -37,7 +39,8 @@ def main() -> None:
         pd.read_csv(csv)
         baseline = time.perf_counter() - start
         start = time.perf_counter()
-        run_analyze(args.study, Path(tmp) / "report", csv, "", analysis_inputs(args.study))
+        run_analyze(args.study, Path(tmp) / "report", csv, "",
+                    analysis_inputs(settings, args.study))
         analysis = time.perf_counter() - start
     print(f"rows: {len(frame):,} ({args.participants} participants x 20 trials x 5 x 3)")
     print(f"baseline pd.read_csv: {baseline:.2f} s")

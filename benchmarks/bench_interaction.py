@@ -21,6 +21,7 @@ from app.interaction.config import InteractionConfig
 from app.interaction.dataset import load_scenario_data
 from app.interaction.experiment import experiment_train_config, run_command
 from app.interaction.synthetic import generate
+from app.layout import Layout
 from app.learning.config import load_train_config
 from app.learning.train import train_and_save
 
@@ -45,7 +46,7 @@ def main() -> None:
         train_and_save(exp.train.trajs, "ours", 0, train_cfg, root / "baseline", progress=False)
         base_wall, base_cpu = time.perf_counter() - wall, time.process_time() - cpu
         wall, cpu = time.perf_counter(), time.process_time()
-        summary = run_command(root / "data", args.scenario, root / "var",
+        summary = run_command(root / "data", args.scenario, Layout(root / "var"),
                               frame_seeds=args.frame_seeds)
         full_wall, full_cpu = time.perf_counter() - wall, time.process_time() - cpu
     row = summary.get("sensitivity", {}).get("human_relative_frame")

@@ -14,11 +14,11 @@ import multiprocessing as mp
 import tempfile
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 
 from app.data.trajectory import TrajectorySet
+from app.layout import Layout
 from app.worlds.registry import WORLD_NAMES, build_world
 from app.worlds.simulate import simulate
 
@@ -73,7 +73,7 @@ def main() -> None:
     for world in args.worlds:
         with tempfile.TemporaryDirectory() as tmp:
             started = time.perf_counter()
-            result = simulate(world, args.n, seed=0, data_dir=Path(tmp), workers=WORKERS)
+            result = simulate(world, args.n, seed=0, layout=Layout(tmp), workers=WORKERS)
             wall = time.perf_counter() - started
             steps = int(TrajectorySet.load(result.npz_path).lengths.sum())
         if steps not in baselines:

@@ -50,6 +50,13 @@ class SmallStudy:
     configs_dir: Path
     study_id: str = SMALL_STUDY
 
+    @property
+    def layout(self):
+        """The generated paths under this study's data dir."""
+        from app.layout import Layout
+
+        return Layout(self.data_dir)
+
     def env(self, db_url: str, **extra: str) -> dict:
         """Environment for a `tomstudy` subprocess using this study and database."""
         env = dict(os.environ, TOMSTUDY_DATA_DIR=str(self.data_dir),
@@ -103,8 +110,8 @@ def build_small_study(root: Path) -> SmallStudy:
     data_dir, configs_dir = root / "var", root / "configs"
     write_small_configs(configs_dir)
     for world in ("highway", "obstacle"):
-        simulate(world, SMALL_TRAJECTORIES, 0, data_dir, configs_dir / "worlds" / f"{world}.yaml",
-                 workers=2)
+        simulate(world, SMALL_TRAJECTORIES, 0, Layout(data_dir),
+                 configs_dir / "worlds" / f"{world}.yaml", workers=2)
     train_family(Layout(data_dir), ["highway", "obstacle"], SMALL_SEEDS,
                  TrainConfig(**SMALL_TRAINING), workers=1, say=lambda _: None)
     study = SmallStudy(data_dir, configs_dir)
@@ -119,7 +126,7 @@ def build_bundle_of(study: SmallStudy) -> None:
     from app.study.config import StudyConfig
 
     config = load_yaml_model(study.configs_dir / f"{study.study_id}.yaml", StudyConfig)
-    build_trials(config, study.study_id, study.data_dir)
+    build_trials(config, study.study_id, study.layout)
     freeze_bundle_of(study)
 
 
@@ -128,12 +135,11 @@ def freeze_bundle_of(study: SmallStudy) -> None:
     changed it, say)."""
     from app.bank.bundle import freeze
     from app.configio import load_yaml_model
-    from app.layout import Layout
     from app.study.config import StudyConfig
 
     config = load_yaml_model(study.configs_dir / f"{study.study_id}.yaml", StudyConfig)
-    freeze(config, study.study_id, study.configs_dir, study.data_dir,
-           Layout(study.data_dir).bundle_dir(study.study_id))
+    freeze(config, study.study_id, study.configs_dir, study.layout,
+           study.layout.bundle_dir(study.study_id))
 
 
 @pytest.fixture(scope="session")

@@ -1,4 +1,7 @@
-"""The house rules a newcomer relies on: no import cycles, one-way packages, no world branches."""
+"""The house rules a newcomer relies on: no import cycles, one-way packages, no world branches,
+one form of the data directory."""
+
+import ast
 
 from tests.import_graph import ROOT, file_graph, imported_names, project_modules, report
 from tests.world_branches import world_branches
@@ -34,3 +37,25 @@ def test_offline_packages_stay_out_of_the_web_room():
 
 def test_no_module_outside_worlds_branches_on_a_world():
     assert world_branches() == []
+
+
+# Settings.layout is where a process turns its data dir into a Layout; library code is handed
+# one (tests and benchmarks build theirs from temporary folders)
+LAYOUT_BUILDERS = {"app.settings"}
+
+
+def test_a_layout_is_built_only_at_the_edge():
+    """Library functions take a `Layout`, never a bare data dir they wrap again."""
+    built_at = []
+    for name, path in project_modules().items():
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.Call) and called_name(node.func) == "Layout":
+                built_at.append((name, f"{path.relative_to(ROOT)}:{node.lineno}"))
+    assert [where for name, where in built_at if name not in LAYOUT_BUILDERS] == []
+
+
+def called_name(func: ast.expr) -> str:
+    """`Layout` for both `Layout(...)` and `layout.Layout(...)`."""
+    if isinstance(func, ast.Attribute):
+        return func.attr
+    return func.id if isinstance(func, ast.Name) else ""

@@ -58,16 +58,15 @@ class WorldInputs:
     data_dir: Path  # meta.json names the inputs relative to it
 
 
-def build_trials(config: StudyConfig, study_id: str, data_dir: Path) -> Path:
+def build_trials(config: StudyConfig, study_id: str, layout: Layout) -> Path:
     """Build the study's bank.json and its meta.json; returns the bank path."""
     started = time.perf_counter()
     worlds, meta_worlds = {}, {}
     for w_index, name in enumerate(config.worlds):
-        inputs = load_inputs(config, name, Path(data_dir))
+        inputs = load_inputs(config, name, layout)
         rng = np.random.default_rng(np.random.SeedSequence([config.bank_seed, w_index]))
         worlds[name], meta_worlds[name] = build_world_bank(config, inputs, rng)
     bank = BankFile(study_id=study_id, steps_to_predict=config.steps_to_predict, worlds=worlds)
-    layout = Layout(data_dir)
     bank_path = layout.bank(study_id)
     write_json(bank_path, bank.model_dump())
     write_json(layout.bank_meta(study_id), {
@@ -79,7 +78,7 @@ def build_trials(config: StudyConfig, study_id: str, data_dir: Path) -> Path:
     return bank_path
 
 
-def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
+def load_inputs(config: StudyConfig, name: str, layout: Layout) -> WorldInputs:
     """The world, its trajectories, every seed's checkpoints and the test split they share."""
     from app.learning.checkpoint import (
         CheckpointError,
@@ -88,7 +87,6 @@ def load_inputs(config: StudyConfig, name: str, data_dir: Path) -> WorldInputs:
         trajectory_hash,
     )
 
-    layout = Layout(data_dir)
     npz_path = layout.trajectories(name)
     if not npz_path.is_file():
         raise FileNotFoundError(f"{npz_path}: no trajectories; run `tomstudy simulate {name}`")

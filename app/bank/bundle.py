@@ -65,11 +65,11 @@ def shipped_dir(configs_dir: Path, study_id: str) -> Path:
     return Path(configs_dir) / BUNDLES / study_id
 
 
-def bundle_dir(config: StudyConfig, study_id: str, configs_dir: Path, data_dir: Path) -> Path:
+def bundle_dir(config: StudyConfig, study_id: str, configs_dir: Path, layout: Layout) -> Path:
     """Where the study's config says its bundle is (shipped or built)."""
     if config.bundle == "shipped":
         return shipped_dir(configs_dir, study_id)
-    return Layout(data_dir).bundle_dir(study_id)
+    return layout.bundle_dir(study_id)
 
 
 @dataclass
@@ -157,9 +157,9 @@ def check_design(bundle: Bundle, config: StudyConfig, config_path: Path) -> None
                           f"{bundle.study_id}`)")
 
 
-def load_bundle(config: StudyConfig, study_id: str, configs_dir: Path, data_dir: Path) -> Bundle:
+def load_bundle(config: StudyConfig, study_id: str, configs_dir: Path, layout: Layout) -> Bundle:
     """The verified bundle a study's config names, whose bank design matches that config."""
-    root = bundle_dir(config, study_id, configs_dir, data_dir)
+    root = bundle_dir(config, study_id, configs_dir, layout)
     if not (root / MANIFEST).is_file():
         how = ("it ships with the code: restore it from git" if config.bundle == "shipped"
                else f"build it with `tomstudy bundle build --study {study_id}`")
@@ -174,10 +174,10 @@ def load_bundle(config: StudyConfig, study_id: str, configs_dir: Path, data_dir:
 # ---------------------------------------------------------------- freezing
 
 def bundle_files(config: StudyConfig, study_id: str, configs_dir: Path,
-                 data_dir: Path) -> dict[str, bytes]:
+                 layout: Layout) -> dict[str, bytes]:
     """Every file of the study's bundle (name -> bytes), from the data dir's working bank,
     checkpoints and trajectories' meta and the configs dir."""
-    layout, configs_dir = Layout(data_dir), Path(configs_dir)
+    configs_dir = Path(configs_dir)
     files = {BANK: layout.bank(study_id).read_bytes(),
              BANK_META: layout.bank_meta(study_id).read_bytes()}
     for world in config.worlds:
@@ -197,14 +197,14 @@ def bundle_files(config: StudyConfig, study_id: str, configs_dir: Path,
     return files
 
 
-def freeze(config: StudyConfig, study_id: str, configs_dir: Path, data_dir: Path,
+def freeze(config: StudyConfig, study_id: str, configs_dir: Path, layout: Layout,
            out: Path, wall_time_s: float | None = None) -> Bundle:
     """Write the study's bundle to `out` (replacing what is there) and open it."""
     out = Path(out)
     staging = out.with_name(f".{out.name}.tmp-{os.getpid()}")
     shutil.rmtree(staging, ignore_errors=True)
     entries = {}
-    for name, data in sorted(bundle_files(config, study_id, configs_dir, data_dir).items()):
+    for name, data in sorted(bundle_files(config, study_id, configs_dir, layout).items()):
         target = staging / name
         if name.endswith(".gz"):
             write_gzip(target, data)

@@ -7,10 +7,67 @@ and the same clip shown), and on those the largest angle and distance between th
 bundles' stored answers per model and seed.
 """
 
+from collections.abc import Iterator
+from pathlib import Path
+
 import numpy as np
 
-from app.bank.bundle import Bundle
+from app.bank.bundle import BANK, MANIFEST, Bundle, open_bundle, shipped_dir
 from app.bank.model_answers import largest_angle_deg
+from app.bank.served import simulation_inputs
+from app.settings import Settings
+
+
+def compare_with_shipped(settings: Settings, study_id: str, built: Bundle,
+                         replications: int) -> Iterator[str]:
+    """What `bundle build` says of `built` against the shipped bundle, line by line as each
+    is ready: the differences, then the instrument verdict on each bank (nothing without a
+    shipped bundle; BundleError if it cannot be opened)."""
+    root = shipped_dir(settings.configs_dir, study_id)
+    if not (root / MANIFEST).is_file():
+        return
+    shipped = open_bundle(root)
+    yield from diff_lines(compare_bundles(shipped, built), shipped.root)
+    yield from instrument_verdicts(settings, study_id, {"shipped": shipped, "built": built},
+                                   replications)
+
+
+def diff_lines(diff: dict, shipped_root: Path) -> list[str]:
+    """`compare_bundles`' result as text: files, checkpoints, then kept trials and answer gaps
+    per world."""
+    files, rows = diff["files"], diff["checkpoints"]
+    lines = [f"\nagainst the shipped bundle {shipped_root}:\n"
+             f"content {'identical' if diff['content_same'] else 'differs'}; files: "
+             f"{len(files['same'])} same, {len(files['changed'])} changed, "
+             f"{len(files['only_old'])} only shipped, {len(files['only_new'])} only built"]
+    others = sorted({key for row in rows for key in row["other_keys_differ"]})
+    lines.append(f"checkpoints: {sum(row['same'] for row in rows)} of {len(rows)} identical; "
+                 f"{sum(row['same_weights'] for row in rows)} of {len(rows)} with the same "
+                 f"weights" + (f" (other recorded keys that differ: {', '.join(others)})"
+                              if others else ""))
+    for world, part in diff["worlds"].items():
+        lines.append(f"{world}: {part['main_same_clip']} of {part['main_trials'][0]} shipped "
+                     f"main trials kept with the same clip; {part['trials_same_clip']} trials "
+                     f"compared")
+        lines += [f"  {row['model']:<5} seed {row['seed']}: largest angle "
+                  f"{row['max_degrees']:.3g} deg, {row['max_metres']:.3g} m per step, "
+                  f"{row['codes_differ']} of {row['trials']} codes differ"
+                  for row in part["answers"]]
+    return lines
+
+
+def instrument_verdicts(settings: Settings, study_id: str, bundles: dict[str, Bundle],
+                        replications: int) -> Iterator[str]:
+    """The instrument check's verdict and pass rate per world on each named bundle's bank."""
+    from app.observers.instrument_tables import verdict_line
+    from app.observers.simulated_study import run_instrument
+
+    out = settings.layout.instrument_report(study_id)
+    for name, bundle in bundles.items():
+        inputs = simulation_inputs(settings, study_id, bank=bundle.root / BANK)
+        summary = run_instrument(inputs.bank, inputs.trials_per_world, out / f"bundle-{name}",
+                                 observers=inputs.observers, replications=replications)
+        yield verdict_line(name, summary)
 
 
 def compare_bundles(old: Bundle, new: Bundle) -> dict:

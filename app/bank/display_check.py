@@ -93,10 +93,9 @@ def click_resolution(world_bank: dict) -> dict:
             "deg_per_px": round(view.resolution_deg, 3)}
 
 
-def check_display(data_dir: Path, study_id: str, bank_path: Path) -> dict:
+def check_display(layout: Layout, study_id: str, bank_path: Path) -> dict:
     """Figures for every world of a study's bank (the one it is served from) on the data dir's
     trajectories; also written to the data dir's trials/<study>/ folder."""
-    layout = Layout(data_dir)
     bank = json.loads(read_bytes(bank_path))
     result = {}
     for name, world_bank in sorted(bank["worlds"].items()):

@@ -9,11 +9,12 @@ interrupted build resumes. A bundle that exists is served as it is: rebuilding i
 """
 
 import json
+import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-from app.bank.bundle import MANIFEST, Bundle, bundle_dir, freeze
+from app.bank.bundle import MANIFEST, Bundle, bundle_dir, freeze, open_bundle, shipped_dir
 from app.fileio import sha256_file
 from app.layout import Layout
 from app.settings import Settings
@@ -25,7 +26,7 @@ def prepare_study(settings: Settings, study_id: str, workers: int = 2,
     """The folder of the bundle `study_id` is served from, built first if it is a missing
     `built` one."""
     config = load_study_config(settings, study_id)
-    root = bundle_dir(config, study_id, settings.configs_dir, settings.data_dir)
+    root = bundle_dir(config, study_id, settings.configs_dir, settings.layout)
     if config.bundle == "shipped" or (root / MANIFEST).is_file():
         say(f"serving the {config.bundle} bundle {root}")
         return root
@@ -51,12 +52,22 @@ def build_bundle(settings: Settings, study_id: str, workers: int = 2, n_trajecto
         from app.bank.build import build_trials
 
         say(f"building the trial bank of {study_id}")
-        build_trials(config, study_id, layout.root)
+        build_trials(config, study_id, layout)
     out = layout.bundle_dir(study_id)
-    bundle = freeze(config, study_id, settings.configs_dir, layout.root, out,
+    bundle = freeze(config, study_id, settings.configs_dir, layout, out,
                     round(time.perf_counter() - started, 1))
     say(f"froze {out} ({len(bundle.manifest['files'])} files)")
     return bundle
+
+
+def replace_shipped(built: Bundle, configs_dir: Path, study_id: str) -> Path:
+    """Copy a built bundle over the one that ships in the configs dir; returns its folder
+    once the copy opens as a bundle (maintainers commit it with the numbers it changes)."""
+    shipped = shipped_dir(configs_dir, study_id)
+    shutil.rmtree(shipped, ignore_errors=True)
+    shutil.copytree(built.root, shipped)
+    open_bundle(shipped)
+    return shipped
 
 
 def ensure_trajectories(layout: Layout, world: str, n: int, seed: int, say) -> None:
@@ -68,7 +79,7 @@ def ensure_trajectories(layout: Layout, world: str, n: int, seed: int, say) -> N
     from app.worlds.simulate import simulate
 
     say(f"simulating {n} {world} trajectories")
-    simulate(world, n, seed, layout.root)
+    simulate(world, n, seed, layout)
 
 
 def bank_is_current(layout: Layout, study_id: str, config: StudyConfig) -> bool:

@@ -60,6 +60,7 @@ from app.interaction.horizons import (
     summarise_by_horizon,
 )
 from app.interaction.report import FigureInputs, write_figures, write_report
+from app.layout import Layout
 from app.learning.config import TrainConfig
 from app.learning.train import train_and_save
 
@@ -357,18 +358,17 @@ def _mean_sd(values) -> dict:
 # ---------------------------------------------------------------- command line
 
 
-def run_command(data_dir: Path, scenario: str, data_root: Path, config: Path | None = None,
+def run_command(data_dir: Path, scenario: str, layout: Layout, config: Path | None = None,
                 train_config: Path | None = None, seeds: int | None = None,
                 max_epochs: int | None = None, out_dir: Path | None = None,
                 frame_seeds: int | None = None) -> dict:
-    """What `tomstudy interaction` does: returns the summary; outputs under data_root."""
-    from app.layout import Layout
+    """What `tomstudy interaction` does on the dataset in `data_dir`: returns the summary;
+    models and report go under `layout`."""
     from app.learning.config import load_train_config
 
     cfg = load_config(config, seeds, frame_seeds)
     overrides = {"max_epochs": max_epochs} if max_epochs else None
     base = load_train_config(train_config, overrides)
-    layout = Layout(data_root)
     out_dir = Path(out_dir) if out_dir else layout.interaction_report(scenario)
     models_dir = layout.interaction_models(scenario)
     return run_experiment(Path(data_dir), scenario, out_dir, models_dir, cfg, base)

@@ -46,21 +46,21 @@ def run_jobs(layout: Layout, jobs: list[Job], cfg: TrainConfig, workers: int) ->
     bar = tqdm(total=len(jobs), desc="train family", unit="model", disable=not jobs)
     if workers == 1 or len(jobs) <= 1:
         for job in jobs:
-            train_job(layout.root, job, cfg)
+            train_job(layout, job, cfg)
             bar.update(1)
     else:
         # spawn, not fork: a forked child of a process that has run torch can deadlock
         with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
-            futures = [pool.submit(train_job, layout.root, job, cfg) for job in jobs]
+            futures = [pool.submit(train_job, layout, job, cfg) for job in jobs]
             for done in as_completed(futures):
                 done.result()  # re-raises a job's error here
                 bar.update(1)
     bar.close()
 
 
-def train_job(data_dir: Path, job: Job, cfg: TrainConfig) -> Path:
+def train_job(layout: Layout, job: Job, cfg: TrainConfig) -> Path:
     """One checkpoint: `train_world` for (world, model, seed) into the layout's place."""
     from app.learning.train import train_world
 
     world, model, seed = job
-    return train_world(Layout(data_dir), world, model, seed, cfg, progress=False)
+    return train_world(layout, world, model, seed, cfg, progress=False)

@@ -281,3 +281,42 @@ def run_instrument_grid(bank_path, trials_per_world: int, out_dir, observers: Ob
               "figures": [str(f) for f in figures]}
     write_json(out_dir / "grid.json", result)
     return result
+
+
+def grid_table(result: dict) -> list[str]:
+    """The grid per world and noise level: each seed pair's pass rate and n for 80% power,
+    and which model each population favours on its own; then the goal and whether it is met."""
+    cells = pd.DataFrame(result["cells"])
+    cells = cells[cells["reading"] == "absolute"]
+    alpha = result["alpha"]
+    lines = [f"\n{'world':<10}{'noise':<16}{'pass rate per seed pair':<32}{'n for 80%':<18}"
+             f"coarse favours   precise favours"]
+    for (world, noise), group in cells.groupby(["world", "noise"], sort=False):
+        group = group.sort_values("pair")
+        rates = " ".join(f"{r:.2f}" for r in group["pass_rate"])
+        needed = " ".join("-" if pd.isna(v) else f"{v:.0f}" for v in group["n_for_power_0.8"])
+        lines.append(f"{world:<10}{noise:<16}{rates:<32}{needed:<18}"
+                     f"{favours(group, 'coarse', alpha):<17}{favours(group, 'precise', alpha)}")
+    if result.get("view_click_sd_deg"):
+        view = ", ".join(f"{world} {sd:.2f} deg" for world, sd in
+                         result["view_click_sd_deg"].items())
+        lines.append(f"view = the prediction view's click spread ({view}) in quadrature with "
+                     "each preset's own")
+    goal = result["goal"]
+    met = all(w["met"] for w in goal["worlds"].values())
+    shares = ", ".join(f"{world} {w['share_passing']:.0%}" for world, w in goal["worlds"].items())
+    lines.append(f"pass rate = share of {result['replications']} reruns where Welch p < {alpha}; "
+                 f"n for 80% = participants per population for 80% power at the observed "
+                 f"effect;\nfavours = seed pairs whose population alone prefers Ours / the VAE / "
+                 f"neither (p < {alpha}, first run)\ngoal (pass rate >= {goal['pass_rate']} for "
+                 f">= {goal['share_of_pairs']:.0%} of seed pairs in every world, at noise "
+                 f"{goal['noise']}): {'met' if met else 'NOT met'} ({shares})")
+    return lines
+
+
+def favours(group: pd.DataFrame, population: str, alpha: float) -> str:
+    """'Ours/VAE/neither' counts of seed pairs by a population's own Ours-vs-VAE test."""
+    significant = group[f"{population}_own_p"] < alpha
+    ours = int((significant & (group[f"{population}_mean_diff"] < 0)).sum())
+    vae = int((significant & (group[f"{population}_mean_diff"] > 0)).sum())
+    return f"{ours}/{vae}/{len(group) - ours - vae}"

@@ -101,6 +101,15 @@ def _locked(db: Session, query) -> list[Participant]:
     return list(db.execute(query).scalars().all())
 
 
+def withdraw_and_erase(engine: Engine, study_id: str, who: WithdrawalCreate, platform: str,
+                       via: str) -> dict:
+    """`withdraw` in a session of its own, then `erase_from_files`: the audit line with what
+    happened to the deleted rows on disk (Refused if no session matches)."""
+    with Session(engine) as db:
+        line = audit_line(withdraw(db, study_id, who, platform, via=via))
+    return line | {"storage": erase_from_files(engine)}
+
+
 def erase_from_files(engine: Engine) -> str:
     """After a withdrawal: fold SQLite's write-ahead log into the database and truncate it,
     so the deleted rows' old pages leave the disk; what happened, in a few words."""

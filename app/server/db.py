@@ -3,7 +3,7 @@
 from collections.abc import Iterator
 from pathlib import Path
 
-from sqlalchemy import Table, event
+from sqlalchemy import Table, event, inspect
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.engine import URL, Connection, Engine, make_url
 from sqlmodel import Session, create_engine
@@ -11,6 +11,10 @@ from sqlmodel import Session, create_engine
 from app.server import migrate, tables  # noqa: F401  (tables registers them on SQLModel.metadata)
 
 CONNECT_TIMEOUT_S = 10
+
+
+class NoDatabase(RuntimeError):
+    """DATABASE_URL names no database holding a study's tables."""
 
 
 def normalise_url(url: str) -> str:
@@ -37,6 +41,24 @@ def make_engine(url: str, connect_timeout_s: int = CONNECT_TIMEOUT_S) -> Engine:
     engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": 30},
                            pool_size=20, max_overflow=20)
     event.listen(engine, "connect", _sqlite_pragmas)
+    return engine
+
+
+def open_existing(url: str) -> Engine:
+    """An engine on a database that already holds the study tables at the newest revision;
+    NoDatabase or migrate.SchemaError (each naming DATABASE_URL) otherwise."""
+    url = normalise_url(url)
+    parsed = make_url(url)
+    if parsed.get_backend_name() == "sqlite" and not Path(parsed.database or "").is_file():
+        raise NoDatabase(f"DATABASE_URL: no database file at {parsed.database}")
+    engine = make_engine(url)
+    try:
+        if not inspect(engine).has_table("participant"):
+            raise NoDatabase(f"DATABASE_URL: {migrate.where(engine)} holds no study tables")
+        migrate.check_at_head(engine)
+    except (NoDatabase, migrate.SchemaError):
+        engine.dispose()
+        raise
     return engine
 
 

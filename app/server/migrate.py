@@ -51,6 +51,34 @@ class UpgradeReport:
     rows_after: dict[str, int]
 
 
+def upgrade_lines(report: UpgradeReport, where: str) -> list[str]:
+    """What `db upgrade` did: from -> to revision, then rows per table before and after."""
+    if report.stamped:
+        before = f"no revision (made before migrations; its tables match {report.stamped})"
+    else:
+        before = report.before or "empty database"
+    verb = "already at" if report.before == report.after else "upgraded to"
+    lines = [f"{where}: {before} -> {verb} {report.after}",
+             f"{'table':<16}{'rows before':>12}{'rows after':>12}"]
+    for name in sorted(set(report.rows_before) | set(report.rows_after)):
+        rows = [str(counts[name]) if name in counts else "-"
+                for counts in (report.rows_before, report.rows_after)]
+        lines.append(f"{name:<16}{rows[0]:>12}{rows[1]:>12}")
+    return lines
+
+
+def revision_lines(engine: Engine) -> list[str]:
+    """What `db current` says: the database's revision, the newest, and what to do if they
+    differ."""
+    with engine.connect() as conn:
+        revision, tables = current(conn), our_tables(conn)
+    shown = revision or ("none (made before migrations)" if tables else "none (empty database)")
+    lines = [f"revision: {shown}", f"head: {head()}"]
+    if tables and revision != head():
+        lines.append("back up the database, then run `tomstudy db upgrade` before serving it")
+    return lines
+
+
 def alembic_config(connection: Connection | None = None) -> Config:
     """Alembic's config, in code: the scripts folder and the connection to run on."""
     config = Config()

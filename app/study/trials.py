@@ -133,10 +133,10 @@ class TrialBank:
     sha256: str
 
     @classmethod
-    def load(cls, data_dir: Path, study_id: str) -> "TrialBank":
+    def load(cls, layout: Layout, study_id: str) -> "TrialBank":
         """Read the study's working bank.json (trials/<study>/, what build-trials wrote; a
         server reads its bundle's); FileNotFoundError says how to build it."""
-        path = Layout(data_dir).bank(study_id)
+        path = layout.bank(study_id)
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no trial bank; run `tomstudy build-trials "
                                     f"--study {study_id}`")

@@ -32,6 +32,7 @@ from pydantic import Field, model_validator
 from app.configio import StrictModel, load_yaml_model
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Lane, Scene
 from app.data.trajectory import HUMAN, ROBOT, Episode, Rejected
+from app.layout import Layout
 from app.worlds.mpc import SamplingMPC
 
 INTENTS = ["keep", "left", "right"]
@@ -169,7 +170,7 @@ class HighwayWorld:
         """Build from a YAML file typed by `HighwayConfig`."""
         return cls(load_yaml_model(path, HighwayConfig))
 
-    def prepare(self, data_dir: Path) -> None:
+    def prepare(self, layout: Layout) -> None:
         """Nothing to set up: both cars run the sampling MPC, which needs no training."""
 
     def scene(self) -> Scene:

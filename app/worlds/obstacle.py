@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import dijkstra
 from app.configio import StrictModel, load_yaml_model
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Circle, Scene
 from app.data.trajectory import HUMAN, ROBOT, Episode, Rejected
+from app.layout import Layout
 from app.worlds.mpc import SamplingMPC
 
 AGENTS = (ROBOT, HUMAN)
@@ -192,7 +193,7 @@ class GeodesicFields:
 class AgentPolicy(Protocol):
     """A learnt policy that moves both agents instead of the MPC (sac.py's `SACPolicy`)."""
 
-    def prepare(self, data_dir: Path) -> None:
+    def prepare(self, layout: Layout) -> None:
         """Train or load it once, in the parent before simulation workers fork."""
         ...
 
@@ -476,10 +477,10 @@ class ObstacleWorld:
             (other_pos - pos) / half, other_vel / c.max_speed_mps,
         ]).astype(np.float32)
 
-    def prepare(self, data_dir: Path) -> None:
+    def prepare(self, layout: Layout) -> None:
         """Train or load the agent policy, if any, once (in the parent, before workers fork)."""
         if self.agent_policy is not None:
-            self.agent_policy.prepare(Path(data_dir))
+            self.agent_policy.prepare(layout)
 
     # ----- segments and start states for the trial bank ---------------------------------------
 

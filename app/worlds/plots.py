@@ -7,6 +7,18 @@ import numpy as np
 from analysis.scene_plot import LABEL_COLORS, draw_scene
 from app.data.scene import HUMAN_COLOR
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
+from app.layout import Layout
+
+
+def plot_simulated(layout: Layout, world: str, config_path: Path | None = None,
+                   policy: str = "mpc") -> Path:
+    """data/<world>/trajectories.png: the world's simulated trajectories, robot coloured by
+    the world's robot label."""
+    from app.worlds.registry import build_world
+
+    label = build_world(world, config_path, policy).robot_label
+    return plot_trajectories(TrajectorySet.load(layout.trajectories(world)),
+                             layout.trajectories_plot(world), label)
 
 
 def plot_trajectories(trajs: TrajectorySet, path: Path, label: str, count: int = 20) -> Path:

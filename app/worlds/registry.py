@@ -9,6 +9,7 @@ import numpy as np
 from app.configio import ConfigError, StrictModel, load_yaml_model
 from app.data.scene import Scene
 from app.data.trajectory import Episode
+from app.layout import Layout
 from app.settings import get_settings
 
 WORLD_NAMES = ("highway", "obstacle")
@@ -35,7 +36,7 @@ class World(Protocol):
         """The world's geometry for plots, the trial bank and the browser."""
         ...
 
-    def prepare(self, data_dir: Path) -> None:
+    def prepare(self, layout: Layout) -> None:
         """Per-world set-up before rollouts (e.g. train a learnt policy); may do nothing."""
         ...
 

@@ -2,7 +2,7 @@
 
 One goal-conditioned policy is learnt on the world's own reward (`ObstacleWorld.reward`) in a
 gymnasium env where the learner is one agent and the other agent is driven by the world's MPC.
-The trained policy is saved under <data_dir>/policies/obstacle_sac.zip with a meta.json that
+The trained policy is saved under <data dir>/policies/obstacle_sac.zip with a meta.json that
 names the exact world config it was trained on, so a changed config retrains instead of
 silently reusing a stale policy. `SACPolicy` is what an `ObstacleWorld` is given to act with
 (see `registry.build_world`); this module depends on the world, never the other way round.
@@ -98,9 +98,9 @@ class SACPolicy:
         self.config = config
         self.model = model  # None: loaded on first use from where `prepare` left it
 
-    def prepare(self, data_dir: Path) -> None:
+    def prepare(self, layout: Layout) -> None:
         """Load the policy trained on this config, or train, evaluate and save it first."""
-        self.model = prepare_model(self.config, data_dir)
+        self.model = prepare_model(self.config, layout)
 
     def act(self, observation: np.ndarray) -> np.ndarray:
         """Deterministic (mean) action for one observation."""
@@ -116,9 +116,8 @@ def config_key(config: ObstacleConfig) -> str:
     return sha256_bytes(text.encode())
 
 
-def prepare_model(config: ObstacleConfig, data_dir: Path) -> SAC:
+def prepare_model(config: ObstacleConfig, layout: Layout) -> SAC:
     """Load the model trained on this exact config, or train, evaluate and save it."""
-    layout = Layout(data_dir)
     zip_path, meta_path = layout.policy(POLICY_NAME), layout.policy_meta(POLICY_NAME)
     key = config_key(config)
     if not _is_current(zip_path, meta_path, key):
@@ -155,7 +154,7 @@ def load_prepared_model(config: ObstacleConfig) -> SAC:
         zip_path, meta_path = layout.policy(POLICY_NAME), layout.policy_meta(POLICY_NAME)
         if not _is_current(zip_path, meta_path, key):
             raise RuntimeError(f"no SAC policy trained on this obstacle config at {zip_path}; "
-                               "call ObstacleWorld.prepare(data_dir) first")
+                               "call ObstacleWorld.prepare(layout) first")
     return load_sac_model(zip_path)
 
 

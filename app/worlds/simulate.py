@@ -55,12 +55,12 @@ def _roll_one(args: tuple[int, int]) -> tuple[Episode | None, Counter]:
     return None, rejections
 
 
-def simulate(world: str, n: int, seed: int, data_dir: Path, config_path: Path | None = None,
+def simulate(world: str, n: int, seed: int, layout: Layout, config_path: Path | None = None,
              policy: str = "mpc", workers: int | None = None) -> SimulationResult:
     """Simulate `n` kept trajectories of `world` and write them with a meta.json."""
     started = time.perf_counter()
     built = build_world(world, config_path, policy)  # validates config before forking
-    built.prepare(data_dir)  # e.g. train the SAC policy once, in the parent
+    built.prepare(layout)  # e.g. train the SAC policy once, in the parent
     workers = workers or min(2, os.cpu_count() or 1)
     episodes, rejections = _run_pool(world, config_path, policy, n, seed, workers)
     if any(ep is None for ep in episodes):
@@ -68,7 +68,6 @@ def simulate(world: str, n: int, seed: int, data_dir: Path, config_path: Path | 
                            f"{dict(rejections)}")
     trajs = TrajectorySet.from_episodes(world, built.dt_s, episodes, built.label_names,
                                         built.scene())
-    layout = Layout(data_dir)
     npz_path, meta_path = layout.trajectories(world), layout.trajectories_meta(world)
     trajs.save(npz_path)
     meta = _meta(built, trajs, n, seed, policy, workers, rejections,

@@ -10,6 +10,7 @@ from app.data.windows import Windows
 from app.interaction import config as ic
 from app.interaction import frames
 from app.interaction.synthetic import generate
+from app.layout import Layout
 
 SCENARIO = "DR_USA_Intersection_EP0"
 
@@ -62,7 +63,7 @@ def test_sensitivity_row_appears_in_summary_and_report(tmp_path):
 
     data = tmp_path / "data"
     generate(data, SCENARIO, "v1.2", train_s=60.0, val_s=24.0, seed=5)
-    summary = run_command(data, SCENARIO, tmp_path / "var", seeds=2, max_epochs=2,
+    summary = run_command(data, SCENARIO, Layout(tmp_path / "var"), seeds=2, max_epochs=2,
                           frame_seeds=2, out_dir=tmp_path / "out")
     primary = summary["paper_protocol"]
     row = summary["sensitivity"]["human_relative_frame"]

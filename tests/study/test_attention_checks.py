@@ -50,7 +50,7 @@ def test_the_most_obvious_segments_get_start_states_like_any_other(small_study):
     config = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml",
                              StudyConfig)
     for index, name in enumerate(config.worlds):
-        inputs = load_inputs(config, name, small_study.data_dir)
+        inputs = load_inputs(config, name, small_study.layout)
         rng = np.random.default_rng([7, index])
         max_step = config.prediction_input.max_step_factor * robot_step_percentile(
             inputs.trajs, inputs.held_out)

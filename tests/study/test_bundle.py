@@ -63,7 +63,7 @@ def test_a_bundle_holds_every_seed_and_freezes_to_the_same_content(small_study, 
     assert {"configs/small_study.yaml", "configs/training.yaml", BANK} <= set(files)
     assert str(small_study.data_dir) not in (bundle.root / "bank_meta.json").read_text()
     again = freeze(config_of(small_study), small_study.study_id, small_study.configs_dir,
-                   small_study.data_dir, tmp_path / "again")
+                   small_study.layout, tmp_path / "again")
     assert again.manifest["files"] == bundle.manifest["files"]  # gzip without name or time
     assert again.manifest["content_sha256"] == bundle.manifest["content_sha256"]
 
@@ -87,10 +87,10 @@ def test_the_server_refuses_a_bundle_whose_config_shapes_another_bank(small_stud
     path = study.configs_dir / f"{study.study_id}.yaml"
     raw = yaml.safe_load(path.read_text())
     path.write_text(yaml.safe_dump(raw | {"title": "renamed", "description": "new words"}))
-    load_bundle(config_of(study), study.study_id, study.configs_dir, study.data_dir)
+    load_bundle(config_of(study), study.study_id, study.configs_dir, study.layout)
     path.write_text(yaml.safe_dump(raw | {"bank_seed": 7, "models": {"seeds": [0]}}))
     with pytest.raises(BundleError, match="bank_seed, models"):
-        load_bundle(config_of(study), study.study_id, study.configs_dir, study.data_dir)
+        load_bundle(config_of(study), study.study_id, study.configs_dir, study.layout)
     run = subprocess.run([TOMSTUDY, "serve", "--port", "1", "--study", study.study_id],
                          env=study.env(f"sqlite:///{tmp_path / 'x.db'}"), capture_output=True,
                          text=True, timeout=120)
@@ -201,7 +201,7 @@ def test_a_shipped_study_is_served_as_it_is(small_study, tmp_path):
     shutil.rmtree(Layout(study.data_dir).bank_dir(study.study_id))
     settings = Settings(data_dir=study.data_dir, configs_dir=study.configs_dir)
     assert prepare_study(settings, study.study_id, say=lambda _: None) == shipped
-    bundle = load_bundle(config_of(study), study.study_id, study.configs_dir, study.data_dir)
+    bundle = load_bundle(config_of(study), study.study_id, study.configs_dir, study.layout)
     assert bundle.root == shipped
 
 

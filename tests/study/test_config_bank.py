@@ -77,7 +77,7 @@ def test_attention_passing_starts_cannot_exceed_the_start_states(tmp_path):
 
 @pytest.fixture(scope="module")
 def bank(small_study) -> TrialBank:
-    return TrialBank.load(small_study.data_dir, small_study.study_id)
+    return TrialBank.load(small_study.layout, small_study.study_id)
 
 
 def test_bank_trials_have_the_paper_shape(bank, small_study):
@@ -215,9 +215,9 @@ def test_a_models_disagree_bank_keeps_the_most_controversial_of_its_candidates(s
                              StudyConfig)
     config = config.model_copy(update={"main_trial_selection": MainTrialSelection(
         rule="models_disagree", candidates_per_trial=2)})
-    build_trials(config, "controversial", data)
+    build_trials(config, "controversial", Layout(data))
     meta = json.loads(Layout(data).bank_meta("controversial").read_text())
-    bank = TrialBank.load(data, "controversial")
+    bank = TrialBank.load(Layout(data), "controversial")
     for name, world_meta in meta["worlds"].items():
         selection = world_meta["main_trial_selection"]
         assert selection["candidates"] == 2 * config.bank_trials_per_world
@@ -248,7 +248,7 @@ def test_the_random_arm_cannot_exceed_the_bank(tmp_path):
 
 def test_start_states_config_sets_the_count_and_the_api_follows(three_starts, tmp_path):
     data, configs = three_starts
-    bank = TrialBank.load(data, "three_starts")
+    bank = TrialBank.load(Layout(data), "three_starts")
     for name, world in bank.data.worlds.items():
         for t in world.trials:
             assert len(t.start_states) == 3
@@ -280,13 +280,13 @@ def test_build_trials_is_reproducible(small_study, tmp_path):
     for sub in ("data", "models"):
         (data / sub).symlink_to(small_study.data_dir / sub)
     cfg = load_yaml_model(small_study.configs_dir / f"{small_study.study_id}.yaml", StudyConfig)
-    path = build_trials(cfg, small_study.study_id, data)
+    path = build_trials(cfg, small_study.study_id, Layout(data))
     original = Layout(small_study.data_dir).bank(small_study.study_id)
     assert sha256_file(path) == sha256_file(original)
 
 
 def test_models_disagree_keeps_the_most_controversial_trials_per_label(small_study):
-    bank = TrialBank.load(small_study.data_dir, small_study.study_id)
+    bank = TrialBank.load(small_study.layout, small_study.study_id)
     pool = bank.trials_of("obstacle", "main")
     kept = main_trials(pool, {"random": 1, "models_disagree": 3})
     assert [t.arm for t in kept] == ["random"] + ["models_disagree"] * 3

@@ -16,7 +16,7 @@ from tests.conftest import REPO
 COMPOSE = yaml.safe_load((REPO / "compose.yaml").read_text())
 SERVER = COMPOSE["services"]["server"]
 DB = COMPOSE["services"]["db"]
-ENTRYPOINT = REPO / "app" / "study" / "entrypoint.sh"
+ENTRYPOINT = REPO / "app" / "server" / "entrypoint.sh"
 REQUIRED = re.compile(r"\$\{(\w+):\?[^}]+\}")  # compose's ${VAR:?message}: unset stops `up`
 
 

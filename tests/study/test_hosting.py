@@ -11,7 +11,6 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy.engine import make_url
 
-from app.cli import server_settings
 from app.main import (
     FRONTEND_DIR,
     MAX_BODY_BYTES,
@@ -21,6 +20,12 @@ from app.main import (
     create_app,
 )
 from app.server.db import CONNECT_TIMEOUT_S, make_engine, server_connect_args
+from app.server.preflight import (
+    STUDY_ENV,
+    hand_to_workers,
+    serve_settings,
+    worker_environment,
+)
 from app.settings import Settings, get_settings, is_loopback
 from tests.conftest import ADMIN_TOKEN, REPO, TOMSTUDY, free_port
 from tests.study.flow import ADMIN, Participant
@@ -87,13 +92,27 @@ def test_serve_off_loopback_hands_production_mode_to_the_app(small_study, monkey
     monkeypatch.setenv("TOMSTUDY_ADMIN_TOKEN", STRONG_TOKEN)
     monkeypatch.setenv("TOMSTUDY_DATA_DIR", str(small_study.data_dir))
     monkeypatch.setenv("TOMSTUDY_PRODUCTION", "0")  # so monkeypatch undoes serve's "1"
+    monkeypatch.setenv(STUDY_ENV, "paper_study")  # and the study it hands over
     get_settings.cache_clear()
     try:
-        assert server_settings("0.0.0.0", workers=1).production
+        settings = serve_settings(get_settings(), "0.0.0.0")
+        assert settings.production
+        hand_to_workers(settings, ["paper_study"])
         app = app_from_env()  # what uvicorn calls, in this process or in each worker
         assert app.state.settings.production and app.docs_url is None
     finally:
         get_settings.cache_clear()
+
+
+def test_workers_get_what_serve_decided_but_never_a_token_kept_in_a_file(tmp_path):
+    settings = serve_settings(Settings(admin_token=STRONG_TOKEN), "0.0.0.0",
+                              allow_bank_change=True)
+    assert worker_environment(settings, ["a", "b"]) == {
+        STUDY_ENV: "a,b", "TOMSTUDY_ALLOW_BANK_CHANGE": "1", "TOMSTUDY_PRODUCTION": "1",
+        "TOMSTUDY_ADMIN_TOKEN": STRONG_TOKEN}
+    (tmp_path / "token").write_text(STRONG_TOKEN)
+    from_file = Settings(admin_token_file=tmp_path / "token").for_host("127.0.0.1")
+    assert worker_environment(from_file, ["a"]) == {STUDY_ENV: "a"}
 
 
 @pytest.mark.parametrize("token", ["", OLD_DEFAULT_TOKEN, "test-token"])

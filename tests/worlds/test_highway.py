@@ -9,6 +9,7 @@ from app.configio import ConfigError
 from app.data.scene import Scene
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 from app.fileio import sha256_file
+from app.layout import Layout
 from app.worlds.highway import LANE_SHIFT, HighwayWorld
 from app.worlds.registry import build_world, default_config_path
 from app.worlds.simulate import simulate
@@ -19,7 +20,7 @@ CONFIG = default_config_path("highway")
 @pytest.fixture(scope="module")
 def small_run(tmp_path_factory) -> tuple[TrajectorySet, dict]:
     data_dir = tmp_path_factory.mktemp("highway")
-    result = simulate("highway", 30, seed=3, data_dir=data_dir, workers=1)
+    result = simulate("highway", 30, seed=3, layout=Layout(data_dir), workers=1)
     return TrajectorySet.load(result.npz_path), result.meta
 
 
@@ -138,10 +139,10 @@ def test_every_car_drives_forward_on_screen(small_run):
 
 
 def test_same_seed_gives_identical_bytes_for_any_worker_count(tmp_path):
-    one = simulate("highway", 6, seed=11, data_dir=tmp_path / "a", workers=1)
-    two = simulate("highway", 6, seed=11, data_dir=tmp_path / "b", workers=2)
+    one = simulate("highway", 6, seed=11, layout=Layout(tmp_path / "a"), workers=1)
+    two = simulate("highway", 6, seed=11, layout=Layout(tmp_path / "b"), workers=2)
     assert sha256_file(one.npz_path) == sha256_file(two.npz_path)
-    other = simulate("highway", 6, seed=12, data_dir=tmp_path / "c", workers=1)
+    other = simulate("highway", 6, seed=12, layout=Layout(tmp_path / "c"), workers=1)
     assert sha256_file(other.npz_path) != sha256_file(one.npz_path)
 
 

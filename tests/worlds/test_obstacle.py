@@ -8,6 +8,7 @@ import yaml
 
 from app.configio import ConfigError
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
+from app.layout import Layout
 from app.settings import REPO_ROOT
 from app.worlds.obstacle import ObstacleConfig, ObstacleWorld
 from app.worlds.registry import build_world
@@ -33,7 +34,7 @@ def world() -> ObstacleWorld:
 @pytest.fixture(scope="module")
 def small_run(tmp_path_factory) -> TrajectorySet:
     out = tmp_path_factory.mktemp("obstacle")
-    result = simulate("obstacle", N_SMALL, 0, out, CONFIG, workers=1)
+    result = simulate("obstacle", N_SMALL, 0, Layout(out), CONFIG, workers=1)
     return TrajectorySet.load(result.npz_path)
 
 
@@ -141,7 +142,7 @@ def test_sac_policy_trains_saves_and_rolls_out(tmp_path):
 
     config_path = write_config(tmp_path / "w.yaml", tiny_sac)
     world = build_world("obstacle", config_path, policy="sac")
-    world.prepare(tmp_path)
+    world.prepare(Layout(tmp_path))
     assert (tmp_path / "policies" / "obstacle_sac.zip").is_file()
     meta = yaml.safe_load((tmp_path / "policies" / "obstacle_sac.meta.json").read_text())
     assert meta["total_timesteps"] == 300 and 0 <= meta["evaluation"]["kept_rate"] <= 1

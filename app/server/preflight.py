@@ -1,0 +1,104 @@
+"""What `tomstudy serve` checks before any worker starts, and what it hands the workers.
+
+A refusal here names the setting or file to fix and comes before uvicorn forks, so an
+unservable study fails once, clearly, instead of in every worker's traceback.
+"""
+
+import os
+import secrets
+import tempfile
+
+from app.layout import Layout
+from app.server.bank_guard import BankChanged, check_bank_unchanged
+from app.server.context import StudyContext
+from app.server.db import create_tables, is_sqlite, make_engine
+from app.server.migrate import SchemaError
+from app.settings import Settings, get_settings
+
+STUDY_ENV = "TOMSTUDY_STUDY"  # the studies a worker serves (comma-separated ids)
+
+
+class NotServable(RuntimeError):
+    """The server must not start: the message names what to fix."""
+
+
+def serve_settings(settings: Settings, host: str, allow_bank_change: bool = False) -> Settings:
+    """`settings` for a server bound to `host` (production unless loopback), with
+    --allow-bank-change applied."""
+    settings = settings.for_host(host)
+    if allow_bank_change:
+        settings = settings.model_copy(update={"allow_bank_change": True})
+    return settings
+
+
+def needs_generated_token(settings: Settings) -> bool:
+    """True for a loopback server without a researcher token: it gets one for this run."""
+    return not settings.admin_token.strip() and not settings.production
+
+
+def with_generated_token(settings: Settings) -> Settings:
+    """`settings` with a strong researcher token made for this run."""
+    return settings.model_copy(update={"admin_token": secrets.token_urlsafe(32)})
+
+
+def check_workers(settings: Settings, workers: int) -> None:
+    """Refuse several workers on SQLite: one process at a time may write to it."""
+    if workers > 1 and is_sqlite(settings.resolved_database_url()):
+        raise NotServable(
+            f"--workers {workers} needs a database several processes can share: set "
+            f"DATABASE_URL to PostgreSQL (postgresql+psycopg://user:password@host:5432/db), "
+            f"or serve SQLite with --workers 1")
+
+
+def check_data_dir_writable(layout: Layout) -> None:
+    """Refuse a data dir this user cannot write (a bind mount owned by another user,
+    typically), saying what to do, instead of a traceback from the first file written."""
+    data_dir = layout.root
+    try:
+        data_dir.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=data_dir):
+            pass
+    except OSError as err:
+        raise NotServable(
+            f"TOMSTUDY_DATA_DIR: {data_dir} is not writable by this user (uid {os.getuid()}): "
+            f"{err.strerror}. Give it to this user (on the host of a bind mount: "
+            f"`sudo chown -R {os.getuid()} <the mounted folder>`), or use a volume") from None
+
+
+def check_database(settings: Settings, studies: list[StudyContext]) -> None:
+    """Make an empty database; refuse one that needs `tomstudy db upgrade` or whose sessions
+    ran another trial bank (unless allowed)."""
+    engine = make_engine(settings.resolved_database_url())
+    try:
+        create_tables(engine)  # once, before workers race to create them
+        if not settings.allow_bank_change:
+            for ctx in studies:
+                check_bank_unchanged(engine, ctx.study_id, ctx.bank.sha256)
+    except (SchemaError, BankChanged) as err:
+        raise NotServable(str(err)) from err
+    finally:
+        engine.dispose()
+
+
+def worker_environment(settings: Settings, study_ids: list[str]) -> dict[str, str]:
+    """The variables a worker needs to rebuild `settings` and serve `study_ids`.
+
+    uvicorn starts each worker from an import string (app.main:app_from_env), which reads
+    Settings from the environment: so what serve decided (production off loopback,
+    --allow-bank-change, a token made for this run) must be in it. A token read from a file
+    stays in its file."""
+    env = {STUDY_ENV: ",".join(study_ids)}
+    if settings.allow_bank_change:
+        env["TOMSTUDY_ALLOW_BANK_CHANGE"] = "1"
+    if settings.production:
+        env["TOMSTUDY_PRODUCTION"] = "1"
+    if settings.admin_token_file is None and settings.admin_token:
+        env["TOMSTUDY_ADMIN_TOKEN"] = settings.admin_token
+    return env
+
+
+def hand_to_workers(settings: Settings, study_ids: list[str]) -> None:
+    """Put `worker_environment` into this process's environment (workers inherit it) and
+    forget the cached settings (a single worker runs in this process)."""
+    os.environ.update(worker_environment(settings, study_ids))
+    get_settings.cache_clear()
