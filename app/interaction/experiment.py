@@ -31,8 +31,8 @@ import numpy as np
 from tqdm import tqdm
 
 import app
+from analysis.atomic import write_json
 from app.data.windows import Windows
-from app.fileio import write_json
 from app.interaction.codes import (
     CEILING,
     ceiling_scores,

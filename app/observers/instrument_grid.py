@@ -253,8 +253,8 @@ def run_instrument_grid(bank_path, trials_per_world: int, out_dir, observers: Ob
     grid.json and grid.png; return grid.json's content."""
     from pathlib import Path
 
+    from analysis.atomic import write_json
     from analysis.plots import plot_grid_pass_rates
-    from app.fileio import write_json
     from app.observers.simulated_study import load_bank
     from app.prediction_view import click_direction_sd_deg
 

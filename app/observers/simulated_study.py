@@ -27,12 +27,13 @@ import pandas as pd
 from scipy import stats
 from tqdm import tqdm
 
+from analysis.atomic import write_json
 from analysis.contracts import EXPORT_COLUMNS, alignment_error
 from analysis.load import normalise
 from analysis.metrics import add_alignment_errors, participant_means
 from analysis.plots import plot_power, plot_trial_contrast
 from app.assignment import least_used, pick_by_arm
-from app.fileio import read_bytes, sha256_bytes, write_json
+from app.fileio import read_bytes, sha256_bytes
 from app.observers import inverse_planning
 from app.observers.config import ObserversConfig, default_observers
 
