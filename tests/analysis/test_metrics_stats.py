@@ -16,11 +16,7 @@ from analysis.stats import (
     mean_ci95,
     paired_comparison,
 )
-from tests.analysis.fixed_data import DT_S, fixed_predictions
-
-
-def _cos_distance(a, b) -> float:
-    return 1 - (a[0] * b[0] + a[1] * b[1]) / (math.hypot(*a) * math.hypot(*b))
+from tests.analysis.fixed_data import DT_S, cos_distance, fixed_predictions
 
 
 def test_alignment_error_known_angles():
@@ -43,7 +39,7 @@ def test_participant_means_and_ttest_match_a_hand_computation():
         for pid in sorted(set(frame["participant_id"])):
             rows = frame[(frame["participant_id"] == pid) & (frame["world"] == world)]
             for model in by_hand:
-                errs = [_cos_distance((r.human_vx, r.human_vy),
+                errs = [cos_distance((r.human_vx, r.human_vy),
                                       (r[f"{model}_vx"], r[f"{model}_vy"]))
                         for _, r in rows.iterrows()]
                 by_hand[model].append(sum(errs) / len(errs))
