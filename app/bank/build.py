@@ -40,8 +40,8 @@ import numpy as np
 from tqdm import tqdm
 
 import app
+from analysis.alignment import alignment_error
 from analysis.atomic import write_json
-from analysis.contracts import alignment_error
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 from app.fileio import sha256_file
 from app.layout import Layout

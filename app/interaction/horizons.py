@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.contracts import alignment_error
+from analysis.alignment import alignment_error
 from app.data.trajectory import HUMAN, ROBOT
 from app.data.windows import Windows, make_windows
 from app.interaction.config import SecondaryConfig

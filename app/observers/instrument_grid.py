@@ -27,7 +27,7 @@ import pandas as pd
 from scipy import stats
 from tqdm import tqdm
 
-from analysis.contracts import alignment_error
+from analysis.alignment import alignment_error
 from app.observers import inverse_planning
 from app.observers.config import ObserversConfig
 from app.observers.simulated_study import (

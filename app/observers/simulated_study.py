@@ -27,8 +27,9 @@ import pandas as pd
 from scipy import stats
 from tqdm import tqdm
 
+from analysis.alignment import alignment_error
 from analysis.atomic import write_json
-from analysis.contracts import EXPORT_COLUMNS, alignment_error
+from analysis.contracts import EXPORT_COLUMNS
 from analysis.load import normalise
 from analysis.metrics import add_alignment_errors, participant_means
 from analysis.plots import plot_power, plot_trial_contrast

@@ -6,7 +6,7 @@ refusal is a `Refused(422, "field: message")` naming the offending field.
 
 import numpy as np
 
-from analysis.contracts import alignment_error
+from analysis.alignment import alignment_error
 from app.server.schemas import PredictionCreate
 from app.study.config import AttentionChecks, SurveyQuestion
 from app.study.errors import Refused

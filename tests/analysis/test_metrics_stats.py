@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from analysis.contracts import ExclusionRules, alignment_error
+from analysis.alignment import alignment_error
+from analysis.contracts import ExclusionRules
 from analysis.load import load_csv
 from analysis.metrics import apply_exclusions, participant_means
 from analysis.stats import (

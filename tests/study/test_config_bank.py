@@ -304,7 +304,7 @@ def test_models_disagree_keeps_the_most_controversial_trials_per_label(small_stu
 
 
 def test_family_disagreement_is_the_mean_over_every_ours_and_vae_seed(bank):
-    from analysis.contracts import alignment_error
+    from analysis.alignment import alignment_error
 
     trial = bank.trials_of("highway", "main")[0]
     pairs = [alignment_error(np.asarray(o.actions), np.asarray(v.actions)).mean()
