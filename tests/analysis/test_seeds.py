@@ -103,6 +103,7 @@ def test_the_primary_pair_reproduces_the_export_columns(study):
     per_seed = per_seed_table(join_seeds(frame, bank).errors)
     primary = compare_per_world(add_alignment_errors(frame).groupby(
         ["participant_id", "world"])[["err_ours", "err_vae"]].mean().reset_index())
+    assert set(primary) == {"highway", "obstacle"}
     for world, res in primary.items():
         row = per_seed[(per_seed["world"] == world) & (per_seed["pair"] == 0)].iloc[0]
         assert row["mean_diff"] == pytest.approx(res.mean_diff, rel=1e-12)
