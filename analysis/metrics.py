@@ -1,10 +1,10 @@
 """Alignment errors over the predictions table, per-participant means, exclusions, and the
 subsets (world, selection arm) a comparison is read in.
 
-The metric and the rules themselves are defined once in analysis/contracts.py. Rows where
-a vector is shorter than ZERO_SPEED_MPS are counted as `zero_vectors`, so a report can say
-how often the error fell back to 1. Only numpy and pandas: the researcher dashboard
-imports these for its running numbers.
+The metric is defined once in analysis/alignment.py, the exclusion rules in
+analysis/contracts.py. Rows where a vector is shorter than ZERO_SPEED_MPS are counted as
+`zero_vectors`, so a report can say how often the error fell back to 1. Only numpy and
+pandas: the researcher dashboard imports these for its running numbers.
 """
 
 from collections.abc import Iterator
@@ -13,14 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from analysis.contracts import (
-    MODELS,
-    PILOT,
-    ExclusionRules,
-    alignment_error,
-    has_direction,
-    too_fast_share_exceeds,
-)
+from analysis.alignment import alignment_error, has_direction
+from analysis.contracts import MODELS, PILOT, ExclusionRules, too_fast_share_exceeds
 
 UNIT_KEYS = ["participant_id", "world"]
 

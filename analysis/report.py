@@ -12,15 +12,14 @@ seed's answers from the trial bank (analysis/seeds.py) and treats trials as a ra
 (analysis/trial_effects.py); both, and the per-arm comparison, run on the same kept rows.
 """
 
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from analysis.atomic import write_json
 from analysis.bank import Bank, family_hashes, read_bank
 from analysis.contracts import MODELS, ExclusionRules
 from analysis.csvsafe import write_csv
@@ -76,20 +75,6 @@ def waive_rules(rules: ExclusionRules, waive: tuple[str, ...]) -> ExclusionRules
         else:
             changes[rule] = False
     return rules.model_copy(update=changes)
-
-
-def write_json(path: Path, data: object) -> None:
-    """JSON with sorted keys (numpy scalars as numbers), so equal data gives equal bytes."""
-    text = json.dumps(data, indent=2, sort_keys=True, default=_json_default)
-    Path(path).write_text(text + "\n")
-
-
-def _json_default(value: object) -> object:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
 
 
 def world_summary(means: pd.DataFrame, ade: pd.DataFrame) -> dict:

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from analysis.alignment import alignment_error
 from analysis.bank import ANSWER_KEYS, Bank, seed_answers
-from analysis.contracts import alignment_error
 from analysis.metrics import participant_means
 from analysis.stats import PAIR, breakdown, with_verdicts
 

@@ -52,8 +52,8 @@ def paired_comparison(a: np.ndarray, b: np.ndarray) -> PairedResult:
                             *(nan,) * 9)
     sd = float(np.std(diff, ddof=1))
     mean = float(np.mean(diff))
-    half = stats.t.ppf(0.975, n - 1) * sd / np.sqrt(n)
     t_two = stats.ttest_rel(a, b)
+    ci = t_two.confidence_interval(confidence_level=0.95)
     t_less = stats.ttest_rel(a, b, alternative="less")
     if np.any(diff != 0):
         w = stats.wilcoxon(a, b)
@@ -62,7 +62,7 @@ def paired_comparison(a: np.ndarray, b: np.ndarray) -> PairedResult:
         w_stat, w_p = nan, 1.0
     return PairedResult(
         n=n, mean_a=float(np.mean(a)), mean_b=float(np.mean(b)), mean_diff=mean, sd_diff=sd,
-        ci95_low=mean - half, ci95_high=mean + half, t=float(t_two.statistic),
+        ci95_low=float(ci.low), ci95_high=float(ci.high), t=float(t_two.statistic),
         p_two_sided=float(t_two.pvalue), p_one_sided_less=float(t_less.pvalue),
         wilcoxon_w=w_stat, wilcoxon_p=w_p, d_z=mean / sd if sd > 0 else nan,
     )
@@ -125,8 +125,8 @@ def mean_ci95(values: np.ndarray) -> tuple[float, float, float]:
     mean = float(np.mean(values))
     if len(values) < 2:
         return mean, float("nan"), float("nan")
-    half = stats.t.ppf(0.975, len(values) - 1) * stats.sem(values)
-    return mean, mean - half, mean + half
+    ci = stats.ttest_1samp(values, 0.0).confidence_interval(confidence_level=0.95)
+    return mean, float(ci.low), float(ci.high)
 
 
 def prediction_ids(frame: pd.DataFrame) -> np.ndarray:

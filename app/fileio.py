@@ -1,47 +1,18 @@
-"""Atomic, reproducible file output shared by every pipeline step."""
+"""Reproducible binary output (npz, gzip) and content hashes for the pipeline steps; atomic
+writes and JSON come from analysis.atomic."""
 
 import gzip
 import hashlib
 import io
-import json
-import os
 import zipfile
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
+from analysis.atomic import atomic_path
+
 _FIXED_ZIP_TIME = (1980, 1, 1, 0, 0, 0)
-
-
-@contextmanager
-def atomic_path(path: Path) -> Iterator[Path]:
-    """Yield a temporary sibling path; rename it onto `path` only if the block succeeds."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}")
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def write_json(path: Path, data: object) -> None:
-    """Write JSON atomically with sorted keys, so equal data gives equal bytes."""
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=_json_default) + "\n")
-
-
-def _json_default(value: object) -> object:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
 
 
 def write_npz(path: Path, arrays: Mapping[str, np.ndarray]) -> None:

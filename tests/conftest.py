@@ -39,7 +39,7 @@ SMALL_TRAINING = {"max_epochs": 2, "patience_epochs": 2, "encoder_hidden": [32, 
 SMALL_TRAJECTORIES = 70
 PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/bank/build.py",
                     "app/study/trials.py", "app/study/config.py", "app/bank/bundle.py",
-                    "app/fileio.py", "study_configs"]
+                    "app/fileio.py", "analysis/atomic.py", "study_configs"]
 
 
 @dataclass(frozen=True)

@@ -21,10 +21,11 @@ import numpy as np
 from tqdm import tqdm
 
 import app
-from analysis.contracts import alignment_error
+from analysis.alignment import alignment_error
+from analysis.atomic import write_json
 from app.bank.start_states import NoStartStates, covered_states, start_states
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
-from app.fileio import sha256_file, write_json
+from app.fileio import sha256_file
 from app.layout import Layout
 from app.study.config import StudyConfig
 from app.study.trials import (

@@ -31,8 +31,9 @@ import numpy as np
 import yaml
 
 import app
+from analysis.atomic import write_json
 from app.configio import load_yaml_model
-from app.fileio import sha256_bytes, sha256_file, write_gzip, write_json
+from app.fileio import sha256_bytes, sha256_file, write_gzip
 from app.layout import Layout
 from app.study.config import StudyConfig, bank_design
 from app.study.trials import TrialBank

@@ -19,8 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.atomic import write_json
 from app.data.trajectory import ROBOT, TrajectorySet
-from app.fileio import read_bytes, write_json
+from app.fileio import read_bytes
 from app.layout import Layout
 from app.prediction_view import prediction_view
 

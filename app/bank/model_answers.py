@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.contracts import ZERO_SPEED_MPS
+from analysis.alignment import ZERO_SPEED_MPS
 from app.study.trials import ModelAnswer, TrialRecord
 
 ACTION_TOLERANCE_MPS = 1e-4

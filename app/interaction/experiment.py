@@ -31,8 +31,8 @@ import numpy as np
 from tqdm import tqdm
 
 import app
+from analysis.atomic import write_json
 from app.data.windows import Windows
-from app.fileio import write_json
 from app.interaction.codes import (
     CEILING,
     ceiling_scores,
@@ -98,7 +98,7 @@ def score_model(model, windows: Windows, scored: np.ndarray,
                 frame: Frame = "absolute") -> dict:
     """Alignment errors [W] of the next action, displacement errors, codes; the model sees
     the windows in its `frame` and is scored against the same true actions in every frame."""
-    from analysis.contracts import alignment_error
+    from analysis.alignment import alignment_error
     from app.learning.model_metrics import trajectory_errors
 
     seen = in_frame(windows, frame)
@@ -124,7 +124,7 @@ def protocol_scores(model, on: "Scoring", min_code_share: float,
 
 def score_constant_velocity(windows: Windows, scored: np.ndarray) -> dict:
     """The baseline: the last observed robot velocity, kept for all n steps."""
-    from analysis.contracts import alignment_error
+    from analysis.alignment import alignment_error
     from app.learning.model_metrics import constant_velocity, trajectory_errors
 
     pred = constant_velocity(windows)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.contracts import alignment_error
+from analysis.alignment import alignment_error
 from app.data.trajectory import HUMAN, ROBOT
 from app.data.windows import Windows, make_windows
 from app.interaction.config import SecondaryConfig
@@ -129,14 +129,11 @@ def horizon_scores(pred: np.ndarray, hw: HorizonWindows) -> dict[str, dict[str, 
 
 
 def holm(p_values: list[float]) -> list[float]:
-    """Holm-Bonferroni adjusted p-values, in the input order."""
+    """Holm-Bonferroni adjusted p-values, in the input order (a NaN p counts as 1)."""
+    from statsmodels.stats.multitest import multipletests
+
     p = np.nan_to_num(np.asarray(p_values, dtype=np.float64), nan=1.0)
-    order = np.argsort(p)
-    scaled = p[order] * (len(p) - np.arange(len(p)))
-    adjusted = np.minimum(np.maximum.accumulate(scaled), 1.0)
-    out = np.empty_like(adjusted)
-    out[order] = adjusted
-    return out.tolist()
+    return multipletests(p, method="holm")[1].tolist()
 
 
 def _mean_sd(values: list[float]) -> dict:

@@ -12,12 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.atomic import atomic_path, write_json
 from analysis.html import render_page
 from analysis.scene_plot import LABEL_COLORS
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 from app.data.windows import Windows
-from app.fileio import atomic_path, write_json
 from app.interaction.lanelet_map import LaneLine
 
 MODEL_NAMES = {"ours": "Ours", "vae": "VAE", "cv": "constant velocity"}

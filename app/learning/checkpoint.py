@@ -18,8 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.atomic import atomic_path
 from app.data.windows import segment_features
-from app.fileio import atomic_path, read_bytes
+from app.fileio import read_bytes
 from app.learning.fsq import codes_to_indices, indices_to_codes, mixed_radix_basis, quantize
 from app.learning.networks import Normaliser
 

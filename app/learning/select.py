@@ -33,9 +33,9 @@ import torch
 from pydantic import Field
 from tqdm import tqdm
 
+from analysis.atomic import atomic_path, write_json
 from app.configio import StrictModel, load_yaml_model
 from app.data.trajectory import TrajectorySet
-from app.fileio import atomic_path, write_json
 from app.layout import Layout
 from app.learning.checkpoint import model_from_payload, trajectory_hash
 from app.learning.config import TrainConfig, load_train_config

@@ -15,9 +15,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from analysis.atomic import atomic_path, write_json
 from app.data.trajectory import ROBOT, TrajectorySet
 from app.data.windows import Windows, make_windows, segment_features, split_by_trajectory
-from app.fileio import atomic_path, write_json
 from app.layout import CHECKPOINT_FILE, Layout
 from app.learning.checkpoint import (
     load_model,

@@ -62,7 +62,7 @@ def shown_trial(ctx: StudyContext, response: TrialResponse) -> dict:
 
 def start_replays(rows: list[PredictionRow], dt_s: float) -> list[dict]:
     """Per start state: its clicks in step order and each model's rolled-out positions."""
-    from analysis.contracts import alignment_error
+    from analysis.alignment import alignment_error
 
     starts: dict[int, list[PredictionRow]] = {}
     for row in sorted(rows, key=lambda r: (r.start_index, r.step)):

@@ -7,7 +7,7 @@ land is app/study/clicks.py's rule, shared with the simulated study.
 
 import numpy as np
 
-from analysis.contracts import alignment_error
+from analysis.alignment import alignment_error
 from app.server.schemas import PredictionCreate
 from app.study.clicks import check_points, robot_starts, step_moves
 from app.study.config import AttentionChecks, SurveyQuestion

@@ -12,8 +12,9 @@ import numpy as np
 from tqdm import tqdm
 
 import app
+from analysis.atomic import write_json
 from app.data.trajectory import Episode, Rejected, TrajectorySet
-from app.fileio import sha256_file, write_json
+from app.fileio import sha256_file
 from app.layout import Layout
 from app.worlds.registry import World, build_world
 

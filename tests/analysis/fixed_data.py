@@ -3,6 +3,7 @@
 import copy
 import hashlib
 import json
+import math
 
 import numpy as np
 import pandas as pd
@@ -15,6 +16,11 @@ DT_S = 0.5
 START_KINDS = {"highway": ("own", "same_lane", "adjacent_lane", "same_lane", "adjacent_lane"),
                "obstacle": ("own", "near", "mid", "near", "mid")}
 
+
+
+def cos_distance(a, b) -> float:
+    """1 - cos of the angle between two 2-D vectors, by hand (the alignment error's reference)."""
+    return 1 - (a[0] * b[0] + a[1] * b[1]) / (math.hypot(*a) * math.hypot(*b))
 
 def fixed_predictions(n_participants: int = 4, trials: int = 2, starts: int = 2,
                       steps: int = 3, seed: int = 7) -> pd.DataFrame:

@@ -6,15 +6,18 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from analysis.contracts import ExclusionRules, alignment_error
+from analysis.alignment import alignment_error
+from analysis.contracts import ExclusionRules
 from analysis.load import load_csv
 from analysis.metrics import apply_exclusions, participant_means
-from analysis.stats import compare_per_world, displacement_errors, infer_dt_s, paired_comparison
-from tests.analysis.fixed_data import DT_S, fixed_predictions
-
-
-def _cos_distance(a, b) -> float:
-    return 1 - (a[0] * b[0] + a[1] * b[1]) / (math.hypot(*a) * math.hypot(*b))
+from analysis.stats import (
+    compare_per_world,
+    displacement_errors,
+    infer_dt_s,
+    mean_ci95,
+    paired_comparison,
+)
+from tests.analysis.fixed_data import DT_S, cos_distance, fixed_predictions
 
 
 def test_alignment_error_known_angles():
@@ -37,7 +40,7 @@ def test_participant_means_and_ttest_match_a_hand_computation():
         for pid in sorted(set(frame["participant_id"])):
             rows = frame[(frame["participant_id"] == pid) & (frame["world"] == world)]
             for model in by_hand:
-                errs = [_cos_distance((r.human_vx, r.human_vy),
+                errs = [cos_distance((r.human_vx, r.human_vy),
                                       (r[f"{model}_vx"], r[f"{model}_vy"]))
                         for _, r in rows.iterrows()]
                 by_hand[model].append(sum(errs) / len(errs))
@@ -65,6 +68,38 @@ def test_paired_comparison_one_sided_matches_direction():
     res = paired_comparison(a, b)
     assert res.mean_diff < 0 and res.p_one_sided_less == pytest.approx(res.p_two_sided / 2)
 
+
+
+def _by_hand_ci95(values: np.ndarray) -> tuple[float, float]:
+    """mean +- t(0.975, n - 1) * sd / sqrt(n), sd with n - 1."""
+    n, mean = len(values), sum(values) / len(values)
+    sd = math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1))
+    half = stats.t.ppf(0.975, n - 1) * sd / math.sqrt(n)
+    return mean - half, mean + half
+
+
+@pytest.mark.filterwarnings("ignore:Precision loss:RuntimeWarning")  # the equal values
+@pytest.mark.parametrize("values", [[0.31, 0.12, 0.4], [0.5, 0.25], [0.2, 0.2, 0.2, 0.2],
+                                    list(np.linspace(0.0, 2.0, 40) ** 2)])
+def test_mean_ci95_is_the_t_interval_by_hand(values):
+    mean, low, high = mean_ci95(np.array(values))
+    assert mean == pytest.approx(sum(values) / len(values), rel=1e-12)
+    assert [low, high] == pytest.approx(_by_hand_ci95(values), rel=1e-12, abs=1e-15)
+
+
+def test_mean_ci95_of_one_value_has_no_interval():
+    mean, low, high = mean_ci95(np.array([0.7]))
+    assert mean == 0.7 and math.isnan(low) and math.isnan(high)
+
+
+@pytest.mark.filterwarnings("ignore:Precision loss:RuntimeWarning")  # the equal values
+@pytest.mark.parametrize("gap", [[0.1, 0.05, 0.2, 0.1, 0.12], [0.25, 0.25, 0.25], [-0.5, 0.5]])
+def test_paired_ci95_is_the_t_interval_of_the_differences_by_hand(gap):
+    a = np.linspace(0.1, 0.3, len(gap))
+    res = paired_comparison(a, a + np.array(gap))
+    diff = list(a - (a + np.array(gap)))
+    assert [res.ci95_low, res.ci95_high] == pytest.approx(_by_hand_ci95(diff), rel=1e-12,
+                                                          abs=1e-15)
 
 def test_ade_fde_by_hand():
     frame = fixed_predictions(n_participants=2)

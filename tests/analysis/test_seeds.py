@@ -2,7 +2,6 @@
 
 import gzip
 import hashlib
-import math
 
 import numpy as np
 import pandas as pd
@@ -20,13 +19,15 @@ from analysis.seeds import (
     verdict_counts,
 )
 from analysis.stats import by_arm_table, compare_per_world, paired_comparison, verdicts
-from tests.analysis.fixed_data import family_bank, fixed_predictions, on_bank, small_bank
+from tests.analysis.fixed_data import (
+    cos_distance,
+    family_bank,
+    fixed_predictions,
+    on_bank,
+    small_bank,
+)
 
 SEEDS = {"ours": [7, 8, 9], "vae": [3, 4]}  # unequal families: 2 pairs, family over 3 and 2
-
-
-def _cos_distance(a, b) -> float:
-    return 1 - (a[0] * b[0] + a[1] * b[1]) / (math.hypot(*a) * math.hypot(*b))
 
 
 @pytest.fixture
@@ -44,7 +45,7 @@ def _by_hand_means(frame, bank: dict, model: str, index: int, world: str) -> np.
     means = []
     for pid in sorted(frame["participant_id"].unique()):
         rows = frame[(frame["participant_id"] == pid) & (frame["world"] == world)]
-        errs = [_cos_distance((r.human_vx, r.human_vy), trials[r.trial_id]["predictions"][model]
+        errs = [cos_distance((r.human_vx, r.human_vy), trials[r.trial_id]["predictions"][model]
                               [index]["actions"][r.start_index][r.step])
                 for r in rows.itertuples()]
         means.append(sum(errs) / len(errs))
@@ -102,6 +103,7 @@ def test_the_primary_pair_reproduces_the_export_columns(study):
     per_seed = per_seed_table(join_seeds(frame, bank).errors)
     primary = compare_per_world(add_alignment_errors(frame).groupby(
         ["participant_id", "world"])[["err_ours", "err_vae"]].mean().reset_index())
+    assert set(primary) == {"highway", "obstacle"}
     for world, res in primary.items():
         row = per_seed[(per_seed["world"] == world) & (per_seed["pair"] == 0)].iloc[0]
         assert row["mean_diff"] == pytest.approx(res.mean_diff, rel=1e-12)

@@ -4,6 +4,8 @@ import json
 import math
 import uuid
 
+from app.layout import Layout
+from tests.conftest import SmallStudy
 from tests.e2e.conftest import BROWSER_STUDY
 
 VIEWPORT = {"width": 1280, "height": 900}
@@ -14,6 +16,18 @@ THINK_MS = 1500  # fake-clock time between two clicks
 def fresh_recruitment() -> str:
     """URL parameters of a new Prolific participant (each visit a new session)."""
     return f"PROLIFIC_PID={uuid.uuid4().hex[:24]}&STUDY_ID={'5' * 24}&SESSION_ID=s1"
+
+
+def page_token(page, study_id: str = BROWSER_STUDY) -> str:
+    """The session token the page keeps in sessionStorage."""
+    key = f"tomstudy.{study_id}.session"
+    return json.loads(page.evaluate(f"sessionStorage.getItem({key!r})"))["token"]
+
+
+def bank_of(study: SmallStudy, study_id: str = BROWSER_STUDY) -> dict:
+    """The study's bank trials by id."""
+    raw = json.loads(Layout(study.data_dir).bank(study_id).read_text())
+    return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}
 
 
 def visible(page, screen: str) -> None:

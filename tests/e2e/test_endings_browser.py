@@ -21,13 +21,14 @@ import httpx
 import pytest
 import yaml
 
-from app.layout import Layout
 from tests.conftest import SmallStudy, build_bundle_of, free_port, start_server
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
     VIEWPORT,
     answer_survey,
+    bank_of,
     fresh_recruitment,
+    page_token,
     through_instructions,
     visible,
 )
@@ -37,7 +38,6 @@ from tests.study.flow import fail_attention_checks
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 MTURK_STUDY = "browser_mturk"
-SESSION_KEY = "tomstudy.{}.session"
 
 
 def receipt(db_path: Path, token: str) -> dict:
@@ -55,12 +55,6 @@ def receipt(db_path: Path, token: str) -> dict:
             "writes": kinds, "events": events}
 
 
-def page_token(page, study_id: str) -> str:
-    """The session token the page keeps in sessionStorage."""
-    return json.loads(page.evaluate(f"sessionStorage.getItem({SESSION_KEY.format(study_id)!r})")
-                      )["token"]
-
-
 def done_screen(page) -> dict:
     """What the done screen shows."""
     visible(page, "done")
@@ -69,12 +63,6 @@ def done_screen(page) -> dict:
             "code": page.inner_text("#completion-code") if page.is_visible("#code-block") else "",
             "redirect": page.get_attribute("#redirect-link", "href")
             if page.is_visible("#redirect-block") else None}
-
-
-def bank_of(study: SmallStudy, study_id: str) -> dict:
-    """Bank trials by id."""
-    raw = json.loads(Layout(study.data_dir).bank(study_id).read_text())
-    return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}
 
 
 def to_survey_failing_checks(page, base_url: str, study: SmallStudy, study_id: str) -> str:

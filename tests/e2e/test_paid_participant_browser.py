@@ -28,10 +28,12 @@ from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
     VIEWPORT,
     answer_trial,
+    bank_of,
     canvas_view,
     current_state,
     fresh_recruitment,
     onward,
+    page_token,
     place,
     start_predicting,
     through_instructions,
@@ -72,16 +74,6 @@ def study_url(base: str, recruitment: str, study: str = BROWSER_STUDY) -> str:
 
 def params_of(recruitment: str) -> dict:
     return dict(pair.split("=") for pair in recruitment.split("&"))
-
-
-def bank_of(study: SmallStudy, study_id: str = BROWSER_STUDY) -> dict:
-    raw = json.loads(Layout(study.data_dir).bank(study_id).read_text())
-    return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}
-
-
-def page_token(page, study_id: str = BROWSER_STUDY) -> str:
-    return json.loads(page.evaluate(f"sessionStorage.getItem('tomstudy.{study_id}.session')"))[
-        "token"]
 
 
 def shoot(page, name: str) -> None:

@@ -298,6 +298,7 @@ def test_instrument_check_runs_and_writes_its_files(tmp_path):
 def test_simulated_participants_are_assigned_trials_as_the_server_assigns_them():
     bank = bank_with_examples()
     frame = simulate_participants(trial_bank(bank), "random", 7, 2, seed=3, show_progress=False)
+    assert set(frame["world"]) == {"highway", "obstacle"}
     for world, rows in frame.groupby("world"):
         seen = rows.groupby("trial_id")["participant_id"].nunique()
         mains = [t["trial_id"] for t in bank["worlds"][world]["trials"] if t["kind"] == "main"]

@@ -24,6 +24,7 @@ DATA_KINDS = {"same_lane", "adjacent_lane", "near", "mid", "own"}
 
 def test_checks_take_their_start_states_from_the_main_trials_rule(small_study):
     bank = json.loads(Layout(small_study.data_dir).bank(small_study.study_id).read_text())
+    assert set(bank["worlds"]) == {"highway", "obstacle"}
     for world in bank["worlds"].values():
         checks = [t for t in world["trials"] if t["kind"] == "attention"]
         assert checks
@@ -36,6 +37,7 @@ def test_checks_take_their_start_states_from_the_main_trials_rule(small_study):
 def test_the_spotting_script_does_no_better_than_chance_on_the_bank(small_study):
     bank = json.loads(Layout(small_study.data_dir).bank(small_study.study_id).read_text())
     rates = hit_rates(bank, trials_per_world=3, sessions=2000)
+    assert set(rates) == {"highway", "obstacle"}
     for world, rate in rates.items():
         # before issue 22 every check lay closest (hit rate 1.0) and under THRESHOLD
         assert rate["closest_hit_rate"] < 1.0, (world, rate)

@@ -86,7 +86,8 @@ def test_error_cis_equal_scipy_on_the_same_rows(client, small_study, finished):
                      headers=ADMIN).text
     expected = _independent_cis(csv)
     worlds = board["alignment"]["worlds"]
-    assert set(worlds) == {w for w, _ in expected}
+    assert set(worlds) == {w for w, _ in expected} == {"highway", "obstacle"}
+    assert len(expected) == 2 * 4  # two worlds, four models
     for (world, model), (mean, low, high, n) in expected.items():
         got = worlds[world]["models"][model]
         assert worlds[world]["n"] == n == 3
@@ -99,10 +100,12 @@ def test_error_cis_equal_scipy_on_the_same_rows(client, small_study, finished):
 
 def test_field_panels_hold_each_models_top_codes(client, small_study, finished):
     fields = dashboard(client, small_study.study_id)["alignment"]["fields"]
+    assert set(fields) == {"highway", "obstacle"}
     for field in fields.values():
         assert field["scene"]["bounds"] and field["arrow_m"] > 0
+        assert {panel["model"] for panel in field["panels"]} == {"ours", "vae"}
         for panel in field["panels"]:
-            assert panel["model"] in ("ours", "vae") and panel["trials"] >= 1
+            assert panel["trials"] >= 1 and panel["states"]
             for state in panel["states"]:
                 assert np.hypot(*state["human"]) == pytest.approx(1, abs=1e-3)
 

@@ -61,10 +61,12 @@ def test_secrets_come_from_files_never_from_the_environment():
 
 
 def test_no_secret_literal_in_any_service():
-    for service in COMPOSE["services"].values():
-        for name, value in service.get("environment", {}).items():
-            if re.search("PASSWORD|TOKEN|SECRET|KEY", name):
-                assert name.endswith("_FILE") and value.startswith("/run/secrets/"), name
+    secrets = [(name, value) for service in COMPOSE["services"].values()
+               for name, value in service.get("environment", {}).items()
+               if re.search("PASSWORD|TOKEN|SECRET|KEY", name)]
+    assert {"TOMSTUDY_DATABASE_PASSWORD_FILE", "POSTGRES_PASSWORD_FILE"} <= {n for n, _ in secrets}
+    for name, value in secrets:
+        assert name.endswith("_FILE") and value.startswith("/run/secrets/"), name
     text = (REPO / "compose.yaml").read_text()
     # a long random-looking word outside ${...} and digests would be a pasted secret
     words = re.findall(r"[A-Za-z0-9_-]{24,}", re.sub(r"sha256:\w+", "", REQUIRED.sub("", text)))
@@ -81,6 +83,7 @@ def test_base_images_are_pinned_by_digest_and_the_database_is_checked_over_tcp()
 
 def test_only_loopback_publishes_the_server_and_nothing_publishes_the_database():
     assert "ports" not in DB
+    assert SERVER["ports"]  # published, on loopback only
     for port in SERVER["ports"]:
         host_ip = port["host_ip"] if isinstance(port, dict) else str(port).split(":")[0]
         assert host_ip == "127.0.0.1"

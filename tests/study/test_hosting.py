@@ -9,6 +9,7 @@ from contextlib import contextmanager
 import httpx
 import pytest
 from fastapi.testclient import TestClient
+from sqlalchemy import event
 from sqlalchemy.engine import make_url
 
 from app.main import (
@@ -186,7 +187,11 @@ def test_security_headers_on_pages_api_static_files_and_errors(client, small_stu
 def test_templates_need_no_inline_script_or_style():
     """What lets the policy say script-src 'self' and style-src 'self' and nothing more (a
     JSON data block is never run, so the policy does not cover it)."""
-    for template in (FRONTEND_DIR / "templates").glob("*.html"):
+    templates = sorted((FRONTEND_DIR / "templates").glob("*.html"))
+    assert {t.name for t in templates} >= {"base.html", "index.html", "study.html",
+                                           "researcher.html", "notice.html",
+                                           "mturk_preview.html"}
+    for template in templates:
         html = template.read_text()
         assert not re.search(r"<script(?![^>]*\b(src=|type=\"application/json\"))[^>]*>", html), \
             template.name
@@ -245,8 +250,29 @@ def test_healthz_is_503_with_a_short_reason_when_the_database_is_down(small_stud
     assert "127.0.0.1" not in r.text and "nobody" not in r.text
 
 
-def test_postgres_engines_get_a_connect_timeout():
-    assert CONNECT_TIMEOUT_S == 10
+class _Dialled(Exception):
+    """Raised in place of the driver's connect, once its arguments are seen."""
+
+
+def driver_arguments(url: str) -> dict:
+    """The keyword arguments make_engine's engine hands the database driver on connect."""
+    engine, seen = make_engine(url), {}
+
+    def capture(_dialect, _record, _cargs, cparams):
+        seen.update(cparams)
+        raise _Dialled
+
+    event.listen(engine, "do_connect", capture)
+    with pytest.raises(_Dialled):
+        engine.connect()
+    return seen
+
+
+def test_postgres_engines_get_a_connect_timeout(tmp_path):
+    # the README's "its connections give up after 10 s"
+    assert driver_arguments("postgresql://u@db/x")["connect_timeout"] == CONNECT_TIMEOUT_S == 10
+    assert driver_arguments("postgresql://u@db/x?connect_timeout=3")["connect_timeout"] == "3"
+    assert "connect_timeout" not in driver_arguments(f"sqlite:///{tmp_path / 'study.db'}")
     assert server_connect_args(make_url("postgresql+psycopg://u@db/x"), 10) == {
         "connect_timeout": 10}
     assert server_connect_args(make_url("postgresql+psycopg://u@db/x?connect_timeout=3"),

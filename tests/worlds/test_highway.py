@@ -149,7 +149,9 @@ def test_same_seed_gives_identical_bytes_for_any_worker_count(tmp_path):
 def test_robot_policy_actions_follow_intent(small_run):
     trajs, _ = small_run
     world = HighwayWorld.from_yaml(CONFIG)
-    for index in np.flatnonzero(trajs.labels["robot_intent"] != 0)[:4]:
+    changing = np.flatnonzero(trajs.labels["robot_intent"] != 0)[:4]
+    assert set(trajs.labels["robot_intent"][changing]) == {1, 2}  # 4 changes, both ways
+    for index in changing:
         labels = {k: int(v[index]) for k, v in trajs.labels.items()}
         robot = trajs.positions[index, 0, ROBOT]
         human_behind = robot - [30.0, 0.0]  # same lane, far behind: out of the robot's way

@@ -70,6 +70,7 @@ def test_geodesic_distance_goes_around_obstacles(world):
 def test_kept_rollouts_never_collide_or_leave_the_plane(world, small_run):
     c = world.config
     r = c.agent_radius_m
+    assert len(small_run) == N_SMALL
     for i in range(len(small_run)):
         pos = small_run.positions[i, : small_run.lengths[i] + 1].astype(np.float64)
         for obs in c.obstacles:
