@@ -368,9 +368,10 @@ def bundle_verify(
 ) -> None:
     """Check every file against the manifest and recompute every stored model answer on this
     machine; print the largest differences; exit 1 if any is beyond tolerance."""
-    from app.bank.bundle import BundleError, open_bundle
+    from app.bank.bundle import BundleError
     from app.bank.model_answers import ACTION_TOLERANCE_MPS, recompute
     from app.bank.served import served_bundle
+    from app.bank.verify import open_bundle
 
     try:
         opened = open_bundle(bundle) if bundle else served_bundle(get_settings(), study)

@@ -19,9 +19,10 @@ from fastapi.templating import Jinja2Templates
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from app.bank.bundle import BundleError, load_bundle
+from app.bank.bundle import BundleError
 from app.bank.model_answers import BankMismatch, ModelAnswers
 from app.bank.prepare import prepare_study
+from app.bank.verify import load_bundle
 from app.researcher import api as researcher
 from app.researcher import dashboard_api as dashboard
 from app.server import health

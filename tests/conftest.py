@@ -38,7 +38,8 @@ SMALL_TRAINING = {"max_epochs": 2, "patience_epochs": 2, "encoder_hidden": [32, 
                   "val_fraction": 0.15, "test_fraction": 0.45}
 SMALL_TRAJECTORIES = 70
 PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/bank/build.py",
-                    "app/study/trials.py", "app/study/config.py", "app/bank/bundle.py",
+                    "app/bank/start_states.py", "app/study/trials.py", "app/study/config.py",
+                    "app/bank/bundle.py", "app/bank/freeze.py", "app/bank/verify.py",
                     "app/fileio.py", "analysis/atomic.py", "study_configs"]
 
 
@@ -133,7 +134,7 @@ def build_bundle_of(study: SmallStudy) -> None:
 def freeze_bundle_of(study: SmallStudy) -> None:
     """Freeze the study's bundle from its data dir's working bank as it is (after a test
     changed it, say)."""
-    from app.bank.bundle import freeze
+    from app.bank.freeze import freeze
     from app.configio import load_yaml_model
     from app.study.config import StudyConfig
 

@@ -12,9 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from app.bank.bundle import BANK, MANIFEST, Bundle, open_bundle, shipped_dir
+from app.bank.bundle import BANK, MANIFEST, Bundle, shipped_dir
 from app.bank.model_answers import largest_angle_deg
 from app.bank.served import simulation_inputs
+from app.bank.verify import open_bundle
 from app.settings import Settings
 
 

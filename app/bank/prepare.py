@@ -14,7 +14,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from app.bank.bundle import MANIFEST, Bundle, bundle_dir, freeze, open_bundle, shipped_dir
+from app.bank.bundle import MANIFEST, Bundle, bundle_dir, shipped_dir
+from app.bank.freeze import freeze
+from app.bank.verify import open_bundle
 from app.fileio import sha256_file
 from app.layout import Layout
 from app.settings import Settings

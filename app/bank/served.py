@@ -10,7 +10,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from app.bank.bundle import BANK, Bundle, BundleError, load_bundle
+from app.bank.bundle import BANK, Bundle, BundleError
+from app.bank.verify import load_bundle
 from app.settings import Settings
 from app.study.config import load_study_config
 

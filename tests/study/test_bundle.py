@@ -10,19 +10,12 @@ import subprocess
 import pytest
 import yaml
 
-from app.bank.bundle import (
-    BANK,
-    MANIFEST,
-    BundleError,
-    checkpoint_file,
-    freeze,
-    load_bundle,
-    open_bundle,
-    shipped_dir,
-)
+from app.bank.bundle import BANK, MANIFEST, BundleError, checkpoint_file, shipped_dir
 from app.bank.bundle_diff import compare_bundles
+from app.bank.freeze import freeze
 from app.bank.model_answers import BankMismatch, ModelAnswers
 from app.bank.prepare import bank_is_current, build_bundle, prepare_study
+from app.bank.verify import load_bundle, open_bundle
 from app.configio import load_yaml_model
 from app.layout import Layout
 from app.settings import Settings

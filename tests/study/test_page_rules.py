@@ -14,7 +14,7 @@ import pytest
 from analysis.contracts import MODEL_COLORS, MODEL_LABELS
 from app.data.scene import BROWSER_PALETTE
 from app.prediction_view import MIN_WINDOW_PX
-from app.server.crud import FINISHED
+from app.server.endings import FINISHED
 from app.server.schemas import (
     ClientInfo,
     DraftSave,

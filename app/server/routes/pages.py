@@ -9,8 +9,8 @@ from analysis.contracts import MODEL_COLORS, MODEL_LABELS
 from app.data.scene import BROWSER_PALETTE
 from app.prediction_view import MIN_WINDOW_PX
 from app.server import notices
-from app.server.crud import FINISHED
 from app.server.deps import study_context
+from app.server.endings import FINISHED
 from app.server.plan import BEFORE_TRIALS, Phase
 from app.server.recruitment import MTURK_PREVIEW
 from app.server.schemas import (
