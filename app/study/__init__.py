@@ -1,1 +1,1 @@
-"""What a study is, for every side: its typed config, its trial bank and its write-path error."""
+"""What a study is, for every side: its config, its bank, and a trial's payload, clicks, rows."""

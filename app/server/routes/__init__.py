@@ -1,1 +1,1 @@
-"""HTTP routes: participant API, researcher API and dashboard, HTML pages."""
+"""HTTP routes of the participant side: the participant API and the HTML pages."""
