@@ -53,7 +53,8 @@ def levels_cell(trajs, train_cfg: TrainConfig, levels: list[int], seed: int) -> 
     from app.learning.select import score_cell
     from app.learning.train import prepare
 
-    # each cell prepares the windows itself: cheaper than sending tensors to a worker
+    # each cell cuts the same windows again (the split is seeded): a job then sends a worker
+    # trajectories, not torch tensors
     return score_cell("ours", {"levels": levels}, train_cfg, prepare(trajs, train_cfg), seed)[0]
 
 
