@@ -584,6 +584,8 @@ def interaction(
                                                  "layout (v1.0 or v1.2) into --data")] = None,
     frame_seeds: Annotated[int | None, typer.Option(min=0, help="seeds of the human-relative "
                                                     "frame row (0 skips it; default 5)")] = None,
+    workers: Annotated[int, typer.Option(min=1, help="training processes (1: one after "
+                                         "another in this process)")] = 2,
 ) -> None:
     """Ours vs VAE vs constant velocity on INTERACTION pairs; report in var/reports/interaction/."""
     from app.interaction.dataset import InteractionError
@@ -598,7 +600,7 @@ def interaction(
 
             write_generated(data, scenario, generate)
         summary = run_command(data, scenario, get_settings().layout, config, train_config,
-                              seeds, max_epochs, frame_seeds=frame_seeds)
+                              seeds, max_epochs, frame_seeds=frame_seeds, workers=workers)
     except (TrackFileError, InteractionError, MapError, ValueError) as err:
         fail(str(err))
     out = get_settings().layout.interaction_report(scenario)

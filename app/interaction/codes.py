@@ -23,6 +23,7 @@ import numpy as np
 from app.data.windows import Windows, segment_features
 from app.interaction.config import CodeLevelsConfig
 from app.learning.config import TrainConfig
+from app.learning.jobs import JobPool
 
 CEILING = ("classifier on the standardised encoder inputs of the 1 s observed: logistic "
            "regression or an MLP (scikit-learn, 2 x 64 ReLU units, L2 1e-3, 100 epochs, "
@@ -30,22 +31,31 @@ CEILING = ("classifier on the standardised encoder inputs of the 1 s observed: l
            "(held-out train pairs)")
 
 
-def choose_levels(trajs, train_cfg: TrainConfig, grid: CodeLevelsConfig) -> dict:
-    """Train and score every levels cell on validation loss; the chosen levels and all rows."""
-    from app.learning.select import OursGrid, choose_ours, ours_rule, score_cell
-    from app.learning.train import one_thread, prepare
+def choose_levels(trajs, train_cfg: TrainConfig, grid: CodeLevelsConfig,
+                  pool: JobPool | None = None) -> dict:
+    """Train and score every levels cell on validation loss (the cells on `pool`'s workers);
+    the chosen levels and all rows."""
+    from app.learning.select import OursGrid, choose_ours, ours_rule
 
     rule = OursGrid(levels=grid.levels, min_used_fraction=grid.min_used_fraction,
                     loss_tolerance=grid.loss_tolerance)
-    with one_thread():
-        data = prepare(trajs, train_cfg)
-        rows = [score_cell("ours", {"levels": levels}, train_cfg, data, grid.seed)[0]
-                for levels in grid.levels]
+    cells = [(trajs, train_cfg, levels, grid.seed) for levels in grid.levels]
+    rows = (pool or JobPool(1)).run(levels_cell, cells, "interaction: FSQ levels", "cell")
     chosen, any_eligible = choose_ours(rows, rule)
     for k, row in enumerate(rows):
         row["chosen"] = k == chosen
     return {"levels": rows[chosen]["settings"]["levels"], "rule": ours_rule(rule),
             "any_eligible": any_eligible, "seed": grid.seed, "rows": rows}
+
+
+def levels_cell(trajs, train_cfg: TrainConfig, levels: list[int], seed: int) -> dict:
+    """One cell of the levels grid: Ours trained with `levels`, its validation row."""
+    from app.learning.select import score_cell
+    from app.learning.train import prepare
+
+    # each cell cuts the same windows again (the split is seeded): a job then sends a worker
+    # trajectories, not torch tensors
+    return score_cell("ours", {"levels": levels}, train_cfg, prepare(trajs, train_cfg), seed)[0]
 
 
 def encoder_inputs(windows: Windows) -> np.ndarray:

@@ -11,6 +11,9 @@ Procedure (one command, `tomstudy interaction`):
    them by pair into fit/early-stopping/test), then on every val window predict the robot's
    next action; alignment error = 1 - cos against the true next action. Windows whose true
    next speed is below `min_speed_mps` are not scored (a standing car has no direction).
+   The seeds (with step 5's and step 1's levels cells) run on `workers` processes
+   (app/learning/jobs.py, `--workers`, default 2), torch on one thread in each: a seed's
+   numbers do not depend on how many processes ran.
 4. Per seed mean errors -> paired t-tests (Ours vs VAE, each vs constant velocity), ADE/FDE
    over the n steps, purity/NMI of codes against the manoeuvre labels when the data carry
    them (the generator's sidecar) and against a turn label derived from the robot's heading
@@ -28,7 +31,6 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 import app
 from analysis.atomic import write_json
@@ -62,6 +64,7 @@ from app.interaction.horizons import (
 from app.interaction.report import FigureInputs, write_figures, write_report
 from app.layout import Layout
 from app.learning.config import TrainConfig
+from app.learning.jobs import JobPool
 from app.learning.train import train_and_save
 
 MODELS = ("ours", "vae", "cv")
@@ -213,47 +216,98 @@ def scoring_set(exp: ScenarioData, cfg: InteractionConfig, train_cfg: TrainConfi
                    trainer_windows(exp, train_cfg))
 
 
+def frame_seed(exp: ScenarioData, seed: int, train_cfg: TrainConfig, models_dir: Path,
+               on: Scoring, frame: Frame) -> dict:
+    """The sensitivity row's seed: Ours and the VAE trained and scored in `frame`."""
+    out = {"seed": seed}
+    for kind, _, model in train_pair(exp, seed, train_cfg, models_dir, frame):
+        out[kind] = protocol_scores(model, on, train_cfg.min_code_share, frame)[0]
+    return out
+
+
+def seed_job(frame: Frame, exp: ScenarioData, seed: int, train_cfg: TrainConfig,
+             models_dir: Path, on: Scoring) -> dict:
+    """A primary seed (run_seed) in the map frame, else a sensitivity row's (frame_seed)."""
+    if frame == "absolute":
+        return run_seed(exp, seed, train_cfg, models_dir, on)
+    return frame_seed(exp, seed, train_cfg, models_dir / frame, on, frame)
+
+
 def train_seeds(exp: ScenarioData, cfg: InteractionConfig, train_cfg: TrainConfig,
-                models_dir: Path, on: Scoring) -> list[dict]:
-    """run_seed for every seed, with a progress bar."""
-    per_seed = []
-    bar = tqdm(range(cfg.seeds), desc=f"interaction {exp.scenario}: seeds", unit="seed")
-    for seed in bar:
-        per_seed.append(run_seed(exp, seed, train_cfg, models_dir, on))
-        bar.set_postfix(ours=f"{per_seed[-1]['ours']['alignment_error']:.3f}",
-                        vae=f"{per_seed[-1]['vae']['alignment_error']:.3f}")
-    return per_seed
+                models_dir: Path, on: Scoring, pool: JobPool) -> tuple[list[dict], list[dict]]:
+    """Every primary seed and the sensitivity row's, as one batch on `pool`'s workers with one
+    progress bar; (primary rows, sensitivity rows), each in seed order."""
+    row = cfg.frame_sensitivity
+    frames = [("absolute", seed) for seed in range(cfg.seeds)]
+    frames += [(row.frame, seed) for seed in range(row.seeds)]
+    jobs = [(frame, exp, seed, train_cfg, models_dir, on) for frame, seed in frames]
+    desc = f"interaction {exp.scenario}: seeds (+{row.seeds} {row.frame} frame)"
+    rows = pool.run(seed_job, jobs, desc, "seed", _errors_postfix)
+    return rows[:cfg.seeds], rows[cfg.seeds:]
+
+
+def _errors_postfix(row: dict) -> dict:
+    return {m: f"{row[m]['alignment_error']:.3f}" for m in ("ours", "vae")}
+
+
+@dataclass(frozen=True)
+class Trained:
+    """The training phases' outcome: Ours' levels, what every seed is scored on, the primary
+    and sensitivity rows per seed, and each phase's wall time."""
+
+    levels: dict
+    train_cfg: TrainConfig
+    on: Scoring
+    per_seed: list[dict]
+    frame_rows: list[dict]
+    wall_s: dict[str, float]
+
+
+def train_all(exp: ScenarioData, cfg: InteractionConfig, base_train_cfg: TrainConfig,
+              models_dir: Path, workers: int) -> Trained:
+    """Choose Ours' levels, then train and score every seed; both phases on `workers`
+    processes (one pool, started once)."""
+    started = time.perf_counter()
+    train_cfg = experiment_train_config(base_train_cfg, cfg)
+    with JobPool(workers) as pool:
+        levels = choose_levels(exp.train.trajs, train_cfg, cfg.code_levels, pool)  # before purity
+        chosen = time.perf_counter()
+        train_cfg = with_levels(train_cfg, levels["levels"])
+        on = scoring_set(exp, cfg, train_cfg)
+        per_seed, frame_rows = train_seeds(exp, cfg, train_cfg, models_dir, on, pool)
+    wall_s = {"levels": chosen - started, "seeds": time.perf_counter() - chosen}
+    return Trained(levels, train_cfg, on, per_seed, frame_rows, wall_s)
 
 
 def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Path,
-                   cfg: InteractionConfig, base_train_cfg: TrainConfig) -> dict:
-    """Everything: load, choose Ours' levels, train 2 x seeds models, score, test, plot,
-    write the report."""
+                   cfg: InteractionConfig, base_train_cfg: TrainConfig, workers: int = 2) -> dict:
+    """Everything: load, choose Ours' levels, train 2 x seeds models (on `workers`
+    processes), score, test, plot, write the report."""
     started = time.perf_counter()
     exp = load_scenario_data(data_dir, scenario, cfg)
-    train_cfg = experiment_train_config(base_train_cfg, cfg)
-    levels = choose_levels(exp.train.trajs, train_cfg, cfg.code_levels)  # before any purity
-    train_cfg = with_levels(train_cfg, levels["levels"])
-    on = scoring_set(exp, cfg, train_cfg)
-    per_seed = train_seeds(exp, cfg, train_cfg, models_dir, on)
+    loaded = time.perf_counter()
+    run = train_all(exp, cfg, base_train_cfg, models_dir, workers)
+    on, per_seed = run.on, run.per_seed
     cv = score_constant_velocity(on.windows, on.scored)
     summary = summarise(exp, cfg, on.windows, on.scored, on.labels, per_seed, cv)
     summary.update(secondary_results(exp, cfg, on.horizons, per_seed))
-    summary.update(frame_sensitivity(exp, cfg, train_cfg, models_dir, on, cv))
+    summary.update(frame_sensitivity(cfg, on, cv, run.frame_rows))
     ceiling = ceiling_scores(on.trainer.windows, on.trainer.labels, on.windows, on.labels,
                              on.scored)
-    summary.update(fsq_levels=levels, ceiling_model=CEILING,
+    summary.update(fsq_levels=run.levels, ceiling_model=CEILING,
                    code_purity=code_purity(per_seed, ceiling))
     out_dir = Path(out_dir)
     inputs = FigureInputs(exp.scenario, exp.train.trajs, exp.lane_lines, on.windows, on.scored,
                           cfg.field_grid, cfg.field_codes)
     write_report(out_dir, summary, per_seed, write_figures(inputs, per_seed, summary, out_dir))
+    wall_s = {"load": loaded - started, **run.wall_s}
     write_json(out_dir / "meta.json", {
         "scenario": scenario, "layout": exp.layout, "config": cfg.model_dump(),
-        "train_config": train_cfg.model_dump(), "inputs_sha256": exp.inputs,
+        "train_config": run.train_cfg.model_dump(), "inputs_sha256": exp.inputs,
         "checkpoints": {f"seed_{r['seed']}/{k}": r[k]["content_hash"]
                         for r in per_seed for k in ("ours", "vae")},
-        "wall_time_s": round(time.perf_counter() - started, 2),
+        "workers": workers, "wall_time_s": round(time.perf_counter() - started, 2),
+        "phase_wall_time_s": {k: round(v, 2) for k, v in wall_s.items()},
         "package_version": app.__version__, "python": platform.python_version(),
         "numpy": np.__version__})
     return summary
@@ -304,22 +358,15 @@ def paper_protocol(windows: Windows, scored: np.ndarray, per_seed: list[dict], c
     }
 
 
-def frame_sensitivity(exp: ScenarioData, cfg: InteractionConfig, train_cfg: TrainConfig,
-                      models_dir: Path, on: Scoring, cv: dict) -> dict:
+def frame_sensitivity(cfg: InteractionConfig, on: Scoring, cv: dict,
+                      per_seed: list[dict]) -> dict:
     """`sensitivity`: the paper's protocol with both models trained and scored in the
-    configured frame (seeds 0..k-1, Ours' levels as chosen for the primary); {} when off.
-    Constant velocity does not depend on the frame (a translation keeps every velocity)."""
+    configured frame (seeds 0..k-1 from `frame_seed`, Ours' levels as chosen for the
+    primary); {} when off. Constant velocity does not depend on the frame (a translation
+    keeps every velocity)."""
     row = cfg.frame_sensitivity
     if row.seeds == 0:
         return {}
-    per_seed = []
-    for seed in tqdm(range(row.seeds), desc=f"interaction {exp.scenario}: {row.frame} frame",
-                     unit="seed"):
-        out = {"seed": seed}
-        for kind, _, model in train_pair(exp, seed, train_cfg, models_dir / row.frame,
-                                         row.frame):
-            out[kind] = protocol_scores(model, on, train_cfg.min_code_share, row.frame)[0]
-        per_seed.append(out)
     result = paper_protocol(on.windows, on.scored, per_seed, cv)
     return {"sensitivity": {f"{row.frame}_frame": {**result, "frame": row.frame,
                                                     "seeds": row.seeds}}}
@@ -361,9 +408,9 @@ def _mean_sd(values) -> dict:
 def run_command(data_dir: Path, scenario: str, layout: Layout, config: Path | None = None,
                 train_config: Path | None = None, seeds: int | None = None,
                 max_epochs: int | None = None, out_dir: Path | None = None,
-                frame_seeds: int | None = None) -> dict:
-    """What `tomstudy interaction` does on the dataset in `data_dir`: returns the summary;
-    models and report go under `layout`."""
+                frame_seeds: int | None = None, workers: int = 2) -> dict:
+    """What `tomstudy interaction` does on the dataset in `data_dir`, training on `workers`
+    processes: returns the summary; models and report go under `layout`."""
     from app.learning.config import load_train_config
 
     cfg = load_config(config, seeds, frame_seeds)
@@ -371,4 +418,5 @@ def run_command(data_dir: Path, scenario: str, layout: Layout, config: Path | No
     base = load_train_config(train_config, overrides)
     out_dir = Path(out_dir) if out_dir else layout.interaction_report(scenario)
     models_dir = layout.interaction_models(scenario)
-    return run_experiment(Path(data_dir), scenario, out_dir, models_dir, cfg, base)
+    return run_experiment(Path(data_dir), scenario, out_dir, models_dir, cfg, base,
+                          workers)

@@ -7,15 +7,12 @@ VAE takes its k-means k from seed k's Ours, so every Ours seed is trained first.
 that already exists is kept, so an interrupted build resumes where it stopped.
 """
 
-import multiprocessing as mp
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
-
-from tqdm import tqdm
 
 from app.layout import Layout
 from app.learning.config import TrainConfig
+from app.learning.jobs import JobPool
 
 Job = tuple[str, str, int]  # world, model, seed
 
@@ -31,31 +28,15 @@ def train_family(layout: Layout, worlds: list[str], seeds: list[int], cfg: Train
     """Train every missing checkpoint of Ours then the VAE for `worlds` x `seeds`; returns
     the jobs it ran."""
     ran = []
-    for model in ("ours", "vae"):
-        jobs = missing_jobs(layout, worlds, seeds, model)
-        kept = len(worlds) * len(seeds) - len(jobs)
-        say(f"training {len(jobs)} {model} checkpoint(s) on {workers} process(es); "
-            f"{kept} already exist")
-        run_jobs(layout, jobs, cfg, workers)
-        ran += jobs
+    with JobPool(workers) as pool:
+        for model in ("ours", "vae"):
+            jobs = missing_jobs(layout, worlds, seeds, model)
+            kept = len(worlds) * len(seeds) - len(jobs)
+            say(f"training {len(jobs)} {model} checkpoint(s) on {workers} process(es); "
+                f"{kept} already exist")
+            pool.run(train_job, [(layout, job, cfg) for job in jobs], "train family", "model")
+            ran += jobs
     return ran
-
-
-def run_jobs(layout: Layout, jobs: list[Job], cfg: TrainConfig, workers: int) -> None:
-    """Run training jobs `workers` at a time with one progress bar (in process if 1)."""
-    bar = tqdm(total=len(jobs), desc="train family", unit="model", disable=not jobs)
-    if workers == 1 or len(jobs) <= 1:
-        for job in jobs:
-            train_job(layout, job, cfg)
-            bar.update(1)
-    else:
-        # spawn, not fork: a forked child of a process that has run torch can deadlock
-        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
-            futures = [pool.submit(train_job, layout, job, cfg) for job in jobs]
-            for done in as_completed(futures):
-                done.result()  # re-raises a job's error here
-                bar.update(1)
-    bar.close()
 
 
 def train_job(layout: Layout, job: Job, cfg: TrainConfig) -> Path:

@@ -188,11 +188,16 @@ def ours_code_count(ours_checkpoint: Path, world: str) -> int:
 
 
 def kmeans_centres(latents: np.ndarray, k: int, seed: int) -> np.ndarray:
-    """k-means centres [k, d] of validation latents."""
+    """k-means centres [k, d] of validation latents, computed on one thread."""
     from sklearn.cluster import KMeans
+    from threadpoolctl import threadpool_limits
 
     k = max(1, min(k, len(np.unique(latents.round(6), axis=0))))
-    return KMeans(n_clusters=k, n_init=10, random_state=seed).fit(latents).cluster_centers_
+    # scikit-learn adds up per-thread partial centres, so the centres' last bits (and at times
+    # the clusters) follow the thread count: one thread gives the same VAE on any machine,
+    # whether `tomstudy train` or a worker of a parallel run trains it
+    with threadpool_limits(limits=1):
+        return KMeans(n_clusters=k, n_init=10, random_state=seed).fit(latents).cluster_centers_
 
 
 def code_summary(codes: np.ndarray, windows: Windows, label_names: dict,

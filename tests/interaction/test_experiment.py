@@ -259,3 +259,31 @@ def test_ceiling_learns_the_entry_arm_from_the_observed_second(small_data):
     ceiling = ceiling_scores(trainer.windows, trainer.labels, windows, labels, scored)
     chance = np.bincount(labels["entry_arm"]).max() / len(windows)
     assert set(ceiling) == set(labels) and ceiling["entry_arm"] > chance + 0.2
+
+
+
+def _numbers(run: "ie.Trained") -> str:
+    """What the seeds and the levels grid produced, as JSON (NaN compares equal as text),
+    without the levels cells' wall times."""
+    rows = [{k: v for k, v in row.items() if k != "wall_s"} for row in run.levels["rows"]]
+    return json.dumps({"levels": {**run.levels, "rows": rows}, "per_seed": run.per_seed,
+                       "frame_rows": run.frame_rows}, sort_keys=True)
+
+
+def test_two_workers_give_the_numbers_of_one(small_data, tmp_path):
+    """--workers 2 runs the levels cells and the seeds (the frame row's too) on two processes:
+    every per-seed number, checkpoint and levels row is that of --workers 1."""
+    from app.learning.config import TrainConfig
+
+    cfg = ic.InteractionConfig(seeds=2, code_levels=ic.CodeLevelsConfig(levels=[[2, 2], [3, 3]]),
+                               frame_sensitivity=ic.FrameSensitivityConfig(seeds=2))
+    exp = ds.load_scenario_data(small_data, SCENARIO, cfg)
+    runs = {workers: ie.train_all(exp, cfg, TrainConfig(max_epochs=3),
+                                  tmp_path / f"workers_{workers}", workers) for workers in (1, 2)}
+    one, two = runs[1], runs[2]
+    assert [r["seed"] for r in one.per_seed] == [0, 1]
+    assert [r["seed"] for r in one.frame_rows] == [0, 1]
+    assert {"ours", "vae"} <= set(one.frame_rows[0]) and len(one.levels["rows"]) == 2
+    assert [r["ours"]["checkpoint"] for r in two.per_seed] == [
+        str(tmp_path / "workers_2" / f"seed_{s}" / "ours" / "checkpoint.pt") for s in (0, 1)]
+    assert _numbers(one) == _numbers(two).replace("workers_2", "workers_1")
