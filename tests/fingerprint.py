@@ -4,8 +4,9 @@
 
 Simulates both worlds with a fixed seed into a scratch data dir, builds the paper study's
 bank there from the checkpoints under var/models (and the trajectories under var/data), and
-lets every bot kind click every trial of that bank with fixed seeds. Prints one sha256 per
-artefact; run it before and after a change that should not alter behaviour and compare.
+lets every bot kind click every trial of that bank with fixed seeds, and runs the simulated
+study (the instrument's path) on the shipped bank. Prints one sha256 per artefact; run it
+before and after a change that should not alter behaviour and compare.
 """
 
 import argparse
@@ -79,6 +80,23 @@ def click_digests(bank_path: Path, seed: int) -> dict[str, str]:
     return out
 
 
+def simulated_digests(seed: int) -> dict[str, str]:
+    """The simulated study on the shipped bank (8 participants per population, 10 trials per
+    world): sha256 of every export column and of the per-participant err_ours - err_vae."""
+    from app.observers.config import default_observers
+    from app.observers.simulated_study import load_bank, participant_diffs, population_frames
+
+    bank = load_bank(ROOT / "study_configs" / "bundles" / "paper_study" / "bank.json.gz")
+    frames = population_frames(bank, 8, 10, seed, default_observers(), show_progress=False)
+    out = {}
+    for preset, frame in frames.items():
+        rows = frame.sort_index(axis=1).to_csv(index=False).encode()
+        diffs = participant_diffs(frame).to_csv(index=False).encode()
+        out[f"simulated/{preset}"] = hashlib.sha256(rows).hexdigest()
+        out[f"simulated/{preset}/diffs"] = hashlib.sha256(diffs).hexdigest()
+    return out
+
+
 def fingerprint(n: int, seed: int, source: Path) -> dict[str, str]:
     """All the hashes, keyed by artefact."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -88,6 +106,7 @@ def fingerprint(n: int, seed: int, source: Path) -> dict[str, str]:
         out = trajectory_digests(sim, n, seed)
         out["bank/paper_study"], bank_path = bank_digest(built, source)
         out.update(click_digests(bank_path, seed))
+    out.update(simulated_digests(seed))
     return out
 
 
