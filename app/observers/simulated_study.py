@@ -55,14 +55,17 @@ def simulated_payload(bank: TrialBank, trial: TrialRecord) -> dict:
     return {**trial_payload(bank, trial), "trial_id": trial.trial_id, "world": trial.world}
 
 
+def check_answer(bank: TrialBank, trial: TrialRecord, clicks: np.ndarray) -> None:
+    """Refuse (Refused 422) a simulated answer the server would refuse: its click check."""
+    check_points(bank.world(trial.world), robot_starts(trial), clicks)
+
+
 def answer_columns(bank: TrialBank, trial: TrialRecord, clicks: np.ndarray
                    ) -> dict[str, np.ndarray]:
-    """A simulated answer checked and turned into rows as the server checks and stores a live
-    one (the primary seed's answers, as the server stores)."""
-    world = bank.world(trial.world)
-    check_points(world, robot_starts(trial), clicks)
+    """A checked simulated answer turned into rows as the server stores a live one (the
+    primary seed's answers, as the server stores)."""
     answers = {model: trial.primary(model) for model in MODELS}
-    return prediction_columns(trial, answers, clicks, world.dt_s)
+    return prediction_columns(trial, answers, clicks, bank.world(trial.world).dt_s)
 
 
 def trial_rows(participant: str, answered: "SimulatedTrial", bank: TrialBank
@@ -129,6 +132,7 @@ def simulated_trials(bank: TrialBank, preset: str, n: int, trials_per_world: int
                                                                         relative)
                 clicks = inverse_planning.predict(preset, payload, rng, trial.policy_actions,
                                                   observers, readings.get(trial_id))
+                check_answer(bank, trial, clicks)  # the instrument grid's answers too
                 yield SimulatedTrial(p, position, index, trial, payload, clicks)
 
 

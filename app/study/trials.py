@@ -145,7 +145,11 @@ class TrialBank:
     @classmethod
     def read(cls, path: Path) -> "TrialBank":
         """A bank file (bank.json, or a bundle's bank.json.gz); its sha256 is of the JSON."""
-        raw = read_bytes(path)
+        return cls.parse(read_bytes(path))
+
+    @classmethod
+    def parse(cls, raw: bytes) -> "TrialBank":
+        """A bank from its JSON bytes (validated); its sha256 is of those bytes."""
         return cls(BankFile.model_validate_json(raw), sha256_bytes(raw))
 
     @cached_property

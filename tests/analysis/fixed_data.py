@@ -10,7 +10,7 @@ import pandas as pd
 
 from analysis.contracts import EXPORT_COLUMNS
 from analysis.load import normalise
-from app.study.trials import BankFile, TrialBank
+from app.study.trials import TrialBank
 
 DT_S = 0.5
 START_KINDS = {"highway": ("own", "same_lane", "adjacent_lane", "same_lane", "adjacent_lane"),
@@ -174,8 +174,7 @@ def small_bank(trials: int = 6, seed: int = 0) -> dict:
 
 def trial_bank(bank: dict) -> TrialBank:
     """A bank.json-shaped dict, read as the server and the simulated study read a bank file."""
-    raw = json.dumps(bank).encode()
-    return TrialBank(BankFile.model_validate_json(raw), hashlib.sha256(raw).hexdigest())
+    return TrialBank.parse(json.dumps(bank).encode())
 
 
 def with_seeds(bank: dict, n_seeds: int = 3, seed: int = 0) -> dict:

@@ -9,7 +9,7 @@ from sqlalchemy import select
 from app.bank.model_answers import ACTION_TOLERANCE_MPS
 from app.layout import Layout
 from app.observers import inverse_planning
-from app.observers.simulated_study import answer_columns, simulated_payload
+from app.observers.simulated_study import answer_columns, check_answer, simulated_payload
 from app.server.tables import PredictionRow
 from app.study.errors import Refused
 from app.study.trials import TrialBank
@@ -70,4 +70,4 @@ def test_the_simulated_study_refuses_a_click_the_server_refuses(trial_bank):
     starts = np.asarray([s.robot for s in trial.start_states])
     too_far = starts[:, None, :] + np.arange(1, 4)[None, :, None] * [world.max_step_m * 1.5, 0]
     with pytest.raises(Refused, match=r"points\.0\.0: move of .* longer than the reachable"):
-        answer_columns(trial_bank, trial, too_far)
+        check_answer(trial_bank, trial, too_far)
