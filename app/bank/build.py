@@ -24,7 +24,7 @@ import app
 from analysis.alignment import alignment_error
 from analysis.atomic import write_json
 from app.bank.start_states import NoStartStates, covered_states, start_states
-from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
+from app.data.trajectory import HUMAN, ROBOT, Covered, TrajectorySet
 from app.fileio import sha256_file
 from app.layout import Layout
 from app.study.config import StudyConfig
@@ -53,7 +53,7 @@ class WorldInputs:
     models: dict[str, list]  # model name -> one TrainedModel per seed, the primary first
     held_out: np.ndarray
     trajectories_path: Path
-    covered: np.ndarray  # robot positions [M, 2] start states are drawn from
+    covered: Covered  # robot states start states are drawn from
     covered_trajectories: int
     seeds: list[int]  # the model family's seeds, in the order of every models list
     data_dir: Path  # meta.json names the inputs relative to it
@@ -92,7 +92,8 @@ def load_inputs(config: StudyConfig, name: str, layout: Layout) -> WorldInputs:
     if not npz_path.is_file():
         raise FileNotFoundError(f"{npz_path}: no trajectories; run `tomstudy simulate {name}`")
     trajs = TrajectorySet.load(npz_path)
-    data_hash = trajectory_hash(trajs.positions, trajs.lengths, trajs.labels)
+    data_hash = trajectory_hash(trajs.positions, trajs.lengths, trajs.labels,
+                                trajs.held_out)
     models, splits = {"ours": [], "vae": []}, []  # test trajectory sets
     for kind, seed in ((k, s) for k in models for s in config.models.seeds):
         path = layout.checkpoint(name, kind, seed)
@@ -105,7 +106,9 @@ def load_inputs(config: StudyConfig, name: str, layout: Layout) -> WorldInputs:
         splits.append(set(model.data_meta["split_trajectories"]["test"]))
     held_out = np.array(sorted(set.intersection(*splits)), dtype=np.int64)
     learned = np.setdiff1d(np.arange(len(trajs)), sorted(set.union(*splits)))
-    return WorldInputs(build_world(name), trajs, models, held_out, npz_path,
+    world = build_world(name)
+    world.prepare(layout)  # e.g. a recorded world indexes its recordings' futures
+    return WorldInputs(world, trajs, models, held_out, npz_path,
                        covered_states(trajs, learned), len(learned), list(config.models.seeds),
                        layout.root)
 

@@ -23,25 +23,28 @@ worlds apply their rules to the scene the trajectories were simulated in.
 
 import numpy as np
 
-from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
+from app.data.trajectory import HUMAN, ROBOT, Covered, TrajectorySet
 from app.study.trials import HEADING_DECIMALS, POS_DECIMALS, StartState
 from app.worlds.registry import World
 
 
-def covered_states(trajs: TrajectorySet, index: np.ndarray) -> np.ndarray:
-    """The robot's position at every valid step of trajectories `index` [M, 2] (m)."""
+def covered_states(trajs: TrajectorySet, index: np.ndarray) -> Covered:
+    """The robot's position and heading at every valid step of trajectories `index`."""
     if not len(index):
         raise ValueError(f"{trajs.world}: every trajectory is in a test split; no data "
                          "to draw start states from")
-    return np.concatenate([trajs.positions[i, : trajs.lengths[i] + 1, ROBOT]
-                           for i in index]).astype(np.float64)
+    def robot_steps(array: np.ndarray) -> np.ndarray:
+        return np.concatenate([array[i, : trajs.lengths[i] + 1, ROBOT]
+                               for i in index]).astype(np.float64)
+
+    return Covered(robot_steps(trajs.positions), robot_steps(trajs.headings))
 
 
 class NoStartStates(ValueError):
     """Too few points near the robot for the study's start states."""
 
 
-def start_states(world: World, trajs: TrajectorySet, covered: np.ndarray,
+def start_states(world: World, trajs: TrajectorySet, covered: Covered,
                  segment_end: tuple[int, int], segment: np.ndarray, count: int,
                  steps_to_predict: int, max_step: float, rng: np.random.Generator
                  ) -> list[StartState]:

@@ -3,7 +3,7 @@
 Plots draw it from its JSON form with analysis.scene_plot.draw_scene.
 """
 
-from pydantic import Field
+from pydantic import Field, model_serializer
 
 from app.configio import StrictModel
 
@@ -44,6 +44,37 @@ class AgentShape(StrictModel):
     color: str
 
 
+class Polyline(StrictModel):
+    """A line drawn under the agents (a map's lane border, kerb or stop line), scene frame."""
+
+    kind: str = Field(pattern="^(border|kerb|virtual|stop)$")
+    dashed: bool = False
+    points: list[list[float]] = Field(min_length=2)  # [[x, y], ...] m
+
+
+class DrivenArea(StrictModel):
+    """Where recorded agents went, as square cells: the road a map would draw, from the data.
+
+    Cell (row, col) spans x in x0 + col * cell, y in y0 + row * cell; `runs` lists each
+    row's occupied cells as [row, first col, last col] (inclusive).
+    """
+
+    cell_m: float = Field(gt=0)
+    x0_m: float
+    y0_m: float
+    runs: list[list[int]]
+
+
+class RecordedScene(StrictModel):
+    """What a recorded world adds to its scene: where the data came from, the map's lines,
+    the driven area and how large the clip's view is as it follows the robot."""
+
+    source: str  # e.g. "INTERACTION DR_USA_Roundabout_FT (v1.2)"
+    lines: list[Polyline] = []
+    driven: DrivenArea | None = None
+    view_span_m: float = Field(gt=0)  # the clip shows a square this wide around the robot
+
+
 class Scene(StrictModel):
     """Everything needed to draw a world; `frame` says what the coordinates mean."""
 
@@ -56,6 +87,16 @@ class Scene(StrictModel):
     obstacles: list[Circle] = []
     goals: list[Circle] = []
     agents: list[AgentShape]
+    recorded: RecordedScene | None = None
+
+    @model_serializer(mode="wrap")
+    def _without_unset_recorded(self, handler):
+        # a simulated world's scene serialises exactly as before `recorded` existed, so the
+        # shipped bundle's scenes, clip hashes and trajectory files keep their bytes
+        data = handler(self)
+        if data.get("recorded") is None:
+            data.pop("recorded", None)
+        return data
 
 
 # Okabe-Ito colours (distinguishable for colour-blind readers); label colours for plots are

@@ -6,6 +6,9 @@ Shape legend: N trajectories, T = max steps, A = 2 agents (0 = robot, 1 = human)
 - headings  [N, T+1, A]    rad, for drawing; speeds [N, T+1, A] m/s, world-frame speed
 - lengths   [N]            number of valid actions; later steps repeat the last state
 - labels    name -> [N] int, with class names in label_names
+- held_out  [N] bool or None: recorded worlds mark the trajectories cut from held-out
+            recordings, which every checkpoint keeps as its test split; None lets the trainer
+            draw the split (simulated worlds)
 """
 
 import json
@@ -35,6 +38,18 @@ class Episode:
         return len(self.positions) - 1
 
 
+@dataclass(frozen=True)
+class Covered:
+    """Robot states a trial's start states are drawn from: positions [M, 2] (m) and headings
+    [M] (rad), every valid step of the trajectories the models learned from."""
+
+    positions: np.ndarray
+    headings: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+
 class Rejected(Exception):
     """A rollout that must not enter the dataset; the message is the reason (e.g. 'collision')."""
 
@@ -52,6 +67,7 @@ class TrajectorySet:
     labels: dict[str, np.ndarray]
     label_names: dict[str, list[str]]
     scene: Scene
+    held_out: np.ndarray | None = None
 
     @property
     def actions(self) -> np.ndarray:
@@ -63,7 +79,8 @@ class TrajectorySet:
 
     @classmethod
     def from_episodes(cls, world: str, dt_s: float, episodes: list[Episode],
-                      label_names: dict[str, list[str]], scene: Scene) -> "TrajectorySet":
+                      label_names: dict[str, list[str]], scene: Scene,
+                      held_out: np.ndarray | None = None) -> "TrajectorySet":
         """Pad episodes to the longest one by repeating each final state."""
         horizon = max(ep.length for ep in episodes)
 
@@ -82,6 +99,7 @@ class TrajectorySet:
                     for name in sorted(episodes[0].labels)},
             label_names=label_names,
             scene=scene,
+            held_out=None if held_out is None else np.asarray(held_out, dtype=bool),
         )
 
     def subset(self, index: np.ndarray) -> "TrajectorySet":
@@ -92,6 +110,7 @@ class TrajectorySet:
             lengths=self.lengths[index],
             labels={k: v[index] for k, v in self.labels.items()},
             label_names=self.label_names, scene=self.scene,
+            held_out=None if self.held_out is None else self.held_out[index],
         )
 
     def save(self, path: Path) -> None:
@@ -104,6 +123,8 @@ class TrajectorySet:
             "header_json": np.frombuffer(json.dumps(header, sort_keys=True).encode(), np.uint8),
         }
         arrays.update({f"label__{k}": v for k, v in self.labels.items()})
+        if self.held_out is not None:
+            arrays["held_out"] = self.held_out.astype(bool)
         write_npz(path, arrays)
 
     @classmethod
@@ -118,4 +139,5 @@ class TrajectorySet:
                 positions=npz["positions"], headings=npz["headings"], speeds=npz["speeds"],
                 lengths=npz["lengths"], labels=labels, label_names=header["label_names"],
                 scene=Scene.model_validate(header["scene"]),
+                held_out=npz["held_out"] if "held_out" in npz.files else None,
             )

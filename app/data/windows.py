@@ -104,10 +104,23 @@ def make_windows(trajs: TrajectorySet, segment_len: int, n_actions: int,
 
 
 def split_by_trajectory(n: int, val_fraction: float, test_fraction: float,
-                        seed: int) -> dict[str, np.ndarray]:
-    """Disjoint sorted trajectory indices for train/val/test (never split by window)."""
+                        seed: int, held_out: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Disjoint sorted trajectory indices for train/val/test (never split by window).
+
+    With `held_out` (a recorded world's [n] bool: cut from held-out recordings) those are the
+    test split and the validation split is drawn from the rest, so no recording the bank's
+    trials come from is ever trained on."""
+    if held_out is not None:
+        return _split_around(np.asarray(held_out, dtype=bool), val_fraction, seed)
     order = np.random.default_rng(seed).permutation(n)
     n_test = max(1, round(n * test_fraction)) if n >= 3 else 0
     n_val = max(1, round(n * val_fraction)) if n >= 3 else 0
     return {"test": np.sort(order[:n_test]), "val": np.sort(order[n_test:n_test + n_val]),
             "train": np.sort(order[n_test + n_val:])}
+
+
+def _split_around(held_out: np.ndarray, val_fraction: float, seed: int) -> dict[str, np.ndarray]:
+    rest = np.random.default_rng(seed).permutation(np.flatnonzero(~held_out))
+    n_val = max(1, round(len(held_out) * val_fraction)) if len(rest) >= 2 else 0
+    return {"test": np.flatnonzero(held_out), "val": np.sort(rest[:n_val]),
+            "train": np.sort(rest[n_val:])}

@@ -58,11 +58,15 @@ def save_checkpoint(path: Path, payload: dict) -> str:
     return payload["content_hash"]
 
 
-def trajectory_hash(positions: np.ndarray, lengths: np.ndarray, labels: dict) -> str:
-    """sha256 hex of a TrajectorySet's arrays: ties a checkpoint to its training data."""
+def trajectory_hash(positions: np.ndarray, lengths: np.ndarray, labels: dict,
+                    held_out: np.ndarray | None = None) -> str:
+    """sha256 hex of a TrajectorySet's arrays: ties a checkpoint to its training data (and,
+    for a recorded world, to the recordings it held out)."""
     digest = hashlib.sha256()
     for array in (positions, lengths, *(labels[k] for k in sorted(labels))):
         digest.update(np.ascontiguousarray(array).tobytes())
+    if held_out is not None:
+        digest.update(np.ascontiguousarray(held_out, dtype=bool).tobytes())
     return digest.hexdigest()
 
 

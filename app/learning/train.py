@@ -63,7 +63,8 @@ def split_tensors(windows: Windows, norm: Normaliser) -> SplitTensors:
 
 def prepare_windows(trajs: TrajectorySet, cfg: TrainConfig) -> dict[str, Windows]:
     """Split by trajectory (cfg.split_seed) and cut windows per split."""
-    split = split_by_trajectory(len(trajs), cfg.val_fraction, cfg.test_fraction, cfg.split_seed)
+    split = split_by_trajectory(len(trajs), cfg.val_fraction, cfg.test_fraction, cfg.split_seed,
+                                trajs.held_out)
     windows = {name: make_windows(trajs, cfg.segment_len, cfg.n_actions,
                                   cfg.windows_per_trajectory, index)
                for name, index in split.items()}
@@ -279,7 +280,8 @@ def build_payload(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainCo
         "kind": model_name, "world": trajs.world, "dt_s": float(trajs.dt_s), "model_args": args,
         "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
         "norm": data.norm.to_dict(), "data_meta": _data_meta(trajs, data.windows, data_meta),
-        "data_hash": trajectory_hash(trajs.positions, trajs.lengths, trajs.labels),
+        "data_hash": trajectory_hash(trajs.positions, trajs.lengths, trajs.labels,
+                                     trajs.held_out),
         "train_config": cfg.model_dump(), "seed": seed,
         "kmeans_centres": centres.tolist() if centres is not None else None, "codes": {},
     }

@@ -31,7 +31,7 @@ from pydantic import Field, model_validator
 
 from app.configio import StrictModel, load_yaml_model
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Lane, Scene
-from app.data.trajectory import HUMAN, ROBOT, Episode, Rejected
+from app.data.trajectory import HUMAN, ROBOT, Covered, Episode, Rejected
 from app.layout import Layout
 from app.worlds.mpc import SamplingMPC
 
@@ -503,13 +503,13 @@ class HighwayWorld:
             return ends[(done >= 0.05) & (done <= 0.75)]
         return ends[ends <= 0.6 * (len(robot_track) - 1)]
 
-    def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: np.ndarray,
+    def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: Covered,
                               reach: float) -> dict[str, np.ndarray]:
         """`same_lane` and `adjacent_lane` points (lanes by nearest centre) within `reach`
         along the road, with `reach` of road ahead (the way the robot's last segment move goes
         along x) inside the view; not within two car lengths along and half a lane across of
         the human."""
-        robot, human, pts = segment[-1, ROBOT], segment[-1, HUMAN], covered
+        robot, human, pts = segment[-1, ROBOT], segment[-1, HUMAN], covered.positions
         travel = 1.0 if segment[-1, ROBOT, 0] >= segment[-2, ROBOT, 0] else -1.0
         centres = np.array([lane.y_center_m for lane in scene.lanes])
         index = np.array([lane.index for lane in scene.lanes])

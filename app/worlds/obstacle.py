@@ -18,7 +18,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from app.configio import StrictModel, load_yaml_model
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Circle, Scene
-from app.data.trajectory import HUMAN, ROBOT, Episode, Rejected
+from app.data.trajectory import HUMAN, ROBOT, Covered, Episode, Rejected
 from app.layout import Layout
 from app.worlds.mpc import SamplingMPC
 
@@ -489,14 +489,14 @@ class ObstacleWorld:
         remaining = np.linalg.norm(robot_track[ends] - robot_track[-1], axis=1)
         return ends[remaining >= 0.4 * np.linalg.norm(robot_track[0] - robot_track[-1])]
 
-    def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: np.ndarray,
+    def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: Covered,
                               reach: float) -> dict[str, np.ndarray]:
         """`near` (within `reach` of the robot) and `mid` (`reach` to 2 `reach`) points, more
         than one agent width clear of every obstacle and goal disc and two from the human (the
         whole walled plane is in view, so there is always room for n steps)."""
         robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
-        dist = np.linalg.norm(covered - robot, axis=1)
-        pts, dist = covered[dist <= 2 * reach], dist[dist <= 2 * reach]
+        dist = np.linalg.norm(covered.positions - robot, axis=1)
+        pts, dist = covered.positions[dist <= 2 * reach], dist[dist <= 2 * reach]
         agent = max(a.width_m for a in scene.agents)
         clear = np.linalg.norm(pts - human, axis=1) > 2 * agent
         for c in [*scene.obstacles, *scene.goals]:

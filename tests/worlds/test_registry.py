@@ -4,12 +4,13 @@ import numpy as np
 import pytest
 
 from app.configio import ConfigError
-from app.worlds.registry import WORLD_NAMES, World, build_world
+from app.data.trajectory import Covered
+from app.worlds.registry import SIMULATED_WORLDS, World, build_world
 
 
 @pytest.fixture(scope="module")
 def worlds() -> dict[str, World]:
-    return {name: build_world(name) for name in WORLD_NAMES}
+    return {name: build_world(name) for name in SIMULATED_WORLDS}
 
 
 def test_every_world_implements_the_whole_protocol(worlds):
@@ -39,7 +40,7 @@ def test_obstacle_segments_end_well_before_the_goal(worlds):
 
 def test_data_start_kinds_are_the_worlds_own(worlds):
     segment = np.array([[[0.0, 4.0], [-20.0, 8.0]], [[3.0, 4.0], [-18.0, 8.0]]])
-    covered = np.array([[4.0, 4.0], [5.0, 0.0], [6.0, 8.0], [40.0, 4.0]])
+    covered = Covered(np.array([[4.0, 4.0], [5.0, 0.0], [6.0, 8.0], [40.0, 4.0]]), np.zeros(4))
     highway = worlds["highway"]
     pools = highway.data_start_candidates(highway.scene(), segment, covered, 9.0)
     assert list(pools) == ["same_lane", "adjacent_lane"]
