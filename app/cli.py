@@ -61,6 +61,42 @@ def simulate(
         typer.echo(f"wrote {plot_simulated(layout, world, config, policy)}")
 
 
+@cli.command("import-recordings")
+def import_recordings_cmd(
+    world: Annotated[str, typer.Argument(help="a recorded world: study_configs/worlds/<world>"
+                                         ".yaml with kind: recorded")],
+) -> None:
+    """Read a recorded world's recordings into var/data/<world>/ (its `simulate`)."""
+    from app.recordings.importer import RECORDING_ERRORS
+    from app.worlds.world_data import import_world_data
+
+    try:
+        result = import_world_data(world, get_settings().layout)
+    except RECORDING_ERRORS as err:
+        fail(str(err))
+    meta = result.meta
+    typer.echo(f"wrote {result.npz_path} ({meta['pairs']['train']} training and "
+               f"{meta['pairs']['held_out']} held-out pairs from {meta['source']})")
+
+
+@cli.command("generate-recordings")
+def generate_recordings_cmd(
+    out: Annotated[Path | None, typer.Option(help="folder (default: <recordings dir>/"
+                                             "INTERACTION, where the recorded worlds look)")]
+    = None,
+    seconds: Annotated[float, typer.Option(min=60, help="training traffic per scenario; "
+                                           "half as much is held out")] = 900.0,
+) -> None:
+    """Write GENERATED, NOT REAL INTERACTION-format files of the interaction study's two
+    scenarios (a v1.2 roundabout, a v1.0 intersection) for demos, tests and labs without data."""
+    from app.recordings.generated import generate_study_recordings
+
+    folder = out or get_settings().layout.recordings() / "INTERACTION"
+    for summary in generate_study_recordings(folder, seconds):
+        typer.echo(f"wrote {summary['scenario']} ({summary['layout']}) into {folder}: "
+                   "GENERATED, NOT REAL DATA")
+
+
 @cli.command()
 def train(
     world: Annotated[str, typer.Option(help="highway or obstacle (reads var/data/<world>/)")],

@@ -13,6 +13,7 @@
       reports/<study>/, power-<study>-<bots>/, instrument-<study>/      analyze, power, instrument
       reports/interaction/<scenario>/                                   interaction
       study.db, pilot_<bots>.db                                         serve, make pilot
+      recordings/             a lab's recordings (TOMSTUDY_RECORDINGS_DIR)   import-recordings
 
 A study's model family (its config's `models.seeds`) lives at `checkpoint(world, model, seed)`;
 the bundle a study is served from is frozen from those files (app/bank/bundle.py).
@@ -30,6 +31,7 @@ class Layout:
     """The generated paths under one data dir."""
 
     root: Path
+    recordings_root: Path | None = None  # default: <root>/recordings
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "root", Path(self.root))
@@ -122,6 +124,12 @@ class Layout:
     def interaction_report(self, scenario: str) -> Path:
         """reports/interaction/<scenario>/: `tomstudy interaction`."""
         return self.root / "reports" / "interaction" / scenario
+
+    # -- recorded worlds
+    def recordings(self) -> Path:
+        """recordings/: where a lab keeps its recordings (a licensed download, its own logs);
+        a recorded world's config names its files relative to it. Never in git."""
+        return Path(self.recordings_root) if self.recordings_root else self.root / "recordings"
 
     # -- databases
     def study_database(self) -> Path:

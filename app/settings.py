@@ -23,6 +23,8 @@ class Settings(BaseSettings):
 
     data_dir: Path = Field(default=DEFAULT_DATA_DIR)
     configs_dir: Path = Field(default=REPO_ROOT / "study_configs")
+    # a lab's recordings (recorded worlds' sources); default <data dir>/recordings
+    recordings_dir: Path | None = None
     database_url: str = Field(default="", validation_alias="DATABASE_URL")
     # no default anywhere: `serve` generates one when unset (app/main.py)
     admin_token: str = ""
@@ -62,7 +64,7 @@ class Settings(BaseSettings):
     @property
     def layout(self) -> Layout:
         """Every generated path under the data dir."""
-        return Layout(self.data_dir)
+        return Layout(self.data_dir, self.recordings_dir)
 
     @property
     def trusted_hosts(self) -> list[str]:

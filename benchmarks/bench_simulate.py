@@ -19,7 +19,7 @@ import numpy as np
 
 from app.data.trajectory import TrajectorySet
 from app.layout import Layout
-from app.worlds.registry import WORLD_NAMES, build_world
+from app.worlds.registry import SIMULATED_WORLDS, build_world
 from app.worlds.simulate import simulate
 
 WORKERS = 2
@@ -63,7 +63,7 @@ def main() -> None:
     """Time each world's simulation and the raw-stepping baseline; print ratios."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=2000)
-    parser.add_argument("--worlds", nargs="+", default=list(WORLD_NAMES))
+    parser.add_argument("--worlds", nargs="+", default=list(SIMULATED_WORLDS))
     args = parser.parse_args()
     highway = build_world("highway")
     sim_hz = highway.config.simulation_frequency_hz

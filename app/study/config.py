@@ -5,7 +5,7 @@ import json
 import math
 from functools import lru_cache
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, ValidationError, model_validator
 
@@ -13,7 +13,8 @@ from analysis.contracts import ExclusionRules
 from app.configio import ConfigError, StrictModel, load_yaml_model
 from app.settings import Settings
 
-WorldName = Literal["highway", "obstacle"]
+# a simulated world (highway, obstacle) or a recorded one: study_configs/worlds/<name>.yaml
+WorldName = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]{0,31}$")]
 # where a study's frozen bundle is (app/bank/bundle.py): `shipped` in the configs dir (in git,
 # served as it is), `built` in the data dir (made by `tomstudy bundle build`)
 BundleSource = Literal["shipped", "built"]
@@ -337,8 +338,16 @@ def study_config_path(settings: Settings, study_id: str) -> Path:
 
 
 def load_study_config(settings: Settings, study_id: str) -> StudyConfig:
-    """Read and validate a study config; a bad key raises ConfigError naming it."""
-    return _load(study_config_path(settings, study_id))
+    """Read and validate a study config; a bad key raises ConfigError naming it, as does a
+    world without its study_configs/worlds/<world>.yaml."""
+    path = study_config_path(settings, study_id)
+    config = _load(path)
+    for index, world in enumerate(config.worlds):
+        world_file = Path(settings.configs_dir) / "worlds" / f"{world}.yaml"
+        if not world_file.is_file():
+            raise ConfigError(f"{path}: worlds.{index}: no world {world!r}: describe it in "
+                              f"{world_file} (a recorded world: kind: recorded)")
+    return config
 
 
 @lru_cache(maxsize=16)

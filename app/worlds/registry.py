@@ -1,25 +1,34 @@
 """The `World` protocol every world implements, the worlds' names, and how to build each one
-from its YAML config (the Obstacle world's SAC policy is wired in here)."""
+from its YAML config (the Obstacle world's SAC policy is wired in here).
 
+Two kinds: the simulated worlds (Highway, Obstacle: code, rolled out by simulate.py) and
+recorded worlds (any study_configs/worlds/<name>.yaml with `kind: recorded`: recordings
+imported by app/recordings/importer.py, app/worlds/recorded.py)."""
+
+import re
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+import yaml
 
 from app.configio import ConfigError, StrictModel, load_yaml_model
 from app.data.scene import Scene
-from app.data.trajectory import Episode
+from app.data.trajectory import Covered, Episode
 from app.layout import Layout
 from app.settings import get_settings
 
-WORLD_NAMES = ("highway", "obstacle")
+SIMULATED_WORLDS = ("highway", "obstacle")
 POLICIES = ("mpc", "sac")
+RECORDED_KIND = "recorded"
+WORLD_NAME = re.compile(r"[a-z][a-z0-9_]{0,31}")  # names folders under the data dir
 
 
 @runtime_checkable
 class World(Protocol):
-    """Everything the simulation, the learning and the trial bank need from a world, so
-    nothing outside app/worlds/ asks which world it has.
+    """Everything the learning, the trial bank and the observers need from a world, so
+    nothing outside app/worlds/ asks which world it has (a simulated world also rolls out:
+    `SimulatedWorld`).
 
     Shapes: A = 2 agents (0 robot, 1 human), positions in the scene frame [m]; a segment is
     [T+1, A, 2] states, the last one the segment end. Start candidates are computed on the
@@ -32,16 +41,9 @@ class World(Protocol):
     robot_label: str  # the label plots colour by and latent metrics score against
     config: StrictModel
 
-    def scene(self) -> Scene:
-        """The world's geometry for plots, the trial bank and the browser."""
-        ...
-
     def prepare(self, layout: Layout) -> None:
-        """Per-world set-up before rollouts (e.g. train a learnt policy); may do nothing."""
-        ...
-
-    def rollout(self, rng: np.random.Generator) -> Episode:
-        """One episode; raises `Rejected(reason)` when it must not enter the dataset."""
+        """Per-world set-up before the world rolls out or answers (train a learnt policy, read
+        a recorded world's data); may do nothing."""
         ...
 
     def robot_policy_actions(self, positions: np.ndarray, robot_heading: float,
@@ -56,10 +58,23 @@ class World(Protocol):
         where the robot's behaviour is under way but not finished."""
         ...
 
-    def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: np.ndarray,
+    def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: Covered,
                               reach: float) -> dict[str, np.ndarray]:
         """Robot positions from the data `covered` [M, 2] that may start a prediction after
         `segment`, by start kind (the first kind draws first); `reach` = n steps x max step."""
+        ...
+
+
+@runtime_checkable
+class SimulatedWorld(World, Protocol):
+    """A world of code: its scene is fixed and its episodes are rolled out."""
+
+    def scene(self) -> Scene:
+        """The world's geometry for plots, the trial bank and the browser."""
+        ...
+
+    def rollout(self, rng: np.random.Generator) -> Episode:
+        """One episode; raises `Rejected(reason)` when it must not enter the dataset."""
         ...
 
 
@@ -68,13 +83,40 @@ def default_config_path(world: str) -> Path:
     return get_settings().configs_dir / "worlds" / f"{world}.yaml"
 
 
+def is_recorded(world: str, config_path: Path | None = None) -> bool:
+    """Whether `world` is a recorded world (its YAML says `kind: recorded`)."""
+    if world in SIMULATED_WORLDS:
+        return False
+    if not WORLD_NAME.fullmatch(world):
+        raise ConfigError(f"world: {world!r} is not a world name (lower-case letters, digits "
+                          "and _, starting with a letter, at most 32)")
+    path = Path(config_path or default_config_path(world))
+    if not path.is_file():
+        raise ConfigError(f"world: unknown world {world!r}; choose one of "
+                          f"{', '.join(SIMULATED_WORLDS)}, or describe a recorded world in "
+                          f"{path} (kind: {RECORDED_KIND})")
+    try:
+        kind = (yaml.safe_load(path.read_text()) or {}).get("kind")
+    except (yaml.YAMLError, AttributeError):
+        kind = None
+    if kind != RECORDED_KIND:
+        raise ConfigError(f"{path}: kind: a world other than {', '.join(SIMULATED_WORLDS)} "
+                          f"must be `kind: {RECORDED_KIND}`")
+    return True
+
+
 def build_world(world: str, config_path: Path | None = None, policy: str = "mpc") -> World:
     """Load the world's typed config and construct it; errors name the field."""
-    if world not in WORLD_NAMES:
-        raise ConfigError(f"world: unknown world {world!r}; choose one of {', '.join(WORLD_NAMES)}")
     if policy not in POLICIES:
         raise ConfigError(f"policy: unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
     path = config_path or default_config_path(world)
+    if is_recorded(world, path):
+        if policy != "mpc":
+            raise ConfigError(f"policy: a recorded world's moves are recorded; {world} takes "
+                              "no policy")
+        from app.worlds.recorded import RecordedWorld
+
+        return RecordedWorld.from_yaml(world, path)
     if world == "highway":
         if policy != "mpc":
             raise ConfigError("policy: highway supports only 'mpc'")

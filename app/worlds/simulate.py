@@ -13,10 +13,11 @@ from tqdm import tqdm
 
 import app
 from analysis.atomic import write_json
+from app.configio import ConfigError
 from app.data.trajectory import Episode, Rejected, TrajectorySet
 from app.fileio import sha256_file
 from app.layout import Layout
-from app.worlds.registry import World, build_world
+from app.worlds.registry import SimulatedWorld, World, build_world
 
 MAX_ATTEMPTS = 50
 _WORKER_WORLD: World | None = None
@@ -61,6 +62,9 @@ def simulate(world: str, n: int, seed: int, layout: Layout, config_path: Path | 
     """Simulate `n` kept trajectories of `world` and write them with a meta.json."""
     started = time.perf_counter()
     built = build_world(world, config_path, policy)  # validates config before forking
+    if not isinstance(built, SimulatedWorld):
+        raise ConfigError(f"world: {world} is a recorded world; `tomstudy import-recordings "
+                          f"{world}` reads its recordings")
     built.prepare(layout)  # e.g. train the SAC policy once, in the parent
     workers = workers or min(2, os.cpu_count() or 1)
     episodes, rejections = _run_pool(world, config_path, policy, n, seed, workers)
