@@ -8,6 +8,8 @@
     <bundle>/models/<world>/<model>/seed<k>.pt.gz  every checkpoint whose answers the bank stores
     <bundle>/models/<world>/<model>/seed<k>.metrics.json.gz   its training and test figures
     <bundle>/data/<world>.meta.json                how the trajectories were simulated (hashes)
+    <bundle>/selection/<world>.json                how the build chose a world's model sizes,
+                                                   when training.yaml chose none (a new world)
     <bundle>/configs/...                           the study, training, selection, observer and
                                                    world configs that made it
 

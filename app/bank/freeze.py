@@ -52,11 +52,25 @@ def bundle_files(config: StudyConfig, study_id: str, configs_dir: Path,
                 files[checkpoint_file(world, model, seed)] = (
                     layout.checkpoint(world, model, seed).read_bytes())
                 files[metrics_file(world, model, seed)] = (directory / "metrics.json").read_bytes()
+    files.update(build_selections(config, configs_dir, layout))
     files[f"configs/{study_id}.yaml"] = (configs_dir / f"{study_id}.yaml").read_bytes()
     for name in SHARED_CONFIGS:
         if (configs_dir / name).is_file():
             files[f"configs/{name}"] = (configs_dir / name).read_bytes()
     return files
+
+
+def build_selections(config: StudyConfig, configs_dir: Path, layout: Layout) -> dict[str, bytes]:
+    """selection/<world>.json of every world whose sizes the build chose (training.yaml selects
+    nothing for it; app/learning/select.py ensure_selected), so the bundle says why its
+    checkpoints have the levels, beta and latent size they have."""
+    from app.learning.config import load_train_config
+
+    selected = load_train_config(Path(configs_dir) / "training.yaml").selected
+    found = {world: layout.selection_dir(world) / "selection.json" for world in config.worlds
+             if world not in selected}
+    return {f"selection/{world}.json": path.read_bytes() for world, path in found.items()
+            if path.is_file()}
 
 
 def freeze(config: StudyConfig, study_id: str, configs_dir: Path, layout: Layout,

@@ -41,13 +41,15 @@ def build_bundle(settings: Settings, study_id: str, workers: int = 2, n_trajecto
     the bundle into the data dir's bundles/<study>/ (never into the configs dir)."""
     from app.learning.config import load_train_config
     from app.learning.family import train_family
+    from app.learning.select import ensure_selected
 
     started = time.perf_counter()
     config = load_study_config(settings, study_id)
     layout = settings.layout
     for world in config.worlds:
         ensure_trajectories(layout, world, n_trajectories, seed, say)
-    train_family(layout, config.worlds, config.models.seeds, load_train_config(), workers, say)
+    train_cfg = ensure_selected(layout, config.worlds, load_train_config(), say)
+    train_family(layout, config.worlds, config.models.seeds, train_cfg, workers, say)
     if bank_is_current(layout, study_id, config):
         say(f"{layout.bank(study_id)} is up to date; skipping build-trials")
     else:
@@ -73,15 +75,15 @@ def replace_shipped(built: Bundle, configs_dir: Path, study_id: str) -> Path:
 
 
 def ensure_trajectories(layout: Layout, world: str, n: int, seed: int, say) -> None:
-    """Simulate a world unless its trajectory file exists."""
+    """Simulate a world, or import a recorded one's recordings, unless its trajectory file
+    exists."""
     npz_path = layout.trajectories(world)
     if npz_path.is_file() and layout.trajectories_meta(world).is_file():
         say(f"{npz_path} exists; skipping simulate")
         return
-    from app.worlds.simulate import simulate
+    from app.worlds.world_data import make_world_data
 
-    say(f"simulating {n} {world} trajectories")
-    simulate(world, n, seed, layout)
+    make_world_data(world, layout, n, seed, say)
 
 
 def bank_is_current(layout: Layout, study_id: str, config: StudyConfig) -> bool:

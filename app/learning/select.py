@@ -38,7 +38,7 @@ from app.configio import StrictModel, load_yaml_model
 from app.data.trajectory import TrajectorySet
 from app.layout import Layout
 from app.learning.checkpoint import model_from_payload, trajectory_hash
-from app.learning.config import TrainConfig, load_train_config
+from app.learning.config import TrainConfig, WorldSelection, load_train_config
 from app.learning.model_metrics import code_usage, evaluate
 from app.learning.models import model_args
 from app.learning.networks import LatentActionModel
@@ -210,7 +210,8 @@ def run_selection(trajs: TrajectorySet, base: TrainConfig, sel: SelectionConfig,
     return {**result, "world": trajs.world, "seed": sel.seed, "sensitivity": sensitivity,
             "test_information_only": information, "selection_config": sel.model_dump(),
             "base_train_config": base.model_dump(),
-            "data_hash": trajectory_hash(trajs.positions, trajs.lengths, trajs.labels),
+            "data_hash": trajectory_hash(trajs.positions, trajs.lengths, trajs.labels,
+                                         trajs.held_out),
             "n_windows": {k: len(w) for k, w in data.windows.items() if k != "test"},
             "wall_s": round(time.perf_counter() - started, 1)}
 
@@ -294,3 +295,50 @@ def select_world(layout: Layout, world: str, config: Path | None = None,
     say("in study_configs/training.yaml, put this under `selected:` (replacing `{}`; keep "
         "other worlds' entries):\n" + yaml_lines(result))
     return out_dir
+
+
+def chosen_selection(result: dict) -> WorldSelection:
+    """The values a selection chose, as training.yaml's `selected` entry holds them."""
+    vae, ours = result["chosen"]["vae"], result["chosen"]["ours"]
+    return WorldSelection(levels=ours["levels"], beta_kl=vae["beta_kl"],
+                          vae_latent_dim=vae["vae_latent_dim"])
+
+
+def ensure_selected(layout: Layout, worlds: list[str], base: TrainConfig,
+                    say: Callable[[str], None] = print) -> TrainConfig:
+    """`base` with a selection for every world: training.yaml's own, else the pre-registered
+    rule run now (or its result on this very data, kept in the layout's selection dir).
+
+    A world new to the study (a recorded one, say) gets its sizes by the rules the simulated
+    worlds got theirs, on validation data, before any checkpoint of it is trained."""
+    chosen = dict(base.selected)
+    sel, unselected = load_selection_config(), base.model_copy(update={"selected": {}})
+    for world in worlds:
+        if world in chosen:
+            continue
+        out_dir = layout.selection_dir(world)
+        trajs = simulated_trajectories(layout, world)
+        result = kept_selection(out_dir / "selection.json", trajs, sel, unselected)
+        if result is None:
+            say(f"{world}: training.yaml selects nothing; running the selection rules of "
+                "model_selection.yaml on its validation split")
+            result = run_selection(trajs, unselected, sel)
+            write_outputs(result, out_dir)
+        chosen[world] = chosen_selection(result)
+        say(f"{world}: selected {chosen[world].model_dump()} ({out_dir / 'selection.md'})")
+    return base.model_copy(update={"selected": chosen})
+
+
+def kept_selection(path: Path, trajs: TrajectorySet, sel: SelectionConfig,
+                   base: TrainConfig) -> dict | None:
+    """The selection.json at `path` if it was run on this data with these grids and this
+    training config, else None."""
+    if not path.is_file():
+        return None
+    result = json.loads(path.read_text())
+    same = (result.get("data_hash") == trajectory_hash(trajs.positions, trajs.lengths,
+                                                       trajs.labels, trajs.held_out)
+            and result.get("selection_config") == json.loads(json.dumps(sel.model_dump()))
+            and result.get("base_train_config")
+            == json.loads(json.dumps(cell_config(base, {}).model_dump())))
+    return result if same else None
