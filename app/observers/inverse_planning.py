@@ -9,7 +9,8 @@ a checkpoint nor a model's answer. Their parameters and sources: study_configs/o
 
 One observer family, inverse planning (Baker, Saxe & Tenenbaum 2009):
 - intents: what the robot may be heading for in this world (app/worlds/intents.py: a
-  target lane, absolute or relative to the robot's lane, or one of the scene's goals);
+  target lane, absolute or relative to the robot's lane, one of the scene's goals, or, in a
+  recorded world, turning one way, straight on or the other way);
 - prior: Dirichlet(pseudo-count) over intents updated with where the robot ends in the
   example clips;
 - likelihood of each observed robot step: exp(beta * progress) normalised over the moves
@@ -63,8 +64,9 @@ def payload_intents(payload: dict, config: ObserversConfig, relative: bool) -> I
     """The intents an observer reads into this trial's segment, in the payload's world."""
     options = IntentOptions(relative_lanes=relative,
                             lane_change_duration_s=config.lane_change_duration_s.value)
+    examples = [robot_track(c["positions"]) for c in payload.get("examples") or []]
     return trial_intents(payload["scene"], payload["dt_s"],
-                         robot_track(payload["segment"]["positions"]), options)
+                         robot_track(payload["segment"]["positions"]), options, examples)
 
 
 def example_outcomes(payload: dict, intents: Intents) -> np.ndarray:

@@ -14,6 +14,13 @@ is the only place that knows it, behind one interface (`Intents`):
   distance gained towards the goal over the step's length (about cos of the angle to the
   goal), normalised over all directions of the same length. The coarse move: straight at
   the goal at the segment's speed.
+- turns (recorded worlds, whose roads have no lanes or goals a scene could name): the robot
+  turns one way, goes straight on, or turns the other way. A turn's nominal rate is how
+  sharply the robots of the trial's example clips turn (their median heading change per
+  second, at least MIN_TURN_RATE_DEG_S). Progress of a step is how close its heading change
+  comes to the intent's nominal change per step, in units of that change, normalised over
+  heading changes up to three nominal ones either way. The coarse move: on from the robot's
+  current heading, turning at the intent's rate, at the segment's speed.
 
 Everything is read from what the browser is shown: the scene as JSON (bank.json's
 `scene`), dt and robot tracks [T+1, 2].
@@ -28,6 +35,11 @@ import numpy as np
 LANE_OFFSETS = np.array([-1, 0, 1])  # relative reading: merge left (towards lane 0), keep, right
 LATERAL_CANDIDATES = 41  # lateral moves the lane likelihood normalises over
 DIRECTION_CANDIDATES = 72  # directions (5 deg apart) the goal likelihood normalises over
+TURN_SIGNS = np.array([-1, 0, 1])  # the heading's change in the scene's angle sense
+TURN_CANDIDATES = 41  # heading changes the turn likelihood normalises over
+TURN_THRESHOLD_DEG = 30.0  # a clip turning more than this ends in a turn (recorded worlds')
+MIN_TURN_RATE_DEG_S = 5.0  # slower reads as straight on: under 30 deg over a 6 s clip
+MOVING_M = 1e-3  # a shorter step has no direction
 
 # move(i, position) -> (direction, length [m]) of start state i's next move
 Move = Callable[[int, np.ndarray], tuple[np.ndarray, float]]
@@ -62,10 +74,13 @@ class Intents(Protocol):
 
 
 def trial_intents(scene: dict, dt_s: float, segment_track: np.ndarray,
-                  options: IntentOptions) -> Intents:
-    """The intents of the scene's world for one trial (its robot segment track [T+1, 2])."""
+                  options: IntentOptions, example_tracks: list[np.ndarray] = ()) -> Intents:
+    """The intents of the scene's world for one trial (its robot segment track [T+1, 2]; the
+    example clips' robot tracks)."""
     if scene["lanes"]:
         return LaneIntents(scene, dt_s, segment_track, options)
+    if scene.get("recorded"):
+        return TurnIntents(dt_s, segment_track, example_tracks)
     return GoalIntents(scene, dt_s, segment_track)
 
 
@@ -184,5 +199,68 @@ class GoalIntents:
         def move(i: int, position: np.ndarray) -> tuple[np.ndarray, float]:
             to_goal = goal - position
             return to_goal, min(reach, float(np.linalg.norm(to_goal)))
+
+        return move
+
+
+def move_headings(track: np.ndarray) -> np.ndarray:
+    """Heading [rad] of each move of a track [T+1, 2] that has a direction."""
+    moves = np.diff(track, axis=0)
+    moving = np.hypot(moves[:, 0], moves[:, 1]) > MOVING_M
+    return np.arctan2(moves[moving, 1], moves[moving, 0])
+
+
+def heading_changes(track: np.ndarray) -> np.ndarray:
+    """Change of heading [rad] between consecutive moves of a track, wrapped into (-pi, pi]."""
+    angles = move_headings(track)
+    return (np.diff(angles) + np.pi) % (2 * np.pi) - np.pi
+
+
+def turn_rate(example_tracks: list[np.ndarray], dt_s: float) -> float:
+    """The examples' median |heading change| per second over their turning clips [rad/s]."""
+    rates = []
+    for track in example_tracks:
+        changes = heading_changes(track)
+        if len(changes) and abs(changes.sum()) > np.radians(TURN_THRESHOLD_DEG):
+            rates.append(abs(changes.sum()) / (len(changes) * dt_s))
+    floor = np.radians(MIN_TURN_RATE_DEG_S)
+    return max(float(np.median(rates)), floor) if rates else floor
+
+
+class TurnIntents:
+    """Turning one way, straight on, or the other way (recorded worlds)."""
+
+    labels = TURN_SIGNS
+
+    def __init__(self, dt_s: float, track: np.ndarray, example_tracks: list[np.ndarray]) -> None:
+        self.dt_s, self.track = dt_s, track
+        self.step_rad = turn_rate(example_tracks, dt_s) * dt_s  # a nominal turn per step
+        self.feasible = np.ones(len(TURN_SIGNS), dtype=bool)
+
+    def outcome(self, clip_track: np.ndarray) -> int:
+        """Index of the way a clip's robot turned over the whole clip."""
+        total = float(np.degrees(heading_changes(clip_track).sum()))
+        sign = 0 if abs(total) <= TURN_THRESHOLD_DEG else int(np.sign(total))
+        return int(np.flatnonzero(TURN_SIGNS == sign)[0])
+
+    def progress(self) -> tuple[np.ndarray, np.ndarray]:
+        """Closeness of each observed heading change to each intent's nominal change."""
+        nominal = TURN_SIGNS * self.step_rad  # [J]
+        changes = heading_changes(self.track)[:, None]  # [T, 1]
+        progress = -np.abs(changes - nominal) / self.step_rad  # [T, J]
+        others = np.linspace(-3, 3, TURN_CANDIDATES) * self.step_rad
+        candidates = -np.abs(others[None, None, :] - nominal[None, :, None]) / self.step_rad
+        return progress, np.broadcast_to(candidates, (len(changes), *candidates.shape[1:]))
+
+    def course(self, label: int, starts: np.ndarray, speed_factor: float) -> Move:
+        """On from the robot's heading, turning `label` nominal turns per step."""
+        angles = move_headings(self.track)
+        start = float(angles[-1]) if len(angles) else 0.0
+        headings = dict.fromkeys(range(len(starts)), start)
+        length = segment_speed(self.track, self.dt_s) * speed_factor * self.dt_s
+
+        def move(i: int, position: np.ndarray) -> tuple[np.ndarray, float]:
+            headings[i] += label * self.step_rad
+            return np.array([np.cos(headings[i]), np.sin(headings[i])]), length
 
         return move
