@@ -8,7 +8,10 @@ point one way per behaviour? Three figures per world, on the built data and the 
   "forward" means on a road) and each trajectory's own start-to-end displacement.
 - same_label_spread: mean 1 - cos between the world policy's first moves at the bank's start
   states, over pairs of main trials that share a robot label (pairs within one trial are
-  left out). 0 = one direction per behaviour; 1 = what random directions give.
+  left out). 0 = one direction per behaviour; 1 = what random directions give. Measured on
+  the screen (`same_label_spread`) and in each start's own heading frame
+  (`same_label_spread_heading`: the move turned by minus the start's heading), where a
+  recorded world's behaviour (a left turn, say) is one direction whichever way the road runs.
 - click resolution: the prediction view's scale (app/prediction_view.py), the median true
   step on screen at that scale, and the degrees one pixel of click error turns a move of
   that length: the angular resolution of the measurement.
@@ -45,11 +48,23 @@ def against_share(steps: np.ndarray, direction: np.ndarray) -> float:
     return float((dots[moving] < 0).mean())
 
 
-def same_label_spread(world_bank: dict) -> dict:
+def first_moves(trial: dict, heading_frame: bool) -> np.ndarray:
+    """The policy's first move from each start state [K, 2]; in the heading frame, each turned
+    by minus its start's robot heading."""
+    moves = np.asarray(trial["policy_actions"], dtype=np.float64)[:, 0]
+    if not heading_frame:
+        return moves
+    angle = -np.array([s["robot_heading"] for s in trial["start_states"]], dtype=np.float64)
+    cos, sin = np.cos(angle), np.sin(angle)
+    return np.stack([cos * moves[:, 0] - sin * moves[:, 1],
+                     sin * moves[:, 0] + cos * moves[:, 1]], axis=1)
+
+
+def same_label_spread(world_bank: dict, heading_frame: bool = False) -> dict:
     """Mean pairwise 1-cos of policy first moves between main trials sharing a robot label."""
     by_label: dict[int, list[tuple[int, np.ndarray]]] = {}
     for index, trial in enumerate(t for t in world_bank["trials"] if t["kind"] == "main"):
-        for move in np.asarray(trial["policy_actions"], dtype=np.float64)[:, 0]:
+        for move in first_moves(trial, heading_frame):
             by_label.setdefault(int(trial["robot_label"]), []).append((index, move))
     per_label, pairs_total, sum_total = {}, 0, 0.0
     for label, items in sorted(by_label.items()):
@@ -81,6 +96,7 @@ def world_figures(trajs: TrajectorySet, world_bank: dict) -> dict:
         "mean_direction": np.round(mean_direction / (np.linalg.norm(mean_direction) + 1e-12),
                                    3).tolist(),
         "same_label_spread": same_label_spread(world_bank),
+        "same_label_spread_heading": same_label_spread(world_bank, heading_frame=True),
         "click_resolution": click_resolution(world_bank),
     }
 
@@ -112,12 +128,13 @@ def check_display(layout: Layout, study_id: str, bank_path: Path) -> dict:
 def format_table(result: dict) -> str:
     """Two markdown tables, one row per world: the display figures, then click resolution."""
     lines = ["| world | min click (m) | true steps shorter | against mean direction "
-             "| against own displacement | same-label policy 1-cos |",
+             "| against own displacement | same-label policy 1-cos (screen / heading frame) |",
              "|---|---|---|---|---|---|"]
     for name, f in result.items():
         lines.append(f"| {name} | {f['min_click_m']:.3f} | {f['short_steps']:.1%} "
                      f"| {f['against_mean_direction']:.1%} | {f['against_own_displacement']:.1%} "
-                     f"| {f['same_label_spread']['mean']:.3f} |")
+                     f"| {f['same_label_spread']['mean']:.3f} / "
+                     f"{f['same_label_spread_heading']['mean']:.3f} |")
     lines += ["", "| world | px per m | median true step (m) | median step (px) "
                   "| reach radius (px) | deg per px of click error |",
               "|---|---|---|---|---|---|"]

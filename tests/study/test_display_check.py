@@ -23,9 +23,12 @@ def _trajectories(robot_tracks: list[list[tuple[float, float]]]) -> TrajectorySe
                          labels={}, label_names={}, scene=SCENE)
 
 
-def _trial(label: int, first_moves: list[tuple[float, float]]) -> dict:
+def _trial(label: int, first_moves: list[tuple[float, float]],
+           headings: list[float] | None = None) -> dict:
     actions = [[list(m), list(m)] for m in first_moves]
-    return {"kind": "main", "robot_label": label, "policy_actions": actions}
+    starts = [{"robot_heading": h} for h in headings or [0.0] * len(first_moves)]
+    return {"kind": "main", "robot_label": label, "policy_actions": actions,
+            "start_states": starts}
 
 
 def test_short_and_backward_steps_are_counted():
@@ -54,3 +57,12 @@ def test_same_label_spread_is_zero_for_one_direction_and_one_for_opposites():
     mixed = {"label_names": ["a", "b"], "trials": [_trial(0, [(1, 0), (-1, 0)]),
                                                    _trial(1, [(0, 1)])]}
     assert same_label_spread(mixed)["per_label"] == {}
+
+
+def test_in_the_heading_frame_one_turn_is_one_direction_whichever_way_the_road_runs():
+    # a left turn seen from cars heading east and north: 45 deg off their own heading
+    east, north = np.radians([0.0, 90.0])
+    turn = {"label_names": ["left"],
+            "trials": [_trial(0, [(1, 1)], [east]), _trial(0, [(-1, 1)], [north])]}
+    assert same_label_spread(turn)["mean"] == pytest.approx(1.0)  # 90 deg apart on screen
+    assert same_label_spread(turn, heading_frame=True)["mean"] == pytest.approx(0.0, abs=1e-9)
