@@ -42,25 +42,28 @@ test: $(STAMP)
 	$(BIN)/ruff check app analysis tests benchmarks
 	$(BIN)/pytest -q
 
-# Pilot end to end on a fresh database: serve, KIND bots (coarse|coarse_relative|precise|random),
-# analyze. The database is app/layout.py's pilot_database(KIND) under the default data dir.
-# Bots answer without thinking from one address, so this loopback server has no rate limits.
+# Pilot end to end on a fresh database: serve STUDY, KIND bots (coarse|coarse_relative|precise|
+# random), analyze. The database is app/layout.py's pilot_database(KIND) under the default data
+# dir (STUDY other than paper_study: pilot_<STUDY>_<KIND>). Bots answer without thinking from
+# one address, so this loopback server has no rate limits.
 KIND ?= coarse
+STUDY ?= paper_study
+PILOT_NAME = $(if $(filter paper_study,$(STUDY)),$(KIND),$(STUDY)_$(KIND))
 PILOT_PORT ?= 8765
 # random clickers fail the attention checks by design (as they should); their report waives
 # that rule so the random baseline can be read
 PILOT_WAIVE = $(if $(filter random,$(KIND)),--waive failed_attention_check)
 pilot: $(STAMP)
-	rm -f var/pilot_$(KIND).db*
-	DATABASE_URL=sqlite:///$(CURDIR)/var/pilot_$(KIND).db TOMSTUDY_TRUST_CLIENT_CLOCK=1 \
+	rm -f var/pilot_$(PILOT_NAME).db*
+	DATABASE_URL=sqlite:///$(CURDIR)/var/pilot_$(PILOT_NAME).db TOMSTUDY_TRUST_CLIENT_CLOCK=1 \
 	  TOMSTUDY_RATE_LIMIT_STARTS= TOMSTUDY_RATE_LIMIT_REQUESTS= \
 	  $(BIN)/tomstudy serve --prepare \
-	  --study paper_study --port $(PILOT_PORT) & pid=$$!; \
-	for i in $$(seq 600); do curl -sf http://127.0.0.1:$(PILOT_PORT)/s/paper_study >/dev/null && break; sleep 1; done; \
-	$(BIN)/tomstudy pilot --url http://127.0.0.1:$(PILOT_PORT) --n 22 --kind $(KIND) --concurrency 8; \
+	  --study $(STUDY) --port $(PILOT_PORT) & pid=$$!; \
+	for i in $$(seq 3600); do curl -sf http://127.0.0.1:$(PILOT_PORT)/s/$(STUDY) >/dev/null && break; sleep 1; done; \
+	$(BIN)/tomstudy pilot --url http://127.0.0.1:$(PILOT_PORT) --study $(STUDY) --n 22 --kind $(KIND) --concurrency 8; \
 	status=$$?; kill $$pid; wait $$pid; test $$status -eq 0
-	$(BIN)/tomstudy analyze --study paper_study --database-url sqlite:///$(CURDIR)/var/pilot_$(KIND).db \
-	  --out var/reports/pilot_$(KIND) $(PILOT_WAIVE)
+	$(BIN)/tomstudy analyze --study $(STUDY) --database-url sqlite:///$(CURDIR)/var/pilot_$(PILOT_NAME).db \
+	  --out var/reports/pilot_$(PILOT_NAME) $(PILOT_WAIVE)
 
 # The researcher dashboard and one replay on a copy of the coarse pilot's database (var/screens)
 screens: $(STAMP)

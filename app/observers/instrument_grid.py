@@ -289,13 +289,13 @@ def grid_table(result: dict) -> list[str]:
     cells = pd.DataFrame(result["cells"])
     cells = cells[cells["reading"] == "absolute"]
     alpha = result["alpha"]
-    lines = [f"\n{'world':<10}{'noise':<16}{'pass rate per seed pair':<32}{'n for 80%':<18}"
+    lines = [f"\n{'world':<14}{'noise':<16}{'pass rate per seed pair':<32}{'n for 80%':<18}"
              f"coarse favours   precise favours"]
     for (world, noise), group in cells.groupby(["world", "noise"], sort=False):
         group = group.sort_values("pair")
         rates = " ".join(f"{r:.2f}" for r in group["pass_rate"])
         needed = " ".join("-" if pd.isna(v) else f"{v:.0f}" for v in group["n_for_power_0.8"])
-        lines.append(f"{world:<10}{noise:<16}{rates:<32}{needed:<18}"
+        lines.append(f"{world:<14}{noise:<16}{rates:<32}{needed:<18}"
                      f"{favours(group, 'coarse', alpha):<17}{favours(group, 'precise', alpha)}")
     if result.get("view_click_sd_deg"):
         view = ", ".join(f"{world} {sd:.2f} deg" for world, sd in

@@ -359,15 +359,16 @@ def test_instrument_command_prints_the_table(tmp_path, monkeypatch):
         get_settings.cache_clear()
     written = json.loads((tmp_path / "o" / "instrument.json").read_text())
     assert result.exit_code == (0 if all(written["passed"].values()) else 1), result.output
-    assert "highway   absolute" in result.output and "obstacle  relative" in result.output
-    assert "start kind" in result.output and "obstacle  all" in result.output
+    assert f"{'highway':<14}absolute" in result.output
+    assert f"{'obstacle':<14}relative" in result.output
+    assert "start kind" in result.output and f"{'obstacle':<14}all" in result.output
     assert "pass rate" in result.output and written["replications"] == 2
     grid = json.loads((tmp_path / "o" / "grid.json").read_text())
     assert grid["seed_pairs"] == [0, 1] and (tmp_path / "o" / "grid.png").is_file()
     assert "pass rate per seed pair" in result.output and "goal (pass rate >= 0.8" in result.output
     for world in ("highway", "obstacle"):
         for level in grid["noise_levels"]:
-            assert f"{world:<10}{level:<16}" in result.output
+            assert f"{world:<14}{level:<16}" in result.output
 
 
 def test_a_move_that_would_overshoot_a_narrow_scene_turns_along_it():
