@@ -241,7 +241,7 @@ class TurnIntents:
         """Index of the way a clip's robot turned over the whole clip."""
         total = float(np.degrees(heading_changes(clip_track).sum()))
         sign = 0 if abs(total) <= TURN_THRESHOLD_DEG else int(np.sign(total))
-        return int(np.flatnonzero(TURN_SIGNS == sign)[0])
+        return int(np.flatnonzero(sign == TURN_SIGNS)[0])
 
     def progress(self) -> tuple[np.ndarray, np.ndarray]:
         """Closeness of each observed heading change to each intent's nominal change."""
