@@ -161,6 +161,8 @@ def select_cmd(
                                                       "study_configs/training.yaml)")] = None,
     out: Annotated[Path | None, typer.Option(help="folder holding <world>/ (default "
                                              "var/models/selection)")] = None,
+    workers: Annotated[int, typer.Option(min=1, help="processes the grid's cells train on "
+                                         "(the choice does not depend on it)")] = 2,
 ) -> None:
     """Choose the VAE's beta_kl and latent size and Ours' FSQ levels on validation data.
 
@@ -168,7 +170,8 @@ def select_cmd(
     from app.learning.select import select_world
 
     try:
-        select_world(get_settings().layout, world, config, train_config, out, say=typer.echo)
+        select_world(get_settings().layout, world, config, train_config, out, say=typer.echo,
+                     workers=workers)
     except FileNotFoundError as err:
         fail(str(err))
 

@@ -48,7 +48,7 @@ def build_bundle(settings: Settings, study_id: str, workers: int = 2, n_trajecto
     layout = settings.layout
     for world in config.worlds:
         ensure_trajectories(layout, world, n_trajectories, seed, say)
-    train_cfg = ensure_selected(layout, config.worlds, load_train_config(), say)
+    train_cfg = ensure_selected(layout, config.worlds, load_train_config(), say, workers)
     train_family(layout, config.worlds, config.models.seeds, train_cfg, workers, say)
     if bank_is_current(layout, study_id, config):
         say(f"{layout.bank(study_id)} is up to date; skipping build-trials")

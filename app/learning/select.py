@@ -38,6 +38,7 @@ from app.configio import StrictModel, load_yaml_model
 from app.data.trajectory import TrajectorySet
 from app.layout import Layout
 from app.learning.checkpoint import model_from_payload, trajectory_hash
+from app.learning.jobs import JobPool
 from app.learning.config import TrainConfig, WorldSelection, load_train_config
 from app.learning.model_metrics import code_usage, evaluate
 from app.learning.models import model_args
@@ -175,32 +176,34 @@ def held_out_information(trajs: TrajectorySet, seed: int, cfg: TrainConfig,
             "test_mse": scores["prediction"]["mse"]}
 
 
+def selection_cell(trajs: TrajectorySet, base: TrainConfig, model_name: str, values: dict,
+                   seed: int) -> tuple[dict, LatentActionModel]:
+    """One grid cell on its own windows (a JobPool job: the split and windows are the same in
+    every process); (row, model)."""
+    return score_cell(model_name, values, base, prepare(trajs, base), seed)
+
+
 def run_selection(trajs: TrajectorySet, base: TrainConfig, sel: SelectionConfig,
-                  progress: bool = True) -> dict:
-    """Train and score every cell, apply the rules, add the sensitivity row; JSON-able dict."""
+                  workers: int = 1) -> dict:
+    """Train and score every cell (`workers` at a time), apply the rules, add the sensitivity
+    row; JSON-able dict. The result does not depend on `workers`: every cell trains on one
+    thread from its seed."""
     started = time.perf_counter()
     base = cell_config(base, {})
     cells = grid_cells(sel)
-    with one_thread(), tqdm(total=len(cells) + 1, desc=f"select {trajs.world}",
-                            disable=not progress) as bar:
+    with JobPool(workers) as pool, one_thread():
         data = prepare(trajs, base)
-        rows, models = [], []
-        for model_name, values in cells:
-            bar.set_postfix_str(f"{model_name} {json.dumps(values)}")
-            row, model = score_cell(model_name, values, base, data, sel.seed)
-            rows.append(row)
-            models.append(model)
-            bar.update()
+        scored = pool.run(selection_cell, [(trajs, base, m, v, sel.seed) for m, v in cells],
+                          f"select {trajs.world}", "cell")
+        rows, models = [row for row, _ in scored], [model for _, model in scored]
         result = _choose(rows, sel)
         chosen = result["chosen"]["ours"]
         default = models[next(i for i, row in enumerate(rows)
                               if row["model"] == "ours" and row["chosen"])]
         # the sensitivity row: chosen levels, the paper's quantiser; scored, never chosen
         paper = {**chosen, "fsq_noise_fraction": sel.sensitivity_fsq_noise_fraction}
-        bar.set_postfix_str(f"ours {json.dumps(paper)}")
         sensitivity, paper_model = score_cell("ours", paper, base, data, sel.seed)
         sensitivity["paper_quantiser"] = True
-        bar.update()
         information = {
             "default": held_out_information(trajs, sel.seed, cell_config(base, chosen),
                                             default, data),
@@ -280,13 +283,13 @@ def write_outputs(result: dict, out_dir: Path) -> None:
 
 def select_world(layout: Layout, world: str, config: Path | None = None,
                  train_config: Path | None = None, out: Path | None = None,
-                 say: Callable[[str], None] = print) -> Path:
+                 say: Callable[[str], None] = print, workers: int = 2) -> Path:
     """`tomstudy select`: run the selection for one world, write and say the results.
 
     Writes into out/<world>/ (default: the layout's selection dir); returns that folder."""
     trajs = simulated_trajectories(layout, world)
     sel, base = load_selection_config(config), load_train_config(train_config)
-    result = run_selection(trajs, base, sel)
+    result = run_selection(trajs, base, sel, workers)
     result["data_file"] = str(layout.trajectories(world))
     out_dir = out / world if out else layout.selection_dir(world)
     write_outputs(result, out_dir)
@@ -305,7 +308,7 @@ def chosen_selection(result: dict) -> WorldSelection:
 
 
 def ensure_selected(layout: Layout, worlds: list[str], base: TrainConfig,
-                    say: Callable[[str], None] = print) -> TrainConfig:
+                    say: Callable[[str], None] = print, workers: int = 2) -> TrainConfig:
     """`base` with a selection for every world: training.yaml's own, else the pre-registered
     rule run now (or its result on this very data, kept in the layout's selection dir).
 
@@ -322,7 +325,7 @@ def ensure_selected(layout: Layout, worlds: list[str], base: TrainConfig,
         if result is None:
             say(f"{world}: training.yaml selects nothing; running the selection rules of "
                 "model_selection.yaml on its validation split")
-            result = run_selection(trajs, unselected, sel)
+            result = run_selection(trajs, unselected, sel, workers)
             write_outputs(result, out_dir)
         chosen[world] = chosen_selection(result)
         say(f"{world}: selected {chosen[world].model_dump()} ({out_dir / 'selection.md'})")

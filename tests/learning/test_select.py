@@ -103,7 +103,7 @@ def test_ours_rule():
 def test_selection_picks_the_argmin_on_validation_and_writes_its_outputs(tiny_trajs, tmp_path):
     sel = SelectionConfig(vae=VaeGrid(beta_kl=[0.01, 1.0], latent_dim=[2]),
                           ours=OursGrid(levels=[[2, 2]]))
-    result = run_selection(tiny_trajs, TINY, sel, progress=False)
+    result = run_selection(tiny_trajs, TINY, sel)
     vae = [row for row in result["rows"] if row["model"] == "vae"]
     assert len(vae) == 2 and sum(row["chosen"] for row in vae) == 1
     best = min(vae, key=lambda row: row["val_task_loss"])
@@ -118,6 +118,17 @@ def test_selection_picks_the_argmin_on_validation_and_writes_its_outputs(tiny_tr
     applied = TrainConfig(**pasted).for_world("lanes")
     assert (applied.levels, applied.beta_kl) == ([2, 2], best["settings"]["beta_kl"])
     assert yaml_lines(result).startswith("  lanes:\n")
+
+
+def test_two_workers_choose_what_one_chooses(tiny_trajs):
+    sel = SelectionConfig(vae=VaeGrid(beta_kl=[0.01, 1.0], latent_dim=[2]),
+                          ours=OursGrid(levels=[[2, 2], [3, 3]]))
+
+    def without_times(result):
+        return [{k: v for k, v in row.items() if k != "wall_s"} for row in result["rows"]]
+
+    one, two = run_selection(tiny_trajs, TINY, sel, 1), run_selection(tiny_trajs, TINY, sel, 2)
+    assert without_times(one) == without_times(two) and one["chosen"] == two["chosen"]
 
 
 def test_the_stated_grid_is_the_issues():
