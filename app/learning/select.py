@@ -31,15 +31,14 @@ from pathlib import Path
 import numpy as np
 import torch
 from pydantic import Field
-from tqdm import tqdm
 
 from analysis.atomic import atomic_path, write_json
 from app.configio import StrictModel, load_yaml_model
 from app.data.trajectory import TrajectorySet
 from app.layout import Layout
 from app.learning.checkpoint import model_from_payload, trajectory_hash
-from app.learning.jobs import JobPool
 from app.learning.config import TrainConfig, WorldSelection, load_train_config
+from app.learning.jobs import JobPool
 from app.learning.model_metrics import code_usage, evaluate
 from app.learning.models import model_args
 from app.learning.networks import LatentActionModel
