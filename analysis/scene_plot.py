@@ -28,3 +28,28 @@ def draw_scene(ax, scene: dict) -> None:
                             edgecolor=LABEL_COLORS[k % len(LABEL_COLORS)], zorder=1))
         ax.annotate(goal.get("label") or f"goal {k}", (goal["x_m"], goal["y_m"]), ha="center",
                     va="center", fontsize=7, zorder=2)
+    draw_recorded(ax, scene.get("recorded"))
+
+
+# how a recorded scene's map lines are drawn: colour, width, dashes (app/data/scene.py Polyline)
+LINE_STYLES = {"kerb": ("#555555", 1.2, "-"), "border": ("#888888", 0.8, "-"),
+               "virtual": ("#bbbbbb", 0.6, ":"), "stop": ("#aa4444", 1.0, "-")}
+
+
+def draw_recorded(ax, recorded: dict | None) -> None:
+    """A recorded world's driven area (as road) and map lines, under everything else."""
+    if not recorded:
+        return
+    from matplotlib.patches import Rectangle
+
+    driven = recorded.get("driven")
+    if driven:
+        cell = driven["cell_m"]
+        for row, first, last in driven["runs"]:
+            ax.add_patch(Rectangle((driven["x0_m"] + first * cell, driven["y0_m"] + row * cell),
+                                   (last - first + 1) * cell, cell, facecolor="#e4e4e4",
+                                   edgecolor="none", zorder=0))
+    for line in recorded.get("lines", []):
+        color, width, style = LINE_STYLES[line["kind"]]
+        xs, ys = zip(*line["points"], strict=True)
+        ax.plot(xs, ys, color=color, lw=width, ls="--" if line["dashed"] else style, zorder=0.5)

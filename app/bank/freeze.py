@@ -74,7 +74,8 @@ def build_selections(config: StudyConfig, configs_dir: Path, layout: Layout) -> 
 
 
 def freeze(config: StudyConfig, study_id: str, configs_dir: Path, layout: Layout,
-           out: Path, wall_time_s: float | None = None) -> Bundle:
+           out: Path, wall_time_s: float | None = None,
+           phases: dict[str, float] | None = None) -> Bundle:
     """Write the study's bundle to `out` (replacing what is there) and open it."""
     out = Path(out)
     staging = out.with_name(f".{out.name}.tmp-{os.getpid()}")
@@ -89,7 +90,8 @@ def freeze(config: StudyConfig, study_id: str, configs_dir: Path, layout: Layout
             target.write_bytes(data)
         entries[name] = {"sha256": sha256_file(target), "bytes": target.stat().st_size}
     bank = TrialBank.read(staging / BANK)
-    write_json(staging / MANIFEST, manifest(config, study_id, bank, entries, wall_time_s))
+    write_json(staging / MANIFEST, manifest(config, study_id, bank, entries, wall_time_s,
+                                            phases))
     shutil.rmtree(out, ignore_errors=True)
     out.parent.mkdir(parents=True, exist_ok=True)
     os.replace(staging, out)
@@ -97,7 +99,7 @@ def freeze(config: StudyConfig, study_id: str, configs_dir: Path, layout: Layout
 
 
 def manifest(config: StudyConfig, study_id: str, bank: TrialBank, entries: dict,
-             wall_time_s: float | None) -> dict:
+             wall_time_s: float | None, phases: dict[str, float] | None = None) -> dict:
     """The manifest: the files, what the bank answers with, and where it was built."""
     models = {world: {model: {str(a.seed): a.content_hash
                               for a in bank.trials_of(world, "main")[0].predictions[model]}
@@ -106,10 +108,10 @@ def manifest(config: StudyConfig, study_id: str, bank: TrialBank, entries: dict,
     return {"format": FORMAT, "study_id": study_id, "bank_sha256": bank.sha256,
             "seeds": list(config.models.seeds), "models": models,
             "content_sha256": sha256_bytes(json.dumps(entries, sort_keys=True).encode()),
-            "files": entries, "built": build_environment(wall_time_s)}
+            "files": entries, "built": build_environment(wall_time_s, phases)}
 
 
-def build_environment(wall_time_s: float | None) -> dict:
+def build_environment(wall_time_s: float | None, phases: dict[str, float] | None = None) -> dict:
     """Where and with what a bundle was built (informational: not part of its content hash)."""
     import torch
 
@@ -118,7 +120,7 @@ def build_environment(wall_time_s: float | None) -> dict:
             "torch": torch.__version__, "machine": platform.machine(),
             "platform": platform.platform(), "cpus": os.cpu_count(),
             "built_at_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            "wall_time_s": wall_time_s}
+            "wall_time_s": wall_time_s, **({"phase_wall_time_s": phases} if phases else {})}
 
 
 def git_commit() -> str:

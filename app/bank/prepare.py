@@ -11,7 +11,8 @@ interrupted build resumes. A bundle that exists is served as it is: rebuilding i
 import json
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from app.bank.bundle import MANIFEST, Bundle, bundle_dir, shipped_dir
@@ -44,24 +45,39 @@ def build_bundle(settings: Settings, study_id: str, workers: int = 2, n_trajecto
     from app.learning.select import ensure_selected
 
     started = time.perf_counter()
+    phases: dict[str, float] = {}
     config = load_study_config(settings, study_id)
     layout = settings.layout
-    for world in config.worlds:
-        ensure_trajectories(layout, world, n_trajectories, seed, say)
-    train_cfg = ensure_selected(layout, config.worlds, load_train_config(), say, workers)
-    train_family(layout, config.worlds, config.models.seeds, train_cfg, workers, say)
-    if bank_is_current(layout, study_id, config):
-        say(f"{layout.bank(study_id)} is up to date; skipping build-trials")
-    else:
-        from app.bank.build import build_trials
+    with timed(phases, "data"):
+        for world in config.worlds:
+            ensure_trajectories(layout, world, n_trajectories, seed, say)
+    with timed(phases, "selection"):
+        train_cfg = ensure_selected(layout, config.worlds, load_train_config(), say, workers)
+    with timed(phases, "training"):
+        train_family(layout, config.worlds, config.models.seeds, train_cfg, workers, say)
+    with timed(phases, "bank"):
+        if bank_is_current(layout, study_id, config):
+            say(f"{layout.bank(study_id)} is up to date; skipping build-trials")
+        else:
+            from app.bank.build import build_trials
 
-        say(f"building the trial bank of {study_id}")
-        build_trials(config, study_id, layout)
+            say(f"building the trial bank of {study_id}")
+            build_trials(config, study_id, layout)
     out = layout.bundle_dir(study_id)
     bundle = freeze(config, study_id, settings.configs_dir, layout, out,
-                    round(time.perf_counter() - started, 1))
+                    round(time.perf_counter() - started, 1), phases)
     say(f"froze {out} ({len(bundle.manifest['files'])} files)")
     return bundle
+
+
+@contextmanager
+def timed(phases: dict[str, float], name: str) -> Iterator[None]:
+    """Add the block's wall time (s, rounded) to phases[name]."""
+    started = time.perf_counter()
+    try:
+        yield
+    finally:
+        phases[name] = round(time.perf_counter() - started, 1)
 
 
 def replace_shipped(built: Bundle, configs_dir: Path, study_id: str) -> Path:

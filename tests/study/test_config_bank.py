@@ -49,7 +49,7 @@ def test_paper_study_config_matches_the_paper():
     ({"titel": "x"}, "titel"),
     ({"trials_per_world": -1}, "trials_per_world"),
     ({"segment_steps": {"min": 7, "max": 5}}, "segment_steps"),
-    ({"worlds": ["highway", "mars"]}, "worlds.1"),
+    ({"worlds": ["highway", "Mars!"]}, "worlds.1"),
     ({"recruitment": {"completion_code": "X", "prolific_url": "u"}}, "recruitment.prolific_url"),
     ({"recruitment": {"completion_code": "X", "platform": "email"}}, "recruitment.platform"),
     ({"recruitment": {"completion_code": "X", "prolific_redirect_url": "https://p/?cc={code}"}},
@@ -64,6 +64,20 @@ def test_config_errors_name_the_key(tmp_path, change, field):
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(ConfigError, match=f"bad.yaml: {field}"):
         load_yaml_model(path, StudyConfig)
+
+
+def test_a_world_without_its_config_file_is_named(tmp_path):
+    from app.settings import Settings
+    from app.study.config import load_study_config
+
+    shutil.copytree(REPO / "study_configs" / "worlds", tmp_path / "worlds")
+    data = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
+    data["worlds"] = ["highway", "mars"]
+    data["world_intros"]["mars"] = {"title": "Mars", "text": "Red."}
+    (tmp_path / "red.yaml").write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match=r"red.yaml: worlds.1: no world 'mars': describe it "
+                                          r"in .*worlds/mars.yaml \(a recorded world"):
+        load_study_config(Settings(configs_dir=tmp_path), "red")
 
 
 def test_attention_passing_starts_cannot_exceed_the_start_states(tmp_path):
