@@ -36,7 +36,7 @@ class TrackFileError(ValueError):
 
 @dataclass
 class Track:
-    """One agent in one recording: frames [T] (index of the 100 ms grid), states [T, ...]."""
+    """One agent in one recording: frames [T] on the recording's time grid, states [T, ...]."""
 
     track_id: int
     agent_type: str
@@ -46,6 +46,7 @@ class Track:
     psi: np.ndarray
     length_m: float
     width_m: float
+    name: str = ""  # the agent's id in a lab's log (csv_logs); empty for INTERACTION tracks
 
     @property
     def is_car(self) -> bool:
@@ -124,7 +125,7 @@ def read_track_file(path: Path) -> list[Recording]:
     with open(path, newline="", encoding="utf-8") as fh, \
             tqdm(total=path.stat().st_size, unit="B", unit_scale=True, leave=False,
                  desc=f"read {path.name}") as bar:
-        reader = csv.reader(_counted_lines(fh, bar))
+        reader = csv.reader(counted_lines(fh, bar))
         header = next(reader, None)
         if header is None or not any(cell.strip() for cell in header):
             raise TrackFileError(f"{path}:1: empty file: expected a header line "
@@ -136,7 +137,7 @@ def read_track_file(path: Path) -> list[Recording]:
     return _group_tracks(path, rows, has_case="case_id" in columns)
 
 
-def _counted_lines(fh, bar, every: int = 20000):
+def counted_lines(fh, bar, every: int = 20000):
     """The file's lines, advancing a byte progress bar every `every` lines."""
     done = 0
     for k, line in enumerate(fh, start=1):
