@@ -19,6 +19,7 @@ returned until every file has been read and checked.
 """
 
 import csv
+import math
 import re
 from array import array
 from dataclasses import dataclass, field
@@ -223,7 +224,7 @@ def _number(path: Path, line: int, column: str, text: str, empty_ok: bool = Fals
         value = float(text)
     except ValueError:
         raise _error(path, line, column, f"expected a number, found {text!r}") from None
-    if not np.isfinite(value):
+    if not math.isfinite(value):
         raise _error(path, line, column, f"{text!r} is not finite: expected a number")
     return value
 
