@@ -297,3 +297,20 @@ def test_role_pairs_on_generated_logs_are_robot_then_human(logs):
     assert {p.recording for p in found} == {r.name for r in logs.recordings}
     for pair in found:
         assert np.linalg.norm(pair.positions[:, 0] - pair.positions[:, 1], axis=-1).min() <= 4.0
+
+
+def test_the_readme_example_reads_as_documented(tmp_path):
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    section = readme.split("### Your own robot logs (generic CSV)")[1]
+    example = section.split("```csv\n")[1].split("```")[0]
+    assert len(example.splitlines()) == 5
+    (tmp_path / "hall.csv").write_text(example)
+    logs = read_logs(tmp_path / "hall.csv")
+    (rec,) = logs.recordings
+    assert (rec.name, logs.dt_s) == ("hall_a", 0.1)
+    tiago, p07 = rec.tracks
+    assert (tiago.name, tiago.agent_type, p07.name, p07.agent_type) == ("tiago", "robot",
+                                                                        "p07", "human")
+    np.testing.assert_allclose(tiago.v, [[0.8, 0.0], [0.8, 0.0]])
+    np.testing.assert_allclose(p07.v, [[-1.1, 0.05], [-1.1, 0.05]])
+    assert np.isnan(p07.psi).all() and (tiago.psi == 0.0).all()
