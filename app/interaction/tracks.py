@@ -13,6 +13,8 @@ Cutting tracks into robot/human pairs is pairs.py's job.
 import csv
 import math
 from array import array
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -122,10 +124,7 @@ def load_recordings(files: list[Path]) -> list[Recording]:
 def read_track_file(path: Path) -> list[Recording]:
     """Validate and read one track file (any layout) into recordings."""
     path = Path(path)
-    with open(path, newline="", encoding="utf-8") as fh, \
-            tqdm(total=path.stat().st_size, unit="B", unit_scale=True, leave=False,
-                 desc=f"read {path.name}") as bar:
-        reader = csv.reader(counted_lines(fh, bar))
+    with csv_reader(path) as reader:
         header = next(reader, None)
         if header is None or not any(cell.strip() for cell in header):
             raise TrackFileError(f"{path}:1: empty file: expected a header line "
@@ -137,7 +136,16 @@ def read_track_file(path: Path) -> list[Recording]:
     return _group_tracks(path, rows, has_case="case_id" in columns)
 
 
-def counted_lines(fh, bar, every: int = 20000):
+@contextmanager
+def csv_reader(path: Path, encoding: str = "utf-8") -> Iterator:
+    """A csv.reader over the file's lines, with a byte progress bar while it is read."""
+    with open(path, newline="", encoding=encoding) as fh, \
+            tqdm(total=path.stat().st_size, unit="B", unit_scale=True, leave=False,
+                 desc=f"read {path.name}") as bar:
+        yield csv.reader(_counted_lines(fh, bar))
+
+
+def _counted_lines(fh, bar, every: int = 20000):
     """The file's lines, advancing a byte progress bar every `every` lines."""
     done = 0
     for k, line in enumerate(fh, start=1):

@@ -18,7 +18,6 @@ Every format problem raises `RecordingError` naming file, line and column, and n
 returned until every file has been read and checked.
 """
 
-import csv
 import math
 import re
 from array import array
@@ -30,7 +29,7 @@ import numpy as np
 from tqdm import tqdm
 
 from app.fileio import sha256_file
-from app.interaction.tracks import Recording, Track, TrackFileError, counted_lines
+from app.interaction.tracks import Recording, Track, TrackFileError, csv_reader
 
 LEADING = "recording"
 COLUMNS = ("agent_id", "time_s", "x_m", "y_m", "vx_mps", "vy_mps", "role")
@@ -117,10 +116,7 @@ def log_files(path: Path) -> list[Path]:
 
 def _read_file(path: Path, logs: dict[str, _Log]) -> None:
     """Check one file's header and rows and add its rows to `logs`."""
-    with open(path, newline="", encoding="utf-8-sig") as fh, \
-            tqdm(total=path.stat().st_size, unit="B", unit_scale=True, leave=False,
-                 desc=f"read {path.name}") as bar:
-        reader = csv.reader(counted_lines(fh, bar))
+    with csv_reader(path, encoding="utf-8-sig") as reader:  # -sig: Excel's byte order mark
         header = next(reader, None)
         if header is None or not any(cell.strip() for cell in header):
             raise RecordingError(f"{path}:1: empty file: expected a header line {ORDER}")
