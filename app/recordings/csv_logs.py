@@ -44,7 +44,7 @@ GRID_TOLERANCE = 0.01  # a time may lie this share of dt off its grid step
 
 
 class RecordingError(TrackFileError):
-    """A lab's CSV log does not follow the documented format; the message names file and line."""
+    """A lab's CSV log breaks the documented format; the message names file, line and column."""
 
 
 @dataclass

@@ -314,3 +314,18 @@ def test_the_readme_example_reads_as_documented(tmp_path):
     np.testing.assert_allclose(tiago.v, [[0.8, 0.0], [0.8, 0.0]])
     np.testing.assert_allclose(p07.v, [[-1.1, 0.05], [-1.1, 0.05]])
     assert np.isnan(p07.psi).all() and (tiago.psi == 0.0).all()
+
+
+def test_the_generator_command_writes_logs_without_velocities(tmp_path, monkeypatch, capsys):
+    from app.recordings import synthetic_logs
+
+    out = tmp_path / "cli.csv"
+    monkeypatch.setattr("sys.argv", ["synthetic_logs", str(out), "--recordings", "2",
+                                     "--seconds", "5", "--seed", "4", "--no-velocities"])
+    synthetic_logs.main()
+    assert "NOT REAL DATA" in capsys.readouterr().out
+    with open(out, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 2 * 2 * 51
+    assert {(r["vx_mps"], r["vy_mps"]) for r in rows} == {("", "")}
+    assert [r.name for r in read_logs(out).recordings] == ["generated_001", "generated_002"]
