@@ -16,11 +16,16 @@ an agent (rounded to the microsecond), the same in every recording; every time l
 number of steps (within 1% of dt) from its recording's first time. Missing samples are gaps.
 Every format problem raises `RecordingError` naming file, line and column, and nothing is
 returned until every file has been read and checked.
+
+A line file (optional: walls, kerbs, lane marks to draw under the agents) has the columns
+line_id, kind (a lanelet2 line type the scene draws, e.g. wall, curbstone, line_thin,
+stop_line), dashed (1/0, true/false), x_m, y_m: one row per point, in order along the line.
 """
 
 import math
 import re
 from array import array
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -29,7 +34,9 @@ import numpy as np
 from tqdm import tqdm
 
 from app.fileio import sha256_file
+from app.interaction.lanelet_map import LaneLine
 from app.interaction.tracks import Recording, Track, TrackFileError, csv_reader
+from app.recordings.scene import LINE_KINDS
 
 LEADING = "recording"
 COLUMNS = ("agent_id", "time_s", "x_m", "y_m", "vx_mps", "vy_mps", "role")
@@ -41,6 +48,8 @@ ROLES_EXPECTED = "robot, human or another lower-case word such as pedestrian"
 MAX_ID_CHARS = 64
 DT_DECIMALS = 6  # the time step is rounded to the microsecond
 GRID_TOLERANCE = 0.01  # a time may lie this share of dt off its grid step
+LINE_COLUMNS = ("line_id", "kind", "dashed", "x_m", "y_m")  # a line file: lines to draw
+DASHED = {"1": True, "true": True, "0": False, "false": False}
 
 
 class RecordingError(TrackFileError):
@@ -53,7 +62,7 @@ class Logs:
 
     recordings: list[Recording]
     dt_s: float
-    inputs: dict[str, str]  # file path -> sha256 of its bytes, in reading order
+    files: dict[str, str]  # file name (relative to the folder read) -> sha256, reading order
 
 
 @dataclass
@@ -95,7 +104,8 @@ def read_logs(path: Path) -> Logs:
         _read_file(file, logs)
     dt = _time_step(list(logs.values()))
     recordings = [_recording(log, dt) for log in logs.values()]
-    return Logs(recordings, dt, {str(f): sha256_file(f) for f in files})
+    folder = Path(path) if Path(path).is_dir() else Path(path).parent
+    return Logs(recordings, dt, {f.relative_to(folder).as_posix(): sha256_file(f) for f in files})
 
 
 def log_files(path: Path) -> list[Path]:
@@ -116,18 +126,35 @@ def log_files(path: Path) -> list[Path]:
 
 def _read_file(path: Path, logs: dict[str, _Log]) -> None:
     """Check one file's header and rows and add its rows to `logs`."""
+    for line, row in _rows(path, _check_header, ORDER):
+        _read_row(path, line, row, logs)
+
+
+def _rows(path: Path, check_header, expected: str) -> Iterator[tuple[int, dict[str, str]]]:
+    """Each data row of a file as (line, column -> stripped cell), once its header is checked."""
     with csv_reader(path, encoding="utf-8-sig") as reader:  # -sig: Excel's byte order mark
         header = next(reader, None)
         if header is None or not any(cell.strip() for cell in header):
-            raise RecordingError(f"{path}:1: empty file: expected a header line {ORDER}")
-        columns = _check_header(path, [cell.strip() for cell in header])
-        rows = 0
+            raise RecordingError(f"{path}:1: empty file: expected a header line {expected}")
+        columns = check_header(path, [cell.strip() for cell in header])
+        count = 0
         for cells in reader:
             if cells and (len(cells) > 1 or cells[0].strip()):
-                _read_row(path, reader.line_num, columns, cells, logs)
-                rows += 1
-    if not rows:
+                yield reader.line_num, _fields(path, reader.line_num, columns, cells)
+                count += 1
+    if not count:
         raise RecordingError(f"{path}:2: no data rows after the header")
+
+
+def _fields(path: Path, line: int, columns: tuple[str, ...], cells: list[str]) -> dict[str, str]:
+    """The row's stripped cells by column, if it has as many as the header."""
+    if len(cells) < len(columns):
+        raise _error(path, line, columns[len(cells)], f"missing: the row has {len(cells)} "
+                                                      f"fields where the header has {len(columns)}")
+    if len(cells) > len(columns):
+        raise _error(path, line, len(columns) + 1, f"the row has {len(cells)} fields where the "
+                     f"header has {len(columns)} (quote a value that holds a comma)")
+    return dict(zip(columns, (cell.strip() for cell in cells), strict=True))
 
 
 def _check_header(path: Path, header: list[str]) -> tuple[str, ...]:
@@ -162,16 +189,8 @@ def _check_trailing(path: Path, names: list[str], before: int) -> None:
         last = TRAILING.index(name)
 
 
-def _read_row(path: Path, line: int, columns: tuple[str, ...], cells: list[str],
-              logs: dict[str, _Log]) -> None:
+def _read_row(path: Path, line: int, row: dict[str, str], logs: dict[str, _Log]) -> None:
     """Check one data row and add it to its agent."""
-    if len(cells) < len(columns):
-        raise _error(path, line, columns[len(cells)], f"missing: the row has {len(cells)} "
-                                                      f"fields where the header has {len(columns)}")
-    if len(cells) > len(columns):
-        raise _error(path, line, len(columns) + 1, f"the row has {len(cells)} fields where the "
-                     f"header has {len(columns)} (quote a value that holds a comma)")
-    row = dict(zip(columns, (cell.strip() for cell in cells), strict=True))
     log = _log_of(path, line, row, logs)
     agent = _agent_of(path, line, row, log)
     agent.lines.append(line)
@@ -389,3 +408,70 @@ def _filled_velocity(rows: _Rows, dt: float) -> np.ndarray:
     missing = np.isnan(v[:, 0])
     v[missing] = ((hi - lo) / np.maximum(span, dt))[missing]
     return v
+
+
+# ---------------------------------------------------------------- lines to draw
+
+
+@dataclass
+class _Line:
+    """One line of a line file: its kind, style, first line in the file and points."""
+
+    name: str
+    kind: str
+    dashed: bool
+    line: int
+    points: list[tuple[float, float]] = field(default_factory=list)
+
+
+def read_line_file(path: Path) -> list[LaneLine]:
+    """Lines to draw under a lab's logs (walls, kerbs, lane marks) from a CSV of their points."""
+    path = Path(path)
+    if not path.is_file():
+        raise RecordingError(f"{path}: no such file (the lines to draw: "
+                             f"{','.join(LINE_COLUMNS)})")
+    lines: dict[str, _Line] = {}
+    for line, row in _rows(path, _check_line_header, ",".join(LINE_COLUMNS)):
+        _add_point(path, line, row, lines)
+    for entry in lines.values():
+        if len(entry.points) < 2:
+            raise _error(path, entry.line, "line_id", f"line {entry.name!r} has one point: a "
+                                                      f"line needs two or more")
+    return [LaneLine(e.kind, "dashed" if e.dashed else "solid", np.array(e.points))
+            for e in lines.values()]
+
+
+def _check_line_header(path: Path, header: list[str]) -> tuple[str, ...]:
+    """The line file's columns if they are exactly LINE_COLUMNS."""
+    expected = f"expected {','.join(LINE_COLUMNS)}"
+    for name in LINE_COLUMNS:
+        if name not in header:
+            raise _error(path, 1, name, f"missing from the header ({expected})")
+    for index, found in enumerate(header, start=1):
+        if index > len(LINE_COLUMNS):
+            raise _error(path, 1, found, f"not a documented column (column {index} of the "
+                                         f"header; {expected})")
+        if found != LINE_COLUMNS[index - 1]:
+            raise _error(path, 1, found, f"found as column {index} where "
+                                         f"{LINE_COLUMNS[index - 1]!r} is expected ({expected}, "
+                                         f"in this order)")
+    return LINE_COLUMNS
+
+
+def _add_point(path: Path, line: int, row: dict[str, str], lines: dict[str, _Line]) -> None:
+    """Check one row of a line file and add its point to its line."""
+    name, kind, dashed = row["line_id"], row["kind"], row["dashed"].lower()
+    if not name:
+        raise _error(path, line, "line_id", "empty: every row names its line")
+    if kind not in LINE_KINDS:
+        raise _error(path, line, "kind", f"{kind!r} is not a line kind: expected one of "
+                                         f"{', '.join(LINE_KINDS)}")
+    if dashed not in DASHED:
+        raise _error(path, line, "dashed", f"expected 1, 0, true or false, found {dashed!r}")
+    entry = lines.setdefault(name, _Line(name, kind, DASHED[dashed], line))
+    if (entry.kind, entry.dashed) != (kind, DASHED[dashed]):
+        column = "kind" if entry.kind != kind else "dashed"
+        raise _error(path, line, column, f"line {name!r} is {row[column]!r} here but not at "
+                                         f"line {entry.line}: one kind and style per line")
+    entry.points.append((_number(path, line, "x_m", row["x_m"]),
+                         _number(path, line, "y_m", row["y_m"])))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from app.interaction import pairs as px
-from app.recordings.csv_logs import RecordingError, read_logs
+from app.recordings.csv_logs import RecordingError, read_line_file, read_logs
 from app.recordings.synthetic_logs import generate_logs
 
 HEADER = "recording,agent_id,time_s,x_m,y_m,vx_mps,vy_mps,role"
@@ -44,7 +44,7 @@ def test_generated_file_reads_back_with_its_recordings_agents_and_roles(generate
     assert logs.dt_s == 0.1
     assert [r.name for r in logs.recordings] == ["generated_001", "generated_002",
                                                  "generated_003"]
-    assert logs.inputs == {str(generated): hashlib.sha256(generated.read_bytes()).hexdigest()}
+    assert logs.files == {"lab.csv": hashlib.sha256(generated.read_bytes()).hexdigest()}
     for rec in logs.recordings:
         assert rec.source == generated
         assert [(t.track_id, t.name, t.agent_type) for t in rec.tracks] == [
@@ -120,7 +120,7 @@ def test_folder_reads_its_csv_files_in_name_order_with_optional_columns(tmp_path
     logs = read_logs(tmp_path)
     assert [(r.name, r.source.name) for r in logs.recordings] == [("s0", "a.csv"),
                                                                   ("s1", "b.csv")]
-    assert list(logs.inputs) == [str(tmp_path / "a.csv"), str(tmp_path / "b.csv")]
+    assert list(logs.files) == ["a.csv", "b.csv"]  # named in the folder: any machine alike
     np.testing.assert_array_equal(logs.recordings[1].tracks[0].psi, 0.5)
     assert np.isnan(logs.recordings[0].tracks[0].psi).all()
 
@@ -329,3 +329,44 @@ def test_the_generator_command_writes_logs_without_velocities(tmp_path, monkeypa
     assert len(rows) == 2 * 2 * 51
     assert {(r["vx_mps"], r["vy_mps"]) for r in rows} == {("", "")}
     assert [r.name for r in read_logs(out).recordings] == ["generated_001", "generated_002"]
+
+
+# ---------------------------------------------------------------- lines to draw
+
+
+LINE_HEADER = "line_id,kind,dashed,x_m,y_m"
+ROOM_LINES = [LINE_HEADER, "outer,wall,0,0,0", "outer,wall,false,12,0", "outer,wall,0,12,8",
+              "lane,line_thin,1,6,0", "lane,line_thin,TRUE,6,8"]
+
+
+def test_line_file_reads_lines_in_order_of_first_appearance(tmp_path):
+    walls, lane = read_line_file(_write(tmp_path / "room.csv", ROOM_LINES[0], ROOM_LINES[1:]))
+    assert (walls.kind, walls.subtype, lane.kind, lane.subtype) == ("wall", "solid",
+                                                                    "line_thin", "dashed")
+    np.testing.assert_array_equal(walls.points, [[0, 0], [12, 0], [12, 8]])
+    np.testing.assert_array_equal(lane.points, [[6, 0], [6, 8]])
+
+
+@pytest.mark.parametrize("rows, expected", [
+    (["line_id,kind,x_m,y_m", "a,wall,0,0"], ":1: column 'dashed': missing from the header "
+     "(expected line_id,kind,dashed,x_m,y_m)"),
+    (["line_id,kind,x_m,dashed,y_m", "a,wall,0,0,0"], ":1: column 'x_m': found as column 3 "
+     "where 'dashed' is expected (expected line_id,kind,dashed,x_m,y_m, in this order)"),
+    ([LINE_HEADER, "a,kerb,0,0,0"], ":2: column 'kind': 'kerb' is not a line kind: expected "
+     "one of curbstone, road_border, guard_rail, fence, wall, line_thin, line_thick, virtual, "
+     "pedestrian_marking, zebra_marking, stop_line"),
+    ([LINE_HEADER, "a,wall,yes,0,0"], ":2: column 'dashed': expected 1, 0, true or false, "
+     "found 'yes'"),
+    ([LINE_HEADER, "a,wall,0,0,0", "a,wall,1,1,0"], ":3: column 'dashed': line 'a' is '1' "
+     "here but not at line 2: one kind and style per line"),
+    ([LINE_HEADER, "a,wall,0,0,0", "a,wall,0,1,0", "b,wall,0,3,3"], ":4: column 'line_id': "
+     "line 'b' has one point: a line needs two or more"),
+    ([LINE_HEADER, "a,wall,0,inf,0"], ":2: column 'x_m': 'inf' is not finite: expected a "
+     "number"),
+])
+def test_malformed_line_file_gives_the_exact_message(tmp_path, rows, expected):
+    path = _write(tmp_path / "lines.csv", rows[0], rows[1:])
+    with pytest.raises(RecordingError) as err:
+        read_line_file(path)
+    assert str(err.value) == f"{path}{expected}"
+
