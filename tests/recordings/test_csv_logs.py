@@ -370,3 +370,29 @@ def test_malformed_line_file_gives_the_exact_message(tmp_path, rows, expected):
         read_line_file(path)
     assert str(err.value) == f"{path}{expected}"
 
+
+# ---------------------------------------------------------------- a recorded world of lab logs
+
+
+def test_generated_lab_logs_import_as_a_recorded_world(tmp_path):
+    from app.data.trajectory import TrajectorySet
+    from app.layout import Layout
+    from app.recordings.config import RecordedConfig
+    from app.recordings.importer import import_recordings
+
+    logs = tmp_path / "recordings" / "lab" / "logs.csv"
+    generate_logs(logs, recordings=4, seconds=60.0, seed=0)
+    _write(logs.parent / "room_lines.csv", ROOM_LINES[0], ROOM_LINES[1:])
+    config = RecordedConfig.model_validate({
+        "kind": "recorded", "pair_max_distance_m": 10.0,
+        "source": {"format": "csv", "path": "lab/logs.csv", "lines": "room_lines.csv"}})
+    layout = Layout(tmp_path / "var", tmp_path / "recordings")
+    meta = import_recordings("lab", config, layout).meta
+    assert set(meta["input_sha256"]) == {"logs.csv", "room_lines.csv"}
+    assert (meta["frame_dt_s"], meta["pairs"]) == (0.1, {"train": 45, "held_out": 15})
+    trajs = TrajectorySet.load(layout.trajectories("lab"))
+    assert trajs.positions.shape == (60, 10, 2, 2)  # 4 s windows (40 frames), every 4th frame
+    speeds = trajs.speeds[:, :, 0]  # the robot (0.8 m/s) is agent 0, the person (1.2) agent 1
+    assert speeds.max() <= 0.8 + 0.002 < trajs.speeds[:, :, 1].max()
+    assert [(line.kind, line.dashed) for line in trajs.scene.recorded.lines] == [
+        ("kerb", False), ("border", True)]
