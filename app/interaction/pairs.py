@@ -1,9 +1,12 @@
-"""Robot/human pairs cut from INTERACTION recordings, and the train/val frame ranges.
+"""Robot/human pairs cut from recordings (INTERACTION or a lab's logs), and train/val ranges.
 
-Pair rule (one pair per robot and window): every car present at every frame of the window
-is a robot; its human is the other car present at every frame of the window with the
-smallest mean distance to the robot, provided the two come within `max_distance_m` of each
-other at some frame. Pedestrians, bicycles and other agent types are never robot or human.
+Pair rule (one pair per robot and window): every agent of a robot type (`PairRule.robots`)
+present at every frame of the window is a robot; its human is the other agent of a human
+type (`PairRule.humans`) present at every frame of the window with the smallest mean
+distance to the robot, provided the two come within `max_distance_m` of each other at some
+frame. Other agent types are never robot or human. `CARS` (the default, INTERACTION): cars
+for both, so pedestrians and bicycles are never paired; `ROLES` (a lab's logs): each
+`robot`-role agent with its nearest `human`-role agent.
 """
 
 from dataclasses import dataclass
@@ -12,7 +15,23 @@ import numpy as np
 from tqdm import tqdm
 
 from app.data.trajectory import Episode
-from app.interaction.tracks import Recording, Track
+from app.interaction.tracks import CAR_TYPES, Recording, Track
+
+
+@dataclass(frozen=True)
+class PairRule:
+    """Which agent types may be the robot of a pair and which its human."""
+
+    robots: frozenset[str]
+    humans: frozenset[str]
+
+    def takes(self, track: Track) -> bool:
+        """True if the track may be robot or human under this rule."""
+        return track.agent_type in self.robots or track.agent_type in self.humans
+
+
+CARS = PairRule(robots=CAR_TYPES, humans=CAR_TYPES)
+ROLES = PairRule(robots=frozenset({"robot"}), humans=frozenset({"human"}))
 
 
 @dataclass
@@ -48,24 +67,25 @@ def _window_states(track: Track, first: int, size: int) -> tuple[np.ndarray, ...
 
 
 def window_first_frames(recording: Recording, size: int, stride: int,
-                  frame_range: tuple[int, int] | None = None) -> list[int]:
+                        frame_range: tuple[int, int] | None = None,
+                        rule: PairRule = CARS) -> list[int]:
     """First frames of the windows of `size` frames, every `stride` frames, inside the range."""
-    cars = [t for t in recording.tracks if t.is_car]
-    if not cars:
+    agents = [t for t in recording.tracks if rule.takes(t)]
+    if not agents:
         return []
-    lo = min(int(t.frames[0]) for t in cars)
-    hi = max(int(t.frames[-1]) for t in cars)
+    lo = min(int(t.frames[0]) for t in agents)
+    hi = max(int(t.frames[-1]) for t in agents)
     if frame_range is not None:
         lo, hi = max(lo, frame_range[0]), min(hi, frame_range[1])
     return list(range(lo, hi - size + 2, stride))
 
 
-def pairs_in_window(recording: Recording, first: int, size: int,
-                    max_distance_m: float) -> list[Pair]:
-    """Every car present over the window paired with its nearest interacting car (rule above)."""
-    present = []
+def pairs_in_window(recording: Recording, first: int, size: int, max_distance_m: float,
+                    rule: PairRule = CARS) -> list[Pair]:
+    """Every robot present over the window paired with its nearest interacting human (above)."""
+    present, last = [], first + size - 1
     for track in recording.tracks:
-        if track.is_car and track.frames[0] <= first and track.frames[-1] >= first + size - 1:
+        if rule.takes(track) and track.frames[0] <= first and track.frames[-1] >= last:
             states = _window_states(track, first, size)
             if states is not None:
                 present.append((track, states))
@@ -76,8 +96,11 @@ def pairs_in_window(recording: Recording, first: int, size: int,
     mean = dist.mean(axis=-1)
     mean[dist.min(axis=-1) > max_distance_m] = np.inf
     np.fill_diagonal(mean, np.inf)
+    mean[:, [t.agent_type not in rule.humans for t, _ in present]] = np.inf
     pairs = []
     for r, (robot, r_states) in enumerate(present):
+        if robot.agent_type not in rule.robots:
+            continue
         h = int(np.argmin(mean[r]))
         if not np.isfinite(mean[r, h]):
             continue
@@ -92,14 +115,15 @@ def pairs_in_window(recording: Recording, first: int, size: int,
 
 
 def extract_pairs(recordings: list[Recording], size: int, stride: int, max_distance_m: float,
-                  frame_ranges: dict[str, tuple[int, int]] | None = None) -> list[Pair]:
+                  frame_ranges: dict[str, tuple[int, int]] | None = None,
+                  rule: PairRule = CARS) -> list[Pair]:
     """All pairs of all windows of all recordings, in a deterministic order."""
     pairs = []
     for rec in tqdm(sorted(recordings, key=lambda r: r.name), desc="pairs", unit="recording",
                     leave=False):
         span = (frame_ranges or {}).get(rec.name)
-        for first in window_first_frames(rec, size, stride, span):
-            pairs.extend(pairs_in_window(rec, first, size, max_distance_m))
+        for first in window_first_frames(rec, size, stride, span, rule):
+            pairs.extend(pairs_in_window(rec, first, size, max_distance_m, rule))
     return pairs
 
 

@@ -13,6 +13,8 @@ Cutting tracks into robot/human pairs is pairs.py's job.
 import csv
 import math
 from array import array
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,7 +38,7 @@ class TrackFileError(ValueError):
 
 @dataclass
 class Track:
-    """One agent in one recording: frames [T] (index of the 100 ms grid), states [T, ...]."""
+    """One agent in one recording: frames [T] on the recording's time grid, states [T, ...]."""
 
     track_id: int
     agent_type: str
@@ -46,6 +48,7 @@ class Track:
     psi: np.ndarray
     length_m: float
     width_m: float
+    name: str = ""  # the agent's id in a lab's log (csv_logs); empty for INTERACTION tracks
 
     @property
     def is_car(self) -> bool:
@@ -121,10 +124,7 @@ def load_recordings(files: list[Path]) -> list[Recording]:
 def read_track_file(path: Path) -> list[Recording]:
     """Validate and read one track file (any layout) into recordings."""
     path = Path(path)
-    with open(path, newline="", encoding="utf-8") as fh, \
-            tqdm(total=path.stat().st_size, unit="B", unit_scale=True, leave=False,
-                 desc=f"read {path.name}") as bar:
-        reader = csv.reader(_counted_lines(fh, bar))
+    with csv_reader(path) as reader:
         header = next(reader, None)
         if header is None or not any(cell.strip() for cell in header):
             raise TrackFileError(f"{path}:1: empty file: expected a header line "
@@ -134,6 +134,15 @@ def read_track_file(path: Path) -> list[Recording]:
     if not rows:
         raise TrackFileError(f"{path}:2: no data rows after the header")
     return _group_tracks(path, rows, has_case="case_id" in columns)
+
+
+@contextmanager
+def csv_reader(path: Path, encoding: str = "utf-8") -> Iterator:
+    """A csv.reader over the file's lines, with a byte progress bar while it is read."""
+    with open(path, newline="", encoding=encoding) as fh, \
+            tqdm(total=path.stat().st_size, unit="B", unit_scale=True, leave=False,
+                 desc=f"read {path.name}") as bar:
+        yield csv.reader(_counted_lines(fh, bar))
 
 
 def _counted_lines(fh, bar, every: int = 20000):

@@ -55,7 +55,7 @@ class Recordings:
     recordings: list[tx.Recording]
     frame_dt_s: float
     ranges: dict[str, dict[str, tuple[int, int]]]  # split -> recording -> frame range
-    paired_types: frozenset[str] = tx.CAR_TYPES  # agent types the pairing may pick
+    rule: px.PairRule = px.CARS  # which agent types are robot and human (pairs.py)
     files: dict[str, str] = field(default_factory=dict)
     lines: list[LaneLine] = field(default_factory=list)
 
@@ -108,7 +108,7 @@ def interaction_recordings(root: Path, source: InteractionSource) -> Recordings:
     if map_path.is_file():
         inputs.append(map_path)
     return Recordings(f"INTERACTION {source.scenario} ({layout})", recordings,
-                      tx.FRAME_MS / 1000, ranges, tx.CAR_TYPES, hashes(inputs, root), lines)
+                      tx.FRAME_MS / 1000, ranges, px.CARS, hashes(inputs, root), lines)
 
 
 def csv_recordings(root: Path, source: CsvSource) -> Recordings:
@@ -131,7 +131,7 @@ def csv_recordings(root: Path, source: CsvSource) -> Recordings:
         lines = read_line_file(line_path)
         files.update(hashes([line_path], line_path.parent))
     return Recordings(f"CSV logs {root.name}", logs.recordings, logs.dt_s, ranges,
-                      frozenset({"robot", "human"}), files, lines)
+                      px.ROLES, files, lines)
 
 
 def whole(recordings: list[tx.Recording]) -> dict[str, tuple[int, int]]:
@@ -166,7 +166,7 @@ def split_pairs(rec: Recordings, config: RecordedConfig) -> dict[str, list[px.Pa
     for split in tx.SPLITS:
         chosen = [r for r in rec.recordings if r.name in rec.ranges[split]]
         pairs = px.extract_pairs(chosen, size, stride, config.pair_max_distance_m,
-                                 rec.ranges[split])
+                                 rec.ranges[split], rec.rule)
         if 0 < config.max_pairs < len(pairs):
             keep = np.linspace(0, len(pairs) - 1, config.max_pairs).round().astype(int)
             pairs = [pairs[k] for k in keep]
@@ -204,7 +204,7 @@ def pair_episode(pair: px.Pair, step: int, frame: SceneFrame, threshold_deg: flo
 
 def driven_points(rec: Recordings) -> np.ndarray:
     """Every position of every agent the pairing rule may pick, map frame [M, 2]."""
-    xy = [t.xy for r in rec.recordings for t in r.tracks if t.agent_type in rec.paired_types]
+    xy = [t.xy for r in rec.recordings for t in r.tracks if rec.rule.takes(t)]
     return np.concatenate(xy) if xy else np.zeros((0, 2))
 
 
