@@ -34,7 +34,8 @@ class CsvSource(StrictModel):
 
     Held out: an evenly spaced `held_out_fraction` of the recordings (sorted by name); a
     single recording is split in time instead (its last `held_out_fraction`). `lines` is an
-    optional CSV of lines to draw under the agents (line_id, kind, dashed, x_m, y_m)."""
+    optional CSV of lines to draw under the agents (line_id, kind, dashed, x_m, y_m), relative
+    to the recordings dir like `path` (not inside a folder of logs: each .csv there is a log)."""
 
     format: Literal["csv"]
     path: str = Field(min_length=1)
@@ -58,7 +59,8 @@ class RecordedConfig(StrictModel):
     dt_s: float = Field(0.4, gt=0, description="one step of the clips and the predictions; a "
                         "whole number of the recordings' time steps")
     window_s: float = Field(4.0, gt=0, description="one interaction: a robot/human pair over "
-                            "this long (a v1.2 case is 4 s)")
+                            "window_s / frame step samples (a v1.2 case: 40 at 10 Hz), "
+                            "every dt_s of them kept")
     window_stride_s: float = Field(4.0, gt=0, description="continuous recordings: a window "
                                    "every this many seconds")
     pair_max_distance_m: float = Field(30.0, gt=0, description="robot and human come this "

@@ -69,22 +69,23 @@ class ImportResult:
     meta: dict
 
 
-def source_path(config: RecordedConfig, layout: Layout) -> Path:
-    """The source's path: absolute as given, else under the recordings dir."""
-    path = Path(config.source.path).expanduser()
+def recordings_path(path: str, layout: Layout) -> Path:
+    """A path a recorded world's config gives: absolute as given, else under the recordings dir."""
+    path = Path(path).expanduser()
     return path if path.is_absolute() else layout.recordings() / path
 
 
 def read_source(config: RecordedConfig, layout: Layout) -> Recordings:
     """Read and validate the config's recordings (TrackFileError / RecordingError on bad files)."""
-    root = source_path(config, layout)
+    root = recordings_path(config.source.path, layout)
     if not root.exists():
         raise UnusableRecordings(f"source.path: {root} does not exist; put the recordings there "
                            f"(the recordings dir is {layout.recordings()}, set by "
                            "TOMSTUDY_RECORDINGS_DIR) or fix the world config")
     if isinstance(config.source, InteractionSource):
         return interaction_recordings(root, config.source)
-    return csv_recordings(root, config.source)
+    lines = recordings_path(config.source.lines, layout) if config.source.lines else None
+    return csv_recordings(root, config.source, lines)
 
 
 def interaction_recordings(root: Path, source: InteractionSource) -> Recordings:
@@ -111,8 +112,9 @@ def interaction_recordings(root: Path, source: InteractionSource) -> Recordings:
                       tx.FRAME_MS / 1000, ranges, px.CARS, hashes(inputs, root), lines)
 
 
-def csv_recordings(root: Path, source: CsvSource) -> Recordings:
-    """A lab's CSV logs: robot-role agents paired with the nearest human-role agent."""
+def csv_recordings(root: Path, source: CsvSource, line_path: Path | None) -> Recordings:
+    """A lab's CSV logs: robot-role agents paired with the nearest human-role agent; the lines
+    to draw from `line_path` (outside a folder of logs, whose every .csv is read as logs)."""
     from app.recordings.csv_logs import read_line_file, read_logs
 
     logs = read_logs(root)
@@ -125,9 +127,7 @@ def csv_recordings(root: Path, source: CsvSource) -> Recordings:
         ranges = px.recording_split(logs.recordings, sorted(held))
     files = dict(logs.files)
     lines = []
-    if source.lines:
-        line_path = Path(source.lines) if Path(source.lines).is_absolute() \
-            else root.parent / source.lines if root.is_file() else root / source.lines
+    if line_path is not None:
         lines = read_line_file(line_path)
         files.update(hashes([line_path], line_path.parent))
     return Recordings(f"CSV logs {root.name}", logs.recordings, logs.dt_s, ranges,
@@ -226,7 +226,8 @@ def build_trajectories(world: str, config: RecordedConfig,
     held_out = np.arange(len(every)) >= len(pairs["train"])
     trajs = TrajectorySet.from_episodes(world, config.dt_s, episodes, LABEL_NAMES, scene,
                                         held_out)
-    counts = {"recordings": {s: len(rec.ranges[s]) for s in tx.SPLITS},
+    counts = {"recordings": {s: sum(hi >= lo for lo, hi in rec.ranges[s].values())
+                             for s in tx.SPLITS},
               "pairs": {"train": len(pairs["train"]), "held_out": len(pairs["val"])}}
     return trajs, counts
 

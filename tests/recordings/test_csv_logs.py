@@ -385,11 +385,12 @@ def test_generated_lab_logs_import_as_a_recorded_world(tmp_path):
     _write(logs.parent / "room_lines.csv", ROOM_LINES[0], ROOM_LINES[1:])
     config = RecordedConfig.model_validate({
         "kind": "recorded", "pair_max_distance_m": 10.0,
-        "source": {"format": "csv", "path": "lab/logs.csv", "lines": "room_lines.csv"}})
+        "source": {"format": "csv", "path": "lab/logs.csv", "lines": "lab/room_lines.csv"}})
     layout = Layout(tmp_path / "var", tmp_path / "recordings")
     meta = import_recordings("lab", config, layout).meta
     assert set(meta["input_sha256"]) == {"logs.csv", "room_lines.csv"}
     assert (meta["frame_dt_s"], meta["pairs"]) == (0.1, {"train": 45, "held_out": 15})
+    assert meta["recordings"] == {"train": 3, "val": 1}  # one of four recordings held out
     trajs = TrajectorySet.load(layout.trajectories("lab"))
     assert trajs.positions.shape == (60, 10, 2, 2)  # 4 s windows (40 frames), every 4th frame
     speeds = trajs.speeds[:, :, 0]  # the robot (0.8 m/s) is agent 0, the person (1.2) agent 1

@@ -231,3 +231,21 @@ def test_lines_are_simplified_and_cells_run_length_coded():
     assert len(simplify(bent, 0.1)) == 3
     grid = np.array([[0, 1, 1, 0, 1], [0, 0, 0, 0, 0], [1, 1, 1, 1, 1]], dtype=bool)
     assert row_runs(grid) == [[0, 1, 2], [0, 4, 4], [2, 0, 4]]
+
+
+def test_the_hallway_example_imports_generated_lab_logs(tmp_path):
+    from app.recordings.synthetic_logs import generate_logs
+    from app.settings import REPO_ROOT
+
+    generate_logs(tmp_path / "rec" / "lab" / "logs.csv", recordings=8, seconds=60.0, seed=2)
+    layout = Layout(tmp_path / "var", tmp_path / "rec")
+    world = build_world("hallway", REPO_ROOT / "study_configs" / "worlds" / "hallway.yaml")
+    meta = world.import_recordings(layout).meta
+    assert meta["recordings"] == {"train": 6, "val": 2} and meta["pairs"]["held_out"] > 0
+    trajs = TrajectorySet.load(layout.trajectories("hallway"))
+    assert trajs.positions.shape[1:] == (16, 2, 2)  # 80 samples of 8 s, every 5th: 15 steps
+    world.prepare(layout)
+    robot = trajs.positions[:, :, ROBOT].astype(np.float64)
+    usable = [len(world.visible_ends(track, np.arange(5, 14))) for track in robot]
+    assert sum(usable) > 0.5 * 9 * len(robot)  # a walking robot is under way most of the time
+    assert [a.kind for a in trajs.scene.agents] == ["disc", "disc"]
