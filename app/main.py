@@ -127,7 +127,10 @@ def ready_to_serve(settings: Settings, host: str, workers: int, study_ids: list[
     check_data_dir_writable(settings.layout)
     if prepare:
         for study_id in study_ids:
-            prepare_study(settings, study_id, say=say)
+            try:
+                prepare_study(settings, study_id, say=say)
+            except (FileNotFoundError, ValueError) as err:  # missing or malformed inputs
+                raise NotServable(f"{study_id}: its bundle cannot be built: {err}") from err
     check_database(settings, [servable_study(settings, sid) for sid in study_ids])
     return settings
 

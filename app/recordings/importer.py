@@ -79,9 +79,11 @@ def read_source(config: RecordedConfig, layout: Layout) -> Recordings:
     """Read and validate the config's recordings (TrackFileError / RecordingError on bad files)."""
     root = recordings_path(config.source.path, layout)
     if not root.exists():
+        hint = (" (no data yet? `tomstudy generate-recordings` writes GENERATED, not real, "
+                "INTERACTION files there)") if isinstance(config.source, InteractionSource) else ""
         raise UnusableRecordings(f"source.path: {root} does not exist; put the recordings there "
-                           f"(the recordings dir is {layout.recordings()}, set by "
-                           "TOMSTUDY_RECORDINGS_DIR) or fix the world config")
+                                 f"(the recordings dir is {layout.recordings()}, set by "
+                                 f"TOMSTUDY_RECORDINGS_DIR) or fix the world config{hint}")
     if isinstance(config.source, InteractionSource):
         return interaction_recordings(root, config.source)
     lines = recordings_path(config.source.lines, layout) if config.source.lines else None

@@ -249,3 +249,18 @@ def test_the_hallway_example_imports_generated_lab_logs(tmp_path):
     usable = [len(world.visible_ends(track, np.arange(5, 14))) for track in robot]
     assert sum(usable) > 0.5 * 9 * len(robot)  # a walking robot is under way most of the time
     assert [a.kind for a in trajs.scene.agents] == ["disc", "disc"]
+
+
+def test_serve_prepare_without_recordings_says_where_they_go(tmp_path):
+    from app.main import ready_to_serve
+    from app.server.preflight import NotServable
+    from app.settings import REPO_ROOT, Settings
+
+    settings = Settings(data_dir=tmp_path / "var", configs_dir=REPO_ROOT / "study_configs",
+                        admin_token="t" * 32)
+    with pytest.raises(NotServable, match=r"interaction_study: its bundle cannot be built: "
+                                          r"source.path: .*recordings/INTERACTION does not exist"
+                                          r".*tomstudy generate-recordings"):
+        ready_to_serve(settings, "127.0.0.1", 1, ["interaction_study"], prepare=True,
+                       say=lambda line: None)
+    assert not (tmp_path / "var" / "data").exists()
