@@ -6,7 +6,7 @@ import uuid
 from pathlib import Path
 
 from app.layout import Layout
-from tests.conftest import SmallStudy
+from tests.conftest import ADMIN_TOKEN, SmallStudy
 from tests.e2e.conftest import BROWSER_STUDY
 
 VIEWPORT = {"width": 1280, "height": 900}
@@ -48,13 +48,29 @@ SHOWN = "s => document.querySelector(`#screen-${s}`)?.hidden === false"
 
 def through_instructions(page) -> None:
     """Consent, instructions and the first part's introduction, by clicking."""
+    consent_and_instructions(page)
+    onward(page)
+    visible(page, "trial")
+
+
+def consent_and_instructions(page) -> None:
+    """Agree to take part and read the instructions, by clicking."""
     visible(page, "consent")
     page.check("#consent-check")
     page.click("#consent-agree")
     visible(page, "instructions")
     page.click("#instructions-done")
-    onward(page)
-    visible(page, "trial")
+
+
+def open_dashboard(page, base_url: str, study_id: str = BROWSER_STUDY) -> None:
+    """Log into the researcher dashboard and show a study."""
+    page.goto(f"{base_url}/researcher")
+    page.fill("#token-input", ADMIN_TOKEN)
+    page.click("#token-form button[type=submit]")
+    page.wait_for_selector("#dashboard:not([hidden])")
+    page.fill("#study-input", study_id)
+    page.click("#refresh")
+    page.wait_for_selector("table.sessions")  # the dashboard has loaded
 
 
 def onward(page) -> str:

@@ -17,14 +17,16 @@ import tempfile
 import time
 from pathlib import Path
 
-from tests.conftest import ADMIN_TOKEN, REPO, cached_interaction_study, free_port, start_server
+from tests.conftest import REPO, cached_interaction_study, free_port, start_server
 from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
 from tests.e2e.pages import (
     VIEWPORT,
     answer_survey,
     answer_trial,
+    consent_and_instructions,
     current_state,
     fresh_recruitment,
+    open_dashboard,
     place,
     press_on,
     shown_screen,
@@ -39,11 +41,7 @@ REPLAYED_WORLD = "roundabout"
 
 def shoot_participant(page, study_id: str) -> None:
     """Consent to the survey, by clicking; per world its introduction, a clip and two clicks."""
-    visible(page, "consent")
-    page.check("#consent-check")
-    page.click("#consent-agree")
-    visible(page, "instructions")
-    page.click("#instructions-done")
+    consent_and_instructions(page)
     screen = shown_screen(page)
     while screen != "survey":
         if screen == "world":
@@ -76,11 +74,7 @@ def shoot_trial(page, study_id: str) -> None:
 
 def shoot_replay(page, url: str, study_id: str) -> None:
     """The researcher dashboard, and its replay of the first main trial of REPLAYED_WORLD."""
-    page.goto(f"{url}/researcher")
-    page.fill("#token-input", ADMIN_TOKEN)
-    page.click("#token-form button[type=submit]")
-    page.fill("#study-input", study_id)
-    page.click("#refresh")
+    open_dashboard(page, url, study_id)
     page.wait_for_selector("table.sessions tbody tr")
     page.wait_for_selector(".field-canvas")
     page.screenshot(path=str(OUT / "recorded_dashboard.png"), full_page=True)

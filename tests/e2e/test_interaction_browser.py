@@ -23,6 +23,7 @@ from tests.e2e.pages import (
     answer_survey,
     answer_trial,
     canvas_view,
+    consent_and_instructions,
     contrast,
     current_state,
     fresh_recruitment,
@@ -113,11 +114,7 @@ def test_a_participant_walks_the_recorded_worlds_by_clicking(chromium, interacti
     errors = []
     page.on("pageerror", lambda err: errors.append(str(err)))
     page.goto(f"{interaction_server.url}/s/{INTERACTION_STUDY}?{fresh_recruitment()}")
-    visible(page, "consent")
-    page.check("#consent-check")
-    page.click("#consent-agree")
-    visible(page, "instructions")
-    page.click("#instructions-done")
+    consent_and_instructions(page)
     answered, parts = [], []
     screen = shown_screen(page)
     while screen != "survey":
@@ -164,11 +161,7 @@ def test_the_prediction_screen_and_its_small_map_draw_the_recorded_road(chromium
     context.clock.install()
     page = context.new_page()
     page.goto(f"{interaction_server.url}/s/{INTERACTION_STUDY}?{fresh_recruitment()}")
-    visible(page, "consent")
-    page.check("#consent-check")
-    page.click("#consent-agree")
-    visible(page, "instructions")
-    page.click("#instructions-done")
+    consent_and_instructions(page)
     press_on(page, shown_screen(page))  # the first part's introduction
     visible(page, "trial")
     for _ in range(100):
