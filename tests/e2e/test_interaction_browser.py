@@ -178,6 +178,29 @@ def test_the_prediction_screen_and_its_small_map_draw_the_recorded_road(chromium
     context.close()
 
 
+def test_a_reduced_motion_still_shows_the_whole_clip(chromium, interaction_server):
+    context = chromium.new_context(viewport=VIEWPORT, reduced_motion="reduce")
+    context.clock.install()
+    page = context.new_page()
+    page.goto(f"{interaction_server.url}/s/{INTERACTION_STUDY}?{fresh_recruitment()}")
+    consent_and_instructions(page)
+    press_on(page, shown_screen(page))  # the first part's introduction
+    visible(page, "trial")
+    page.clock.fast_forward(200)
+    trial = current_state(page, INTERACTION_STUDY)["step"]
+    scale, origin_x, origin_y = canvas_view(page)
+    width, height = view_centre(page)[2]
+    context.close()
+    points = [p for step in trial["examples"][0]["positions"] for p in step]  # both agents
+    car = max(a["length_m"] for a in trial["scene"]["agents"])
+    span = [max(p[i] for p in points) - min(p[i] for p in points) + 2 * car for i in (0, 1)]
+    fitted = min((width - 48) / span[0], (height - 48) / span[1])  # scene.js MARGIN_PX each side
+    follow = min(width, height) / trial["scene"]["recorded"]["view_span_m"]
+    assert scale == pytest.approx(min(fitted, follow), rel=1e-4)
+    for x, y in points:
+        assert 0 < origin_x + x * scale < width and 0 < origin_y + y * scale < height
+
+
 def test_the_driven_area_has_no_seams_and_each_line_its_style(chromium, interaction_server):
     page = chromium.new_page()
     page.goto(f"{interaction_server.url}/")
