@@ -31,6 +31,7 @@ from tests.e2e.pages import (
     press_on,
     robot_outline,
     shown_screen,
+    start_predicting,
     visible,
 )
 
@@ -155,20 +156,22 @@ def test_a_participant_walks_the_recorded_worlds_by_clicking(chromium, interacti
         assert error_px <= math.sqrt(2) + 1e-3
 
 
-def test_the_prediction_screen_and_its_small_map_draw_the_recorded_road(chromium,
-                                                                       interaction_server):
-    context = chromium.new_context(viewport=VIEWPORT)
+def at_first_trial(context, url: str):
+    """A new participant's page (on a fake clock) at the first part's practice trial."""
     context.clock.install()
     page = context.new_page()
-    page.goto(f"{interaction_server.url}/s/{INTERACTION_STUDY}?{fresh_recruitment()}")
+    page.goto(f"{url}/s/{INTERACTION_STUDY}?{fresh_recruitment()}")
     consent_and_instructions(page)
     press_on(page, shown_screen(page))  # the first part's introduction
     visible(page, "trial")
-    for _ in range(100):
-        if page.is_enabled("#start-predicting"):
-            break
-        page.clock.fast_forward(2000)
-    page.click("#start-predicting")
+    return page
+
+
+def test_the_prediction_screen_and_its_small_map_draw_the_recorded_road(chromium,
+                                                                       interaction_server):
+    context = chromium.new_context(viewport=VIEWPORT)
+    page = at_first_trial(context, interaction_server.url)
+    start_predicting(page)
     assert page.evaluate(ROAD_SHARE, "#trial-canvas") > 0.05
     assert page.evaluate(ROAD_SHARE, "#overview-canvas") > 0.02
     drawn = robot_outline(page, current_state(page, INTERACTION_STUDY)["step"])
@@ -180,12 +183,7 @@ def test_the_prediction_screen_and_its_small_map_draw_the_recorded_road(chromium
 
 def test_a_reduced_motion_still_shows_the_whole_clip(chromium, interaction_server):
     context = chromium.new_context(viewport=VIEWPORT, reduced_motion="reduce")
-    context.clock.install()
-    page = context.new_page()
-    page.goto(f"{interaction_server.url}/s/{INTERACTION_STUDY}?{fresh_recruitment()}")
-    consent_and_instructions(page)
-    press_on(page, shown_screen(page))  # the first part's introduction
-    visible(page, "trial")
+    page = at_first_trial(context, interaction_server.url)
     page.clock.fast_forward(200)
     trial = current_state(page, INTERACTION_STUDY)["step"]
     scale, origin_x, origin_y = canvas_view(page)
