@@ -2,7 +2,7 @@
 // clicks up to a time in the trial, with Ours', the VAE's and the policy's moves over them.
 import { MODEL_COLORS, MODEL_LABELS, el } from "./dashboard.js";
 import { ClipPlayer, followsRobot, trialClips } from "./player.js";
-import { agentStyle, drawAgent, drawBackground, drawClickMarker, drawTrace, prepareCanvas } from "./scene.js";
+import { agentStyle, clipToScene, drawAgent, drawBackground, drawClickMarker, drawTrace, prepareCanvas } from "./scene.js";
 
 export const REPLAY_MODELS = ["ours", "vae", "policy"];
 const CLICK_PLAYBACK_SPEED = 8; // trial milliseconds per wall-clock millisecond
@@ -72,6 +72,8 @@ export function drawAnswers(canvas, replay, tMs, only = null) {
   const robot = agentStyle(scene, 0);
   const human = agentStyle(scene, 1);
   drawBackground(ctx, view, scene);
+  ctx.save();
+  clipToScene(ctx, view, scene.bounds); // a close-up's traces and agents stop at its edge
   const segment = trial.segment.positions;
   drawTrace(ctx, view, robot, segment.map((s) => s[0]), { alpha: 0.25 });
   drawTrace(ctx, view, human, segment.map((s) => s[1]), { alpha: 0.25 });
@@ -93,6 +95,7 @@ export function drawAnswers(canvas, replay, tMs, only = null) {
   for (const start of shown) {
     for (const model of REPLAY_MODELS) modelPath(ctx, view, model, start.robot, start.paths[model]);
   }
+  ctx.restore();
   canvas.dataset.clicksDrawn = String(drawn);
   return drawn;
 }

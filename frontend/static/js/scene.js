@@ -112,9 +112,7 @@ export function drawBackground(ctx, view, scene, t = 0, { labels = true } = {}) 
   ctx.fillRect(x0, y0, x1 - x0, y1 - y0);
   if (scene.recorded) {
     ctx.save();
-    ctx.beginPath();
-    ctx.rect(x0, y0, x1 - x0, y1 - y0);
-    ctx.clip();
+    clipToScene(ctx, view, bounds);
     drawDriven(ctx, view, scene.recorded.driven);
     drawMapLines(ctx, view, scene.recorded.lines || []);
     ctx.restore();
@@ -126,6 +124,15 @@ export function drawBackground(ctx, view, scene, t = 0, { labels = true } = {}) 
   ctx.lineWidth = 1;
   ctx.setLineDash([]);
   ctx.strokeRect(x0, y0, x1 - x0, y1 - y0);
+}
+
+/** Clip what is drawn next to the scene's bounds (the caller saves and restores). */
+export function clipToScene(ctx, view, bounds) {
+  const [x0, y0] = view.toPx([bounds.x_min_m, bounds.y_min_m]);
+  const [x1, y1] = view.toPx([bounds.x_max_m, bounds.y_max_m]);
+  ctx.beginPath();
+  ctx.rect(x0, y0, x1 - x0, y1 - y0);
+  ctx.clip();
 }
 
 // Highway lane markings: 3 m painted, 9 m gap (the US MUTCD broken line), drawn in metres so
