@@ -14,7 +14,7 @@ RUNTIME_STAMP := $(VENV)/.installed-runtime
 # wheel sources (an unpinned resolve pulls gigabytes of CUDA wheels), and uv keeps it.
 UV := $(BIN)/uv pip install -q --python $(BIN)/python
 
-.PHONY: install serve test lint data bench pilot screens fuzz lock clean
+.PHONY: install serve test lint data bench pilot screens screens-recorded fuzz lock clean
 
 $(RUNTIME_STAMP): pyproject.toml $(RUNTIME_LOCK)
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -68,6 +68,10 @@ pilot: $(STAMP)
 # The researcher dashboard and one replay on a copy of the coarse pilot's database (var/screens)
 screens: $(STAMP)
 	$(BIN)/python -m tests.e2e.shoot_dashboard
+
+# The recorded worlds (generated recordings) as a participant and a researcher see them (var/screens)
+screens-recorded: $(STAMP)
+	$(BIN)/python -m tests.e2e.shoot_recorded
 
 # Schemathesis with every check on the study API: at least 5,000 cases, 0 failures (issue 10)
 fuzz: $(STAMP)

@@ -8,6 +8,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -76,9 +77,9 @@ class SmallStudy:
                                allowed_hosts="testserver", **NO_RATE_LIMITS) | extra)
 
 
-def _sources_hash() -> str:
+def _sources_hash(roots: list[str] = PIPELINE_SOURCES) -> str:
     digest = hashlib.sha256()
-    for root in PIPELINE_SOURCES + ["tests/conftest.py"]:
+    for root in roots + ["tests/conftest.py"]:
         path = REPO / root
         files = sorted(path.rglob("*")) if path.is_dir() else [path]
         for f in files:
@@ -88,15 +89,17 @@ def _sources_hash() -> str:
     return digest.hexdigest()[:16]
 
 
-def write_small_configs(configs_dir: Path) -> None:
-    """study_configs copy with a small study and a tiny training config."""
+def write_small_configs(configs_dir: Path, study_id: str = SMALL_STUDY,
+                        source: str = "paper_study") -> None:
+    """study_configs copy with the `source` study shrunk as `study_id` and a tiny training
+    config."""
     import yaml
 
     shutil.copytree(REPO / "study_configs", configs_dir, dirs_exist_ok=True,
                     ignore=shutil.ignore_patterns("bundles"))  # the small study builds its own
-    study = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
+    study = yaml.safe_load((REPO / "study_configs" / f"{source}.yaml").read_text())
     study.update(SMALL_STUDY_OVERRIDES)
-    (configs_dir / f"{SMALL_STUDY}.yaml").write_text(yaml.safe_dump(study))
+    (configs_dir / f"{study_id}.yaml").write_text(yaml.safe_dump(study))
     (configs_dir / "training.yaml").write_text(yaml.safe_dump(SMALL_TRAINING))
 
 
@@ -150,29 +153,93 @@ def small_study() -> SmallStudy:
 
 
 def cached_small_study() -> SmallStudy:
-    """The small real pipeline, cached in the temp dir by a hash of the code it runs.
+    """The small real pipeline, cached in the temp dir by a hash of the code it runs."""
+    return cached_build("tomstudy-small-study", PIPELINE_SOURCES, build_small_study)
+
+
+def cached_build(prefix: str, sources: list[str], build) -> SmallStudy:
+    """`build(root)`'s study, cached in the temp dir under `prefix` and a hash of `sources`.
 
     A lock file serialises test sessions that share the machine (and the cache).
     """
     import fcntl
 
-    root = Path(tempfile.gettempdir()) / f"tomstudy-small-study-{_sources_hash()}"
+    root = Path(tempfile.gettempdir()) / f"{prefix}-{_sources_hash(sources)}"
     with open(f"{root}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         if not (root / "done").exists():
             shutil.rmtree(root, ignore_errors=True)
             root.mkdir(parents=True)
-            build_small_study(root)
-            (root / "done").touch()
-            remove_stale_caches(root)
-    return SmallStudy(root / "var", root / "configs")
+            study = build(root)
+            (root / "done").write_text(study.study_id)
+            remove_stale_caches(root, prefix)
+    return SmallStudy(root / "var", root / "configs", (root / "done").read_text() or SMALL_STUDY)
 
 
-def remove_stale_caches(keep: Path, max_age_s: float = 3 * 3600) -> None:
-    """Delete other small-study caches untouched for 3 hours (the code they ran changed)."""
-    for other in keep.parent.glob("tomstudy-small-study-*"):
+def remove_stale_caches(keep: Path, prefix: str, max_age_s: float = 3 * 3600) -> None:
+    """Delete other caches of `prefix` untouched for 3 hours (the code they ran changed)."""
+    for other in keep.parent.glob(f"{prefix}-*"):
         if other != keep and other.is_dir() and time.time() - other.stat().st_mtime > max_age_s:
             shutil.rmtree(other, ignore_errors=True)
+
+
+# ---------------------------------------------------------------- the interaction study
+
+# study_configs/interaction_study.yaml shrunk as the small study is, on GENERATED (not real)
+# INTERACTION files of its roundabout and intersection: 150 s of traffic each.
+INTERACTION_STUDY = "interaction_study"
+INTERACTION_SECONDS = 150.0
+INTERACTION_SOURCES = [*PIPELINE_SOURCES, "app/recordings", "app/interaction", "app/bank",
+                       "app/predictors"]
+
+
+@pytest.fixture(scope="session")
+def interaction_study() -> SmallStudy:
+    """The interaction study through the real pipeline (see `cached_interaction_study`)."""
+    return cached_interaction_study()
+
+
+def cached_interaction_study() -> SmallStudy:
+    """`build_interaction_study`, cached as the small study is."""
+    return cached_build("tomstudy-interaction-study", INTERACTION_SOURCES,
+                        build_interaction_study)
+
+
+def build_interaction_study(root: Path) -> SmallStudy:
+    """Generate recordings of both scenarios, then `tomstudy bundle build`'s steps: import
+    them, select the models' sizes, train both models' seeds, build the bank, freeze."""
+    from app.bank.prepare import build_bundle
+    from app.recordings.generated import generate_study_recordings
+
+    study = SmallStudy(root / "var", root / "configs", INTERACTION_STUDY)
+    write_small_configs(study.configs_dir, INTERACTION_STUDY, source=INTERACTION_STUDY)
+    generate_study_recordings(study.layout.recordings() / "INTERACTION", INTERACTION_SECONDS)
+    with settings_of(study) as settings:
+        build_bundle(settings, INTERACTION_STUDY, workers=2, say=lambda _: None)
+    return study
+
+
+@contextmanager
+def settings_of(study: SmallStudy):
+    """The process' settings (which the pipeline reads, its worker processes too) set to the
+    study's data and configs dirs for the block; yields them."""
+    from app.settings import get_settings
+
+    keys = {"TOMSTUDY_DATA_DIR": str(study.data_dir),
+            "TOMSTUDY_CONFIGS_DIR": str(study.configs_dir),
+            "TOMSTUDY_RECORDINGS_DIR": str(study.layout.recordings())}
+    before = {key: os.environ.get(key) for key in keys}
+    os.environ.update(keys)
+    get_settings.cache_clear()
+    try:
+        yield get_settings()
+    finally:
+        for key, value in before.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+        get_settings.cache_clear()
 
 
 # ---------------------------------------------------------------- servers

@@ -112,7 +112,13 @@ HUMAN_COLOR = "#E69F00"
 #   ignores a scene's `agents[].color` and draws the robot and the person with these;
 # - the road is light enough for both agents (dark asphalt left the blue robot at 1.2:1);
 # - goal rings are distinct from both agents, each >= 5:1 on the field, where plots cycle
-#   through analysis/scene_plot.py LABEL_COLORS on white.
+#   through analysis/scene_plot.py LABEL_COLORS on white;
+# - a recorded scene (`map`) reads as a road map: a pale green field, the driven area a light
+#   asphalt grey just dark enough to read as a band on it (1.2:1, and the hue differs) yet
+#   light enough for both agents (robot 3.7:1, person 3.4:1, also under the reach disc's
+#   tint); kerbs a dark slate (7.5:1 on the road, drawn thick), painted lane borders a mid
+#   grey (3.3:1, thin), virtual lanes (no paint) faint on purpose (1.9:1, dotted), stop lines
+#   a dark red no agent or model is drawn in (5.3:1, a thick bar).
 BROWSER_PALETTE = {
     "robot": ROBOT_COLOR,
     "human": "#B35C00",
@@ -120,4 +126,6 @@ BROWSER_PALETTE = {
     "ground": {"field": "#fbfbf8", "road": "#e8eaed", "shoulder": "#cfd8c8"},
     "lane_mark": "#5f6368",
     "goals": ["#007A5A", "#6A3D9A", "#A0306A", "#333333"],
+    "map": {"field": "#edf2e4", "road": "#d8dadd", "kerb": "#3c4043", "border": "#70757a",
+            "virtual": "#9aa0a6", "stop": "#9e2a2b"},
 }

@@ -64,6 +64,19 @@ def browser_server(browser_study: SmallStudy, tmp_path_factory):
     proc.wait(timeout=10)
 
 
+@pytest.fixture(scope="session")
+def interaction_server(interaction_study: SmallStudy, tmp_path_factory):
+    """`tomstudy serve` of the interaction study (generated recordings) on a fresh SQLite file."""
+    root = tmp_path_factory.mktemp("interaction-server")
+    port = free_port()
+    db_path = root / "study.db"
+    proc = start_server(interaction_study, f"sqlite:///{db_path}", port,
+                        log=root / "server.log")
+    yield BrowserServer(f"http://127.0.0.1:{port}", db_path)
+    proc.terminate()
+    proc.wait(timeout=10)
+
+
 @pytest.fixture(scope="module")
 def chromium():
     """Debian's chromium driven by Playwright (never a downloaded browser).

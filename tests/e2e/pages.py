@@ -3,12 +3,18 @@
 import json
 import math
 import uuid
+from pathlib import Path
 
 from app.layout import Layout
-from tests.conftest import SmallStudy
+from tests.conftest import ADMIN_TOKEN, SmallStudy
 from tests.e2e.conftest import BROWSER_STUDY
 
 VIEWPORT = {"width": 1280, "height": 900}
+JS = Path(__file__).parent / "js"
+ROBOT_EXTENT = (JS / "robot_extent.js").read_text()
+PIXEL = """([x, y]) => Array.from(document.querySelector('#trial-canvas').getContext('2d')
+    .getImageData(Math.round(x * devicePixelRatio), Math.round(y * devicePixelRatio), 1, 1).data)"""
+ROBOT_RGB = (0x00, 0x72, 0xB2)
 CLIP_JUMP_MS = 2000  # fake-clock jump per poll while clips play
 THINK_MS = 1500  # fake-clock time between two clicks
 
@@ -42,26 +48,52 @@ SHOWN = "s => document.querySelector(`#screen-${s}`)?.hidden === false"
 
 def through_instructions(page) -> None:
     """Consent, instructions and the first part's introduction, by clicking."""
+    consent_and_instructions(page)
+    onward(page)
+    visible(page, "trial")
+
+
+def consent_and_instructions(page) -> None:
+    """Agree to take part and read the instructions, by clicking."""
     visible(page, "consent")
     page.check("#consent-check")
     page.click("#consent-agree")
     visible(page, "instructions")
     page.click("#instructions-done")
-    onward(page)
-    visible(page, "trial")
+
+
+def open_dashboard(page, base_url: str, study_id: str = BROWSER_STUDY) -> None:
+    """Log into the researcher dashboard and show a study."""
+    page.goto(f"{base_url}/researcher")
+    page.fill("#token-input", ADMIN_TOKEN)
+    page.click("#token-form button[type=submit]")
+    page.wait_for_selector("#dashboard:not([hidden])")
+    page.fill("#study-input", study_id)
+    page.click("#refresh")
+    page.wait_for_selector("table.sessions")  # the dashboard has loaded
 
 
 def onward(page) -> str:
     """Press on through a part's introduction, 'practice over' and pause screens; returns the
     screen that asks for more (trial, survey or done)."""
-    screens = [*ONWARD, "trial", "survey", "done"]
     while True:
-        page.wait_for_function(f"() => {json.dumps(screens)}.some({SHOWN})", timeout=15000)
-        shown = next(s for s in screens if page.evaluate(f"s => ({SHOWN})(s)", s))
+        shown = shown_screen(page)
         if shown not in ONWARD:
             return shown
-        page.click(ONWARD[shown])
-        page.wait_for_function(f"s => !({SHOWN})(s)", arg=shown, timeout=15000)
+        press_on(page, shown)
+
+
+def shown_screen(page) -> str:
+    """Wait until one of the participant app's screens is shown; its name."""
+    screens = [*ONWARD, "trial", "survey", "done"]
+    page.wait_for_function(f"() => {json.dumps(screens)}.some({SHOWN})", timeout=15000)
+    return next(s for s in screens if page.evaluate(f"s => ({SHOWN})(s)", s))
+
+
+def press_on(page, screen: str) -> None:
+    """Press the button of a screen that only asks to go on, and wait until it is gone."""
+    page.click(ONWARD[screen])
+    page.wait_for_function(f"s => !({SHOWN})(s)", arg=screen, timeout=15000)
 
 
 def answer_survey(page) -> None:
@@ -142,10 +174,10 @@ def start_predicting(page) -> None:
     page.click("#start-predicting")
 
 
-def answer_trial(page) -> dict:
+def answer_trial(page, study_id: str = BROWSER_STUDY) -> dict:
     """Answer the trial on screen (from wherever its input stands) by clicking the rest of
     every planned path, then submit; returns its payload."""
-    trial = current_state(page)["step"]
+    trial = current_state(page, study_id)["step"]
     if page.is_visible("#start-predicting"):
         start_predicting(page)
     while page.is_visible("#screen-trial"):
@@ -165,3 +197,30 @@ def wait_saved(page) -> None:
     """Wait until the page says every click so far is on the server."""
     page.wait_for_function(
         "() => document.querySelector('#save-status').textContent.includes('are saved')")
+
+
+def contrast(a, b) -> float:
+    """WCAG 2.1 contrast ratio of two sRGB colours (0-255 each)."""
+    def luminance(rgb):
+        linear = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
+                  for c in (v / 255 for v in rgb[:3])]
+        return 0.2126 * linear[0] + 0.7152 * linear[1] + 0.0722 * linear[2]
+    high, low = sorted((luminance(a), luminance(b)), reverse=True)
+    return (high + 0.05) / (low + 0.05)
+
+
+def robot_outline(page, trial: dict) -> dict:
+    """Across the robot at the first start state of the prediction screen (its sides: a car's
+    nose wedge is not there): its drawn width (CSS px), its outline's colour and the colour
+    just outside it (the reach disc's tint over the ground)."""
+    scale, origin_x, origin_y = canvas_view(page)
+    start = trial["start_states"][0]
+    agent = trial["scene"]["agents"][0]
+    centre = [origin_x + start["robot"][0] * scale, origin_y + start["robot"][1] * scale]
+    heading = start["robot_heading"] if agent["kind"] == "car" else 0.0
+    across = [-math.sin(heading), math.cos(heading)]
+    extent = page.evaluate(ROBOT_EXTENT, [*centre, *across, agent["width_m"] * scale / 2 + 4,
+                                          list(ROBOT_RGB)])
+    at = lambda d: [centre[0] + d * across[0], centre[1] + d * across[1]]  # noqa: E731
+    return {"width": extent[1] - extent[0], "outline": page.evaluate(PIXEL, at(extent[1] - 1)),
+            "ground": page.evaluate(PIXEL, at(extent[1] + 6))}

@@ -18,7 +18,7 @@ import yaml
 from app.configio import load_yaml_model
 from app.server.routes.pages import PAGE_RULES
 from app.study.config import StudyConfig
-from tests.conftest import ADMIN_TOKEN, REPO
+from tests.conftest import REPO
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
     THINK_MS,
@@ -29,6 +29,7 @@ from tests.e2e.pages import (
     current_state,
     fresh_recruitment,
     onward,
+    open_dashboard,
     planned_path,
     through_instructions,
     visible,
@@ -155,17 +156,6 @@ def complete_session(page, base_url: str) -> dict:
     visible(page, "done")
     return {"clicks": clicks, "code": page.inner_text("#completion-code"),
             "redirect": page.get_attribute("#redirect-link", "href")}
-
-
-def open_dashboard(page, base_url: str) -> None:
-    """Log into the researcher dashboard and show the browser study."""
-    page.goto(f"{base_url}/researcher")
-    page.fill("#token-input", ADMIN_TOKEN)
-    page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#dashboard:not([hidden])")
-    page.fill("#study-input", BROWSER_STUDY)
-    page.click("#refresh")
-    page.wait_for_selector("table.sessions")  # the dashboard has loaded
 
 
 def download_export(page, what: str = "predictions") -> list[dict]:

@@ -9,7 +9,6 @@ canvas; a declined session counts no trial on the dashboard.
 
 import io
 import json
-import math
 import shutil
 import sqlite3
 import time
@@ -26,15 +25,18 @@ from app.prediction_view import TARGET_STEP_PX, prediction_view
 from tests.conftest import ADMIN_TOKEN, SmallStudy, free_port, freeze_bundle_of, start_server
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
+    JS,
     VIEWPORT,
     answer_trial,
     bank_of,
     canvas_view,
+    contrast,
     current_state,
     fresh_recruitment,
     onward,
     page_token,
     place,
+    robot_outline,
     start_predicting,
     through_instructions,
     visible,
@@ -341,49 +343,23 @@ def test_each_world_is_a_part_with_its_practice_numbering_and_pauses(fresh, brow
 
 # ---------------------------------------------------------------- 6, 7. the prediction view
 
-JS = Path(__file__).parent / "js"
-ROBOT_EXTENT = (JS / "robot_extent.js").read_text()
-PIXEL = """([x, y]) => Array.from(document.querySelector('#trial-canvas').getContext('2d')
-    .getImageData(Math.round(x * devicePixelRatio), Math.round(y * devicePixelRatio), 1, 1).data)"""
-ROBOT_RGB = (0x00, 0x72, 0xB2)
-
-
-def contrast(a, b) -> float:
-    """WCAG 2.1 contrast ratio of two sRGB colours (0-255 each)."""
-    def luminance(rgb):
-        linear = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
-                  for c in (v / 255 for v in rgb[:3])]
-        return 0.2126 * linear[0] + 0.7152 * linear[1] + 0.0722 * linear[2]
-    high, low = sorted((luminance(a), luminance(b)), reverse=True)
-    return (high + 0.05) / (low + 0.05)
-
-
 def check_view(page, browser_study) -> dict:
     """At the first start state of the trial on screen: the scale is the server's rule, the
     robot is drawn that large, and its outline stands out from the ground."""
     trial = current_state(page)["step"]
     raw = json.loads(Layout(browser_study.data_dir).bank(BROWSER_STUDY).read_text())
     rule = prediction_view(raw["worlds"][trial["world"]])
-    scale, origin_x, origin_y = canvas_view(page)
+    scale = canvas_view(page)[0]
     assert trial["view"]["px_per_m"] == rule.px_per_m and scale == pytest.approx(rule.px_per_m)
     assert rule.median_step_m * scale == pytest.approx(TARGET_STEP_PX, abs=0.1)
-    start = trial["start_states"][0]
-    agent = trial["scene"]["agents"][0]
-    centre = [origin_x + start["robot"][0] * scale, origin_y + start["robot"][1] * scale]
-    heading = start["robot_heading"] if agent["kind"] == "car" else 0.0
-    across = [-math.sin(heading), math.cos(heading)]  # a car's sides: no nose wedge there
-    extent = page.evaluate(ROBOT_EXTENT, [*centre, *across, agent["width_m"] * scale / 2 + 4,
-                                          list(ROBOT_RGB)])
-    drawn = extent[1] - extent[0]
-    assert drawn == pytest.approx(agent["width_m"] * scale + 3, abs=2)  # a 3 px outline
-    at = lambda d: [centre[0] + d * across[0], centre[1] + d * across[1]]  # noqa: E731
+    drawn = robot_outline(page, trial)
+    assert drawn["width"] == pytest.approx(trial["scene"]["agents"][0]["width_m"] * scale + 3,
+                                           abs=2)  # a 3 px outline
     box = page.eval_on_selector("#trial-canvas", "c => c.getBoundingClientRect().toJSON()")
     fits = page.evaluate("() => innerHeight") - box["bottom"]
     scene_px = (trial["scene"]["bounds"]["y_max_m"] - trial["scene"]["bounds"]["y_min_m"]) * scale
     assert fits >= 0 and (fits <= 80 or box["height"] >= scene_px)  # the height is used
-    # the outline's colour, and the colour just outside it (the reach disc's tint)
-    return {"outline": page.evaluate(PIXEL, at(extent[1] - 1)),
-            "ground": page.evaluate(PIXEL, at(extent[1] + 6))}
+    return drawn
 
 
 def labels_clear(page) -> None:
@@ -428,8 +404,10 @@ def test_agents_traces_markers_and_goals_reach_3_to_1_on_the_canvas(fresh, brows
     page = fresh()
     page.goto(f"{browser_server.url}/")
     colours = page.evaluate(CANVAS_COLOURS)
+    grounds = ("field", "road", "shoulder", "recorded road", "recorded field")
+    assert set(colours) == {*grounds, "goals", "goal_ground"}
     ratios = {}
-    for ground in ("field", "road", "shoulder"):
+    for ground in grounds:
         drawn = colours[ground]
         for thing in ("robot", "person", "robot_trace", "person_trace", "ring", "robot_outline"):
             ratios[f"{thing} on {ground}"] = contrast(drawn[thing], drawn["ground"])

@@ -143,12 +143,18 @@ def test_the_dashboard_names_and_colours_models_as_the_figures_do(client):
 
 # ---------------------------------------------------------------- no second copy in the scripts
 
+def colours_in(value) -> list[str]:
+    """Every string in a palette entry, however deep (groups, lists)."""
+    if isinstance(value, str):
+        return [value]
+    items = value.values() if isinstance(value, dict) else value
+    return [colour for item in items for colour in colours_in(item)]
+
+
 def defined_colours() -> list[str]:
     """Every colour of the scene palette and of the models but black (which any script may
     draw with)."""
-    palette = BROWSER_PALETTE
-    flat = [v for v in palette.values() if isinstance(v, str)]
-    scene = flat + list(palette["ground"].values()) + palette["goals"]
+    scene = colours_in(BROWSER_PALETTE)
     return scene + [colour for colour in MODEL_COLORS.values() if colour != "#000000"]
 
 

@@ -1,5 +1,17 @@
 // Play a trial's clips on a canvas: the example interactions, then the segment.
-import { LabelLayout, agentStyle, drawAgents, drawBackground, drawTrace, prepareCanvas } from "./scene.js";
+import {
+  LabelLayout,
+  agentStyle,
+  centreOnAxis,
+  drawAgents,
+  drawBackground,
+  drawPointer,
+  drawTrace,
+  fitView,
+  prepareCanvas,
+  publishView,
+  viewAt,
+} from "./scene.js";
 
 export const STEP_SECONDS = 0.35;
 const PAUSE_BETWEEN_CLIPS_MS = 700;
@@ -31,6 +43,45 @@ export function poseAt(clip, t) {
   }));
 }
 
+/** True when a scene's clips follow the robot (a recorded world) instead of showing it whole. */
+export function followsRobot(scene) {
+  return Boolean(scene.recorded?.view_span_m);
+}
+
+/** Pixels per metre that show `view_span_m` across the shorter side of a w x h box. */
+function followScale(scene, width, height) {
+  return Math.min(width, height) / scene.recorded.view_span_m;
+}
+
+/** The view centred on `point` at the follow scale, moved only to stay inside the scene. */
+export function followView(scene, width, height, point) {
+  const scale = followScale(scene, width, height);
+  const b = scene.bounds;
+  const centre = [
+    centreOnAxis(b.x_min_m, b.x_max_m, width, scale, point[0], [point[0], point[0]]),
+    centreOnAxis(b.y_min_m, b.y_max_m, height, scale, point[1], [point[1], point[1]]),
+  ];
+  return viewAt(scale, centre, width, height);
+}
+
+/**
+ * A reduced-motion still of a clip that follows the robot: the clip's own positions (both
+ * agents) and a car length around them, fitted, but never closer than the moving view.
+ */
+export function stillView(scene, clip, width, height) {
+  const margin = Math.max(...(scene.agents || []).map((a) => a.length_m), 1);
+  const points = clip.positions.flat();
+  const xs = points.map((p) => p[0]);
+  const ys = points.map((p) => p[1]);
+  const box = {
+    x_min_m: Math.min(...xs) - margin, x_max_m: Math.max(...xs) + margin,
+    y_min_m: Math.min(...ys) - margin, y_max_m: Math.max(...ys) + margin,
+  };
+  const fitted = fitView(box, width, height);
+  const scale = Math.min(fitted.scale, followScale(scene, width, height));
+  return viewAt(scale, fitted.toM([width / 2, height / 2]), width, height);
+}
+
 /** Draw a clip frame at fractional step `t`, with each agent's trace so far. */
 export function drawClipFrame(ctx, view, scene, clip, t) {
   drawBackground(ctx, view, scene, t);
@@ -42,6 +93,10 @@ export function drawClipFrame(ctx, view, scene, clip, t) {
   });
   const layout = new LabelLayout(ctx, view.width, view.height);
   drawAgents(ctx, view, poses.map((pose, agent) => ({ style: agentStyle(scene, agent), ...pose })), layout);
+  if (followsRobot(scene)) { // the person may be out of the followed view: an arrow points to it
+    const person = agentStyle(scene, 1);
+    drawPointer(ctx, view, poses[1].position, person.tag, person.color, layout);
+  }
 }
 
 /** The clip list of a trial, each with a caption. */
@@ -89,10 +144,22 @@ export class ClipPlayer {
 
   /** Reduced motion: the final frame with the whole path, held still. */
   async showStill(clip, run) {
-    const { ctx, view } = prepareCanvas(this.canvas, this.scene);
+    let { ctx, view, cssWidth, cssHeight } = prepareCanvas(this.canvas, this.scene);
+    if (followsRobot(this.scene)) {
+      view = stillView(this.scene, clip, cssWidth, cssHeight);
+      publishView(this.canvas, view);
+    }
     drawClipFrame(ctx, view, this.scene, clip, clip.positions.length - 1);
     await this.wait(REDUCED_MOTION_HOLD_MS);
     return run === this.run;
+  }
+
+  /** The view of frame `t`: the whole scene (`fitted`), or the followed robot's surroundings. */
+  frameView(fitted, clip, t) {
+    if (!followsRobot(this.scene)) return fitted;
+    const view = followView(this.scene, fitted.width, fitted.height, poseAt(clip, t)[0].position);
+    publishView(this.canvas, view);
+    return view;
   }
 
   animate(clip, run) {
@@ -106,7 +173,7 @@ export class ClipPlayer {
           ({ ctx, view, cssWidth } = prepareCanvas(this.canvas, this.scene)); // window resized
         }
         const t = Math.min(steps, (now - start) / 1000 / STEP_SECONDS);
-        drawClipFrame(ctx, view, this.scene, clip, t);
+        drawClipFrame(ctx, this.frameView(view, clip, t), this.scene, clip, t);
         if (t >= steps) return resolve(true);
         requestAnimationFrame(frame);
       };

@@ -5,6 +5,7 @@ import {
   ROBOT_COLOR,
   agentStyle,
   centreOnAxis,
+  clipToScene,
   placeTag,
   drawAgent,
   drawBackground,
@@ -365,14 +366,9 @@ export class PredictionInput {
   /** The reach of one step around the last position, cut at the scene's edge. */
   drawReach(ctx, view) {
     if (this.stateDone()) return;
-    const { bounds } = this.scene;
     const [cx, cy] = view.toPx(this.anchor());
-    const [x0, y0] = view.toPx([bounds.x_min_m, bounds.y_min_m]);
-    const [x1, y1] = view.toPx([bounds.x_max_m, bounds.y_max_m]);
     ctx.save();
-    ctx.beginPath();
-    ctx.rect(x0, y0, x1 - x0, y1 - y0);
-    ctx.clip();
+    clipToScene(ctx, view, this.scene.bounds);
     ctx.fillStyle = ROBOT_COLOR;
     ctx.strokeStyle = ROBOT_COLOR;
     ctx.lineWidth = 1.5;

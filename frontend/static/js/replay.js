@@ -1,8 +1,8 @@
 // Replay of one answered trial: the clip through the participant page's own player, then the
 // clicks up to a time in the trial, with Ours', the VAE's and the policy's moves over them.
 import { MODEL_COLORS, MODEL_LABELS, el } from "./dashboard.js";
-import { ClipPlayer, trialClips } from "./player.js";
-import { agentStyle, drawAgent, drawBackground, drawClickMarker, drawTrace, prepareCanvas } from "./scene.js";
+import { ClipPlayer, followsRobot, trialClips } from "./player.js";
+import { agentStyle, clipToScene, drawAgent, drawBackground, drawClickMarker, drawTrace, prepareCanvas } from "./scene.js";
 
 export const REPLAY_MODELS = ["ours", "vae", "policy"];
 const CLICK_PLAYBACK_SPEED = 8; // trial milliseconds per wall-clock millisecond
@@ -36,11 +36,18 @@ function modelPath(ctx, view, model, start, points) {
   ctx.restore();
 }
 
-/** The scene, or (one start state chosen) a close-up of that start's robot, clicks and moves. */
-function viewScene(replay, start) {
-  const { scene, max_step_m: reach } = replay.trial;
-  if (!start) return scene;
-  const points = [start.robot, ...start.clicks.map((c) => c.at), ...REPLAY_MODELS.flatMap((m) => start.paths[m])];
+/**
+ * The scene, or a close-up of the `shown` start states' robots, clicks and moves: when one
+ * start state is chosen, and for every start state in a scene whose clips follow the robot (a
+ * recorded world is too large to show a trial's few metres of answers whole), with the
+ * segment and the person then.
+ */
+function viewScene(replay, shown, closeUp) {
+  const { scene, max_step_m: reach, segment, start_states: states } = replay.trial;
+  if (!closeUp && !followsRobot(scene)) return scene;
+  const points = shown.flatMap((start) => [start.robot, ...start.clicks.map((c) => c.at),
+    ...REPLAY_MODELS.flatMap((m) => start.paths[m])]);
+  if (!closeUp) points.push(...segment.positions.flat(), ...states.map((s) => s.human));
   const xs = points.map((p) => p[0]);
   const ys = points.map((p) => p[1]);
   const b = scene.bounds;
@@ -60,11 +67,13 @@ function viewScene(replay, start) {
 export function drawAnswers(canvas, replay, tMs, only = null) {
   const { trial, starts, click_order: order } = replay;
   const shown = starts.filter((s) => only === null || s.start_index === only);
-  const scene = viewScene(replay, only === null ? null : shown[0]);
+  const scene = viewScene(replay, shown, only !== null);
   const { ctx, view } = prepareCanvas(canvas, scene);
   const robot = agentStyle(scene, 0);
   const human = agentStyle(scene, 1);
   drawBackground(ctx, view, scene);
+  ctx.save();
+  clipToScene(ctx, view, scene.bounds); // a close-up's traces and agents stop at its edge
   const segment = trial.segment.positions;
   drawTrace(ctx, view, robot, segment.map((s) => s[0]), { alpha: 0.25 });
   drawTrace(ctx, view, human, segment.map((s) => s[1]), { alpha: 0.25 });
@@ -86,6 +95,7 @@ export function drawAnswers(canvas, replay, tMs, only = null) {
   for (const start of shown) {
     for (const model of REPLAY_MODELS) modelPath(ctx, view, model, start.robot, start.paths[model]);
   }
+  ctx.restore();
   canvas.dataset.clicksDrawn = String(drawn);
   return drawn;
 }

@@ -10,6 +10,7 @@ const HUMAN_TEXT = PALETTE.human_text;
 export const GROUND = PALETTE.ground;
 const LANE_MARK = PALETTE.lane_mark;
 export const GOAL_COLORS = PALETTE.goals;
+export const MAP = PALETTE.map;
 const MARGIN_PX = 24;
 
 /** Uniform metres->CSS-pixel transform that fits `bounds` in a w x h box with margins. */
@@ -98,16 +99,24 @@ export function publishView(canvas, view) {
 }
 
 /**
- * Background: bounds, road and lanes, obstacles and goals. `t` is the clip's fractional
- * step: in a moving frame the lane markings slide backwards by the distance it has moved.
+ * Background: bounds, road and lanes (or a recorded scene's map), obstacles and goals. `t` is
+ * the clip's fractional step: in a moving frame the lane markings slide backwards by the
+ * distance it has moved.
  */
 export function drawBackground(ctx, view, scene, t = 0, { labels = true } = {}) {
   const { bounds } = scene;
   const [x0, y0] = view.toPx([bounds.x_min_m, bounds.y_min_m]);
   const [x1, y1] = view.toPx([bounds.x_max_m, bounds.y_max_m]);
   ctx.clearRect(0, 0, ctx.canvas.width, ctx.canvas.height);
-  ctx.fillStyle = scene.lanes?.length ? GROUND.shoulder : GROUND.field;
+  ctx.fillStyle = scene.recorded ? MAP.field : scene.lanes?.length ? GROUND.shoulder : GROUND.field;
   ctx.fillRect(x0, y0, x1 - x0, y1 - y0);
+  if (scene.recorded) {
+    ctx.save();
+    clipToScene(ctx, view, bounds);
+    drawDriven(ctx, view, scene.recorded.driven);
+    drawMapLines(ctx, view, scene.recorded.lines || []);
+    ctx.restore();
+  }
   drawLanes(ctx, view, scene, t);
   (scene.obstacles || []).forEach((obstacle) => drawObstacle(ctx, view, obstacle));
   (scene.goals || []).forEach((goal, k) => drawGoal(ctx, view, goal, k, labels));
@@ -115,6 +124,15 @@ export function drawBackground(ctx, view, scene, t = 0, { labels = true } = {}) 
   ctx.lineWidth = 1;
   ctx.setLineDash([]);
   ctx.strokeRect(x0, y0, x1 - x0, y1 - y0);
+}
+
+/** Clip what is drawn next to the scene's bounds (the caller saves and restores). */
+export function clipToScene(ctx, view, bounds) {
+  const [x0, y0] = view.toPx([bounds.x_min_m, bounds.y_min_m]);
+  const [x1, y1] = view.toPx([bounds.x_max_m, bounds.y_max_m]);
+  ctx.beginPath();
+  ctx.rect(x0, y0, x1 - x0, y1 - y0);
+  ctx.clip();
 }
 
 // Highway lane markings: 3 m painted, 9 m gap (the US MUTCD broken line), drawn in metres so
@@ -150,6 +168,77 @@ function drawLanes(ctx, view, scene, t) {
   });
   ctx.setLineDash([]);
   ctx.lineDashOffset = 0;
+}
+
+const drivenBoxes = new WeakMap();
+
+/** The driven area as rectangles [x0, y0, x1, y1] (m): a row's run that repeats the run
+ * just above it extends that rectangle down, so a straight band is one rectangle. */
+function mergedRuns(driven) {
+  if (drivenBoxes.has(driven)) return drivenBoxes.get(driven);
+  const { cell_m: cell, x0_m: left, y0_m: top } = driven;
+  const open = new Map(); // "first,last" -> the rectangle that run reached, and its last row
+  const boxes = [];
+  for (const [row, first, last] of driven.runs) {
+    const key = `${first},${last}`;
+    const above = open.get(key);
+    if (above?.row === row - 1) {
+      above.row = row;
+      above.box[3] = top + (row + 1) * cell;
+      continue;
+    }
+    const box = [left + first * cell, top + row * cell, left + (last + 1) * cell, top + (row + 1) * cell];
+    boxes.push(box);
+    open.set(key, { row, box });
+  }
+  drivenBoxes.set(driven, boxes);
+  return boxes;
+}
+
+/** Where recorded cars drove, in the road colour: one path, filled once, so rectangles that
+ * touch leave no anti-aliased seam between them. */
+function drawDriven(ctx, view, driven) {
+  if (!driven) return;
+  ctx.beginPath();
+  for (const [ax, ay, bx, by] of mergedRuns(driven)) {
+    const [x0, y0] = view.toPx([ax, ay]);
+    const [x1, y1] = view.toPx([bx, by]);
+    ctx.rect(x0, y0, x1 - x0, y1 - y0);
+  }
+  ctx.fillStyle = MAP.road;
+  ctx.fill();
+}
+
+// How a map's lines are drawn, faintest first: width in metres, held within [min, max] CSS px
+// so a line stays visible on the small overview map and does not swamp the close-up;
+// `dots`: a dotted line (round dots `gap` px apart).
+const MAP_LINES = [
+  ["virtual", { widthM: 0.12, minPx: 1.2, maxPx: 1.5, dots: true, gapPx: 5 }],
+  ["border", { widthM: 0.12, minPx: 1, maxPx: 2 }],
+  ["kerb", { widthM: 0.3, minPx: 1.5, maxPx: 4 }],
+  ["stop", { widthM: 0.5, minPx: 2, maxPx: 6 }],
+];
+
+function drawMapLines(ctx, view, lines) {
+  for (const [kind, style] of MAP_LINES) {
+    ctx.strokeStyle = MAP[kind];
+    ctx.lineWidth = Math.min(style.maxPx, Math.max(style.minPx, style.widthM * view.scale));
+    ctx.lineCap = style.dots ? "round" : "butt";
+    ctx.lineJoin = "round";
+    for (const line of lines.filter((l) => l.kind === kind)) {
+      if (style.dots) ctx.setLineDash([0, style.gapPx]);
+      else ctx.setLineDash(line.dashed ? DASH_M.map((m) => m * view.scale) : []);
+      ctx.beginPath();
+      line.points.forEach((p, i) => {
+        const [px, py] = view.toPx(p);
+        if (i === 0) ctx.moveTo(px, py);
+        else ctx.lineTo(px, py);
+      });
+      ctx.stroke();
+    }
+  }
+  ctx.setLineDash([]);
+  ctx.lineCap = "butt";
 }
 
 function drawObstacle(ctx, view, obstacle) {

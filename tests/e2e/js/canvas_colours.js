@@ -1,5 +1,6 @@
 // Every drawn thing a participant must see, drawn by the page's own code (scene.js) on each
-// ground it can stand on; returns the pixels (RGBA) the test computes contrast from.
+// ground it can stand on (a simulated scene's, flat; a recorded scene's road and field, as
+// drawBackground paints them); returns the pixels (RGBA) the test computes contrast from.
 async () => {
   const s = await import("/static/js/scene.js");
   const pixel = (ctx, x, y) => Array.from(ctx.getImageData(Math.round(x), Math.round(y), 1, 1).data);
@@ -18,12 +19,25 @@ async () => {
     }
     return [...counts.entries()].sort((a, b) => b[1] - a[1])[0][0].split(",").map(Number);
   };
-  const out = {};
-  for (const [name, ground] of Object.entries(s.GROUND)) {
-    const [c, ctx] = canvas(240, 160);
-    ctx.fillStyle = ground;
+  const flat = (colour) => (ctx) => {
+    ctx.fillStyle = colour;
     ctx.fillRect(0, 0, 240, 160);
+  };
+  // a recorded scene over the whole canvas, driven everywhere (road) or nowhere (field)
+  const recorded = (driven) => (ctx, view) => {
+    const scene = {
+      bounds: { x_min_m: -8, x_max_m: 8, y_min_m: -6, y_max_m: 6 }, agents: [],
+      recorded: { view_span_m: 60, lines: [], driven: { cell_m: 2, x0_m: -8, y0_m: -6, runs: driven ? [0, 1, 2, 3, 4, 5].map((r) => [r, 0, 7]) : [] } },
+    };
+    s.drawBackground(ctx, view, scene, 0, { labels: false });
+  };
+  const grounds = Object.entries(s.GROUND).map(([name, colour]) => [name, flat(colour)]);
+  grounds.push(["recorded road", recorded(true)], ["recorded field", recorded(false)]);
+  const out = {};
+  for (const [name, paint] of grounds) {
+    const [c, ctx] = canvas(240, 160);
     const view = s.viewAt(20, [0, 0], 240, 160);
+    paint(ctx, view);
     const at = (m) => pixel(ctx, ...view.toPx(m));
     s.drawAgent(ctx, view, disc(0), [-4, -1.5], 0, { tag: false });
     s.drawAgent(ctx, view, disc(1), [0, -1.5], null, { tag: false });

@@ -1,0 +1,127 @@
+"""Screenshots of the recorded worlds as a participant and a researcher see them.
+
+`python -m tests.e2e.shoot_recorded`: builds (or reuses) the tests' small interaction study on
+GENERATED, NOT REAL recordings (tests/conftest.py `cached_interaction_study`), serves it on a
+fresh SQLite file, walks it in Debian's chromium and writes var/screens/recorded_*.png: per
+world its introduction, an example clip mid-animation and the prediction screen with two
+clicks made; then the researcher dashboard and its replay of the roundabout's first main trial
+(every start state, then one).
+
+The walk runs on the page's fake clock, seconds of server time for minutes of a person's: the
+server trusts the page's clock (as pilots with bots do), so the too-fast rule keeps the session
+and the dashboard draws its error plots and field panels.
+"""
+
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+from tests.conftest import REPO, cached_interaction_study, free_port, start_server
+from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
+from tests.e2e.pages import (
+    VIEWPORT,
+    answer_survey,
+    answer_trial,
+    consent_and_instructions,
+    current_state,
+    fresh_recruitment,
+    open_dashboard,
+    place,
+    press_on,
+    shown_screen,
+    start_predicting,
+    visible,
+)
+
+OUT = REPO / "var" / "screens"
+MID_CLIP_MS = 1600  # into the first example: about half of its 9 steps of 0.35 s
+REPLAYED_WORLD = "roundabout"
+
+
+def shoot_participant(page, study_id: str) -> None:
+    """Consent to the survey, by clicking; per world its introduction, a clip and two clicks."""
+    consent_and_instructions(page)
+    screen = shown_screen(page)
+    while screen != "survey":
+        if screen == "world":
+            world = current_state(page, study_id)["step"]["world"]
+            page.wait_for_timeout(100)
+            page.screenshot(path=str(OUT / f"recorded_{world}_intro.png"))
+            press_on(page, screen)
+        elif screen == "trial" and current_state(page, study_id)["step"]["is_practice"]:
+            shoot_trial(page, study_id)
+        elif screen == "trial":
+            answer_trial(page, study_id)
+        else:
+            press_on(page, screen)
+        screen = shown_screen(page)
+    answer_survey(page)
+    visible(page, "done")
+
+
+def shoot_trial(page, study_id: str) -> None:
+    """A practice trial: mid-clip, then two clicks of the first start state; then the rest."""
+    trial = current_state(page, study_id)["step"]
+    page.clock.fast_forward(MID_CLIP_MS)
+    page.screenshot(path=str(OUT / f"recorded_{trial['world']}_clip.png"))
+    start_predicting(page)
+    place(page, trial, 0, [0, 1])
+    page.mouse.move(0, 0)  # no hover preview in the picture
+    page.screenshot(path=str(OUT / f"recorded_{trial['world']}_predict.png"))
+    answer_trial(page, study_id)
+
+
+def shoot_replay(page, url: str, study_id: str) -> None:
+    """The researcher dashboard, and its replay of the first main trial of REPLAYED_WORLD."""
+    open_dashboard(page, url, study_id)
+    page.wait_for_selector("table.sessions tbody tr")
+    page.wait_for_selector(".field-canvas")
+    page.screenshot(path=str(OUT / "recorded_dashboard.png"), full_page=True)
+    page.locator("table.sessions tbody tr").nth(0).locator("button").click()
+    page.wait_for_selector(".trial-row")
+    rows = page.locator(".trial-row")
+    texts = rows.all_inner_texts()
+    pick = next(i for i, t in enumerate(texts)
+                if REPLAYED_WORLD in t and "practice" not in t and "passed" not in t
+                and "failed" not in t)
+    rows.nth(pick).locator("button").click()
+    page.wait_for_selector("#replay-view:not([hidden])")
+    page.locator("#replay-card").screenshot(path=str(OUT / "recorded_replay.png"))
+    page.select_option("#replay-start", "1")
+    page.locator(".replay-stage").screenshot(path=str(OUT / "recorded_replay_start.png"))
+
+
+def main() -> None:
+    """Build or reuse the study, serve it, shoot."""
+    from playwright.sync_api import sync_playwright
+
+    study = cached_interaction_study()
+    OUT.mkdir(parents=True, exist_ok=True)
+    root = Path(tempfile.mkdtemp(prefix="tomstudy-shoot-"))
+    port = free_port()
+    proc = start_server(study, f"sqlite:///{root / 'study.db'}", port, log=root / "server.log",
+                        TOMSTUDY_TRUST_CLIENT_CLOCK="1")
+    url = f"http://127.0.0.1:{port}"
+    try:
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+            context = browser.new_context(viewport=VIEWPORT)
+            context.clock.install()
+            context.clock.pause_at(int(time.time() * 1000) + 1000)
+            page = context.new_page()
+            page.goto(f"{url}/s/{study.study_id}?{fresh_recruitment()}")
+            shoot_participant(page, study.study_id)
+            context.close()
+            page = browser.new_page(viewport={"width": 1400, "height": 1000})
+            shoot_replay(page, url, study.study_id)
+            browser.close()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+        shutil.rmtree(root, ignore_errors=True)
+    print(f"wrote {', '.join(sorted(p.name for p in OUT.glob('recorded_*.png')))} into {OUT}")
+
+
+if __name__ == "__main__":
+    main()
