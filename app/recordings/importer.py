@@ -2,7 +2,10 @@
 
 The recorded world's counterpart of `simulate`: read and validate every recording of the
 config's source (a format error names file, line and column), cut robot/human pairs over
-fixed windows (app/interaction/pairs.py), sample them every `dt_s`, label each pair with the
+fixed windows (app/interaction/pairs.py), drop the pairs whose two agents ever come closer
+than an agent's width (tracking errors, or the generator's cars passing through each other:
+no clip may show two cars on top of each other; meta.json counts them), sample them every
+`dt_s`, label each pair with the
 robot's and the human's turn over the window, mark the pairs of held-out recordings (every
 checkpoint's test split, so the bank's trials come from recordings no model trained on),
 and write data/<world>/trajectories.npz and meta.json. Everything is read and checked before
@@ -160,15 +163,19 @@ def frames_per(seconds: float, frame_dt_s: float, name: str) -> int:
     return int(round(frames))
 
 
-def split_pairs(rec: Recordings, config: RecordedConfig) -> dict[str, list[px.Pair]]:
-    """The pairs of each split ('train', 'val' = held out), evenly thinned to `max_pairs`."""
+def split_pairs(rec: Recordings, config: RecordedConfig) -> tuple[dict[str, list[px.Pair]],
+                                                                  dict[str, int]]:
+    """The pairs of each split ('train', 'val' = held out) whose agents never overlap, evenly
+    thinned to `max_pairs`; and how many overlapping pairs each split dropped."""
     size = frames_per(config.window_s, rec.frame_dt_s, "window_s")
     stride = frames_per(config.window_stride_s, rec.frame_dt_s, "window_stride_s")
-    out = {}
+    out, dropped = {}, {}
     for split in tx.SPLITS:
         chosen = [r for r in rec.recordings if r.name in rec.ranges[split]]
-        pairs = px.extract_pairs(chosen, size, stride, config.pair_max_distance_m,
+        found = px.extract_pairs(chosen, size, stride, config.pair_max_distance_m,
                                  rec.ranges[split], rec.rule)
+        pairs = [p for p in found if closest_m(p) >= config.agent.width_m]
+        dropped[split] = len(found) - len(pairs)
         if 0 < config.max_pairs < len(pairs):
             keep = np.linspace(0, len(pairs) - 1, config.max_pairs).round().astype(int)
             pairs = [pairs[k] for k in keep]
@@ -179,7 +186,13 @@ def split_pairs(rec: Recordings, config: RecordedConfig) -> dict[str, list[px.Pa
                 f"present for {config.window_s:g} s, within {config.pair_max_distance_m:g} m "
                 f"at some step); need {MIN_PAIRS}: record more, or shorten window_s")
         out[split] = pairs
-    return out
+    return out, dropped
+
+
+def closest_m(pair: px.Pair) -> float:
+    """The smallest distance between the robot's and the human's centres over the pair [m]."""
+    gaps = pair.positions[:, 0] - pair.positions[:, 1]
+    return float(np.hypot(gaps[:, 0], gaps[:, 1]).min())
 
 
 def turn_label(track: np.ndarray, threshold_deg: float) -> int:
@@ -217,7 +230,7 @@ def build_trajectories(world: str, config: RecordedConfig,
                        rec: Recordings) -> tuple[TrajectorySet, dict]:
     """The world's trajectories (training pairs first, then held-out) and their counts."""
     step = frames_per(config.dt_s, rec.frame_dt_s, "dt_s")
-    pairs = split_pairs(rec, config)
+    pairs, overlapping = split_pairs(rec, config)
     every = pairs["train"] + pairs["val"]
     frame = frame_around(np.concatenate([p.positions.reshape(-1, 2) for p in every]))
     episodes = [pair_episode(p, step, frame, config.turn_threshold_deg)
@@ -230,7 +243,9 @@ def build_trajectories(world: str, config: RecordedConfig,
                                         held_out)
     counts = {"recordings": {s: sum(hi >= lo for lo, hi in rec.ranges[s].values())
                              for s in tx.SPLITS},
-              "pairs": {"train": len(pairs["train"]), "held_out": len(pairs["val"])}}
+              "pairs": {"train": len(pairs["train"]), "held_out": len(pairs["val"])},
+              "pairs_dropped_overlapping": {"train": overlapping["train"],
+                                            "held_out": overlapping["val"]}}
     return trajs, counts
 
 

@@ -385,6 +385,7 @@ def test_generated_lab_logs_import_as_a_recorded_world(tmp_path):
     _write(logs.parent / "room_lines.csv", ROOM_LINES[0], ROOM_LINES[1:])
     config = RecordedConfig.model_validate({
         "kind": "recorded", "pair_max_distance_m": 10.0,
+        "agent": {"kind": "disc", "length_m": 0.6, "width_m": 0.6},
         "source": {"format": "csv", "path": "lab/logs.csv", "lines": "lab/room_lines.csv"}})
     layout = Layout(tmp_path / "var", tmp_path / "recordings")
     meta = import_recordings("lab", config, layout).meta

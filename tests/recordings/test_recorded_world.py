@@ -66,6 +66,16 @@ def test_v12_val_cases_are_held_out_and_v10_holds_out_each_recordings_end(import
         f"recorded_trackfiles/{INTERSECTION}/vehicle_tracks_000.csv", f"maps/{INTERSECTION}.osm"}
 
 
+def test_no_pair_shows_its_two_cars_on_top_of_each_other(imported):
+    dropped = 0
+    for world in ("roundabout", "intersection"):
+        trajs, meta = imported[world], imported[f"{world}_meta"]
+        gaps = np.linalg.norm(trajs.positions[:, :, 0] - trajs.positions[:, :, 1], axis=-1)
+        assert gaps.min() >= 1.9  # the car's width
+        dropped += sum(meta["pairs_dropped_overlapping"].values())
+    assert dropped > 0  # the generator's cars do pass through each other
+
+
 def test_pairs_are_sampled_every_dt_and_labelled(imported):
     trajs = imported["roundabout"]
     assert trajs.dt_s == 0.4 and trajs.positions.shape[1:] == (10, 2, 2)  # 4 s = 9 steps
