@@ -18,7 +18,8 @@ def test_analysis_imports_nothing_from_app():
     assert {src: t for src, t in upward.items() if t} == {}
 
 
-OFFLINE = ("worlds", "data", "learning", "interaction", "observers", "study", "bank")
+OFFLINE = ("worlds", "data", "learning", "interaction", "observers", "study", "bank",
+           "predictors")
 WEB = ("fastapi", "sqlmodel", "sqlalchemy", "starlette", "app.server", "app.researcher",
        "app.pilot", "app.main")
 
