@@ -168,6 +168,33 @@ def cached_small_study() -> SmallStudy:
     return SmallStudy(root / "var", root / "configs")
 
 
+CTRV_STUDY = "ctrv_study"
+
+
+def plugin_study(small: SmallStudy, root: Path, predictors: list[str],
+                 study_id: str = CTRV_STUDY) -> SmallStudy:
+    """The small study with plug-in `predictors` under `root`: its data and checkpoints
+    linked, its configs copied with study `study_id` naming them, the bank built and frozen."""
+    import yaml
+
+    data, configs = root / "var", root / "configs"
+    data.mkdir(parents=True)
+    for sub in ("data", "models"):
+        (data / sub).symlink_to(small.data_dir / sub)
+    shutil.copytree(small.configs_dir, configs)
+    study = yaml.safe_load((configs / f"{SMALL_STUDY}.yaml").read_text())
+    (configs / f"{study_id}.yaml").write_text(yaml.safe_dump(study | {"predictors": predictors}))
+    built = SmallStudy(data, configs, study_id)
+    build_bundle_of(built)
+    return built
+
+
+@pytest.fixture(scope="session")
+def ctrv_study(small_study, tmp_path_factory) -> SmallStudy:
+    """The small study whose config names the CTRV plug-in, built into its own bundle."""
+    return plugin_study(small_study, tmp_path_factory.mktemp("ctrv"), ["ctrv"])
+
+
 def remove_stale_caches(keep: Path, max_age_s: float = 3 * 3600) -> None:
     """Delete other small-study caches untouched for 3 hours (the code they ran changed)."""
     for other in keep.parent.glob("tomstudy-small-study-*"):

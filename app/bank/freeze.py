@@ -95,17 +95,18 @@ def manifest(config: StudyConfig, study_id: str, bank: TrialBank, entries: dict,
            "seeds": list(config.models.seeds), "models": models,
            "content_sha256": sha256_bytes(json.dumps(entries, sort_keys=True).encode()),
            "files": entries, "built": build_environment(wall_time_s)}
-    if config.predictors:
-        out["predictors"] = plugin_entries(config, bank)
+    plugins = plugin_entries(bank)
+    if plugins:
+        out["predictors"] = plugins
     return out
 
 
-def plugin_entries(config: StudyConfig, bank: TrialBank) -> dict:
-    """Each plug-in predictor's content hash (as the bank stores it) and the distribution and
-    version that provided it."""
-    first = bank.trials_of(config.worlds[0], "main")[0]
-    return {name: {"content_hash": first.primary(name).content_hash, **distribution(name)}
-            for name in config.predictors}
+def plugin_entries(bank: TrialBank) -> dict:
+    """Each plug-in predictor the bank stores answers of: its content hash (as stored) and the
+    installed distribution and version that provide it."""
+    first = next(iter(bank.by_id.values()))
+    return {name: {"content_hash": family[0].content_hash, **distribution(name)}
+            for name, family in sorted(first.predictions.items()) if name not in MODELS}
 
 
 def build_environment(wall_time_s: float | None) -> dict:

@@ -167,11 +167,9 @@ def agreement_lines(checks: list[Agreement], plugins: dict[str, dict]) -> list[s
 
 def plugin_line(name: str, frozen: dict) -> str:
     """A plug-in's frozen and installed distribution, for the verify report."""
-    try:
-        here = distribution(name)
-        installed = f"{here['distribution']} {here['version']}"
-    except KeyError:
-        installed = "not installed"
+    here = distribution(name)
+    installed = f"{here['distribution']} {here['version']}" if here["distribution"] else \
+        "not installed"
     return (f"plug-in {name}: frozen with {frozen['distribution']} {frozen['version']} "
             f"({frozen['content_hash'][:12]}), installed: {installed}")
 

@@ -71,7 +71,7 @@ def load_predictor(name: str) -> Predictor:
 
 
 def distribution(name: str) -> dict[str, str]:
-    """The installed distribution that registers `name` and its version."""
-    found = registered()[name]
-    dist = found.dist
+    """The installed distribution that registers `name` and its version ('' when none)."""
+    found = registered().get(name)
+    dist = found.dist if found else None
     return {"distribution": dist.name if dist else "", "version": dist.version if dist else ""}
