@@ -32,6 +32,24 @@ EXPORT_COLUMNS = (
     "vae_code", "ours_sha256", "vae_sha256", "click_time_ms", "trial_duration_ms", "replays",
     "submission_id", "submitted_at", "config_sha256", "bank_sha256",
 )
+# Each plug-in predictor of a study (app/predictors/) adds these columns, in the study config's
+# order after the contract's, named <predictor>_<field>; a plug-in's code is -1 when it has none
+PLUGIN_FIELDS = {"vx": "float", "vy": "float", "code": "int", "sha256": "text"}
+
+
+def plugin_columns(name: str) -> list[str]:
+    """The export columns of plug-in predictor `name`."""
+    return [f"{name}_{field}" for field in PLUGIN_FIELDS]
+
+
+def plugin_names(columns) -> list[str]:
+    """The plug-in predictors whose columns are all among `columns`, in the order they appear
+    (Ours, the VAE, constant velocity and the policy are the contract's own)."""
+    present = set(columns)
+    names = [c[: -len("_sha256")] for c in columns if c.endswith("_sha256")]
+    return [n for n in names if n not in MODELS and present.issuperset(plugin_columns(n))]
+
+
 # columns added after the first export, with the value an older export's rows read as
 ADDED_COLUMNS = {"arm": "", "replaced": False}
 SORT_KEYS = ["participant_id", "trial_index", "trial_id", "start_index", "step"]

@@ -1,0 +1,83 @@
+"""A participant's answer on a study with the CTRV plug-in: stored beside every predictor's in
+one transaction, exported exactly (columns ctrv_vx, ctrv_vy, ctrv_code, ctrv_sha256), read back
+alike from the CSV and the database, and listed on the dashboard."""
+
+import io
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from sqlalchemy import select
+from sqlmodel import Session
+
+from analysis.contracts import EXPORT_COLUMNS, plugin_columns
+from analysis.load import load_csv, load_database
+from app.predictors.ctrv import CTRV
+from app.predictors.protocol import ask
+from app.server.db import make_engine
+from app.server.tables import PredictionRow
+from tests.study.flow import ADMIN, at_first_trial, make_client, prolific
+
+
+@pytest.fixture
+def ctrv_client(ctrv_study, db_url):
+    """The app serving the CTRV study on a fresh database."""
+    with make_client(ctrv_study, db_url) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def ctrv_bank(ctrv_study) -> dict:
+    """The CTRV study's bank trials by id, and its dt and steps per world."""
+    raw = json.loads(ctrv_study.layout.bank(ctrv_study.study_id).read_text())
+    return {t["trial_id"]: t | {"dt_s": w["dt_s"]} for w in raw["worlds"].values()
+            for t in w["trials"]}
+
+
+def finished_export(client, study_id: str, bank: dict) -> str:
+    """One participant through the whole study; the predictions export's CSV text."""
+    p = at_first_trial(client, study_id, **prolific("plugin"))
+    p.finish(bank)
+    r = client.get("/api/researcher/export.csv", params={"study_id": study_id}, headers=ADMIN)
+    assert r.status_code == 200, r.text
+    return r.text
+
+
+def ctrv_of(trial: dict, steps: int) -> np.ndarray:
+    """CTRV's answer [K, n, 2] to a bank trial, computed here."""
+    starts = np.array([[s["robot"], s["human"]] for s in trial["start_states"]])
+    headings = [s["robot_heading"] for s in trial["start_states"]]
+    return ask(CTRV(), trial["model_input"], starts, headings, trial["dt_s"], steps).actions
+
+
+def test_a_plugins_answer_is_stored_and_exported_exactly(ctrv_client, ctrv_study, ctrv_bank,
+                                                         db_url):
+    text = finished_export(ctrv_client, ctrv_study.study_id, ctrv_bank)
+    frame = pd.read_csv(io.StringIO(text))
+    assert list(frame.columns) == [*EXPORT_COLUMNS, *plugin_columns("ctrv")]
+    assert len(frame) > 0 and frame["trial_id"].nunique() > 5
+    assert (frame["ctrv_code"] == -1).all()
+    assert set(frame["ctrv_sha256"]) == {CTRV().content_hash}
+    for (trial_id, start, step), row in frame.set_index(
+            ["trial_id", "start_index", "step"]).iterrows():
+        trial = ctrv_bank[trial_id]
+        stored = trial["predictions"]["ctrv"][0]["actions"][start][step]
+        exported = [row["ctrv_vx"], row["ctrv_vy"]]
+        assert np.round(exported, 5).tolist() == stored  # the bank's, as the bank rounds
+        assert exported == ctrv_of(trial, 3)[start, step].tolist()  # the server's, exactly
+    from_csv = load_csv(io.StringIO(text))
+    from_db = load_database(db_url, ctrv_study.study_id)
+    pd.testing.assert_frame_equal(from_db, from_csv)
+    assert from_csv["ctrv_code"].dtype == np.int64 and from_csv["ctrv_vx"].dtype == np.float64
+
+
+def test_the_rows_hold_the_plugin_in_their_plugins_column(ctrv_client, ctrv_study, ctrv_bank,
+                                                          db_url):
+    finished_export(ctrv_client, ctrv_study.study_id, ctrv_bank)
+    engine = make_engine(db_url)
+    with Session(engine) as db:
+        cells = db.execute(select(PredictionRow.plugins, PredictionRow.ours_sha256)).all()
+    engine.dispose()
+    assert cells and all(set(plugins) == {"ctrv"} and set(plugins["ctrv"]) ==
+                         {"vx", "vy", "code", "sha256"} for plugins, _ in cells)
