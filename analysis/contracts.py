@@ -2,12 +2,14 @@
 
 - the export columns and their types (predictions, survey, events, participants);
 - the exclusion rules a study config names and the analysis applies;
-- how the figures and the researcher dashboard name and colour each model.
+- how the figures and the researcher dashboard name and colour each model (and plug-in).
 
 The metric itself, alignment error, is in analysis/alignment.py. Both `app` and `analysis`
 import this module; it imports neither, so the packages depend one way. Only numpy and
 pydantic.
 """
+
+import hashlib
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -87,6 +89,31 @@ MODEL_COLORS = {"ours": "#E69F00", "vae": "#0072B2", "cv": "#009E73", "policy": 
                 "human": "#000000"}
 MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy",
                 "human": "Participants"}
+# plug-in predictors' colours: the rest of Okabe-Ito, then Paul Tol's muted set
+PLUGIN_COLORS = ("#D55E00", "#56B4E9", "#882255", "#44AA99", "#117733", "#999933", "#AA4499",
+                 "#332288")
+
+
+def model_color(name: str) -> str:
+    """A predictor's colour: the study's own from MODEL_COLORS; a plug-in's picked from
+    PLUGIN_COLORS by the SHA-256 of its name, so it is the same in every study and figure."""
+    if name in MODEL_COLORS:
+        return MODEL_COLORS[name]
+    digest = hashlib.sha256(name.encode()).digest()
+    return PLUGIN_COLORS[int.from_bytes(digest[:4], "big") % len(PLUGIN_COLORS)]
+
+
+def model_label(name: str) -> str:
+    """A predictor's label: the study's own from MODEL_LABELS; a plug-in's is its registered
+    name, the prefix of its export columns."""
+    return MODEL_LABELS.get(name, name)
+
+
+def model_style(names) -> dict[str, dict[str, str]]:
+    """Colours and labels of `names` (and the people's), as the dashboard draws them."""
+    names = [*names, "human"]
+    return {"colors": {n: model_color(n) for n in names},
+            "labels": {n: model_label(n) for n in names}}
 
 PILOT = "pilot"  # the recruitment of a researcher's preview session
 
