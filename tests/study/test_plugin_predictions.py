@@ -11,7 +11,8 @@ import pytest
 from sqlalchemy import select
 from sqlmodel import Session
 
-from analysis.contracts import EXPORT_COLUMNS, plugin_columns
+from analysis.alignment import alignment_error
+from analysis.contracts import EXPORT_COLUMNS, MODEL_COLORS, model_color, plugin_columns
 from analysis.load import load_csv, load_database
 from app.predictors.ctrv import CTRV
 from app.predictors.protocol import ask
@@ -81,3 +82,51 @@ def test_the_rows_hold_the_plugin_in_their_plugins_column(ctrv_client, ctrv_stud
     engine.dispose()
     assert cells and all(set(plugins) == {"ctrv"} and set(plugins["ctrv"]) ==
                          {"vx", "vy", "code", "sha256"} for plugins, _ in cells)
+
+
+def test_the_dashboard_and_summary_list_every_predictor(ctrv_client, ctrv_study, ctrv_bank):
+    finished_export(ctrv_client, ctrv_study.study_id, ctrv_bank)
+    r = ctrv_client.get("/api/researcher/dashboard", params={"study_id": ctrv_study.study_id},
+                        headers=ADMIN)
+    assert r.status_code == 200, r.text
+    alignment = r.json()["alignment"]
+    names = ["ours", "vae", "cv", "ctrv", "policy"]
+    assert alignment["predictors"] == names
+    assert alignment["style"]["labels"]["ctrv"] == "ctrv"
+    assert alignment["style"]["colors"]["ctrv"] == model_color("ctrv")
+    assert alignment["style"]["colors"]["ours"] == MODEL_COLORS["ours"]
+    export = load_csv(io.StringIO(ctrv_client.get(
+        "/api/researcher/export.csv", params={"study_id": ctrv_study.study_id},
+        headers=ADMIN).text))
+    scored = export[~export["is_practice"] & ~export["attention_check"]]
+    assert set(alignment["worlds"]) == {"highway", "obstacle"}
+    for world, entry in alignment["worlds"].items():
+        assert list(entry["models"]) == names, world
+        (mine,) = entry["models"]["ctrv"]["participants"]
+        rows = scored[scored["world"] == world]
+        by_hand = alignment_error(rows[["human_vx", "human_vy"]].to_numpy(),
+                                  rows[["ctrv_vx", "ctrv_vy"]].to_numpy()).mean()
+        assert mine == pytest.approx(by_hand, abs=1e-5)
+    summary = ctrv_client.get("/api/researcher/summary", params={"study_id": ctrv_study.study_id},
+                              headers=ADMIN).json()
+    kept = summary["alignment_error"]["kept"]
+    assert kept and all(0 <= kept[w]["ctrv"] <= 2 for w in kept)
+
+
+def test_the_replay_draws_the_plugin_from_its_stored_answer(ctrv_client, ctrv_study,
+                                                            ctrv_bank):
+    finished_export(ctrv_client, ctrv_study.study_id, ctrv_bank)
+    board = ctrv_client.get("/api/researcher/dashboard", params={"study_id": ctrv_study.study_id},
+                            headers=ADMIN).json()
+    public_id = board["participants"][0]["public_id"]
+    base = f"/api/researcher/participants/{public_id}/trials"
+    trials = ctrv_client.get(base, params={"study_id": ctrv_study.study_id}, headers=ADMIN)
+    trial_id = trials.json()["trials"][-1]["trial_id"]
+    replay = ctrv_client.get(f"{base}/{trial_id}", params={"study_id": ctrv_study.study_id},
+                             headers=ADMIN).json()
+    assert replay["models"] == ["ours", "vae", "policy", "ctrv"]
+    record = ctrv_bank[trial_id]
+    starts = np.asarray([s["robot"] for s in record["start_states"]])
+    rolled = starts[:, None] + record["dt_s"] * np.cumsum(ctrv_of(record, 3), axis=1)
+    got = np.asarray([s["paths"]["ctrv"] for s in replay["starts"]])
+    assert got == pytest.approx(rolled, abs=1e-3)

@@ -4,13 +4,20 @@ import { MODEL_COLORS, MODEL_LABELS, el } from "./dashboard.js";
 import { ClipPlayer, trialClips } from "./player.js";
 import { agentStyle, drawAgent, drawBackground, drawClickMarker, drawTrace, prepareCanvas } from "./scene.js";
 
+// drawn by default; a replay's own `models` adds the study's plug-in predictors after them
 export const REPLAY_MODELS = ["ours", "vae", "policy"];
+const PLUGIN_DASH = [5, 2, 1, 2];
 const CLICK_PLAYBACK_SPEED = 8; // trial milliseconds per wall-clock millisecond
 const MODEL_DASH = { ours: [], vae: [7, 4], policy: [2, 3] };
 const $ = (id) => document.getElementById(id);
 
 function seconds(ms) {
   return `${(ms / 1000).toFixed(1)} s`;
+}
+
+/** The predictors a replay draws: Ours, the VAE, the policy and the study's plug-ins. */
+function drawn(replay) {
+  return replay.models ?? REPLAY_MODELS;
 }
 
 /** A path from `start` through `points` in one model's colour and dash. */
@@ -20,7 +27,7 @@ function modelPath(ctx, view, model, start, points) {
   ctx.fillStyle = MODEL_COLORS[model];
   ctx.lineWidth = 2;
   ctx.globalAlpha = 0.9;
-  ctx.setLineDash(MODEL_DASH[model]);
+  ctx.setLineDash(MODEL_DASH[model] ?? PLUGIN_DASH);
   ctx.beginPath();
   [start, ...points].forEach((p, i) => {
     const [px, py] = view.toPx(p);
@@ -40,7 +47,7 @@ function modelPath(ctx, view, model, start, points) {
 function viewScene(replay, start) {
   const { scene, max_step_m: reach } = replay.trial;
   if (!start) return scene;
-  const points = [start.robot, ...start.clicks.map((c) => c.at), ...REPLAY_MODELS.flatMap((m) => start.paths[m])];
+  const points = [start.robot, ...start.clicks.map((c) => c.at), ...drawn(replay).flatMap((m) => start.paths[m])];
   const xs = points.map((p) => p[0]);
   const ys = points.map((p) => p[1]);
   const b = scene.bounds;
@@ -84,7 +91,7 @@ export function drawAnswers(canvas, replay, tMs, only = null) {
   }
   // the models' moves last, over the clicks, so a close match does not hide them
   for (const start of shown) {
-    for (const model of REPLAY_MODELS) modelPath(ctx, view, model, start.robot, start.paths[model]);
+    for (const model of drawn(replay)) modelPath(ctx, view, model, start.robot, start.paths[model]);
   }
   canvas.dataset.clicksDrawn = String(drawn);
   return drawn;
@@ -145,7 +152,7 @@ export class ReplayView {
       ...starts.map((s) => el("option", { value: String(s.start_index), textContent: `${s.start_index + 1} (${s.start_kind})` })));
     const slider = $("replay-time");
     slider.max = String(Math.ceil(this.endMs()));
-    $("replay-legend").replaceChildren(...["human", ...REPLAY_MODELS].map((m) => {
+    $("replay-legend").replaceChildren(...["human", ...drawn(this.replay)].map((m) => {
       const swatch = el("span", { className: "swatch" });
       swatch.style.background = MODEL_COLORS[m];
       return el("span", { className: "legend-item" }, swatch, m === "human" ? "Participant's clicks (numbered in the order made)" : MODEL_LABELS[m]);
@@ -212,12 +219,12 @@ export class ReplayView {
   renderTables() {
     const { starts, click_order: order, response } = this.replay;
     const byKey = new Map(starts.flatMap((s) => s.clicks.map((c) => [`${s.start_index}:${c.step}`, [s, c]])));
-    const head = el("tr", {}, ...["#", "time", "start state", "step", ...REPLAY_MODELS.map((m) => `error ${MODEL_LABELS[m]}`)]
+    const head = el("tr", {}, ...["#", "time", "start state", "step", ...drawn(this.replay).map((m) => `error ${MODEL_LABELS[m]}`)]
       .map((t) => el("th", { textContent: t })));
     const rows = order.map((o, k) => {
       const [start, click] = byKey.get(`${o.start_index}:${o.step}`);
       const cells = [k + 1, seconds(click.t_ms), `${start.start_index + 1} (${start.start_kind})`, click.step + 1,
-        ...REPLAY_MODELS.map((m) => start.errors[m][click.step].toFixed(3))];
+        ...drawn(this.replay).map((m) => start.errors[m][click.step].toFixed(3))];
       return el("tr", {}, ...cells.map((c) => el("td", { textContent: String(c) })));
     });
     $("replay-clicks-count").textContent = `${order.length} clicks, in the order made; error = 1 - cos between the participant's move and the model's.`;
