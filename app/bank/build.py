@@ -113,7 +113,7 @@ def load_inputs(config: StudyConfig, name: str, layout: Layout) -> WorldInputs:
     learned = np.setdiff1d(np.arange(len(trajs)), sorted(set.union(*splits)))
     return WorldInputs(build_world(name), trajs, models, held_out, npz_path,
                        covered_states(trajs, learned), len(learned), list(config.models.seeds),
-                       layout.root, [load_predictor(name) for name in config.predictors])
+                       layout.root, [load_predictor(p) for p in config.predictors])
 
 
 def build_world_bank(config: StudyConfig, inputs: WorldInputs,

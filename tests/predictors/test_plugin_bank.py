@@ -128,3 +128,16 @@ def test_bundle_verify_passes_the_plugin_study(ctrv_study):
     rows = [line.split() for line in run.stdout.splitlines()]
     assert {(r[0], r[1], r[-1]) for r in rows if len(r) == 8 and r[2] == "-"} == {
         ("highway", "ctrv", "ok"), ("obstacle", "ctrv", "ok")}
+
+
+def test_a_plugin_changes_nothing_else_in_the_bank(ctrv_study, small_study):
+    """Same clips, start states, arms and model answers as the study without it: trial
+    selection (the models_disagree arm) reads Ours and the VAE only."""
+    with_ctrv = json.loads(ctrv_study.layout.bank(ctrv_study.study_id).read_text())
+    without = json.loads(small_study.layout.bank(small_study.study_id).read_text())
+    arms = [t["arm"] for w in with_ctrv["worlds"].values() for t in w["trials"]]
+    assert "models_disagree" in arms and "random" in arms
+    for world in with_ctrv["worlds"].values():
+        for trial in world["trials"]:
+            assert trial["predictions"].pop("ctrv")
+    assert with_ctrv | {"study_id": "small_study"} == without

@@ -16,7 +16,7 @@ function seconds(ms) {
 }
 
 /** The predictors a replay draws: Ours, the VAE, the policy and the study's plug-ins. */
-function drawn(replay) {
+function replayModels(replay) {
   return replay.models ?? REPLAY_MODELS;
 }
 
@@ -47,7 +47,7 @@ function modelPath(ctx, view, model, start, points) {
 function viewScene(replay, start) {
   const { scene, max_step_m: reach } = replay.trial;
   if (!start) return scene;
-  const points = [start.robot, ...start.clicks.map((c) => c.at), ...drawn(replay).flatMap((m) => start.paths[m])];
+  const points = [start.robot, ...start.clicks.map((c) => c.at), ...replayModels(replay).flatMap((m) => start.paths[m])];
   const xs = points.map((p) => p[0]);
   const ys = points.map((p) => p[1]);
   const b = scene.bounds;
@@ -91,7 +91,7 @@ export function drawAnswers(canvas, replay, tMs, only = null) {
   }
   // the models' moves last, over the clicks, so a close match does not hide them
   for (const start of shown) {
-    for (const model of drawn(replay)) modelPath(ctx, view, model, start.robot, start.paths[model]);
+    for (const model of replayModels(replay)) modelPath(ctx, view, model, start.robot, start.paths[model]);
   }
   canvas.dataset.clicksDrawn = String(drawn);
   return drawn;
@@ -152,7 +152,7 @@ export class ReplayView {
       ...starts.map((s) => el("option", { value: String(s.start_index), textContent: `${s.start_index + 1} (${s.start_kind})` })));
     const slider = $("replay-time");
     slider.max = String(Math.ceil(this.endMs()));
-    $("replay-legend").replaceChildren(...["human", ...drawn(this.replay)].map((m) => {
+    $("replay-legend").replaceChildren(...["human", ...replayModels(this.replay)].map((m) => {
       const swatch = el("span", { className: "swatch" });
       swatch.style.background = MODEL_COLORS[m];
       return el("span", { className: "legend-item" }, swatch, m === "human" ? "Participant's clicks (numbered in the order made)" : MODEL_LABELS[m]);
@@ -219,12 +219,12 @@ export class ReplayView {
   renderTables() {
     const { starts, click_order: order, response } = this.replay;
     const byKey = new Map(starts.flatMap((s) => s.clicks.map((c) => [`${s.start_index}:${c.step}`, [s, c]])));
-    const head = el("tr", {}, ...["#", "time", "start state", "step", ...drawn(this.replay).map((m) => `error ${MODEL_LABELS[m]}`)]
+    const head = el("tr", {}, ...["#", "time", "start state", "step", ...replayModels(this.replay).map((m) => `error ${MODEL_LABELS[m]}`)]
       .map((t) => el("th", { textContent: t })));
     const rows = order.map((o, k) => {
       const [start, click] = byKey.get(`${o.start_index}:${o.step}`);
       const cells = [k + 1, seconds(click.t_ms), `${start.start_index + 1} (${start.start_kind})`, click.step + 1,
-        ...drawn(this.replay).map((m) => start.errors[m][click.step].toFixed(3))];
+        ...replayModels(this.replay).map((m) => start.errors[m][click.step].toFixed(3))];
       return el("tr", {}, ...cells.map((c) => el("td", { textContent: String(c) })));
     });
     $("replay-clicks-count").textContent = `${order.length} clicks, in the order made; error = 1 - cos between the participant's move and the model's.`;
