@@ -5,7 +5,7 @@ import math
 import uuid
 
 from app.layout import Layout
-from tests.conftest import SmallStudy
+from tests.conftest import ADMIN_TOKEN, SmallStudy
 from tests.e2e.conftest import BROWSER_STUDY
 
 VIEWPORT = {"width": 1280, "height": 900}
@@ -16,6 +16,18 @@ THINK_MS = 1500  # fake-clock time between two clicks
 def fresh_recruitment() -> str:
     """URL parameters of a new Prolific participant (each visit a new session)."""
     return f"PROLIFIC_PID={uuid.uuid4().hex[:24]}&STUDY_ID={'5' * 24}&SESSION_ID=s1"
+
+
+def researcher_page(browser, base_url: str) -> tuple:
+    """The researcher dashboard opened with the test token, and the list its page errors go
+    to."""
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(f"{base_url}/researcher")
+    page.fill("#token-input", ADMIN_TOKEN)
+    page.click("#token-form button")
+    return page, errors
 
 
 def page_token(page, study_id: str = BROWSER_STUDY) -> str:

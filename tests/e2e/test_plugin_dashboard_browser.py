@@ -7,7 +7,8 @@ import pytest
 
 from analysis.contracts import model_color
 from app.pilot.bots import run_bots
-from tests.conftest import ADMIN_TOKEN, free_port, start_server
+from tests.conftest import free_port, start_server
+from tests.e2e.pages import researcher_page
 from tests.e2e.test_dashboard_browser import CANVAS_COLOURS
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
@@ -31,12 +32,7 @@ def plugin_server(ctrv_study, tmp_path_factory):
 
 
 def test_the_dashboard_shows_every_predictor_and_replays_the_plugin(plugin_server, chromium):
-    page = chromium.new_page(viewport={"width": 1300, "height": 900})
-    errors = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(f"{plugin_server}/researcher")
-    page.fill("#token-input", ADMIN_TOKEN)
-    page.click("#token-form button")
+    page, errors = researcher_page(chromium, plugin_server)
     page.wait_for_selector("table.ci-table")
     heads = page.locator("table.ci-table th").all_inner_texts()
     assert heads == ["world", "n", *LABELS]
