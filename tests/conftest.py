@@ -37,10 +37,10 @@ SMALL_TRAINING = {"max_epochs": 2, "patience_epochs": 2, "encoder_hidden": [32, 
                   "decoder_hidden": [32, 32], "windows_per_trajectory": 5,
                   "val_fraction": 0.15, "test_fraction": 0.45}
 SMALL_TRAJECTORIES = 70
-PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/bank/build.py",
-                    "app/bank/start_states.py", "app/study/trials.py", "app/study/config.py",
-                    "app/bank/bundle.py", "app/bank/freeze.py", "app/bank/verify.py",
-                    "app/fileio.py", "analysis/atomic.py", "study_configs"]
+PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/predictors",
+                    "app/bank/build.py", "app/bank/start_states.py", "app/study/trials.py",
+                    "app/study/config.py", "app/bank/bundle.py", "app/bank/freeze.py",
+                    "app/bank/verify.py", "app/fileio.py", "analysis/atomic.py", "study_configs"]
 
 
 @dataclass(frozen=True)
