@@ -2,12 +2,14 @@
 
 - the export columns and their types (predictions, survey, events, participants);
 - the exclusion rules a study config names and the analysis applies;
-- how the figures and the researcher dashboard name and colour each model.
+- how the figures and the researcher dashboard name and colour each model (and plug-in).
 
 The metric itself, alignment error, is in analysis/alignment.py. Both `app` and `analysis`
 import this module; it imports neither, so the packages depend one way. Only numpy and
 pydantic.
 """
+
+import hashlib
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -32,6 +34,24 @@ EXPORT_COLUMNS = (
     "vae_code", "ours_sha256", "vae_sha256", "click_time_ms", "trial_duration_ms", "replays",
     "submission_id", "submitted_at", "config_sha256", "bank_sha256",
 )
+# Each plug-in predictor of a study (app/predictors/) adds these columns, in the study config's
+# order after the contract's, named <predictor>_<field>; a plug-in's code is -1 when it has none
+PLUGIN_FIELDS = {"vx": "float", "vy": "float", "code": "int", "sha256": "text"}
+
+
+def plugin_columns(name: str) -> list[str]:
+    """The export columns of plug-in predictor `name`."""
+    return [f"{name}_{field}" for field in PLUGIN_FIELDS]
+
+
+def plugin_names(columns) -> list[str]:
+    """The plug-in predictors whose columns are all among `columns`, in the order they appear
+    (Ours, the VAE, constant velocity and the policy are the contract's own)."""
+    present = set(columns)
+    names = [c[: -len("_sha256")] for c in columns if c.endswith("_sha256")]
+    return [n for n in names if n not in MODELS and present.issuperset(plugin_columns(n))]
+
+
 # columns added after the first export, with the value an older export's rows read as
 ADDED_COLUMNS = {"arm": "", "replaced": False}
 SORT_KEYS = ["participant_id", "trial_index", "trial_id", "start_index", "step"]
@@ -69,6 +89,31 @@ MODEL_COLORS = {"ours": "#E69F00", "vae": "#0072B2", "cv": "#009E73", "policy": 
                 "human": "#000000"}
 MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy",
                 "human": "Participants"}
+# plug-in predictors' colours: the rest of Okabe-Ito, then Paul Tol's muted set
+PLUGIN_COLORS = ("#D55E00", "#56B4E9", "#882255", "#44AA99", "#117733", "#999933", "#AA4499",
+                 "#332288")
+
+
+def model_color(name: str) -> str:
+    """A predictor's colour: the study's own from MODEL_COLORS; a plug-in's picked from
+    PLUGIN_COLORS by the SHA-256 of its name, so it is the same in every study and figure."""
+    if name in MODEL_COLORS:
+        return MODEL_COLORS[name]
+    digest = hashlib.sha256(name.encode()).digest()
+    return PLUGIN_COLORS[int.from_bytes(digest[:4], "big") % len(PLUGIN_COLORS)]
+
+
+def model_label(name: str) -> str:
+    """A predictor's label: the study's own from MODEL_LABELS; a plug-in's is its registered
+    name, the prefix of its export columns."""
+    return MODEL_LABELS.get(name, name)
+
+
+def model_style(names) -> dict[str, dict[str, str]]:
+    """Colours and labels of `names` (and the people's), as the dashboard draws them."""
+    names = [*names, "human"]
+    return {"colors": {n: model_color(n) for n in names},
+            "labels": {n: model_label(n) for n in names}}
 
 PILOT = "pilot"  # the recruitment of a researcher's preview session
 

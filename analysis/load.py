@@ -1,12 +1,14 @@
 """Read the study's predictions, from the exported CSV or straight from the database.
 
 Both readers return the same tidy DataFrame: one row per (participant, trial, start state,
-step), the columns of the export contract (app/server/API.md) with fixed dtypes, sorted
-by participant, trial, start state and step. `participant_id` is the session's random
+step), the columns of the export contract (app/server/API.md) with fixed dtypes, then each
+plug-in predictor's four columns (`<name>_vx`, `_vy`, `_code`, `_sha256`), sorted by
+participant, trial, start state and step. `participant_id` is the session's random
 public id: the predictions carry no platform id.
 """
 
 import hashlib
+import json
 from datetime import UTC
 from pathlib import Path
 
@@ -17,10 +19,12 @@ from analysis.contracts import (
     ADDED_COLUMNS,
     BOOL_COLUMNS,
     EXPORT_COLUMNS,
-    FLOAT_COLUMNS,
     INT_COLUMNS,
+    PLUGIN_FIELDS,
     SORT_KEYS,
     STRING_COLUMNS,
+    plugin_columns,
+    plugin_names,
 )
 from analysis.csvsafe import restore_text
 
@@ -41,40 +45,77 @@ def _as_bool(values: pd.Series) -> pd.Series:
     return mapped.astype(bool)
 
 
+def column_kinds(columns) -> dict[str, str]:
+    """Every export column among `columns` and its kind (text, bool, int or float): the
+    contract's, then each plug-in predictor's."""
+    kinds = {c: ("text" if c in STRING_COLUMNS else "bool" if c in BOOL_COLUMNS
+                 else "int" if c in INT_COLUMNS else "float") for c in EXPORT_COLUMNS}
+    for name in plugin_names(columns):
+        kinds |= dict(zip(plugin_columns(name), PLUGIN_FIELDS.values(), strict=True))
+    return kinds
+
+
+def _cast(values: pd.Series, kind: str) -> pd.Series:
+    if kind == "text":
+        return values.fillna("").astype(str) if values.hasnans else values.astype(str)
+    if kind == "bool":
+        return _as_bool(values)
+    if kind == "int":
+        return pd.to_numeric(values, errors="coerce").fillna(-1).astype(np.int64)
+    return pd.to_numeric(values, errors="coerce").astype(np.float64)
+
+
 def normalise(frame: pd.DataFrame) -> pd.DataFrame:
-    """Cast the export columns to fixed dtypes and sort; extra columns are dropped, and
-    columns newer than the export (ADDED_COLUMNS) get the value older rows read as."""
+    """Cast the export columns (and plug-in predictors' columns) to fixed dtypes and sort;
+    other columns are dropped, and columns newer than the export (ADDED_COLUMNS) get the value
+    older rows read as."""
     frame = frame.assign(**{c: v for c, v in ADDED_COLUMNS.items() if c not in frame.columns})
     missing = [c for c in EXPORT_COLUMNS if c not in frame.columns]
     if missing:
         raise DataError(f"missing columns: {', '.join(missing)}")
     out = pd.DataFrame(index=frame.index)
-    for col in EXPORT_COLUMNS:
-        values = frame[col]
-        if col in STRING_COLUMNS:
-            out[col] = values.fillna("").astype(str) if values.hasnans else values.astype(str)
-        elif col in BOOL_COLUMNS:
-            out[col] = _as_bool(values)
-        elif col in INT_COLUMNS:
-            numbers = pd.to_numeric(values, errors="coerce")
-            out[col] = numbers.fillna(-1).astype(np.int64)
-        else:
-            out[col] = pd.to_numeric(values, errors="coerce").astype(np.float64)
+    for col, kind in column_kinds(frame.columns).items():
+        out[col] = _cast(frame[col], kind)
     return out.sort_values(SORT_KEYS, kind="stable").reset_index(drop=True)
+
+
+def expand_plugins(frame: pd.DataFrame, names: list[str] | None = None) -> pd.DataFrame:
+    """The server's `plugins` JSON column as each plug-in predictor's export columns (`names`,
+    or every plug-in the rows hold); a row without a plug-in's answer gets empty cells."""
+    cells = frame.pop("plugins") if "plugins" in frame.columns else [{}] * len(frame)
+    cells = [json.loads(c) if isinstance(c, str) else (c or {}) for c in cells]
+    if names is None:
+        names = list(dict.fromkeys(name for cell in cells for name in cell))
+    for name in names:
+        for field, column in zip(PLUGIN_FIELDS, plugin_columns(name), strict=True):
+            frame[column] = [cell.get(name, {}).get(field) for cell in cells]
+    return frame
 
 
 def load_csv(path: Path) -> pd.DataFrame:
     """The export CSV as a normalised DataFrame (typed while parsing, which is fast), its
     text as the server stored it (the quote that kept it from spreadsheets removed)."""
-    dtypes = {c: str for c in STRING_COLUMNS}
-    dtypes |= {c: np.float64 for c in (*FLOAT_COLUMNS, *INT_COLUMNS)}
     try:
+        kinds = column_kinds(_header(path))
+        texts = [c for c, kind in kinds.items() if kind == "text"]
+        numbers = [c for c, kind in kinds.items() if kind in ("int", "float")]
+        dtypes = {c: str for c in texts} | {c: np.float64 for c in numbers}
         raw = pd.read_csv(path, dtype=dtypes, keep_default_na=False,
-                          na_values={c: [""] for c in (*FLOAT_COLUMNS, *INT_COLUMNS)},
+                          na_values={c: [""] for c in numbers},
                           true_values=["True", "true"], false_values=["False", "false"])
     except ValueError as err:
         raise DataError(f"{path}: {err}") from err
-    return normalise(restore_text(raw, STRING_COLUMNS))  # as the database holds them
+    return normalise(restore_text(raw, texts))  # as the database holds them
+
+
+def _header(source) -> list[str]:
+    """A CSV's column names (an open file is left where it was)."""
+    if not hasattr(source, "seek"):
+        return list(pd.read_csv(source, nrows=0).columns)
+    where = source.tell()
+    columns = list(pd.read_csv(source, nrows=0).columns)
+    source.seek(where)
+    return columns
 
 
 def data_hash(frame: pd.DataFrame) -> str:
@@ -113,7 +154,8 @@ def load_database(url: str, study_id: str) -> pd.DataFrame:
                 *[pred.c[c] for c in EXPORT_COLUMNS if c in pred.c and c not in
                   ("participant_id", "trial_id", "submission_id")],
                 trial.c.duration_ms.label("trial_duration_ms"), trial.c.replays,
-                pred.c.submission_id, trial.c.received_at.label("submitted_at"))
+                pred.c.submission_id, trial.c.received_at.label("submitted_at"),
+                *[pred.c[c] for c in ("plugins",) if c in pred.c])  # older schemas lack it
             .select_from(pred.join(trial, trial.c.submission_id == pred.c.submission_id)
                          .join(part, part.c.id == pred.c.participant_id))
             .where(part.c.study_id == study_id))
@@ -124,7 +166,7 @@ def load_database(url: str, study_id: str) -> pd.DataFrame:
     if frame.empty:
         frame = pd.DataFrame(columns=list(EXPORT_COLUMNS))
     frame["submitted_at"] = frame["submitted_at"].map(_iso_time)
-    return normalise(frame)
+    return normalise(expand_plugins(frame))
 
 
 def _iso_time(value) -> str:

@@ -14,13 +14,23 @@ import numpy as np
 import pandas as pd
 
 from analysis.alignment import alignment_error, has_direction
-from analysis.contracts import MODELS, PILOT, ExclusionRules, too_fast_share_exceeds
+from analysis.contracts import (
+    MODELS,
+    PILOT,
+    ExclusionRules,
+    plugin_names,
+    too_fast_share_exceeds,
+)
 
 UNIT_KEYS = ["participant_id", "world"]
 
 
-def add_alignment_errors(frame: pd.DataFrame, models: tuple[str, ...] = MODELS) -> pd.DataFrame:
-    """A copy of `frame` with `err_<model>` columns: human action vs each model's action."""
+def add_alignment_errors(frame: pd.DataFrame,
+                         models: tuple[str, ...] | None = None) -> pd.DataFrame:
+    """A copy of `frame` with `err_<model>` columns: human action vs each model's action (by
+    default the contract's MODELS and every plug-in predictor the rows hold)."""
+    if models is None:
+        models = (*MODELS, *plugin_names(frame.columns))
     out = frame.copy()
     human = frame[["human_vx", "human_vy"]].to_numpy(np.float64)
     for model in models:

@@ -10,7 +10,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
-from analysis.contracts import MODEL_COLORS, MODEL_LABELS  # noqa: E402
+from analysis.contracts import MODEL_COLORS, MODEL_LABELS, model_color, model_label  # noqa: E402
 from analysis.fields import (  # noqa: E402
     FIELD_MODELS,
     arrow_length,
@@ -50,7 +50,7 @@ def plot_errors(means: pd.DataFrame, results: dict[str, PairedResult], base: Pat
         lines = np.stack([xs, values.T], axis=-1)  # one polyline per participant
         ax.add_collection(LineCollection(lines, colors="#bbbbbb", linewidths=0.7, zorder=1))
         for i, model in enumerate(models):
-            ax.scatter(i + jitter, values[i], s=12, color=MODEL_COLORS[model], alpha=0.6,
+            ax.scatter(i + jitter, values[i], s=12, color=model_color(model), alpha=0.6,
                        zorder=2, edgecolor="none")
             mean, low, high = mean_ci95(values[i])
             ax.errorbar(i + 0.28, mean, yerr=[[mean - low], [high - mean]], fmt="o",
@@ -61,7 +61,7 @@ def plot_errors(means: pd.DataFrame, results: dict[str, PairedResult], base: Pat
             title += (f"\nOurs-VAE: t={res.t:.2f}, p={res.p_two_sided:.2g}, "
                       f"d_z={res.d_z:.2f}, n={res.n}")
         ax.set_title(title, fontsize=9)
-        ax.set_xticks(range(len(models)), [MODEL_LABELS[m] for m in models])
+        ax.set_xticks(range(len(models)), [model_label(m) for m in models])
         ax.set_xlim(-0.5, len(models) - 0.3)
         ax.grid(axis="y", alpha=0.3)
     axes[0][0].set_ylabel("alignment error (1 - cos), mean per participant")

@@ -2,14 +2,16 @@
 
 Writes into the output folder: report.html (analysis/templates/study_report.html.j2,
 figures embedded as base64 PNG), summary.json, per_participant.csv, by_start_kind.csv,
-per_seed.csv, family.csv, by_arm.csv, mixed_model.csv and leave_one_trial_out.csv (every
-number the report shows), the figures as PNG and SVG, and meta.json (data and bank hashes,
-the model family's content hashes, study config). The study config is read by the caller
-(app/bank/served.py) and arrives as plain values and paths (`StudyInputs`).
+per_seed.csv, family.csv, by_arm.csv, mixed_model.csv, leave_one_trial_out.csv,
+predictors.csv and pairwise.csv (every number the report shows), the figures as PNG and SVG,
+and meta.json (data and bank hashes, the model family's content hashes, study config). The
+study config is read by the caller (app/bank/served.py) and arrives as plain values and paths
+(`StudyInputs`).
 
 Besides the primary answers (the primary seed's, in the export), the report reads every
 seed's answers from the trial bank (analysis/seeds.py) and treats trials as a random factor
-(analysis/trial_effects.py); both, and the per-arm comparison, run on the same kept rows.
+(analysis/trial_effects.py); both, and the per-arm comparison, run on the same kept rows, as
+does the comparison of every predictor (plug-ins too) with the people (analysis/predictors.py).
 """
 
 import time
@@ -32,6 +34,14 @@ from analysis.metrics import (
     zero_vector_counts,
 )
 from analysis.plots import plot_errors, plot_fields, plot_leave_one_trial_out, plot_seed_pairs
+from analysis.predictors import (
+    FAMILY,
+    REFERENCE,
+    pairwise_table,
+    predictor_means,
+    predictor_names,
+    world_means,
+)
 from analysis.seeds import seed_results, verdict_counts
 from analysis.stats import (
     ALPHA,
@@ -154,6 +164,20 @@ def robustness(kept: pd.DataFrame, bank: Bank | None, bank_path: Path,
     return summary, figures
 
 
+def every_predictor(kept: pd.DataFrame, out_dir: Path) -> tuple[dict, list[Path]]:
+    """Every predictor against the people (analysis/predictors.py): predictors.csv (per
+    participant and world), pairwise.csv, the side-by-side figure and their summary entry."""
+    names = predictor_names(kept.columns)
+    means = predictor_means(kept, names)
+    pairwise = pairwise_table(kept, names)
+    write_csv(means, out_dir / "predictors.csv", float_format="%.10g")
+    write_csv(pairwise, out_dir / "pairwise.csv", float_format="%.10g")
+    figures = plot_errors(means, {}, out_dir / "predictors", models=(*names, REFERENCE))
+    return {"names": names, "reference": REFERENCE, "family": FAMILY, "alpha": ALPHA,
+            "worlds": world_means(means, names),
+            "pairwise": nested(pairwise, ["world", "pair"])}, figures
+
+
 def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInputs,
             source: str, waive: tuple[str, ...] = ()) -> dict:
     """Run the whole analysis on the export rows and write the report folder."""
@@ -181,7 +205,9 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
     bank = read_bank(inputs.bank)
     extra, extra_figures = robustness(kept, bank, inputs.bank, out_dir)
     steps.update(1)
+    predictors, predictor_figures = every_predictor(kept, out_dir)
     figures = plot_errors(means, results, out_dir / "alignment_error") + extra_figures
+    figures += predictor_figures
     figures += plot_fields(kept, bank.scenes() if bank else {}, out_dir / "fields")
     steps.update(1)
     per_participant = means.merge(ade, on=["participant_id", "world"], how="left")
@@ -202,6 +228,7 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
         "hypothesis_supported": {w: bool(r.p_one_sided_less < ALPHA)
                                  for w, r in results.items()},
         **extra,
+        "predictors": predictors,
         "figures": sorted(p.name for p in figures),
     }
     write_outputs(out_dir, summary, figures, inputs, digest, bank, frame, started)
@@ -289,10 +316,20 @@ def headline(summary: dict) -> list[str]:
                                       summary["seed_pair_verdicts"][world]))
         lines.append(_trials_line(summary["mixed_model"][world]["pooled"]["primary"],
                                   summary["leave_one_trial_out"][world]["primary"]))
+        lines.append(_predictors_line(summary["predictors"], world))
     seeds = summary["seeds"]
     if seeds["status"] != "ok" or seeds["other_banks"] or seeds["rows_not_in_bank"]:
         lines.append(f"per seed: {seeds['note']}")
     return lines
+
+
+def _predictors_line(predictors: dict, world: str) -> str:
+    means = ", ".join(f"{name} {fmt(entry['mean'])}"
+                      for name, entry in predictors["worlds"][world].items())
+    lower = [f"{r['verdict']} < {r['b'] if r['verdict'] == r['a'] else r['a']}"
+             for r in predictors["pairwise"][world].values() if r["verdict"] != "neither"]
+    return (f"  every predictor: {means} ({REFERENCE}: reference); Holm p < "
+            f"{predictors['alpha']}: {', '.join(lower) or 'no pair'}")
 
 
 def _family_line(fam: dict, pairs: dict) -> str:

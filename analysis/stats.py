@@ -114,6 +114,14 @@ def by_arm_table(answer_sets: dict[str, pd.DataFrame]) -> pd.DataFrame:
     return with_verdicts(table[first + [c for c in table.columns if c not in first]])
 
 
+def holm(p_values) -> list[float]:
+    """Holm-Bonferroni adjusted p-values, in the input order (a NaN p counts as 1)."""
+    from statsmodels.stats.multitest import multipletests
+
+    p = np.nan_to_num(np.asarray(p_values, dtype=np.float64), nan=1.0)
+    return multipletests(p, method="holm")[1].tolist() if len(p) else []
+
+
 def plain_records(table: pd.DataFrame) -> list[dict]:
     """A table's rows as dicts of plain values, NaN as None (for JSON)."""
     return table.astype(object).where(table.notna(), None).to_dict("records")

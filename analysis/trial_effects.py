@@ -37,14 +37,14 @@ STATSMODELS_BOUNDARY = "The MLE may be on the boundary"
 FIT_METHODS = ["powell", "nm"]
 
 
-def trial_cells(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per participant and trial: rows, sums of err_ours and err_vae, and `diff`, the mean of
-    err_ours - err_vae over the trial's rows."""
+def trial_cells(rows: pd.DataFrame, a: str = "ours", b: str = "vae") -> pd.DataFrame:
+    """Per participant and trial: rows, sums of err_<a> and err_<b>, and `diff`, the mean of
+    err_<a> - err_<b> over the trial's rows (Ours and the VAE unless another pair is named)."""
     grouped = rows.groupby(CELL_KEYS, sort=True)
-    cells = grouped[["err_ours", "err_vae"]].sum()
-    cells.columns = ["sum_ours", "sum_vae"]
+    cells = grouped[[f"err_{a}", f"err_{b}"]].sum()
+    cells.columns = [f"sum_{a}", f"sum_{b}"]
     cells["n_rows"] = grouped.size()
-    cells["diff"] = (cells["sum_ours"] - cells["sum_vae"]) / cells["n_rows"]
+    cells["diff"] = (cells[f"sum_{a}"] - cells[f"sum_{b}"]) / cells["n_rows"]
     return cells.reset_index()
 
 

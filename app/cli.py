@@ -405,10 +405,11 @@ def bundle_verify(
     bundle: Annotated[Path | None, typer.Option(help="a bundle folder (default: the one the "
                                                 "study is served from)")] = None,
 ) -> None:
-    """Check every file against the manifest and recompute every stored model answer on this
-    machine; print the largest differences; exit 1 if any is beyond tolerance."""
+    """Check every file against the manifest and recompute every stored answer (every
+    checkpoint's and plug-in predictor's) on this machine; print the largest differences; exit
+    1 if any is beyond tolerance or a plug-in is not installed."""
     from app.bank.bundle import BundleError
-    from app.bank.model_answers import ACTION_TOLERANCE_MPS, recompute
+    from app.bank.model_answers import agreement_lines, recompute
     from app.bank.served import served_bundle
     from app.bank.verify import open_bundle
 
@@ -419,16 +420,8 @@ def bundle_verify(
     files = opened.manifest["files"]
     typer.echo(f"{opened.root}: {len(files)} files, {sum(f['bytes'] for f in files.values())} "
                f"bytes, every SHA-256 as in the manifest; bank {opened.bank.sha256[:12]}")
-    _, checks = recompute(opened.bank, opened.model)
-    typer.echo(f"{'world':<10}{'model':<7}{'seed':>5}{'answers':>9}{'max m':>11}{'max deg':>10}"
-               f"{'codes':>7}  verdict")
-    for c in checks:
-        typer.echo(f"{c.world:<10}{c.model:<7}{c.seed:>5}{c.answers:>9}{c.max_metres:>11.2e}"
-                   f"{c.max_degrees:>10.2e}{len(c.codes_changed):>7}  "
-                   f"{'ok' if c.ok else 'MISMATCH'}")
-    typer.echo(f"max m = largest |stored - recomputed| action x dt (one step's position); codes "
-               f"= trials encoded to another code; ok = same checkpoint, same codes, actions "
-               f"within {ACTION_TOLERANCE_MPS} m/s")
+    _, checks = recompute(opened.bank, opened.predictor)
+    echo_lines(agreement_lines(checks, opened.plugins))
     if not all(c.ok for c in checks):
         raise typer.Exit(1)
 

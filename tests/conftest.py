@@ -38,10 +38,10 @@ SMALL_TRAINING = {"max_epochs": 2, "patience_epochs": 2, "encoder_hidden": [32, 
                   "decoder_hidden": [32, 32], "windows_per_trajectory": 5,
                   "val_fraction": 0.15, "test_fraction": 0.45}
 SMALL_TRAJECTORIES = 70
-PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/bank/build.py",
-                    "app/bank/start_states.py", "app/study/trials.py", "app/study/config.py",
-                    "app/bank/bundle.py", "app/bank/freeze.py", "app/bank/verify.py",
-                    "app/fileio.py", "analysis/atomic.py", "study_configs"]
+PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/predictors",
+                    "app/bank/build.py", "app/bank/start_states.py", "app/study/trials.py",
+                    "app/study/config.py", "app/bank/bundle.py", "app/bank/freeze.py",
+                    "app/bank/verify.py", "app/fileio.py", "analysis/atomic.py", "study_configs"]
 
 
 @dataclass(frozen=True)
@@ -176,6 +176,33 @@ def cached_build(prefix: str, sources: list[str], build) -> SmallStudy:
     return SmallStudy(root / "var", root / "configs", (root / "done").read_text() or SMALL_STUDY)
 
 
+CTRV_STUDY = "ctrv_study"
+
+
+def plugin_study(small: SmallStudy, root: Path, predictors: list[str],
+                 study_id: str = CTRV_STUDY) -> SmallStudy:
+    """The small study with plug-in `predictors` under `root`: its data and checkpoints
+    linked, its configs copied with study `study_id` naming them, the bank built and frozen."""
+    import yaml
+
+    data, configs = root / "var", root / "configs"
+    data.mkdir(parents=True)
+    for sub in ("data", "models"):
+        (data / sub).symlink_to(small.data_dir / sub)
+    shutil.copytree(small.configs_dir, configs)
+    study = yaml.safe_load((configs / f"{SMALL_STUDY}.yaml").read_text())
+    (configs / f"{study_id}.yaml").write_text(yaml.safe_dump(study | {"predictors": predictors}))
+    built = SmallStudy(data, configs, study_id)
+    build_bundle_of(built)
+    return built
+
+
+@pytest.fixture(scope="session")
+def ctrv_study(small_study, tmp_path_factory) -> SmallStudy:
+    """The small study whose config names the CTRV plug-in, built into its own bundle."""
+    return plugin_study(small_study, tmp_path_factory.mktemp("ctrv"), ["ctrv"])
+
+
 def remove_stale_caches(keep: Path, prefix: str, max_age_s: float = 3 * 3600) -> None:
     """Delete other caches of `prefix` untouched for 3 hours (the code they ran changed)."""
     for other in keep.parent.glob(f"{prefix}-*"):
@@ -189,8 +216,7 @@ def remove_stale_caches(keep: Path, prefix: str, max_age_s: float = 3 * 3600) ->
 # INTERACTION files of its roundabout and intersection: 150 s of traffic each.
 INTERACTION_STUDY = "interaction_study"
 INTERACTION_SECONDS = 150.0
-INTERACTION_SOURCES = [*PIPELINE_SOURCES, "app/recordings", "app/interaction", "app/bank",
-                       "app/predictors"]
+INTERACTION_SOURCES = [*PIPELINE_SOURCES, "app/recordings", "app/interaction", "app/bank"]
 
 
 @pytest.fixture(scope="session")

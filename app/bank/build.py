@@ -7,14 +7,15 @@ the config's `main_trial_selection` in two arms (the first usable ones; and of f
 those where the Ours and VAE families disagree most, robot labels taking turns); `start_states`
 start states on the data near the robot; every seed of both models, a constant-velocity
 baseline and the world's own policy (`World.robot_policy_actions`) answered for every start
-state. Everything is computed from the rounded numbers the participant is shown. Nothing here
+state, and every plug-in predictor the config names (app/predictors/), each a family of one
+answer. Everything is computed from the rounded numbers the participant is shown. Nothing here
 depends on which world it is.
 Start states are chosen by start_states.py.
 """
 
 import platform
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +28,13 @@ from app.bank.start_states import NoStartStates, covered_states, start_states
 from app.data.trajectory import HUMAN, ROBOT, Covered, TrajectorySet
 from app.fileio import sha256_file
 from app.layout import Layout
+from app.predictors.builtin import CheckpointPredictor, ConstantVelocity
+from app.predictors.protocol import Predictor, ask
+from app.predictors.registry import load_predictor
 from app.study.config import StudyConfig
 from app.study.trials import (
     HEADING_DECIMALS,
+    NO_SEED,
     POS_DECIMALS,
     BankFile,
     Clip,
@@ -57,6 +62,7 @@ class WorldInputs:
     covered_trajectories: int
     seeds: list[int]  # the model family's seeds, in the order of every models list
     data_dir: Path  # meta.json names the inputs relative to it
+    plugins: list[Predictor] = field(default_factory=list)  # the config's `predictors`
 
 
 def build_trials(config: StudyConfig, study_id: str, layout: Layout) -> Path:
@@ -110,7 +116,7 @@ def load_inputs(config: StudyConfig, name: str, layout: Layout) -> WorldInputs:
     world.prepare(layout)  # e.g. a recorded world indexes its recordings' futures
     return WorldInputs(world, trajs, models, held_out, npz_path,
                        covered_states(trajs, learned), len(learned), list(config.models.seeds),
-                       layout.root)
+                       layout.root, [load_predictor(p) for p in config.predictors])
 
 
 def build_world_bank(config: StudyConfig, inputs: WorldInputs,
@@ -310,11 +316,12 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
                 for e in pick_examples(trajs, inputs.held_out, src, label_name,
                                        config.examples_per_trial, rng)]
     joint = np.array([[s.robot, s.human] for s in states])
-    predictions = {kind: [model_answer(model, seed, model_input, joint)
+    dt, n = trajs.dt_s, config.steps_to_predict
+    asked = (model_input, joint, [s.robot_heading for s in states], dt, n)
+    predictions = {kind: [stored_answer(CheckpointPredictor(model), seed, *asked)
                           for seed, model in zip(inputs.seeds, family, strict=True)]
                    for kind, family in inputs.models.items()}
-    dt = trajs.dt_s
-    cv = (segment[-1, ROBOT] - segment[-2, ROBOT]) / dt
+    predictions |= {p.name: [stored_answer(p, NO_SEED, *asked)] for p in inputs.plugins}
     labels = {k: int(v[src]) for k, v in trajs.labels.items()}
     human_v = (segment[-1, HUMAN] - segment[-2, HUMAN]) / dt
     policy = [inputs.world.robot_policy_actions(
@@ -324,19 +331,20 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
         trial_id="", world=inputs.world.name, kind="", source_index=src, segment_start=start,
         robot_label=labels[label_name], examples=examples, segment=shown, start_states=states,
         model_input=model_input, predictions=predictions,
-        cv_actions=np.round(np.broadcast_to(cv, (len(states), config.steps_to_predict, 2)),
-                            5).tolist(),
+        cv_actions=np.round(ask(ConstantVelocity(), *asked).actions, 5).tolist(),
         policy_actions=np.round(np.asarray(policy), 5).tolist(), clip_sha256="")
     return record.model_copy(update={"clip_sha256": clip_sha256(
         scene, dt, record.browser_payload())})
 
 
-def model_answer(model, seed: int, model_input: list, joint: np.ndarray) -> ModelAnswer:
-    """One checkpoint's answer to a trial: its latent, code and actions from every start state
+def stored_answer(predictor: Predictor, seed: int, model_input: list, joint: np.ndarray,
+                  headings: list[float], dt_s: float, n_steps: int) -> ModelAnswer:
+    """One predictor's answer to a trial: its latent, code and actions from every start state
     (rounded as stored; app/bank/model_answers.py recomputes them at start-up)."""
-    z, code, actions = model.trial(np.asarray(model_input), joint)
-    return ModelAnswer(seed=seed, z=[float(v) for v in z], code=int(code),
-                       actions=np.round(actions, 5).tolist(), content_hash=model.content_hash)
+    answer = ask(predictor, model_input, joint, headings, dt_s, n_steps)
+    return ModelAnswer(seed=seed, z=answer.z, code=answer.code,
+                       actions=np.round(answer.actions, 5).tolist(),
+                       content_hash=predictor.content_hash)
 
 
 def clip_of(trajs: TrajectorySet, i: int, start: int, end: int, label_name: str) -> Clip:

@@ -13,6 +13,10 @@
     <bundle>/configs/...                           the study, training, selection, observer and
                                                    world configs that made it
 
+A plug-in predictor (app/predictors/) is code, not a file of the bundle: the manifest's
+`predictors` records each one's name, content hash and the distribution and version that
+provided it, and the server recomputes its answers from the installed plug-in at start-up.
+
 A study config's `bundle` says where its bundle is: `shipped` (<configs dir>/bundles/<study>/,
 in git, so every machine serves the same study) or `built` (<data dir>/bundles/<study>/, made
 by `tomstudy bundle build`). freeze.py writes a bundle; verify.py opens one, refusing a
@@ -24,6 +28,8 @@ from pathlib import Path
 
 from app.configio import load_yaml_model
 from app.layout import Layout
+from app.predictors.builtin import CheckpointPredictor
+from app.predictors.registry import load_predictor
 from app.study.config import StudyConfig
 from app.study.trials import TrialBank
 
@@ -70,6 +76,7 @@ class Bundle:
     manifest: dict
     bank: TrialBank
     _models: dict = field(default_factory=dict, repr=False)
+    _plugins: dict = field(default_factory=dict, repr=False)
 
     @property
     def study_id(self) -> str:
@@ -84,6 +91,20 @@ class Bundle:
     def study_config(self) -> StudyConfig:
         """The study config the bundle was built from (its configs/<study>.yaml)."""
         return load_yaml_model(self.root / "configs" / f"{self.study_id}.yaml", StudyConfig)
+
+    @property
+    def plugins(self) -> dict[str, dict]:
+        """The manifest's plug-in predictors: name -> content hash, distribution, version."""
+        return dict(self.manifest.get("predictors", {}))
+
+    def predictor(self, world: str, name: str, seed: int):
+        """The predictor whose answers the bank stores as `name`: a checkpoint of the bundle
+        (Ours, the VAE), or an installed plug-in (UnknownPredictor when it is not installed)."""
+        if name in MODELS:
+            return CheckpointPredictor(self.model(world, name, seed))
+        if name not in self._plugins:
+            self._plugins[name] = load_predictor(name)
+        return self._plugins[name]
 
     def model(self, world: str, model: str, seed: int):
         """One checkpoint of the bundle as a TrainedModel (loaded once)."""

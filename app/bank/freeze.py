@@ -31,6 +31,7 @@ from app.bank.bundle import (
 from app.bank.verify import open_bundle
 from app.fileio import sha256_bytes, sha256_file, write_gzip
 from app.layout import Layout
+from app.predictors.registry import distribution
 from app.study.config import StudyConfig
 from app.study.trials import TrialBank
 
@@ -100,15 +101,28 @@ def freeze(config: StudyConfig, study_id: str, configs_dir: Path, layout: Layout
 
 def manifest(config: StudyConfig, study_id: str, bank: TrialBank, entries: dict,
              wall_time_s: float | None, phases: dict[str, float] | None = None) -> dict:
-    """The manifest: the files, what the bank answers with, and where it was built."""
+    """The manifest: the files, what the bank answers with (checkpoints and plug-ins), and where
+    it was built."""
     models = {world: {model: {str(a.seed): a.content_hash
                               for a in bank.trials_of(world, "main")[0].predictions[model]}
                       for model in MODELS}
               for world in bank.data.worlds}
-    return {"format": FORMAT, "study_id": study_id, "bank_sha256": bank.sha256,
-            "seeds": list(config.models.seeds), "models": models,
-            "content_sha256": sha256_bytes(json.dumps(entries, sort_keys=True).encode()),
-            "files": entries, "built": build_environment(wall_time_s, phases)}
+    out = {"format": FORMAT, "study_id": study_id, "bank_sha256": bank.sha256,
+           "seeds": list(config.models.seeds), "models": models,
+           "content_sha256": sha256_bytes(json.dumps(entries, sort_keys=True).encode()),
+           "files": entries, "built": build_environment(wall_time_s, phases)}
+    plugins = plugin_entries(bank)
+    if plugins:
+        out["predictors"] = plugins
+    return out
+
+
+def plugin_entries(bank: TrialBank) -> dict:
+    """Each plug-in predictor the bank stores answers of: its content hash (as stored) and the
+    installed distribution and version that provide it."""
+    first = next(iter(bank.by_id.values()))
+    return {name: {"content_hash": family[0].content_hash, **distribution(name)}
+            for name, family in sorted(first.predictions.items()) if name not in MODELS}
 
 
 def build_environment(wall_time_s: float | None, phases: dict[str, float] | None = None) -> dict:

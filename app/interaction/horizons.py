@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.alignment import alignment_error
+from analysis.stats import holm
 from app.data.trajectory import HUMAN, ROBOT
 from app.data.windows import Windows, make_windows
 from app.interaction.config import SecondaryConfig
@@ -126,14 +127,6 @@ def horizon_scores(pred: np.ndarray, hw: HorizonWindows) -> dict[str, dict[str, 
         out[name] = {"alignment_error": float(errors[mask].mean()),
                      "ade_m": float(dist[mask].mean()), "fde_m": float(dist[mask, -1].mean())}
     return out
-
-
-def holm(p_values: list[float]) -> list[float]:
-    """Holm-Bonferroni adjusted p-values, in the input order (a NaN p counts as 1)."""
-    from statsmodels.stats.multitest import multipletests
-
-    p = np.nan_to_num(np.asarray(p_values, dtype=np.float64), nan=1.0)
-    return multipletests(p, method="holm")[1].tolist()
 
 
 def _mean_sd(values: list[float]) -> dict:

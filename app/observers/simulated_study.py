@@ -62,10 +62,9 @@ def check_answer(bank: TrialBank, trial: TrialRecord, clicks: np.ndarray) -> Non
 
 def answer_columns(bank: TrialBank, trial: TrialRecord, clicks: np.ndarray
                    ) -> dict[str, np.ndarray]:
-    """A checked simulated answer turned into rows as the server stores a live one (the
-    primary seed's answers, as the server stores)."""
-    answers = {model: trial.primary(model) for model in MODELS}
-    return prediction_columns(trial, answers, clicks, bank.world(trial.world).dt_s)
+    """A checked simulated answer turned into rows as the server stores a live one (every
+    predictor's primary answer, as the server stores: the models' and each plug-in's)."""
+    return prediction_columns(trial, trial.primaries(), clicks, bank.world(trial.world).dt_s)
 
 
 def trial_rows(participant: str, answered: "SimulatedTrial", bank: TrialBank

@@ -15,7 +15,12 @@ from sqlmodel import Session
 
 from app import __version__
 from app.researcher.exports import checks_answered, predictions_frame
-from app.researcher.progress import exclusion_rules, progress_counts, study_sessions
+from app.researcher.progress import (
+    every_predictor,
+    exclusion_rules,
+    progress_counts,
+    study_sessions,
+)
 from app.server.balance import in_progress_cutoff
 from app.server.context import StudyContext
 from app.server.sessions import as_utc, session_status
@@ -105,20 +110,20 @@ def kept_rows(frame: pd.DataFrame, ctx: StudyContext, rule_set: str) -> tuple[pd
     return add_alignment_errors(result.kept), result.counts()
 
 
-def world_errors(kept: pd.DataFrame) -> dict:
-    """Per world and model: mean of per-participant means, its 95% t interval, the means."""
-    from analysis.contracts import MODELS
+def world_errors(kept: pd.DataFrame, names: list[str]) -> dict:
+    """Per world and predictor in `names`: mean of per-participant means, its 95% t interval,
+    the means."""
     from analysis.metrics import participant_means
     from analysis.stats import compare_per_world, mean_ci95
 
     if kept.empty:
         return {}
-    means = participant_means(kept)
+    means = participant_means(kept, tuple(names))
     paired = compare_per_world(means, "ours", "vae")
     out = {}
     for world, group in means.groupby("world", sort=True):
         models = {}
-        for model in MODELS:
+        for model in names:
             values = group[f"err_{model}"].to_numpy()
             mean, low, high = mean_ci95(values)
             models[model] = {"mean": _finite(mean), "ci95": [_finite(low), _finite(high)],
@@ -160,13 +165,18 @@ def _panel(model: str, code: int, states: pd.DataFrame, arrow_m: float) -> dict:
 
 
 def alignment(db: Session, ctx: StudyContext, rule_set: str) -> dict:
-    """Exclusions, per-world error CIs and field panels under one rule set."""
-    frame = predictions_frame(db, ctx.study_id)
+    """Exclusions, per-world error CIs of every predictor (with their colours and labels, one
+    definition: analysis/contracts.py) and field panels under one rule set."""
+    from analysis.contracts import model_style
+
+    names = every_predictor(ctx)
+    out = {"rules": rule_set, "predictors": names, "style": model_style(names)}
+    frame = predictions_frame(db, ctx.study_id, ctx.config.predictors)
     if frame.empty:
-        return {"rules": rule_set, "exclusions": {}, "worlds": {}, "fields": {}}
+        return out | {"exclusions": {}, "worlds": {}, "fields": {}}
     kept, counts = kept_rows(frame, ctx, rule_set)
-    return {"rules": rule_set, "exclusions": counts, "worlds": world_errors(kept),
-            "fields": world_fields(kept, ctx)}
+    return out | {"exclusions": counts, "worlds": world_errors(kept, names),
+                  "fields": world_fields(kept, ctx)}
 
 
 def dashboard(db: Session, ctx: StudyContext, rule_set: str = "kept",

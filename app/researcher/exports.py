@@ -1,6 +1,7 @@
 """The researcher's four exports as typed DataFrames and spreadsheet-safe CSV (read-only).
 
-- `predictions`: the analysis table, one row per (participant, trial, start state, step);
+- `predictions`: the analysis table, one row per (participant, trial, start state, step),
+  with each plug-in predictor's columns after the contract's;
 - `survey`: one row per (participant, answered question);
 - `events`: telemetry events and each trial's undo/reset presses, one long table;
 - `participants`: the payment and approval sheet, one row per session, with whether the
@@ -24,7 +25,7 @@ from sqlmodel import Session
 from analysis.contracts import EVENTS, EXPORT_COLUMNS, PARTICIPANTS, SURVEY, WHAT, ExclusionRules
 from analysis.csvsafe import write_csv
 from analysis.exports import typed
-from analysis.load import normalise
+from analysis.load import expand_plugins, normalise
 from app.server.balance import exclusion_reasons, in_progress_cutoff, trial_speeds
 from app.server.plan import trial_steps
 from app.server.schemas import SERVER_EVENTS
@@ -39,7 +40,7 @@ _FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields
 def export_table(db: Session, config: StudyConfig, study_id: str, what: str) -> pd.DataFrame:
     """One of the exports (`WHAT`) of a study as a typed DataFrame."""
     if what == "predictions":
-        return predictions_frame(db, study_id)
+        return predictions_frame(db, study_id, config.predictors)
     if what == "survey":
         return survey_frame(db, config, study_id)
     if what == "events":
@@ -59,8 +60,9 @@ def export_csv(db: Session, config: StudyConfig, study_id: str, what: str) -> st
 
 # ---------------------------------------------------------------- predictions
 
-def predictions_frame(db: Session, study_id: str) -> pd.DataFrame:
-    """One row per (participant, trial, start state, step), columns as in API.md."""
+def predictions_frame(db: Session, study_id: str, plugins: list[str] = ()) -> pd.DataFrame:
+    """One row per (participant, trial, start state, step), columns as in API.md, then the
+    four columns of each plug-in predictor in `plugins` (the study config's order)."""
     pred, trial, part = PredictionRow.__table__, TrialResponse.__table__, Participant.__table__
     query = (
         select(part.c.study_id, part.c.public_id.label("participant_id"), part.c.recruitment,
@@ -71,15 +73,15 @@ def predictions_frame(db: Session, study_id: str) -> pd.DataFrame:
                trial.c.attention_check, trial.c.arm, trial.c.clip_sha256,
                trial.c.duration_ms.label("trial_duration_ms"), trial.c.replays,
                trial.c.received_at.label("submitted_at"), part.c.config_sha256,
-               part.c.bank_sha256, *[pred.c[c] for c in _FROM_ROWS])
+               part.c.bank_sha256, *[pred.c[c] for c in _FROM_ROWS], pred.c.plugins)
         .select_from(pred.join(trial, trial.c.submission_id == pred.c.submission_id)
                      .join(part, part.c.id == pred.c.participant_id))
         .where(part.c.study_id == study_id)
         .order_by(pred.c.participant_id, trial.c.id, pred.c.start_index, pred.c.step))
     rows = [dict(r) for r in db.execute(query).mappings()]
-    frame = pd.DataFrame(rows, columns=list(EXPORT_COLUMNS))
+    frame = pd.DataFrame(rows, columns=[*EXPORT_COLUMNS, "plugins"])
     frame["submitted_at"] = [as_utc(t).isoformat() for t in frame["submitted_at"]]
-    return normalise(frame)
+    return normalise(expand_plugins(frame, list(plugins)))
 
 
 # ---------------------------------------------------------------- the sessions

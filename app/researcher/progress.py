@@ -7,7 +7,6 @@ import pandas as pd
 from sqlalchemy import select
 from sqlmodel import Session
 
-from analysis.contracts import MODELS
 from app.researcher.exports import predictions_frame
 from app.server.balance import in_progress_cutoff
 from app.server.context import StudyContext
@@ -62,8 +61,17 @@ def exclusion_rules(ctx: StudyContext, rule_set: str):
     return rules if rule_set == "kept" else rules.model_copy(update={"incomplete": False})
 
 
+def every_predictor(ctx: StudyContext) -> list[str]:
+    """Every predictor of the study in the order researchers see them (Ours, the VAE, constant
+    velocity, each plug-in of the config), then the policy as the reference."""
+    from analysis.predictors import BUILT_IN, REFERENCE
+
+    return [*BUILT_IN, *ctx.config.predictors, REFERENCE]
+
+
 def alignment_summary(frame: pd.DataFrame, ctx: StudyContext) -> dict:
-    """Running mean alignment error per world and model, with the analysis' exclusion rules.
+    """Running mean alignment error per world and predictor (every_predictor), with the
+    analysis' exclusion rules.
 
     `kept` applies every rule (so only completed sessions); `live` waives the
     `incomplete` rule to show sessions still running. `frame` is predictions_frame's
@@ -74,26 +82,28 @@ def alignment_summary(frame: pd.DataFrame, ctx: StudyContext) -> dict:
     if frame.empty:
         return {"kept": {}, "live": {}, "exclusions": {}}
     out = {}
+    names = tuple(every_predictor(ctx))
     for name in ("kept", "live"):
         result = apply_exclusions(frame, exclusion_rules(ctx, name))
-        out[name] = _world_means(participant_means(result.kept)) if len(result.kept) else {}
+        out[name] = (_world_means(participant_means(result.kept, names), names)
+                     if len(result.kept) else {})
         if name == "kept":
             out["exclusions"] = result.counts()
     return out
 
 
-def _world_means(means: pd.DataFrame) -> dict:
+def _world_means(means: pd.DataFrame, names: tuple[str, ...]) -> dict:
     summary = {}
     for world, group in means.groupby("world", sort=True):
         summary[world] = {"participants": int(len(group)), **{
             model: round(float(group[f"err_{model}"].mean()), 4)
-            for model in MODELS}}
+            for model in names}}
     return summary
 
 
 def summary(db: Session, ctx: StudyContext) -> dict:
     """The dashboard's JSON: progress, exclusions and running alignment error."""
-    frame = predictions_frame(db, ctx.study_id)
+    frame = predictions_frame(db, ctx.study_id, ctx.config.predictors)
     return {"study_id": ctx.study_id, "title": ctx.config.title,
             "preview_link": preview_path(ctx.study_id, ctx.preview_key),
             "progress": progress(db, ctx), "alignment_error": alignment_summary(frame, ctx),

@@ -16,6 +16,7 @@ from app.server.tables import Participant, PredictionRow, TrialResponse
 from app.study.errors import Refused
 
 REPLAY_MODELS = ("ours", "vae", "policy", "cv")
+DRAWN = ("ours", "vae", "policy")  # the replay's canvas draws these and each plug-in
 
 
 def participant_of(db: Session, ctx: StudyContext, public_id: str) -> Participant:
@@ -60,8 +61,17 @@ def shown_trial(ctx: StudyContext, response: TrialResponse) -> dict:
     return static_trial(ctx, response.trial_id)
 
 
-def start_replays(rows: list[PredictionRow], dt_s: float) -> list[dict]:
-    """Per start state: its clicks in step order and each model's rolled-out positions."""
+def row_action(row: PredictionRow, model: str) -> list[float]:
+    """A row's action of one predictor: a column of the row, or a plug-in's from its JSON."""
+    if model in REPLAY_MODELS:
+        return [getattr(row, f"{model}_vx"), getattr(row, f"{model}_vy")]
+    return [row.plugins[model]["vx"], row.plugins[model]["vy"]]
+
+
+def start_replays(rows: list[PredictionRow], dt_s: float,
+                  plugins: list[str] = ()) -> list[dict]:
+    """Per start state: its clicks in step order and each predictor's rolled-out positions
+    (the models', the baselines' and each plug-in's)."""
     from analysis.alignment import alignment_error
 
     starts: dict[int, list[PredictionRow]] = {}
@@ -72,9 +82,8 @@ def start_replays(rows: list[PredictionRow], dt_s: float) -> list[dict]:
         start = np.array([steps[0].start_x, steps[0].start_y])
         human = np.array([[r.human_vx, r.human_vy] for r in steps])
         paths, errors = {}, {}
-        for model in REPLAY_MODELS:
-            actions = np.array([[getattr(r, f"{model}_vx"), getattr(r, f"{model}_vy")]
-                                for r in steps])
+        for model in (*REPLAY_MODELS, *plugins):
+            actions = np.array([row_action(r, model) for r in steps])
             paths[model] = (start + dt_s * np.cumsum(actions, axis=0)).round(4).tolist()
             errors[model] = alignment_error(human, actions).round(4).tolist()
         out.append({"start_index": index, "start_kind": steps[0].start_kind,
@@ -110,6 +119,7 @@ def trial_replay(db: Session, ctx: StudyContext, public_id: str, trial_id: str) 
             "server_duration_ms": response.server_duration_ms, "replays": response.replays,
             "received_at": as_utc(response.received_at).isoformat(),
             "history": response.history or []},
-        "starts": start_replays(rows, trial["dt_s"]),
+        "starts": start_replays(rows, trial["dt_s"], ctx.config.predictors),
+        "models": [*DRAWN, *ctx.config.predictors],
         "click_order": [{"t_ms": t, "start_index": i, "step": j} for t, i, j in order],
     }

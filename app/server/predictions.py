@@ -9,6 +9,7 @@ with the step's advance (crud.advance), so a 2xx means the answer is kept.
 import numpy as np
 from sqlmodel import Session
 
+from analysis.contracts import PLUGIN_FIELDS, plugin_columns
 from app.server.context import StudyContext
 from app.server.crud import advance, replay_if_stored
 from app.server.drafts import discard_draft
@@ -85,4 +86,12 @@ def prediction_rows(ctx: StudyContext, participant: Participant, trial: TrialRec
                 "participant_id": np.full(k * n, participant.id),
                 "trial_id": np.full(k * n, trial.trial_id),
                 "click_time_ms": np.asarray(body.click_times_ms, dtype=np.float64).ravel()}
-    return as_rows(columns)
+    return [with_plugins(row, ctx.config.predictors) for row in as_rows(columns)]
+
+
+def with_plugins(row: dict, plugins: list[str]) -> dict:
+    """A row whose plug-in predictors' columns are gathered into its `plugins` JSON."""
+    gathered = {name: {field: row.pop(column) for field, column
+                       in zip(PLUGIN_FIELDS, plugin_columns(name), strict=True)}
+                for name in plugins}
+    return row | {"plugins": gathered}

@@ -3,7 +3,8 @@
 One participant row holds its plan (the ordered steps assigned at start) and its
 position in it; every client write is keyed by a client-made UUID (`submission_id`,
 unique), so a retried request is stored once. Prediction rows are long: one per
-(start state, step), with each model's action and the baselines beside the human's.
+(start state, step), with each model's action, the baselines and every plug-in predictor's
+beside the human's.
 """
 
 from datetime import UTC, datetime
@@ -159,6 +160,10 @@ class PredictionRow(SQLModel, table=True):
     ours_sha256: str = Field(max_length=64)
     vae_sha256: str = Field(max_length=64)
     click_time_ms: float
+    # each plug-in predictor's answer: {"<name>": {"vx", "vy", "code", "sha256"}} (migration
+    # 0006 says why a JSON column); {} in a study without plug-ins
+    plugins: dict = Field(default_factory=dict,
+                          sa_column=Column(JSON, server_default=text("'{}'")))
 
 
 class TrialDraft(SQLModel, table=True):

@@ -7,10 +7,11 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, field_validator, model_serializer, model_validator
 
 from analysis.contracts import ExclusionRules
 from app.configio import ConfigError, StrictModel, load_yaml_model
+from app.predictors.registry import check_names
 from app.settings import Settings
 
 # a simulated world (highway, obstacle) or a recorded one: study_configs/worlds/<name>.yaml
@@ -278,7 +279,24 @@ class StudyConfig(StrictModel):
     # bound on what anonymous traffic can make the server hold (sessions.py)
     max_live_sessions_per_target: float = Field(default=10.0, ge=1)
     models: ModelFamily = ModelFamily()
+    # plug-in predictors (app/predictors/registry.py) whose answers the bank stores beside
+    # Ours', the VAE's and constant velocity's: installed entry point names, never code
+    predictors: list[str] = []
     bundle: BundleSource = "built"
+
+    @field_validator("predictors")
+    @classmethod
+    def _registered(cls, names: list[str]) -> list[str]:
+        return check_names(names)
+
+    @model_serializer(mode="wrap")
+    def _without_empty_predictors(self, handler) -> dict:
+        # a study without plug-ins dumps as before the key existed: same config hash, so
+        # sessions that ran it before an upgrade still show as running the loaded config
+        data = handler(self)
+        if not self.predictors:
+            data.pop("predictors", None)
+        return data
 
     @model_validator(mode="after")
     def _consistent(self) -> "StudyConfig":
@@ -303,7 +321,7 @@ class StudyConfig(StrictModel):
 # the study config's keys that shape the trial bank: a change to any of them rebuilds it
 BANK_DESIGN_KEYS = ("worlds", "examples_per_trial", "segment_steps", "start_states",
                     "steps_to_predict", "practice_trials", "bank_trials_per_world", "bank_seed",
-                    "main_trial_selection", "prediction_input", "models")
+                    "main_trial_selection", "prediction_input", "models", "predictors")
 BANK_ATTENTION_KEYS = ("per_world", "candidate_max_angle_deg")  # the rest only score answers
 
 
@@ -314,7 +332,7 @@ def bank_design(config: dict) -> dict | None:
         valid = StudyConfig.model_validate(config).model_dump(mode="json")
     except ValidationError:
         return None
-    design = {key: valid[key] for key in BANK_DESIGN_KEYS}
+    design = {key: valid.get(key, []) for key in BANK_DESIGN_KEYS}  # only predictors may lack
     return design | {"attention_checks": {k: valid["attention_checks"][k]
                                           for k in BANK_ATTENTION_KEYS}}
 

@@ -1,5 +1,6 @@
 """One answered trial as long rows: per start state and step, the person's click and action
-beside every predictor's action, the models' codes and checkpoints.
+beside every predictor's action, the models' codes and checkpoints, and each plug-in
+predictor's action, code and content hash (`<name>_vx`, `_vy`, `_code`, `_sha256`).
 
 The server stores these rows (app/server/predictions.py adds who answered and when each click
 came); the simulated study builds its export rows from the same columns, so the instrument
@@ -28,7 +29,8 @@ class ModelAnswerLike(Protocol):
 def prediction_columns(trial: TrialRecord, answers: Mapping[str, ModelAnswerLike],
                        points: np.ndarray, dt_s: float) -> dict[str, np.ndarray]:
     """Columns of K x n rows (start state major): the clicks, the person's actions and each
-    predictor's (models from `answers`, constant velocity and the policy from the bank)."""
+    predictor's (models and plug-ins from `answers`, constant velocity and the policy from
+    the bank)."""
     k, n = points.shape[:2]
     starts = robot_starts(trial)
     humans = np.asarray([s.human for s in trial.start_states], dtype=np.float64)
@@ -38,14 +40,16 @@ def prediction_columns(trial: TrialRecord, answers: Mapping[str, ModelAnswerLike
             "start_x": np.repeat(starts[:, 0], n), "start_y": np.repeat(starts[:, 1], n),
             "human_x": np.repeat(humans[:, 0], n), "human_y": np.repeat(humans[:, 1], n),
             "click_x": points[..., 0].ravel(), "click_y": points[..., 1].ravel()}
+    plugins = [name for name in answers if name not in MODELS]
     actions = {"human": clicks_to_actions(starts, points, dt_s),
                **{m: answers[m].actions for m in MODELS},
-               "cv": trial.cv_actions, "policy": trial.policy_actions}
+               "cv": trial.cv_actions, "policy": trial.policy_actions,
+               **{p: answers[p].actions for p in plugins}}
     for name, values in actions.items():
         values = np.asarray(values, dtype=np.float64)[:, :n]
         cols[f"{name}_vx"] = values[..., 0].ravel()
         cols[f"{name}_vy"] = values[..., 1].ravel()
-    for model in MODELS:
+    for model in (*MODELS, *plugins):
         cols[f"{model}_code"] = np.full(k * n, answers[model].code)
         cols[f"{model}_sha256"] = np.full(k * n, answers[model].content_hash)
     return cols

@@ -11,7 +11,8 @@ Shape legend per trial: E examples, L segment steps, K start states, n steps to 
 - model_input [T+1, 2, 2] (m): what every model read, the latest T steps ending at the
   segment's end (T = the checkpoints' segment_len; it may reach back before the shown segment)
 - predictions[model][s].actions, cv_actions, policy_actions [K, n, 2] (m/s); predictions holds
-  one answer per seed of the study's model family, the primary seed first
+  one answer per seed of the study's model family (ours, vae), the primary seed first, then one
+  answer (seed NO_SEED) per plug-in predictor of the study config (app/predictors/)
 """
 
 import json
@@ -26,6 +27,7 @@ from app.layout import Layout
 # what the participant is shown, and so what every model and baseline answers from
 POS_DECIMALS = 3  # positions in m
 HEADING_DECIMALS = 4  # headings in rad
+NO_SEED = -1  # the seed of a plug-in predictor's answer: code, not a trained checkpoint
 
 
 class Clip(StrictModel):
@@ -55,7 +57,8 @@ class StartState(StrictModel):
 
 
 class ModelAnswer(StrictModel):
-    """One checkpoint's (model and seed) reading of the segment and its actions [K, n, 2]."""
+    """One predictor's reading of the segment and its actions [K, n, 2]: a checkpoint's (model
+    and seed), or a plug-in's (seed NO_SEED; code -1 and z [] when it has none)."""
 
     seed: int
     z: list[float]
@@ -78,7 +81,7 @@ class TrialRecord(StrictModel):
     segment: Clip
     start_states: list[StartState]
     model_input: list[list[list[float]]]
-    predictions: dict[str, list[ModelAnswer]]  # model -> one answer per seed, primary first
+    predictions: dict[str, list[ModelAnswer]]  # predictor -> one answer per seed, primary first
     cv_actions: list[list[list[float]]]
     policy_actions: list[list[list[float]]]
     clip_sha256: str
@@ -86,6 +89,10 @@ class TrialRecord(StrictModel):
     def primary(self, model: str) -> ModelAnswer:
         """The primary seed's answer of `model` (what the live export and dashboard show)."""
         return self.predictions[model][0]
+
+    def primaries(self) -> dict[str, ModelAnswer]:
+        """Every predictor's primary answer (checkpoints' primary seed, each plug-in's one)."""
+        return {name: family[0] for name, family in self.predictions.items()}
 
     def browser_payload(self) -> dict:
         """What the participant's browser needs to play and ask this trial."""

@@ -224,3 +224,13 @@ def on_bank(frame: pd.DataFrame, bank: dict) -> tuple[pd.DataFrame, bytes]:
                             [r.start_index][r.step] for r in out.itertuples()])
         out[f"{model}_vx"], out[f"{model}_vy"] = actions[:, 0], actions[:, 1]
     return out, raw
+
+
+def holm_by_hand(p: list[float]) -> list[float]:
+    """Step-down: the k-th smallest p times (m - k), running maximum, capped at 1."""
+    ranked = sorted(range(len(p)), key=lambda i: p[i])
+    out, running = [0.0] * len(p), 0.0
+    for k, i in enumerate(ranked):
+        running = max(running, p[i] * (len(p) - k))
+        out[i] = min(running, 1.0)
+    return out

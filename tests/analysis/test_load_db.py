@@ -16,7 +16,8 @@ from tests.analysis.fixed_data import fixed_predictions
 
 def _store(engine, frame: pd.DataFrame) -> None:
     """Write the fixed rows into the server's tables (as crud.py would have)."""
-    pred_cols = [c.name for c in PredictionRow.__table__.columns if c.name != "id"]
+    skip = ("id", "plugins")  # plugins: the column's default, {} (a study without plug-ins)
+    pred_cols = [c.name for c in PredictionRow.__table__.columns if c.name not in skip]
     with engine.begin() as conn:
         for n, (pid, rows) in enumerate(frame.groupby("participant_id", sort=True)):
             first = rows.iloc[0]

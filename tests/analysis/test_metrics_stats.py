@@ -13,11 +13,12 @@ from analysis.metrics import apply_exclusions, participant_means
 from analysis.stats import (
     compare_per_world,
     displacement_errors,
+    holm,
     infer_dt_s,
     mean_ci95,
     paired_comparison,
 )
-from tests.analysis.fixed_data import DT_S, cos_distance, fixed_predictions
+from tests.analysis.fixed_data import DT_S, cos_distance, fixed_predictions, holm_by_hand
 
 
 def test_alignment_error_known_angles():
@@ -150,3 +151,16 @@ def test_an_export_older_than_the_arm_column_reads_with_an_empty_arm(tmp_path):
     back = load_csv(tmp_path / "old.csv")
     assert (back["arm"] == "").all()
     assert back.drop(columns="arm").equals(frame.drop(columns="arm"))
+
+
+def test_holm_adjusts_in_order_and_caps_at_one():
+    np.testing.assert_allclose(holm([0.01, 0.04, 0.03, 0.5]), [0.04, 0.09, 0.09, 0.5])
+    assert holm([0.6, float("nan")]) == [1.0, 1.0]
+    assert holm([]) == []
+
+
+def test_holm_equals_the_step_down_by_hand_with_ties():
+    rng = np.random.default_rng(5)
+    for m in (1, 2, 7, 30):
+        p = np.round(rng.random(m) ** 3, 2).tolist()  # rounding makes ties
+        assert holm(p) == holm_by_hand(p)

@@ -24,6 +24,18 @@ def fresh_recruitment() -> str:
     return f"PROLIFIC_PID={uuid.uuid4().hex[:24]}&STUDY_ID={'5' * 24}&SESSION_ID=s1"
 
 
+def researcher_page(browser, base_url: str) -> tuple:
+    """The researcher dashboard opened with the test token, and the list its page errors go
+    to."""
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(f"{base_url}/researcher")
+    page.fill("#token-input", ADMIN_TOKEN)
+    page.click("#token-form button")
+    return page, errors
+
+
 def page_token(page, study_id: str = BROWSER_STUDY) -> str:
     """The session token the page keeps in sessionStorage."""
     key = f"tomstudy.{study_id}.session"

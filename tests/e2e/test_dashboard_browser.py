@@ -6,8 +6,9 @@ import re
 import pytest
 
 from app.pilot.bots import run_bots
-from tests.conftest import ADMIN_TOKEN, REPO
+from tests.conftest import REPO
 from tests.e2e.conftest import BROWSER_STUDY
+from tests.e2e.pages import researcher_page
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -33,12 +34,7 @@ def bot_sessions(browser_server) -> list:
 
 
 def test_dashboard_lists_sessions_and_replays_a_trial(browser_server, bot_sessions, chromium):
-    page = chromium.new_page(viewport={"width": 1300, "height": 900})
-    errors = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(f"{browser_server.url}/researcher")
-    page.fill("#token-input", ADMIN_TOKEN)
-    page.click("#token-form button")
+    page, errors = researcher_page(chromium, browser_server.url)
     page.wait_for_selector("table.sessions tbody tr")
     rows = page.locator("table.sessions tbody tr")
     assert rows.count() >= BOTS

@@ -165,33 +165,6 @@ def test_study_config_file_is_the_pre_specified_default():
     assert ic.load_config(None, None).secondary.horizons_s == [1.0, 2.0, 3.0]
 
 
-def test_holm_adjusts_in_order_and_caps_at_one():
-    from app.interaction.horizons import holm
-
-    np.testing.assert_allclose(holm([0.01, 0.04, 0.03, 0.5]), [0.04, 0.09, 0.09, 0.5])
-    assert holm([0.6, float("nan")]) == [1.0, 1.0]
-    assert holm([]) == []
-
-
-def _holm_by_hand(p: list[float]) -> list[float]:
-    """Step-down: the k-th smallest p times (m - k), running maximum, capped at 1."""
-    ranked = sorted(range(len(p)), key=lambda i: p[i])
-    out, running = [0.0] * len(p), 0.0
-    for k, i in enumerate(ranked):
-        running = max(running, p[i] * (len(p) - k))
-        out[i] = min(running, 1.0)
-    return out
-
-
-def test_holm_equals_the_step_down_by_hand_with_ties():
-    from app.interaction.horizons import holm
-
-    rng = np.random.default_rng(5)
-    for m in (1, 2, 7, 30):
-        p = np.round(rng.random(m) ** 3, 2).tolist()  # rounding makes ties
-        assert holm(p) == _holm_by_hand(p)
-
-
 def test_horizon_windows_strata_and_constant_velocity_rollout(small_data):
     from app.interaction import horizons as hz
 

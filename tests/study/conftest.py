@@ -20,15 +20,21 @@ def db_url(request, tmp_path):
     return fresh_database(request.getfixturevalue("postgres_url"), f"api{next(_db_counter)}")
 
 
+@pytest.fixture(scope="session")
+def served_study(small_study):
+    """The study `client` serves and `bank` reads (a test module may serve another)."""
+    return small_study
+
+
 @pytest.fixture
-def client(small_study, db_url):
+def client(served_study, db_url):
     """The app on a fresh database."""
-    with make_client(small_study, db_url) as c:
+    with make_client(served_study, db_url) as c:
         yield c
 
 
 @pytest.fixture(scope="module")
-def bank(small_study) -> dict:
+def bank(served_study) -> dict:
     """Bank trials by id (the test reads the true moves for attention checks)."""
-    raw = json.loads(Layout(small_study.data_dir).bank(small_study.study_id).read_text())
+    raw = json.loads(Layout(served_study.data_dir).bank(served_study.study_id).read_text())
     return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}

@@ -155,13 +155,15 @@ def test_upgrading_keeps_every_row_and_value(db_url, tmp_path, small_study):
     added = snapshot(engine, {"participant": ["config_sha256", "bank_sha256", "app_version",
                                               "outcome", "completion_code", "completed",
                                               "completed_at", "ended_at"],
-                              "trialresponse": ["history"]})
+                              "trialresponse": ["history"], "predictionrow": ["plugins"]})
     # a session completed before endings existed ended as `completed`; its code is unknown
     assert {row[:5] for row in added["participant"]} == {("", "", "", None, None),
                                                          ("", "", "", "completed", None)}
     for *_, outcome, _code, completed, completed_at, ended_at in added["participant"]:
         assert (outcome == "completed") == bool(completed) and ended_at == completed_at
     assert added["trialresponse"] == [([],)] * FIXTURE_ROWS["trialresponse"]
+    # rows answered before plug-in predictors existed hold none (0006)
+    assert added["predictionrow"] == [({},)] * FIXTURE_ROWS["predictionrow"]
     with make_client(small_study, db_url) as client:  # the ORM writes into the old tables
         Participant(client, small_study.study_id).start()
         assert client.get("/healthz").status_code == 200
@@ -191,6 +193,21 @@ def test_0004_moves_a_session_that_ended_early_back_to_the_step_it_ended_at(db_u
     assert after == positions | {5: 0}
     engine.dispose()
     source.dispose()
+
+
+def test_0006_adds_plugin_answers_and_takes_them_away_again(db_url):
+    engine = make_engine(db_url)
+    migrate_to(engine, "0006")
+    assert "plugins" in migrate.revision_columns("0006")["predictionrow"]
+    assert "plugins" not in migrate.revision_columns("0005")["predictionrow"]
+    with engine.begin() as conn:
+        command.downgrade(migrate.alembic_config(conn), "0005")
+        columns = [c["name"] for c in inspect(conn).get_columns("predictionrow")]
+    assert "plugins" not in columns and "vae_sha256" in columns
+    migrate_to(engine, "0006")
+    with engine.connect() as conn:
+        assert "plugins" in [c["name"] for c in inspect(conn).get_columns("predictionrow")]
+    engine.dispose()
 
 
 def test_db_upgrade_on_the_database_9c39751_made(tmp_path):

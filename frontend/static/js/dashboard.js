@@ -1,11 +1,17 @@
 // Researcher dashboard views: sessions table, study versions, error plots (SVG), field panels.
 import { drawBackground, prepareCanvas } from "./scene.js";
 
-// The analysis' figures' names and colours (analysis/contracts.py), as the page carries them.
+// The analysis' figures' names and colours (analysis/contracts.py), as the page carries them;
+// a study's plug-in predictors arrive with its alignment summary (useStyle).
 const MODEL_STYLE = JSON.parse(document.getElementById("model-style").textContent);
 export const MODEL_COLORS = MODEL_STYLE.colors;
 export const MODEL_LABELS = MODEL_STYLE.labels;
-const PLOT_MODELS = ["ours", "vae", "cv", "policy"];
+
+/** Add the colours and labels the dashboard's JSON gives (every predictor of the study). */
+function useStyle(style) {
+  Object.assign(MODEL_COLORS, style.colors);
+  Object.assign(MODEL_LABELS, style.labels);
+}
 const SVG = "http://www.w3.org/2000/svg";
 
 export function el(tag, props = {}, ...children) {
@@ -156,15 +162,16 @@ function tickStep(value, ticks) {
   return [1, 2, 2.5, 5, 10].map((m) => m * power).find((step) => step >= raw);
 }
 
-/** One world's error plot: participants as dots (paired lines), mean and 95% CI in black. */
-export function errorPlot(world, entry) {
+/** One world's error plot of every predictor in `models`: participants as dots (paired
+ * lines), mean and 95% CI in black. */
+export function errorPlot(world, entry, models) {
   const [w, h, left, top, bottom] = [440, 280, 56, 44, 36];
   const plot = svg("svg", { viewBox: `0 0 ${w} ${h}`, role: "img", class: "error-plot", "data-world": world });
-  const highs = PLOT_MODELS.flatMap((m) => [...entry.models[m].participants, entry.models[m].ci95[1] ?? 0]);
+  const highs = models.flatMap((m) => [...entry.models[m].participants, entry.models[m].ci95[1] ?? 0]);
   const yStep = tickStep(Math.max(...highs, 0.01), 4);
   const yMax = 4 * yStep;
   const y = (v) => top + (h - top - bottom) * (1 - v / yMax);
-  const x = (i) => left + 30 + i * ((w - left - 40) / PLOT_MODELS.length);
+  const x = (i) => left + 30 + i * ((w - left - 40) / models.length);
   const test = entry.ours_vs_vae;
   plot.append(svg("title", {}, `${world}: alignment error per model, n = ${entry.n}`));
   plot.append(svg("text", { x: w / 2, y: 16, "text-anchor": "middle", class: "plot-title" }, `${world} (n = ${entry.n})`));
@@ -177,12 +184,12 @@ export function errorPlot(world, entry) {
   }
   const n = entry.models.ours.participants.length;
   const jitter = (p) => ((p * 7919) % 17) / 17 * 0.3 - 0.15; // fixed per participant: stable between refreshes
-  const step = (w - left - 40) / PLOT_MODELS.length;
+  const step = (w - left - 40) / models.length;
   for (let p = 0; p < n; p += 1) {
-    const points = PLOT_MODELS.map((m, i) => `${x(i) + jitter(p) * step},${y(entry.models[m].participants[p])}`);
+    const points = models.map((m, i) => `${x(i) + jitter(p) * step},${y(entry.models[m].participants[p])}`);
     plot.append(svg("polyline", { points: points.join(" "), class: "pair" }));
   }
-  PLOT_MODELS.forEach((model, i) => {
+  models.forEach((model, i) => {
     const { mean, ci95, participants } = entry.models[model];
     participants.forEach((v, p) => plot.append(svg("circle", { cx: x(i) + jitter(p) * step, cy: y(v), r: 3, fill: MODEL_COLORS[model], class: "dot" })));
     const cx = x(i) + 0.3 * step;
@@ -198,8 +205,10 @@ export function errorPlot(world, entry) {
   return plot;
 }
 
-/** Per world: the error plot and a table of mean [95% CI] per model. */
-export function renderErrors(container, worlds) {
+/** Per world: the error plot and a table of mean [95% CI] per predictor (`predictors`, in
+ * order; `style` their colours and labels). */
+export function renderErrors(container, worlds, predictors, style) {
+  useStyle(style);
   const names = Object.keys(worlds);
   if (!names.length) {
     container.replaceChildren(el("p", { textContent: "No participant is kept under these rules yet." }));
@@ -208,15 +217,15 @@ export function renderErrors(container, worlds) {
   const rows = names.map((world) => {
     const tr = el("tr");
     tr.append(el("td", { textContent: world }), el("td", { textContent: String(worlds[world].n) }));
-    for (const m of PLOT_MODELS) {
+    for (const m of predictors) {
       const { mean, ci95 } = worlds[world].models[m];
       tr.append(el("td", { textContent: `${num(mean)} [${num(ci95[0])}, ${num(ci95[1])}]` }));
     }
     return tr;
   });
-  const head = el("tr", {}, ...["world", "n", ...PLOT_MODELS.map((m) => MODEL_LABELS[m])].map((t) => el("th", { textContent: t })));
+  const head = el("tr", {}, ...["world", "n", ...predictors.map((m) => MODEL_LABELS[m])].map((t) => el("th", { textContent: t })));
   const table = el("table", { className: "summary ci-table" }, el("thead", {}, head), el("tbody", {}, ...rows));
-  container.replaceChildren(el("div", { className: "plot-row" }, ...names.map((w) => errorPlot(w, worlds[w]))), table);
+  container.replaceChildren(el("div", { className: "plot-row" }, ...names.map((w) => errorPlot(w, worlds[w], predictors))), table);
 }
 
 function arrow(ctx, view, from, dir, lengthM, color, width) {

@@ -204,7 +204,7 @@ class Dashboard {
     this.table.show(board.participants);
     const { alignment } = board;
     $("exclusions").textContent = exclusionsText(alignment.exclusions);
-    renderErrors($("error-plots"), alignment.worlds);
+    renderErrors($("error-plots"), alignment.worlds, alignment.predictors, alignment.style);
     const key = JSON.stringify(alignment.fields); // redraw the canvases only when they change
     if (key !== this.fieldsKey) renderFields($("fields"), alignment.fields);
     this.fieldsKey = key;

@@ -1,0 +1,77 @@
+"""Plug-in predictors by name, through Python entry points (group `tomstudy.predictors`).
+
+A distribution registers `name = "package.module:factory"` in that group (in its
+pyproject.toml's `[project.entry-points."tomstudy.predictors"]`); once it is installed, a study
+config's `predictors: [name]` asks for it. The factory takes no arguments and returns a
+Predictor (app/predictors/protocol.py) whose `name` is the entry point's: a config holds only
+names, never class paths or code. Ours, the VAE, constant velocity and the policy are the
+study's own columns and cannot be taken by a plug-in.
+"""
+
+import re
+from importlib.metadata import EntryPoint, entry_points
+
+from app.predictors.protocol import Predictor
+
+GROUP = "tomstudy.predictors"
+RESERVED = ("ours", "vae", "cv", "policy", "human")  # the export's own column prefixes
+NAME = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
+MAX_NAME = 32
+
+
+class UnknownPredictor(LookupError):
+    """No installed distribution registers a predictor of that name."""
+
+
+def registered() -> dict[str, EntryPoint]:
+    """Every installed plug-in's entry point, by name."""
+    return {ep.name: ep for ep in entry_points(group=GROUP)}
+
+
+def listing() -> str:
+    """The registered names for a message ('none' when nothing is installed)."""
+    return ", ".join(sorted(registered())) or "none"
+
+
+def name_problem(name: str) -> str:
+    """Why `name` cannot name a plug-in in a study ('' when it can)."""
+    if name in RESERVED:
+        return f"{name!r} is one of the study's own predictors, not a plug-in"
+    if not NAME.match(name) or len(name) > MAX_NAME:
+        return (f"{name!r} is not a predictor name (lower-case letters, digits and single "
+                f"underscores, starting with a letter, at most {MAX_NAME} characters)")
+    if name not in registered():
+        return (f"no installed predictor is named {name!r} (entry point group {GROUP}; "
+                f"registered: {listing()})")
+    return ""
+
+
+def check_names(names: list[str]) -> list[str]:
+    """The names, once each is a registered plug-in named once; ValueError saying which not."""
+    if len(set(names)) != len(names):
+        raise ValueError("each predictor may be named once")
+    problems = [problem for problem in map(name_problem, names) if problem]
+    if problems:
+        raise ValueError("; ".join(problems))
+    return names
+
+
+def load_predictor(name: str) -> Predictor:
+    """The installed plug-in `name`, made by its entry point's factory (UnknownPredictor if
+    none is installed; TypeError if the factory's object is not that predictor)."""
+    found = registered().get(name)
+    if found is None:
+        raise UnknownPredictor(f"predictor {name}: not installed (no entry point {name!r} in "
+                               f"group {GROUP}; registered: {listing()})")
+    predictor = found.load()()
+    if not isinstance(predictor, Predictor) or predictor.name != name:
+        raise TypeError(f"predictor {name}: the entry point {found.value} does not make a "
+                        f"predictor named {name!r} with a content_hash and answer()")
+    return predictor
+
+
+def distribution(name: str) -> dict[str, str]:
+    """The installed distribution that registers `name` and its version ('' when none)."""
+    found = registered().get(name)
+    dist = found.dist if found else None
+    return {"distribution": dist.name if dist else "", "version": dist.version if dist else ""}

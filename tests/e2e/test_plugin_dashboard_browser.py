@@ -1,0 +1,52 @@
+"""The dashboard of a study with the CTRV plug-in, in Debian's chromium: every predictor in the
+error plots and table, and the replay draws the plug-in's moves with its own colour."""
+
+import asyncio
+
+import pytest
+
+from analysis.contracts import model_color
+from app.pilot.bots import run_bots
+from tests.conftest import free_port, start_server
+from tests.e2e.pages import researcher_page
+from tests.e2e.test_dashboard_browser import CANVAS_COLOURS
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+LABELS = ["Ours", "VAE", "Const. vel.", "ctrv", "Policy"]
+
+
+@pytest.fixture(scope="module")
+def plugin_server(ctrv_study, tmp_path_factory):
+    """`tomstudy serve` of the CTRV study, after two coarse bots took it through HTTP."""
+    root = tmp_path_factory.mktemp("plugin-server")
+    port = free_port()
+    proc = start_server(ctrv_study, f"sqlite:///{root / 'study.db'}", port,
+                        log=root / "server.log", TOMSTUDY_TRUST_CLIENT_CLOCK="1")
+    url = f"http://127.0.0.1:{port}"
+    results = asyncio.run(run_bots(url, ctrv_study.study_id, "coarse", 2, concurrency=2, seed=5))
+    assert [r.error for r in results if r.error] == []
+    yield url
+    proc.terminate()
+    proc.wait(timeout=10)
+
+
+def test_the_dashboard_shows_every_predictor_and_replays_the_plugin(plugin_server, chromium):
+    page, errors = researcher_page(chromium, plugin_server)
+    page.wait_for_selector("table.ci-table")
+    heads = page.locator("table.ci-table th").all_inner_texts()
+    assert heads == ["world", "n", *LABELS]
+    plot = page.locator("svg.error-plot").first
+    ticks = plot.locator("text.tick").evaluate_all("ts => ts.map(t => t.textContent)")
+    assert [t for t in ticks if t in LABELS] == LABELS
+    dots = plot.locator("circle.dot").evaluate_all("ds => ds.map(d => d.getAttribute('fill'))")
+    assert model_color("ctrv") in dots
+    page.locator("table.sessions tbody tr").first.locator("button").click()
+    page.wait_for_selector(".trial-row")
+    page.locator(".trial-row").nth(1).locator("button").click()
+    page.wait_for_selector("#replay-view:not([hidden])")
+    assert "ctrv" in page.locator("#replay-legend").inner_text()
+    assert "error ctrv" in page.locator("#replay-click-table th").all_inner_texts()
+    assert page.locator("#replay-canvas").evaluate(CANVAS_COLOURS) > 10
+    assert errors == []
+    page.close()
