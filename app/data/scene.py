@@ -114,11 +114,12 @@ HUMAN_COLOR = "#E69F00"
 # - goal rings are distinct from both agents, each >= 5:1 on the field, where plots cycle
 #   through analysis/scene_plot.py LABEL_COLORS on white;
 # - a recorded scene (`map`) reads as a road map: a pale green field, the driven area a light
-#   asphalt grey just dark enough to read as a band on it (1.2:1, and the hue differs) yet
-#   light enough for both agents (robot 3.7:1, person 3.4:1, also under the reach disc's
-#   tint); kerbs a dark slate (7.5:1 on the road, drawn thick), painted lane borders a mid
-#   grey (3.3:1, thin), virtual lanes (no paint) faint on purpose (1.9:1, dotted), stop lines
-#   a dark red no agent or model is drawn in (5.3:1, a thick bar).
+#   asphalt grey that reads as a band on it by its hue more than its lightness (1.14:1) and
+#   is light enough for both agents (robot 4.0:1, person 3.6:1; under the reach disc's tint
+#   the robot's anti-aliased outline still 3.2:1, where #d8dadd left it at 2.9:1); kerbs a
+#   dark slate (8.1:1 on the road, drawn thick), painted lane borders a mid grey (3.6:1,
+#   thin), virtual lanes (no paint) faint on purpose (2.0:1, dotted), stop lines a dark red
+#   no agent or model is drawn in (5.7:1, a thick bar).
 BROWSER_PALETTE = {
     "robot": ROBOT_COLOR,
     "human": "#B35C00",
@@ -126,6 +127,6 @@ BROWSER_PALETTE = {
     "ground": {"field": "#fbfbf8", "road": "#e8eaed", "shoulder": "#cfd8c8"},
     "lane_mark": "#5f6368",
     "goals": ["#007A5A", "#6A3D9A", "#A0306A", "#333333"],
-    "map": {"field": "#edf2e4", "road": "#d8dadd", "kerb": "#3c4043", "border": "#70757a",
+    "map": {"field": "#edf2e4", "road": "#e0e2e5", "kerb": "#3c4043", "border": "#70757a",
             "virtual": "#9aa0a6", "stop": "#9e2a2b"},
 }

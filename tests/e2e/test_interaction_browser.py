@@ -93,13 +93,15 @@ def check_the_clip_follows_the_robot(page, trial: dict) -> None:
         half = ((width / 2 - 24) / scale, (height / 2 - 24) / scale)  # scene.js MARGIN_PX
         assert near_on_path(centre, robot, scene["bounds"], half) < 0.3
         centres.append(centre)
-    assert math.dist(*centres) > 1.0  # the car moved, and the view with it
+    # the car moved, and the view with it (by how much depends on the clip: a car slowing for
+    # the ring moves under a metre in that time)
+    assert math.dist(*centres) > 0.2
 
 
 def stored_clicks(db_path: Path, public_token: str) -> list[tuple]:
     with closing(sqlite3.connect(db_path)) as db:
         return db.execute(
-            "SELECT trial_id, start_x, start_y, step, click_x, click_y FROM predictionrow "
+            "SELECT human_x, human_y, start_x, start_y, step, click_x, click_y FROM predictionrow "
             "JOIN participant ON participant.id = predictionrow.participant_id "
             "WHERE participant.session_token = ?", (public_token,)).fetchall()
 
@@ -148,10 +150,12 @@ def test_a_participant_walks_the_recorded_worlds_by_clicking(chromium, interacti
     per_trial = config["start_states"] * config["steps_to_predict"]
     assert len(rows) == len(answered) * per_trial
     # every stored click is where the page clicked (mouse events carry whole CSS pixels)
-    planned = {(round(s["robot"][0], 3), round(s["robot"][1], 3)): (t, planned_path(t, s))
+    # a start is known by its robot and human positions: two trials may start the robot at the
+    # same recorded state, never with the person at the same place too
+    planned = {tuple(round(v, 3) for v in (*s["human"], *s["robot"])): (t, planned_path(t, s))
                for t in answered for s in t["start_states"]}
-    for _, start_x, start_y, step, click_x, click_y in rows:
-        trial, path = planned[(round(start_x, 3), round(start_y, 3))]
+    for *where, step, click_x, click_y in rows:
+        trial, path = planned[tuple(round(v, 3) for v in where)]
         error_px = math.dist(path[step], (click_x, click_y)) * trial["view"]["px_per_m"]
         assert error_px <= math.sqrt(2) + 1e-3
 
