@@ -150,11 +150,11 @@ def mismatch_message(check: Agreement) -> str:
 def agreement_lines(checks: list[Agreement], plugins: dict[str, dict]) -> list[str]:
     """What `tomstudy bundle verify` prints: one row per predictor (a plug-in's seed is '-'),
     then, per plug-in, the distribution the bundle was frozen with and the installed one."""
-    lines = [f"{'world':<10}{'model':<7}{'seed':>5}{'answers':>9}{'max m':>11}{'max deg':>10}"
+    lines = [f"{'world':<14}{'model':<7}{'seed':>5}{'answers':>9}{'max m':>11}{'max deg':>10}"
              f"{'codes':>7}  verdict"]
     for c in checks:
         seed = str(c.seed) if c.seed >= 0 else "-"
-        lines.append(f"{c.world:<10}{c.model:<7}{seed:>5}{c.answers:>9}{c.max_metres:>11.2e}"
+        lines.append(f"{c.world:<14}{c.model:<7}{seed:>5}{c.answers:>9}{c.max_metres:>11.2e}"
                      f"{c.max_degrees:>10.2e}{len(c.codes_changed):>7}  "
                      f"{'ok' if c.ok else 'MISMATCH'}")
     lines.append(f"max m = largest |stored - recomputed| action x dt (one step's position); "
