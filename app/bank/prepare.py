@@ -42,6 +42,7 @@ def build_bundle(settings: Settings, study_id: str, workers: int = 2, n_trajecto
     the bundle into the data dir's bundles/<study>/ (never into the configs dir)."""
     from app.learning.config import load_train_config
     from app.learning.family import train_family
+    from app.learning.jobs import JobPool
     from app.learning.select import ensure_selected
 
     started = time.perf_counter()
@@ -51,10 +52,11 @@ def build_bundle(settings: Settings, study_id: str, workers: int = 2, n_trajecto
     with timed(phases, "data"):
         for world in config.worlds:
             ensure_trajectories(layout, world, n_trajectories, seed, say)
-    with timed(phases, "selection"):
-        train_cfg = ensure_selected(layout, config.worlds, load_train_config(), say, workers)
-    with timed(phases, "training"):
-        train_family(layout, config.worlds, config.models.seeds, train_cfg, workers, say)
+    with JobPool(workers) as pool:  # one set of workers for both phases: each start costs
+        with timed(phases, "selection"):  # a torch import
+            train_cfg = ensure_selected(layout, config.worlds, load_train_config(), say, pool)
+        with timed(phases, "training"):
+            train_family(layout, config.worlds, config.models.seeds, train_cfg, pool, say)
     with timed(phases, "bank"):
         if bank_is_current(layout, study_id, config):
             say(f"{layout.bank(study_id)} is up to date; skipping build-trials")

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from app.layout import Layout
 from app.learning.config import TrainConfig
-from app.learning.jobs import JobPool
+from app.learning.jobs import JobPool, job_pool
 
 Job = tuple[str, str, int]  # world, model, seed
 
@@ -24,15 +24,15 @@ def missing_jobs(layout: Layout, worlds: list[str], seeds: list[int], model: str
 
 
 def train_family(layout: Layout, worlds: list[str], seeds: list[int], cfg: TrainConfig,
-                 workers: int = 2, say: Callable[[str], None] = print) -> list[Job]:
-    """Train every missing checkpoint of Ours then the VAE for `worlds` x `seeds`; returns
-    the jobs it ran."""
+                 workers: int | JobPool = 2, say: Callable[[str], None] = print) -> list[Job]:
+    """Train every missing checkpoint of Ours then the VAE for `worlds` x `seeds` (on a pool
+    of `workers`, or on the pool given); returns the jobs it ran."""
     ran = []
-    with JobPool(workers) as pool:
+    with job_pool(workers) as pool:
         for model in ("ours", "vae"):
             jobs = missing_jobs(layout, worlds, seeds, model)
             kept = len(worlds) * len(seeds) - len(jobs)
-            say(f"training {len(jobs)} {model} checkpoint(s) on {workers} process(es); "
+            say(f"training {len(jobs)} {model} checkpoint(s) on {pool.workers} process(es); "
                 f"{kept} already exist")
             pool.run(train_job, [(layout, job, cfg) for job in jobs], "train family", "model")
             ran += jobs

@@ -10,6 +10,7 @@ in this process, whichever worker runs it.
 import multiprocessing as mp
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
 
 from tqdm import tqdm
 
@@ -61,6 +62,17 @@ class JobPool:
             # spawn, not fork: a forked child of a process that has run torch can deadlock
             self._pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"))
         return self._pool
+
+
+@contextmanager
+def job_pool(workers: "int | JobPool") -> Iterator[JobPool]:
+    """`workers` itself when it is a pool (its owner closes it: several phases share its
+    started workers), else a pool of that many workers for the block."""
+    if isinstance(workers, JobPool):
+        yield workers
+        return
+    with JobPool(workers) as pool:
+        yield pool
 
 
 def one_thread_each(fn: Callable, job: tuple):

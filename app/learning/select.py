@@ -38,7 +38,7 @@ from app.data.trajectory import TrajectorySet
 from app.layout import Layout
 from app.learning.checkpoint import model_from_payload, trajectory_hash
 from app.learning.config import TrainConfig, WorldSelection, load_train_config
-from app.learning.jobs import JobPool
+from app.learning.jobs import JobPool, job_pool
 from app.learning.model_metrics import code_usage, evaluate
 from app.learning.models import model_args
 from app.learning.networks import LatentActionModel
@@ -183,14 +183,14 @@ def selection_cell(trajs: TrajectorySet, base: TrainConfig, model_name: str, val
 
 
 def run_selection(trajs: TrajectorySet, base: TrainConfig, sel: SelectionConfig,
-                  workers: int = 1) -> dict:
+                  workers: int | JobPool = 1) -> dict:
     """Train and score every cell (`workers` at a time), apply the rules, add the sensitivity
     row; JSON-able dict. The result does not depend on `workers`: every cell trains on one
     thread from its seed."""
     started = time.perf_counter()
     base = cell_config(base, {})
     cells = grid_cells(sel)
-    with JobPool(workers) as pool, one_thread():
+    with job_pool(workers) as pool, one_thread():
         data = prepare(trajs, base)
         scored = pool.run(selection_cell, [(trajs, base, m, v, sel.seed) for m, v in cells],
                           f"select {trajs.world}", "cell")
@@ -307,7 +307,8 @@ def chosen_selection(result: dict) -> WorldSelection:
 
 
 def ensure_selected(layout: Layout, worlds: list[str], base: TrainConfig,
-                    say: Callable[[str], None] = print, workers: int = 2) -> TrainConfig:
+                    say: Callable[[str], None] = print,
+                    workers: int | JobPool = 2) -> TrainConfig:
     """`base` with a selection for every world: training.yaml's own, else the pre-registered
     rule run now (or its result on this very data, kept in the layout's selection dir).
 
