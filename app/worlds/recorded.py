@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 
 from app.configio import load_yaml_model
 from app.data.scene import Scene
-from app.data.trajectory import ROBOT, Covered, TrajectorySet
+from app.data.trajectory import HUMAN, ROBOT, Covered, TrajectorySet
 from app.layout import Layout
 from app.recordings.config import RecordedConfig
 from app.recordings.importer import LABEL_NAMES, ROBOT_LABEL, ImportResult, import_recordings
@@ -94,7 +94,7 @@ class RecordedWorld:
                               reach: float) -> dict[str, np.ndarray]:
         """`near` (within `reach`) and `far` (`reach` to 2 `reach`) recorded robot positions
         heading the robot's way, clear of the human, with `reach` of scene around them."""
-        robot, human = segment[-1, ROBOT], segment[-1, 1]
+        robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
         move = segment[-1, ROBOT] - segment[-2, ROBOT]
         heading = float(np.arctan2(move[1], move[0]))
         pts = covered.positions
