@@ -65,10 +65,10 @@ def _manoeuvre_lookup(data_dir: Path, scenario: str) -> dict | None:
     return table
 
 
-def _turn_label(positions: np.ndarray, threshold_deg: float) -> int:
-    """left / straight / right from the robot's travel direction change over the window."""
-    robot = positions[:, ROBOT]
-    moves = np.diff(robot, axis=0)
+def turn_label(track: np.ndarray, threshold_deg: float) -> int:
+    """Index into TURN_NAMES of a map-frame track's [W, 2] travel direction change over its
+    moving steps (a map's y points up, so a positive change is a left turn)."""
+    moves = np.diff(track, axis=0)
     moving = np.linalg.norm(moves, axis=1) > 0.05
     if moving.sum() < 2:
         return TURN_NAMES.index("straight")
@@ -109,7 +109,7 @@ def _to_pair_data(world: str, pairs: list[px.Pair], cfg: InteractionConfig, scen
     label_names = {"robot_turn": TURN_NAMES, **{n: list(LABEL_VALUES[n]) for n in names}}
     episodes, per_step = [], []
     for pair in pairs:
-        labels = {"robot_turn": _turn_label(pair.positions, cfg.turn_threshold_deg)}
+        labels = {"robot_turn": turn_label(pair.positions[:, ROBOT], cfg.turn_threshold_deg)}
         steps = _pair_step_labels(pair, lookup or {}, names, cfg.downsample)
         labels.update({name: _majority(row) for name, row in zip(names, steps, strict=True)})
         per_step.append(steps)

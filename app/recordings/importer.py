@@ -16,7 +16,6 @@ checkpoint's content hash covers this file, and the same recordings must give th
 checkpoints on any machine.
 """
 
-import math
 import platform
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,12 +29,12 @@ from app.data.trajectory import Episode, TrajectorySet
 from app.fileio import sha256_file
 from app.interaction import pairs as px
 from app.interaction import tracks as tx
+from app.interaction.dataset import TURN_NAMES, turn_label
 from app.interaction.lanelet_map import LaneLine, MapError, read_lanelet_map
 from app.layout import Layout
 from app.recordings.config import CsvSource, InteractionSource, RecordedConfig
 from app.recordings.scene import SceneFrame, frame_around, recorded_scene
 
-TURN_NAMES = ["left", "straight", "right"]  # on screen, as a map shows them
 LABEL_NAMES = {"robot_turn": TURN_NAMES, "human_turn": TURN_NAMES}
 ROBOT_LABEL = "robot_turn"
 MIN_PAIRS = 3  # per split: a test split and the trainer's train and validation splits
@@ -110,8 +109,9 @@ def interaction_recordings(root: Path, source: InteractionSource) -> Recordings:
             ranges = px.time_split(recordings, 1 - source.held_out_fraction)
     inputs = sorted({f for fs in files.values() for f in fs})
     map_path = root / "maps" / f"{source.scenario}.osm"
-    lines = read_lanelet_map(map_path) if map_path.is_file() else []
+    lines = []
     if map_path.is_file():
+        lines = read_lanelet_map(map_path)
         inputs.append(map_path)
     return Recordings(f"INTERACTION {source.scenario} ({layout})", recordings,
                       tx.FRAME_MS / 1000, ranges, px.CARS, hashes(inputs, root), lines)
@@ -193,20 +193,6 @@ def closest_m(pair: px.Pair) -> float:
     """The smallest distance between the robot's and the human's centres over the pair [m]."""
     gaps = pair.positions[:, 0] - pair.positions[:, 1]
     return float(np.hypot(gaps[:, 0], gaps[:, 1]).min())
-
-
-def turn_label(track: np.ndarray, threshold_deg: float) -> int:
-    """Index into TURN_NAMES of a map-frame track's [W, 2] heading change over its moving
-    steps (a map's y points up, so a positive change is a left turn)."""
-    moves = np.diff(track, axis=0)
-    moving = np.hypot(moves[:, 0], moves[:, 1]) > 0.05
-    if moving.sum() < 2:
-        return TURN_NAMES.index("straight")
-    angles = np.unwrap(np.arctan2(moves[moving, 1], moves[moving, 0]))
-    change = math.degrees(angles[-1] - angles[0])
-    if abs(change) <= threshold_deg:
-        return TURN_NAMES.index("straight")
-    return TURN_NAMES.index("left" if change > 0 else "right")
 
 
 def pair_episode(pair: px.Pair, step: int, frame: SceneFrame, threshold_deg: float) -> Episode:

@@ -11,6 +11,7 @@ from app.configio import ConfigError
 from app.data.scene import Bounds, Scene
 from app.data.trajectory import ROBOT, Covered, TrajectorySet
 from app.data.windows import split_by_trajectory
+from app.interaction.dataset import turn_label
 from app.interaction.tracks import TrackFileError
 from app.layout import Layout
 from app.recordings.config import RecordedConfig
@@ -19,7 +20,6 @@ from app.recordings.importer import (
     LABEL_NAMES,
     UnusableRecordings,
     import_recordings,
-    turn_label,
 )
 from app.recordings.scene import SceneFrame, row_runs, simplify
 from app.worlds.recorded import RecordedWorld
