@@ -175,13 +175,6 @@ def held_out_information(trajs: TrajectorySet, seed: int, cfg: TrainConfig,
             "test_mse": scores["prediction"]["mse"]}
 
 
-def selection_cell(trajs: TrajectorySet, base: TrainConfig, model_name: str, values: dict,
-                   seed: int) -> tuple[dict, LatentActionModel]:
-    """One grid cell on its own windows (a JobPool job: the split and windows are the same in
-    every process); (row, model)."""
-    return score_cell(model_name, values, base, prepare(trajs, base), seed)
-
-
 def run_selection(trajs: TrajectorySet, base: TrainConfig, sel: SelectionConfig,
                   workers: int | JobPool = 1) -> dict:
     """Train and score every cell (`workers` at a time), apply the rules, add the sensitivity
@@ -192,7 +185,7 @@ def run_selection(trajs: TrajectorySet, base: TrainConfig, sel: SelectionConfig,
     cells = grid_cells(sel)
     with job_pool(workers) as pool, one_thread():
         data = prepare(trajs, base)
-        scored = pool.run(selection_cell, [(trajs, base, m, v, sel.seed) for m, v in cells],
+        scored = pool.run(score_cell, [(m, v, base, data, sel.seed) for m, v in cells],
                           f"select {trajs.world}", "cell")
         rows, models = [row for row, _ in scored], [model for _, model in scored]
         result = _choose(rows, sel)
@@ -212,8 +205,7 @@ def run_selection(trajs: TrajectorySet, base: TrainConfig, sel: SelectionConfig,
     return {**result, "world": trajs.world, "seed": sel.seed, "sensitivity": sensitivity,
             "test_information_only": information, "selection_config": sel.model_dump(),
             "base_train_config": base.model_dump(),
-            "data_hash": trajectory_hash(trajs.positions, trajs.lengths, trajs.labels,
-                                         trajs.held_out),
+            "data_hash": trajectory_hash(trajs),
             "n_windows": {k: len(w) for k, w in data.windows.items() if k != "test"},
             "wall_s": round(time.perf_counter() - started, 1)}
 
@@ -339,8 +331,7 @@ def kept_selection(path: Path, trajs: TrajectorySet, sel: SelectionConfig,
     if not path.is_file():
         return None
     result = json.loads(path.read_text())
-    same = (result.get("data_hash") == trajectory_hash(trajs.positions, trajs.lengths,
-                                                       trajs.labels, trajs.held_out)
+    same = (result.get("data_hash") == trajectory_hash(trajs)
             and result.get("selection_config") == json.loads(json.dumps(sel.model_dump()))
             and result.get("base_train_config")
             == json.loads(json.dumps(cell_config(base, {}).model_dump())))
