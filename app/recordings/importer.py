@@ -67,7 +67,6 @@ class ImportResult:
     """Where the trajectories went and what they hold."""
 
     npz_path: Path
-    meta_path: Path
     meta: dict
 
 
@@ -146,8 +145,8 @@ def whole(recordings: list[tx.Recording]) -> dict[str, tuple[int, int]]:
 
 
 def hashes(paths: list[Path], root: Path) -> dict[str, str]:
-    """Each file's SHA-256, named relative to `root` (the lab's folder is its own business)."""
-    root = root if root.is_dir() else root.parent
+    """Each file's SHA-256, named relative to the folder `root` (the lab's folders are its own
+    business)."""
     return {Path(p).relative_to(root).as_posix(): sha256_file(p) for p in paths}
 
 
@@ -246,15 +245,9 @@ def import_recordings(world: str, config: RecordedConfig, layout: Layout) -> Imp
             "dt_s": config.dt_s, "n": len(trajs), **counts,
             "max_steps": int(trajs.positions.shape[1] - 1),
             "mean_length_steps": float(trajs.lengths.mean()),
-            "label_counts": label_counts(trajs), "frame": trajs.scene.frame,
+            "label_counts": trajs.label_counts(), "frame": trajs.scene.frame,
             "package_version": app.__version__, "python": platform.python_version(),
             "numpy": np.__version__, "content_sha256": sha256_file(npz_path)}
     write_json(meta_path, meta)
-    return ImportResult(npz_path, meta_path, meta)
-
-
-def label_counts(trajs: TrajectorySet) -> dict:
-    """Trajectories per class of each label."""
-    return {name: {cls: int((trajs.labels[name] == k).sum())
-                   for k, cls in enumerate(names)} for name, names in trajs.label_names.items()}
+    return ImportResult(npz_path, meta)
 

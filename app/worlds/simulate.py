@@ -107,9 +107,6 @@ def _run_pool(world, config_path, policy, n, seed, workers):
 
 def _meta(world: World, trajs: TrajectorySet, n, seed, policy, workers, rejections,
           wall_s, npz_path) -> dict:
-    counts = {name: {cls: int((values == k).sum())
-                     for k, cls in enumerate(trajs.label_names.get(name, []))}
-              for name, values in trajs.labels.items() if name in trajs.label_names}
     return {
         "world": world.name,
         "config": world.config.model_dump(),
@@ -119,7 +116,7 @@ def _meta(world: World, trajs: TrajectorySet, n, seed, policy, workers, rejectio
         "dt_s": world.dt_s,
         "max_steps": int(trajs.positions.shape[1] - 1),
         "mean_length_steps": float(trajs.lengths.mean()),
-        "label_counts": counts,
+        "label_counts": trajs.label_counts(),
         "rejected": dict(sorted(rejections.items())),
         "attempts": n + sum(rejections.values()),
         "workers": workers,
