@@ -98,8 +98,7 @@ def load_inputs(config: StudyConfig, name: str, layout: Layout) -> WorldInputs:
     if not npz_path.is_file():
         raise FileNotFoundError(f"{npz_path}: no trajectories; run `tomstudy simulate {name}`")
     trajs = TrajectorySet.load(npz_path)
-    data_hash = trajectory_hash(trajs.positions, trajs.lengths, trajs.labels,
-                                trajs.held_out)
+    data_hash = trajectory_hash(trajs)
     models, splits = {"ours": [], "vae": []}, []  # test trajectory sets
     for kind, seed in ((k, s) for k in models for s in config.models.seeds):
         path = layout.checkpoint(name, kind, seed)

@@ -23,6 +23,11 @@ from app.fileio import write_npz
 ROBOT, HUMAN = 0, 1
 
 
+def wrap_angle(angle) -> np.ndarray:
+    """Angles [rad] wrapped into [-pi, pi)."""
+    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
+
+
 @dataclass
 class Episode:
     """One rollout before padding: positions [L+1, A, D], headings/speeds [L+1, A], labels."""
@@ -76,6 +81,12 @@ class TrajectorySet:
 
     def __len__(self) -> int:
         return len(self.lengths)
+
+    def label_counts(self) -> dict[str, dict[str, int]]:
+        """Trajectories per class of every named label (meta.json's `label_counts`)."""
+        return {name: {cls: int((values == k).sum())
+                       for k, cls in enumerate(self.label_names[name])}
+                for name, values in self.labels.items() if name in self.label_names}
 
     @classmethod
     def from_episodes(cls, world: str, dt_s: float, episodes: list[Episode],

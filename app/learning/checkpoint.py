@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.atomic import atomic_path
+from app.data.trajectory import TrajectorySet
 from app.data.windows import segment_features
 from app.fileio import read_bytes
 from app.learning.fsq import codes_to_indices, indices_to_codes, mixed_radix_basis, quantize
@@ -58,15 +59,15 @@ def save_checkpoint(path: Path, payload: dict) -> str:
     return payload["content_hash"]
 
 
-def trajectory_hash(positions: np.ndarray, lengths: np.ndarray, labels: dict,
-                    held_out: np.ndarray | None = None) -> str:
+def trajectory_hash(trajs: TrajectorySet) -> str:
     """sha256 hex of a TrajectorySet's arrays: ties a checkpoint to its training data (and,
     for a recorded world, to the recordings it held out)."""
     digest = hashlib.sha256()
-    for array in (positions, lengths, *(labels[k] for k in sorted(labels))):
+    labels = trajs.labels
+    for array in (trajs.positions, trajs.lengths, *(labels[k] for k in sorted(labels))):
         digest.update(np.ascontiguousarray(array).tobytes())
-    if held_out is not None:
-        digest.update(np.ascontiguousarray(held_out, dtype=bool).tobytes())
+    if trajs.held_out is not None:
+        digest.update(np.ascontiguousarray(trajs.held_out, dtype=bool).tobytes())
     return digest.hexdigest()
 
 

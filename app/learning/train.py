@@ -280,8 +280,7 @@ def build_payload(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainCo
         "kind": model_name, "world": trajs.world, "dt_s": float(trajs.dt_s), "model_args": args,
         "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
         "norm": data.norm.to_dict(), "data_meta": _data_meta(trajs, data.windows, data_meta),
-        "data_hash": trajectory_hash(trajs.positions, trajs.lengths, trajs.labels,
-                                     trajs.held_out),
+        "data_hash": trajectory_hash(trajs),
         "train_config": cfg.model_dump(), "seed": seed,
         "kmeans_centres": centres.tolist() if centres is not None else None, "codes": {},
     }
