@@ -21,13 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.alignment import ZERO_SPEED_MPS
-from app.data.trajectory import ROBOT
+from app.data.trajectory import ROBOT, wrap_angle
 from app.predictors.protocol import PredictorAnswer, code_hash
-
-
-def wrap_angle(angle: np.ndarray) -> np.ndarray:
-    """Angles [rad] wrapped into [-pi, pi)."""
-    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
 
 
 def speed_and_turn(track: np.ndarray, dt_s: float, steps: int) -> tuple[float, float]:

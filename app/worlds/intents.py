@@ -32,6 +32,8 @@ from typing import Protocol
 
 import numpy as np
 
+from app.data.trajectory import wrap_angle
+
 LANE_OFFSETS = np.array([-1, 0, 1])  # relative reading: merge left (towards lane 0), keep, right
 LATERAL_CANDIDATES = 41  # lateral moves the lane likelihood normalises over
 DIRECTION_CANDIDATES = 72  # directions (5 deg apart) the goal likelihood normalises over
@@ -213,7 +215,7 @@ def move_headings(track: np.ndarray) -> np.ndarray:
 def heading_changes(track: np.ndarray) -> np.ndarray:
     """Change of heading [rad] between consecutive moves of a track, wrapped into (-pi, pi]."""
     angles = move_headings(track)
-    return (np.diff(angles) + np.pi) % (2 * np.pi) - np.pi
+    return wrap_angle(np.diff(angles))
 
 
 def turn_rate(example_tracks: list[np.ndarray], dt_s: float) -> float:

@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 
 from app.configio import load_yaml_model
 from app.data.scene import Scene
-from app.data.trajectory import HUMAN, ROBOT, Covered, TrajectorySet
+from app.data.trajectory import HUMAN, ROBOT, Covered, TrajectorySet, wrap_angle
 from app.layout import Layout
 from app.recordings.config import RecordedConfig
 from app.recordings.importer import LABEL_NAMES, ROBOT_LABEL, ImportResult, import_recordings
@@ -36,7 +36,7 @@ class NotImported(RuntimeError):
 
 def angle_gap(a: np.ndarray, b: float) -> np.ndarray:
     """|a - b| wrapped into [0, pi] (rad)."""
-    return np.abs((np.asarray(a) - b + np.pi) % (2 * np.pi) - np.pi)
+    return np.abs(wrap_angle(np.asarray(a) - b))
 
 
 class RecordedWorld:
