@@ -31,7 +31,8 @@ from pathlib import Path
 import yaml
 
 from app.bank.prepare import build_bundle
-from app.learning.config import load_train_config
+from app.learning.config import MODELS, load_train_config
+from app.learning.select import grid_cells, load_selection_config
 from app.learning.train import train_world
 from app.recordings.generated import generate_study_recordings
 from app.settings import REPO_ROOT, Settings
@@ -107,10 +108,12 @@ def main() -> None:
         configs_dir = configs(root, args.seeds, args.max_epochs)
         runs = {w: timed_build(root, configs_dir, w) for w in WORKERS}
         unit = unit_training(root, configs_dir)
-    cells = 2 * 15
+    worlds = yaml.safe_load((configs_dir / f"{STUDY}.yaml").read_text())["worlds"]
+    cells = len(worlds) * len(grid_cells(load_selection_config(
+        configs_dir / "model_selection.yaml")))
     seeds = len(runs[1]["manifest"]["seeds"])
-    checkpoints = 2 * 2 * seeds
-    print(f"{files} recording files, 2 worlds, {seeds} seeds, max epochs "
+    checkpoints = len(MODELS) * len(worlds) * seeds
+    print(f"{files} recording files, {len(worlds)} worlds, {seeds} seeds, max epochs "
           f"{args.max_epochs or 'as training.yaml'}; one Ours training on the roundabout: "
           f"{unit:.1f} s")
     for workers, run in runs.items():

@@ -43,9 +43,10 @@ def recordings(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def imported(recordings, tmp_path_factory) -> dict[str, TrajectorySet]:
+def imported(recordings, tmp_path_factory) -> dict:
+    """Both worlds imported into one data dir: each one's trajectories and meta, and the layout."""
     layout = Layout(tmp_path_factory.mktemp("var"), recordings)
-    out = {}
+    out = {"layout": layout}
     for name, scenario in (("roundabout", ROUNDABOUT), ("intersection", INTERSECTION)):
         import_recordings(name, config(scenario), layout)
         out[name] = TrajectorySet.load(layout.trajectories(name))
@@ -164,11 +165,9 @@ def test_a_window_too_short_for_a_trial_is_a_config_error():
 
 
 @pytest.fixture(scope="module")
-def world(imported, recordings, tmp_path_factory) -> RecordedWorld:
-    layout = Layout(tmp_path_factory.mktemp("world"), recordings)
-    import_recordings("roundabout", config(ROUNDABOUT), layout)
+def world(imported) -> RecordedWorld:
     built = RecordedWorld("roundabout", config(ROUNDABOUT))
-    built.prepare(layout)
+    built.prepare(imported["layout"])
     return built
 
 
