@@ -82,10 +82,10 @@ export function stillView(scene, clip, width, height) {
   return viewAt(scale, fitted.toM([width / 2, height / 2]), width, height);
 }
 
-/** Draw a clip frame at fractional step `t`, with each agent's trace so far. */
-export function drawClipFrame(ctx, view, scene, clip, t) {
+/** Draw a clip frame at fractional step `t` (`poses`: the agents' poseAt then), with each
+ * agent's trace so far. */
+export function drawClipFrame(ctx, view, scene, clip, t, poses = poseAt(clip, t)) {
   drawBackground(ctx, view, scene, t);
-  const poses = poseAt(clip, t);
   poses.forEach((pose, agent) => {
     const style = agentStyle(scene, agent);
     const past = clip.positions.slice(0, Math.floor(t) + 1).map((step) => step[agent]);
@@ -154,10 +154,10 @@ export class ClipPlayer {
     return run === this.run;
   }
 
-  /** The view of frame `t`: the whole scene (`fitted`), or the followed robot's surroundings. */
-  frameView(fitted, clip, t) {
+  /** A frame's view: the whole scene (`fitted`), or the surroundings of the robot at `robot`. */
+  frameView(fitted, robot) {
     if (!followsRobot(this.scene)) return fitted;
-    const view = followView(this.scene, fitted.width, fitted.height, poseAt(clip, t)[0].position);
+    const view = followView(this.scene, fitted.width, fitted.height, robot);
     publishView(this.canvas, view);
     return view;
   }
@@ -173,7 +173,8 @@ export class ClipPlayer {
           ({ ctx, view, cssWidth } = prepareCanvas(this.canvas, this.scene)); // window resized
         }
         const t = Math.min(steps, (now - start) / 1000 / STEP_SECONDS);
-        drawClipFrame(ctx, this.frameView(view, clip, t), this.scene, clip, t);
+        const poses = poseAt(clip, t);
+        drawClipFrame(ctx, this.frameView(view, poses[0].position), this.scene, clip, t, poses);
         if (t >= steps) return resolve(true);
         requestAnimationFrame(frame);
       };
