@@ -4,7 +4,7 @@ from pathlib import Path
 from typing import TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError, model_serializer
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -17,6 +17,22 @@ class StrictModel(BaseModel):
     """Base for every config: unknown keys are errors, instances are immutable."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def omitted_when_empty(*keys: str):
+    """A model's serializer that leaves out these keys while their value is None or empty, so a
+    model given a newer key dumps, byte for byte (and hash for hash), as it did before the key
+    existed. Assign it in the class body: `_serialized = omitted_when_empty("key")`."""
+
+    @model_serializer(mode="wrap")
+    def serialize(self, handler):
+        data = handler(self)
+        for key in keys:
+            if key in data and data[key] in (None, [], {}):
+                del data[key]
+        return data
+
+    return serialize
 
 
 def describe_validation_error(err: ValidationError, source: str) -> str:

@@ -3,9 +3,9 @@
 Plots draw it from its JSON form with analysis.scene_plot.draw_scene.
 """
 
-from pydantic import Field, model_serializer
+from pydantic import Field
 
-from app.configio import StrictModel
+from app.configio import StrictModel, omitted_when_empty
 
 
 class Bounds(StrictModel):
@@ -89,14 +89,9 @@ class Scene(StrictModel):
     agents: list[AgentShape]
     recorded: RecordedScene | None = None
 
-    @model_serializer(mode="wrap")
-    def _without_unset_recorded(self, handler):
-        # a simulated world's scene serialises exactly as before `recorded` existed, so the
-        # shipped bundle's scenes, clip hashes and trajectory files keep their bytes
-        data = handler(self)
-        if data.get("recorded") is None:
-            data.pop("recorded", None)
-        return data
+    # a simulated world's scene serialises exactly as before `recorded` existed, so the
+    # shipped bundle's scenes, clip hashes and trajectory files keep their bytes
+    _without_unset_recorded = omitted_when_empty("recorded")
 
 
 # Okabe-Ito colours (distinguishable for colour-blind readers); label colours for plots are

@@ -7,10 +7,10 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field, ValidationError, field_validator, model_serializer, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from analysis.contracts import ExclusionRules
-from app.configio import ConfigError, StrictModel, load_yaml_model
+from app.configio import ConfigError, StrictModel, load_yaml_model, omitted_when_empty
 from app.predictors.registry import check_names
 from app.settings import Settings
 
@@ -289,14 +289,9 @@ class StudyConfig(StrictModel):
     def _registered(cls, names: list[str]) -> list[str]:
         return check_names(names)
 
-    @model_serializer(mode="wrap")
-    def _without_empty_predictors(self, handler) -> dict:
-        # a study without plug-ins dumps as before the key existed: same config hash, so
-        # sessions that ran it before an upgrade still show as running the loaded config
-        data = handler(self)
-        if not self.predictors:
-            data.pop("predictors", None)
-        return data
+    # a study without plug-ins dumps as before the key existed: same config hash, so
+    # sessions that ran it before an upgrade still show as running the loaded config
+    _without_empty_predictors = omitted_when_empty("predictors")
 
     @model_validator(mode="after")
     def _consistent(self) -> "StudyConfig":

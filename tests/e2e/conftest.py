@@ -52,29 +52,26 @@ class BrowserServer:
     db_path: Path
 
 
-@pytest.fixture(scope="session")
-def browser_server(browser_study: SmallStudy, tmp_path_factory):
-    """`tomstudy serve` of the browser study on a fresh SQLite file."""
-    root = tmp_path_factory.mktemp("browser-server")
+def serve_study(study: SmallStudy, root: Path):
+    """`tomstudy serve` of `study` on a fresh SQLite file under `root`, for a fixture's life."""
     port = free_port()
     db_path = root / "study.db"
-    proc = start_server(browser_study, f"sqlite:///{db_path}", port, log=root / "server.log")
+    proc = start_server(study, f"sqlite:///{db_path}", port, log=root / "server.log")
     yield BrowserServer(f"http://127.0.0.1:{port}", db_path)
     proc.terminate()
     proc.wait(timeout=10)
+
+
+@pytest.fixture(scope="session")
+def browser_server(browser_study: SmallStudy, tmp_path_factory):
+    """`tomstudy serve` of the browser study on a fresh SQLite file."""
+    yield from serve_study(browser_study, tmp_path_factory.mktemp("browser-server"))
 
 
 @pytest.fixture(scope="session")
 def interaction_server(interaction_study: SmallStudy, tmp_path_factory):
     """`tomstudy serve` of the interaction study (generated recordings) on a fresh SQLite file."""
-    root = tmp_path_factory.mktemp("interaction-server")
-    port = free_port()
-    db_path = root / "study.db"
-    proc = start_server(interaction_study, f"sqlite:///{db_path}", port,
-                        log=root / "server.log")
-    yield BrowserServer(f"http://127.0.0.1:{port}", db_path)
-    proc.terminate()
-    proc.wait(timeout=10)
+    yield from serve_study(interaction_study, tmp_path_factory.mktemp("interaction-server"))
 
 
 @pytest.fixture(scope="module")

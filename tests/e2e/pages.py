@@ -30,10 +30,16 @@ def researcher_page(browser, base_url: str) -> tuple:
     page = browser.new_page(viewport={"width": 1300, "height": 900})
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
+    log_in(page, base_url)
+    return page, errors
+
+
+def log_in(page, base_url: str) -> None:
+    """Log into the researcher dashboard with the test token; wait until it is shown."""
     page.goto(f"{base_url}/researcher")
     page.fill("#token-input", ADMIN_TOKEN)
-    page.click("#token-form button")
-    return page, errors
+    page.click("#token-form button[type=submit]")
+    page.wait_for_selector("#dashboard:not([hidden])")
 
 
 def page_token(page, study_id: str = BROWSER_STUDY) -> str:
@@ -76,10 +82,7 @@ def consent_and_instructions(page) -> None:
 
 def open_dashboard(page, base_url: str, study_id: str = BROWSER_STUDY) -> None:
     """Log into the researcher dashboard and show a study."""
-    page.goto(f"{base_url}/researcher")
-    page.fill("#token-input", ADMIN_TOKEN)
-    page.click("#token-form button[type=submit]")
-    page.wait_for_selector("#dashboard:not([hidden])")
+    log_in(page, base_url)
     page.fill("#study-input", study_id)
     page.click("#refresh")
     page.wait_for_selector("table.sessions")  # the dashboard has loaded

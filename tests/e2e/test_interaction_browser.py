@@ -27,6 +27,7 @@ from tests.e2e.pages import (
     contrast,
     current_state,
     fresh_recruitment,
+    page_token,
     planned_path,
     press_on,
     robot_outline,
@@ -138,8 +139,7 @@ def test_a_participant_walks_the_recorded_worlds_by_clicking(chromium, interacti
     assert sorted(parts) == sorted(config["worlds"])
     answer_survey(page)
     visible(page, "done")
-    token = json.loads(page.evaluate(
-        f"sessionStorage.getItem('tomstudy.{INTERACTION_STUDY}.session')"))["token"]
+    token = page_token(page, INTERACTION_STUDY)
     assert errors == []
     context.close()
 

@@ -14,6 +14,24 @@ from tests.e2e.test_dashboard_browser import CANVAS_COLOURS
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 LABELS = ["Ours", "VAE", "Const. vel.", "ctrv", "Policy"]
+# Pixels of a canvas within `tolerance` levels per channel of an RGB colour. The replay strokes
+# a model's moves at 0.9 alpha and anti-aliased, so few of its pixels are the colour exactly;
+# 10 levels take in its squares over its own line and its line over dark ground, and nothing
+# else the replay draws (0 pixels with the plug-in's moves left out).
+COLOUR_PIXELS = """(c, [rgb, tolerance]) => {
+    const data = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+    let n = 0;
+    for (let i = 0; i < data.length; i += 4) {
+        if (rgb.every((v, k) => Math.abs(data[i + k] - v) <= tolerance)) n += 1;
+    }
+    return n;
+}"""
+COLOUR_TOLERANCE = 10
+
+
+def rgb(hex_colour: str) -> list[int]:
+    """[r, g, b] of a "#RRGGBB" colour."""
+    return [int(hex_colour[k:k + 2], 16) for k in (1, 3, 5)]
 
 
 @pytest.fixture(scope="module")
@@ -47,6 +65,9 @@ def test_the_dashboard_shows_every_predictor_and_replays_the_plugin(plugin_serve
     page.wait_for_selector("#replay-view:not([hidden])")
     assert "ctrv" in page.locator("#replay-legend").inner_text()
     assert "error ctrv" in page.locator("#replay-click-table th").all_inner_texts()
-    assert page.locator("#replay-canvas").evaluate(CANVAS_COLOURS) > 10
+    canvas = page.locator("#replay-canvas")
+    assert canvas.evaluate(CANVAS_COLOURS) > 10
+    # the colour the page was given for the plug-in (its error-plot dots above), on the replay
+    assert canvas.evaluate(COLOUR_PIXELS, [rgb(model_color("ctrv")), COLOUR_TOLERANCE]) > 0
     assert errors == []
     page.close()

@@ -43,9 +43,10 @@ export function poseAt(clip, t) {
   }));
 }
 
-/** True when a scene's clips follow the robot (a recorded world) instead of showing it whole. */
+/** True when a scene's clips follow the robot (a recorded world) instead of showing it whole
+ * (a recorded scene always has a view_span_m > 0: app/data/scene.py RecordedScene). */
 export function followsRobot(scene) {
-  return Boolean(scene.recorded?.view_span_m);
+  return Boolean(scene.recorded);
 }
 
 /** Pixels per metre that show `view_span_m` across the shorter side of a w x h box. */
@@ -54,7 +55,7 @@ function followScale(scene, width, height) {
 }
 
 /** The view centred on `point` at the follow scale, moved only to stay inside the scene. */
-export function followView(scene, width, height, point) {
+function followView(scene, width, height, point) {
   const scale = followScale(scene, width, height);
   const b = scene.bounds;
   const centre = [
@@ -68,7 +69,7 @@ export function followView(scene, width, height, point) {
  * A reduced-motion still of a clip that follows the robot: the clip's own positions (both
  * agents) and a car length around them, fitted, but never closer than the moving view.
  */
-export function stillView(scene, clip, width, height) {
+function stillView(scene, clip, width, height) {
   const margin = Math.max(...(scene.agents || []).map((a) => a.length_m), 1);
   const points = clip.positions.flat();
   const xs = points.map((p) => p[0]);
@@ -82,10 +83,10 @@ export function stillView(scene, clip, width, height) {
   return viewAt(scale, fitted.toM([width / 2, height / 2]), width, height);
 }
 
-/** Draw a clip frame at fractional step `t`, with each agent's trace so far. */
-export function drawClipFrame(ctx, view, scene, clip, t) {
+/** Draw a clip frame at fractional step `t` (`poses`: the agents' poseAt then), with each
+ * agent's trace so far. */
+export function drawClipFrame(ctx, view, scene, clip, t, poses = poseAt(clip, t)) {
   drawBackground(ctx, view, scene, t);
-  const poses = poseAt(clip, t);
   poses.forEach((pose, agent) => {
     const style = agentStyle(scene, agent);
     const past = clip.positions.slice(0, Math.floor(t) + 1).map((step) => step[agent]);
@@ -93,10 +94,11 @@ export function drawClipFrame(ctx, view, scene, clip, t) {
   });
   const layout = new LabelLayout(ctx, view.width, view.height);
   drawAgents(ctx, view, poses.map((pose, agent) => ({ style: agentStyle(scene, agent), ...pose })), layout);
-  if (followsRobot(scene)) { // the person may be out of the followed view: an arrow points to it
-    const person = agentStyle(scene, 1);
-    drawPointer(ctx, view, poses[1].position, person.tag, person.color, layout);
-  }
+  // the person may be out of a followed view: an arrow points to it (drawPointer draws nothing
+  // for a point in view, as the person always is in a whole-scene view: the worlds keep both
+  // agents inside the scene's bounds)
+  const person = agentStyle(scene, 1);
+  drawPointer(ctx, view, poses[1].position, person.tag, person.color, layout);
 }
 
 /** The clip list of a trial, each with a caption. */
@@ -154,10 +156,10 @@ export class ClipPlayer {
     return run === this.run;
   }
 
-  /** The view of frame `t`: the whole scene (`fitted`), or the followed robot's surroundings. */
-  frameView(fitted, clip, t) {
+  /** A frame's view: the whole scene (`fitted`), or the surroundings of the robot at `robot`. */
+  frameView(fitted, robot) {
     if (!followsRobot(this.scene)) return fitted;
-    const view = followView(this.scene, fitted.width, fitted.height, poseAt(clip, t)[0].position);
+    const view = followView(this.scene, fitted.width, fitted.height, robot);
     publishView(this.canvas, view);
     return view;
   }
@@ -173,7 +175,8 @@ export class ClipPlayer {
           ({ ctx, view, cssWidth } = prepareCanvas(this.canvas, this.scene)); // window resized
         }
         const t = Math.min(steps, (now - start) / 1000 / STEP_SECONDS);
-        drawClipFrame(ctx, this.frameView(view, clip, t), this.scene, clip, t);
+        const poses = poseAt(clip, t);
+        drawClipFrame(ctx, this.frameView(view, poses[0].position), this.scene, clip, t, poses);
         if (t >= steps) return resolve(true);
         requestAnimationFrame(frame);
       };

@@ -114,7 +114,7 @@ export function drawBackground(ctx, view, scene, t = 0, { labels = true } = {}) 
     ctx.save();
     clipToScene(ctx, view, bounds);
     drawDriven(ctx, view, scene.recorded.driven);
-    drawMapLines(ctx, view, scene.recorded.lines || []);
+    drawMapLines(ctx, view, scene.recorded);
     ctx.restore();
   }
   drawLanes(ctx, view, scene, t);
@@ -219,13 +219,26 @@ const MAP_LINES = [
   ["stop", { widthM: 0.5, minPx: 2, maxPx: 6 }],
 ];
 
-function drawMapLines(ctx, view, lines) {
+const linesByKind = new WeakMap();
+
+/** A recorded scene's map lines by kind, in MAP_LINES' kinds and the scene's order; a
+ * scene's lines never change, so each scene's are grouped once, not on every frame. */
+function mapLinesByKind(recorded) {
+  if (linesByKind.has(recorded)) return linesByKind.get(recorded);
+  const groups = new Map(MAP_LINES.map(([kind]) => [kind, []]));
+  for (const line of recorded.lines || []) groups.get(line.kind)?.push(line);
+  linesByKind.set(recorded, groups);
+  return groups;
+}
+
+function drawMapLines(ctx, view, recorded) {
+  const groups = mapLinesByKind(recorded);
   for (const [kind, style] of MAP_LINES) {
     ctx.strokeStyle = MAP[kind];
     ctx.lineWidth = Math.min(style.maxPx, Math.max(style.minPx, style.widthM * view.scale));
     ctx.lineCap = style.dots ? "round" : "butt";
     ctx.lineJoin = "round";
-    for (const line of lines.filter((l) => l.kind === kind)) {
+    for (const line of groups.get(kind)) {
       if (style.dots) ctx.setLineDash([0, style.gapPx]);
       else ctx.setLineDash(line.dashed ? DASH_M.map((m) => m * view.scale) : []);
       ctx.beginPath();
