@@ -66,10 +66,10 @@ def pair_row(world: str, a: str, b: str, means: pd.DataFrame, rows: pd.DataFrame
             | {f"mixed_{k}": mixed[k] for k in MIXED_COLUMNS})
 
 
-def pairwise_table(kept: pd.DataFrame, names: list[str]) -> pd.DataFrame:
+def pairwise_table(kept: pd.DataFrame, names: list[str], means: pd.DataFrame) -> pd.DataFrame:
     """Every pair of predictors in every world, with Holm-adjusted p-values over each world's
-    pairs (p_holm, mixed_p_holm) and the verdict at ALPHA."""
-    means = predictor_means(kept, names)
+    pairs (p_holm, mixed_p_holm) and the verdict at ALPHA; `means` are the rows'
+    predictor_means."""
     parts = []
     for world, group in means.groupby("world", sort=True):
         rows = kept[kept["world"] == world]

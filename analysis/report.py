@@ -169,7 +169,7 @@ def every_predictor(kept: pd.DataFrame, out_dir: Path) -> tuple[dict, list[Path]
     participant and world), pairwise.csv, the side-by-side figure and their summary entry."""
     names = predictor_names(kept.columns)
     means = predictor_means(kept, names)
-    pairwise = pairwise_table(kept, names)
+    pairwise = pairwise_table(kept, names, means)
     write_csv(means, out_dir / "predictors.csv", float_format="%.10g")
     write_csv(pairwise, out_dir / "pairwise.csv", float_format="%.10g")
     figures = plot_errors(means, {}, out_dir / "predictors", models=(*names, REFERENCE))

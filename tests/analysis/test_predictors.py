@@ -66,7 +66,7 @@ def test_every_predictors_mean_error_per_participant_by_hand(kept):
 
 
 def test_pairwise_tests_and_holm_by_hand(kept):
-    table = pairwise_table(kept, NAMES)
+    table = pairwise_table(kept, NAMES, predictor_means(kept, NAMES))
     pairs = [f"{a}_vs_{b}" for a, b in combinations(NAMES, 2)]
     assert table.groupby("world")["pair"].apply(list).to_dict() == {
         "highway": pairs, "obstacle": pairs}
@@ -94,7 +94,7 @@ def test_pairwise_tests_and_holm_by_hand(kept):
 
 
 def test_the_mixed_model_per_pair_is_the_primary_ones_for_ours_and_vae(kept):
-    table = pairwise_table(kept, NAMES).set_index(["world", "pair"])
+    table = pairwise_table(kept, NAMES, predictor_means(kept, NAMES)).set_index(["world", "pair"])
     primary = mixed_model_table({"primary": kept})
     for row in primary[primary["arm"] == "pooled"].itertuples():
         mine = table.loc[(row.world, "ours_vs_vae")]
