@@ -24,7 +24,7 @@ import pandas as pd
 
 from analysis.contracts import plugin_names
 from analysis.metrics import POOLED, participant_means
-from analysis.stats import ALPHA, PAIR, holm, mean_ci95, paired_comparison
+from analysis.stats import PAIR, holm, mean_ci95, paired_comparison, verdicts
 from analysis.trial_effects import crossed_mixed_model, trial_cells
 
 BUILT_IN = ("ours", "vae", "cv")
@@ -94,17 +94,11 @@ def pairwise_table(kept: pd.DataFrame, names: list[str], means: pd.DataFrame,
         table["mixed_p_holm"] = adjusted(table["mixed_p"])
         parts.append(table)
     table = pd.concat(parts, ignore_index=True)
-    return table.assign(verdict=pair_verdicts(table))
+    return table.assign(verdict=verdicts(table["mean_diff"], table["p_holm"], a=table["a"],
+                                         b=table["b"]))
 
 
 def adjusted(p_values: pd.Series) -> np.ndarray:
     """Holm-adjusted p-values of one family (NaN stays NaN; it counts as 1 in the family)."""
     p = p_values.to_numpy(np.float64)
     return np.where(np.isnan(p), np.nan, holm(p))
-
-
-def pair_verdicts(table: pd.DataFrame) -> np.ndarray:
-    """The predictor with the lower error where p_holm < ALPHA, else 'neither'."""
-    significant = table["p_holm"].to_numpy(np.float64) < ALPHA
-    lower = np.where(table["mean_diff"] < 0, table["a"], table["b"])
-    return np.where(significant & (table["mean_diff"] != 0), lower, "neither")
