@@ -4,12 +4,14 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
+from app.predictors import registry
 from app.predictors.builtin import ConstantVelocity
 from app.predictors.ctrv import CTRV
 from app.predictors.protocol import Predictor, PredictorAnswer, ask
 from app.predictors.registry import (
     GROUP,
     UnknownPredictor,
+    check_names,
     distribution,
     load_predictor,
     registered,
@@ -101,6 +103,20 @@ def test_a_labs_installed_package_is_found_by_its_entry_point(tmp_path, monkeypa
     answer = ask(drift, straight_history([1.0, 0.0]), starts_at([[0, 0]]), [np.pi / 2], DT, 3)
     np.testing.assert_allclose(answer.actions, [[[0.0, 0.25]] * 3], atol=1e-12)
     assert distribution("drift") == {"distribution": "lab_predictors", "version": "0.3.1"}
+
+
+def test_check_names_scans_the_entry_points_once_a_call(tmp_path, monkeypatch):
+    scans = []
+    scan = registry.entry_points
+    monkeypatch.setattr(registry, "entry_points",
+                        lambda **kwargs: scans.append(kwargs) or scan(**kwargs))
+    assert check_names([]) == [] and scans == []
+    assert check_names(["ctrv"]) == ["ctrv"] and len(scans) == 1
+    with pytest.raises(ValueError, match=r"named 'nope' .*registered: ctrv\).*named 'nada'"):
+        check_names(["nope", "ctrv", "nada"])
+    assert scans == [{"group": GROUP}] * 2
+    monkeypatch.syspath_prepend(str(install_lab_plugin(tmp_path)))  # no cache between calls
+    assert check_names(["drift", "ctrv"]) == ["drift", "ctrv"] and len(scans) == 3
 
 
 def test_an_entry_point_that_makes_another_name_is_refused(tmp_path, monkeypatch):
