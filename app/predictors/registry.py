@@ -11,10 +11,11 @@ study's own columns and cannot be taken by a plug-in.
 import re
 from importlib.metadata import EntryPoint, entry_points
 
+from analysis.contracts import MODELS
 from app.predictors.protocol import Predictor
 
 GROUP = "tomstudy.predictors"
-RESERVED = ("ours", "vae", "cv", "policy", "human")  # the export's own column prefixes
+RESERVED = (*MODELS, "human")  # the export's own column prefixes: the models' and the person's
 NAME = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
 MAX_NAME = 32
 

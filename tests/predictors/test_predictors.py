@@ -145,6 +145,8 @@ def test_a_study_config_names_registered_predictors_only():
     assert config_sha256(with_ctrv) != config_sha256(StudyConfig.model_validate(config))
     for names, message in ((["nope"], "no installed predictor is named 'nope'"),
                            (["vae"], "'vae' is one of the study's own predictors"),
+                           (["human"], "'human' is one of the study's own predictors"),
+                           (["policy"], "'policy' is one of the study's own predictors"),
                            (["ctrv", "ctrv"], "each predictor may be named once"),
                            (["Bad-Name"], "is not a predictor name")):
         with pytest.raises(ValidationError) as err:
