@@ -40,6 +40,7 @@ from analysis.predictors import (
     pairwise_table,
     predictor_means,
     predictor_names,
+    primary_fits,
     world_means,
 )
 from analysis.seeds import seed_results, verdict_counts
@@ -136,10 +137,11 @@ def nested(table: pd.DataFrame, keys: list[str]) -> dict:
 
 
 def robustness(kept: pd.DataFrame, bank: Bank | None, bank_path: Path,
-               out_dir: Path) -> tuple[dict, list[Path]]:
+               out_dir: Path) -> tuple[dict, list[Path], pd.DataFrame]:
     """Per seed pair and family, per arm, the crossed mixed model and leave-one-trial-out:
-    their summary.json entries, CSVs and figures. 'primary' is the export's (primary seed's)
-    answers on every kept row; 'family' the mean over seeds on the rows that ran the bank."""
+    their summary.json entries, CSVs and figures, and the mixed models' table (every_predictor
+    reuses its fits). 'primary' is the export's (primary seed's) answers on every kept row;
+    'family' the mean over seeds on the rows that ran the bank."""
     seeds = seed_results(kept, bank, str(bank_path))
     answer_sets = {"primary": kept} | ({"family": seeds.family_rows} if seeds.ok else {})
     tables = {"per_seed": seeds.per_seed, "family": seeds.family,
@@ -161,15 +163,17 @@ def robustness(kept: pd.DataFrame, bank: Bank | None, bank_path: Path,
         "mixed_model": nested(tables["mixed_model"], ["world", "arm", "answers"]),
         "leave_one_trial_out": influence_summary(tables["leave_one_trial_out"]),
     }
-    return summary, figures
+    return summary, figures, tables["mixed_model"]
 
 
-def every_predictor(kept: pd.DataFrame, out_dir: Path) -> tuple[dict, list[Path]]:
+def every_predictor(kept: pd.DataFrame, mixed_model: pd.DataFrame,
+                    out_dir: Path) -> tuple[dict, list[Path]]:
     """Every predictor against the people (analysis/predictors.py): predictors.csv (per
-    participant and world), pairwise.csv, the side-by-side figure and their summary entry."""
+    participant and world), pairwise.csv, the side-by-side figure and their summary entry.
+    Ours vs the VAE takes its mixed model from robustness's table (`mixed_model`)."""
     names = predictor_names(kept.columns)
     means = predictor_means(kept, names)
-    pairwise = pairwise_table(kept, names)
+    pairwise = pairwise_table(kept, names, means, primary_fits(mixed_model))
     write_csv(means, out_dir / "predictors.csv", float_format="%.10g")
     write_csv(pairwise, out_dir / "pairwise.csv", float_format="%.10g")
     figures = plot_errors(means, {}, out_dir / "predictors", models=(*names, REFERENCE))
@@ -203,9 +207,9 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
     ade = displacement_errors(kept)
     steps.update(1)
     bank = read_bank(inputs.bank)
-    extra, extra_figures = robustness(kept, bank, inputs.bank, out_dir)
+    extra, extra_figures, mixed_model = robustness(kept, bank, inputs.bank, out_dir)
     steps.update(1)
-    predictors, predictor_figures = every_predictor(kept, out_dir)
+    predictors, predictor_figures = every_predictor(kept, mixed_model, out_dir)
     figures = plot_errors(means, results, out_dir / "alignment_error") + extra_figures
     figures += predictor_figures
     figures += plot_fields(kept, bank.scenes() if bank else {}, out_dir / "fields")

@@ -68,13 +68,14 @@ def paired_comparison(a: np.ndarray, b: np.ndarray) -> PairedResult:
     )
 
 
-def verdicts(mean_diff, p_two_sided, alpha: float = ALPHA) -> np.ndarray:
-    """Which model a test favours: 'ours' or 'vae' (by the sign of Ours - VAE) where the
-    two-sided p is below alpha, else 'neither' (also where p is NaN)."""
+def verdicts(mean_diff, p_two_sided, alpha: float = ALPHA, a=PAIR[0], b=PAIR[1]) -> np.ndarray:
+    """Which model a test favours: `a` or `b` (by the sign of a - b) where the two-sided p is
+    below alpha, else 'neither' (also where p is NaN). `a` and `b` are names, one for every
+    test or one per test (array-like); Ours and the VAE unless named."""
     mean_diff = np.asarray(mean_diff, dtype=np.float64)
     significant = np.asarray(p_two_sided, dtype=np.float64) < alpha
-    return np.where(significant & (mean_diff < 0), "ours",
-                    np.where(significant & (mean_diff > 0), "vae", "neither"))
+    return np.where(significant & (mean_diff < 0), a,
+                    np.where(significant & (mean_diff > 0), b, "neither"))
 
 
 def with_verdicts(table: pd.DataFrame) -> pd.DataFrame:

@@ -11,10 +11,11 @@ study's own columns and cannot be taken by a plug-in.
 import re
 from importlib.metadata import EntryPoint, entry_points
 
+from analysis.contracts import MODELS
 from app.predictors.protocol import Predictor
 
 GROUP = "tomstudy.predictors"
-RESERVED = ("ours", "vae", "cv", "policy", "human")  # the export's own column prefixes
+RESERVED = (*MODELS, "human")  # the export's own column prefixes: the models' and the person's
 NAME = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
 MAX_NAME = 32
 
@@ -24,33 +25,38 @@ class UnknownPredictor(LookupError):
 
 
 def registered() -> dict[str, EntryPoint]:
-    """Every installed plug-in's entry point, by name."""
+    """Every installed plug-in's entry point, by name. Scanned afresh on every call (a package
+    installed while the process runs counts); callers pass the result down, not call again."""
     return {ep.name: ep for ep in entry_points(group=GROUP)}
 
 
-def listing() -> str:
-    """The registered names for a message ('none' when nothing is installed)."""
-    return ", ".join(sorted(registered())) or "none"
+def listing(plugins: dict[str, EntryPoint]) -> str:
+    """The registered names (`plugins`, from registered()) for a message ('none' when nothing
+    is installed)."""
+    return ", ".join(sorted(plugins)) or "none"
 
 
-def name_problem(name: str) -> str:
-    """Why `name` cannot name a plug-in in a study ('' when it can)."""
+def name_problem(name: str, plugins: dict[str, EntryPoint]) -> str:
+    """Why `name` cannot name a plug-in in a study ('' when it can); `plugins` is registered()."""
     if name in RESERVED:
         return f"{name!r} is one of the study's own predictors, not a plug-in"
     if not NAME.match(name) or len(name) > MAX_NAME:
         return (f"{name!r} is not a predictor name (lower-case letters, digits and single "
                 f"underscores, starting with a letter, at most {MAX_NAME} characters)")
-    if name not in registered():
+    if name not in plugins:
         return (f"no installed predictor is named {name!r} (entry point group {GROUP}; "
-                f"registered: {listing()})")
+                f"registered: {listing(plugins)})")
     return ""
 
 
 def check_names(names: list[str]) -> list[str]:
-    """The names, once each is a registered plug-in named once; ValueError saying which not."""
+    """The names, once each is a registered plug-in named once; ValueError saying which not.
+    The entry points are scanned once per call (none for no names)."""
     if len(set(names)) != len(names):
         raise ValueError("each predictor may be named once")
-    problems = [problem for problem in map(name_problem, names) if problem]
+    plugins = registered() if names else {}
+    problems = [problem for problem in (name_problem(name, plugins) for name in names)
+                if problem]
     if problems:
         raise ValueError("; ".join(problems))
     return names
@@ -59,10 +65,11 @@ def check_names(names: list[str]) -> list[str]:
 def load_predictor(name: str) -> Predictor:
     """The installed plug-in `name`, made by its entry point's factory (UnknownPredictor if
     none is installed; TypeError if the factory's object is not that predictor)."""
-    found = registered().get(name)
+    plugins = registered()
+    found = plugins.get(name)
     if found is None:
         raise UnknownPredictor(f"predictor {name}: not installed (no entry point {name!r} in "
-                               f"group {GROUP}; registered: {listing()})")
+                               f"group {GROUP}; registered: {listing(plugins)})")
     predictor = found.load()()
     if not isinstance(predictor, Predictor) or predictor.name != name:
         raise TypeError(f"predictor {name}: the entry point {found.value} does not make a "

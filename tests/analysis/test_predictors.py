@@ -4,13 +4,15 @@ import math
 from itertools import combinations
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy import stats
 
+from analysis import predictors
 from analysis.contracts import EXPORT_COLUMNS, model_color, model_label, plugin_columns
 from analysis.load import load_csv, normalise
 from analysis.metrics import add_alignment_errors
-from analysis.predictors import pairwise_table, predictor_means, predictor_names
+from analysis.predictors import pairwise_table, predictor_means, predictor_names, primary_fits
 from analysis.report import run_analyze
 from analysis.stats import ALPHA
 from analysis.trial_effects import mixed_model_table
@@ -66,7 +68,7 @@ def test_every_predictors_mean_error_per_participant_by_hand(kept):
 
 
 def test_pairwise_tests_and_holm_by_hand(kept):
-    table = pairwise_table(kept, NAMES)
+    table = pairwise_table(kept, NAMES, predictor_means(kept, NAMES))
     pairs = [f"{a}_vs_{b}" for a, b in combinations(NAMES, 2)]
     assert table.groupby("world")["pair"].apply(list).to_dict() == {
         "highway": pairs, "obstacle": pairs}
@@ -93,9 +95,21 @@ def test_pairwise_tests_and_holm_by_hand(kept):
     assert (table["verdict"] != "neither").any()  # the fixed data tells some pairs apart
 
 
-def test_the_mixed_model_per_pair_is_the_primary_ones_for_ours_and_vae(kept):
-    table = pairwise_table(kept, NAMES).set_index(["world", "pair"])
+def test_the_mixed_model_per_pair_is_the_primary_ones_for_ours_and_vae(kept, monkeypatch):
+    means = predictor_means(kept, NAMES)
+    fresh = pairwise_table(kept, NAMES, means)  # every pair fitted here
     primary = mixed_model_table({"primary": kept})
+    fits = primary_fits(primary)
+    assert sorted(fits) == ["highway", "obstacle"]
+    fitted = []
+    fit = predictors.crossed_mixed_model
+    monkeypatch.setattr(predictors, "crossed_mixed_model",
+                        lambda cells: fitted.append(list(cells.columns)) or fit(cells))
+    reused = pairwise_table(kept, NAMES, means, fits)
+    assert len(fitted) == 2 * 5  # each world's pairs but ours_vs_vae, whose fit is reused
+    assert not [c for c in fitted if "sum_ours" in c and "sum_vae" in c]
+    pd.testing.assert_frame_equal(reused, fresh, check_exact=True)  # as a fresh fit
+    table = reused.set_index(["world", "pair"])
     for row in primary[primary["arm"] == "pooled"].itertuples():
         mine = table.loc[(row.world, "ours_vs_vae")]
         assert mine["mixed_estimate"] == pytest.approx(row.estimate, abs=1e-12)
@@ -124,3 +138,7 @@ def test_analyze_writes_every_predictor_side_by_side(tmp_path, inputs):  # noqa:
     html = (out / "report.html").read_text()
     assert "ours vs ctrv" in html and "Holm over that world" in html
     assert "ours_vs_vae" in summary["predictors"]["pairwise"]["highway"]
+    for world, pairs in summary["predictors"]["pairwise"].items():
+        pooled = summary["mixed_model"][world]["pooled"]["primary"]
+        assert {k: pairs["ours_vs_vae"][f"mixed_{k}"] for k in ("estimate", "p", "status")} == \
+            {k: pooled[k] for k in ("estimate", "p", "status")}

@@ -147,6 +147,9 @@ def test_family_hashes_have_the_manifest_shape(study):
 def test_verdicts_need_significance_and_take_the_sign():
     got = verdicts([-0.1, 0.1, -0.1, 0.2], [0.001, 0.001, 0.2, float("nan")], alpha=0.01)
     assert got.tolist() == ["ours", "vae", "neither", "neither"]
+    named = verdicts([-0.1, 0.1, 0.0, 0.1, -0.1], [0.001, 0.001, 0.001, 0.5, float("nan")],
+                     alpha=0.01, a=pd.Series(["cv", "cv", "cv", "ours", "cv"]), b="ctrv")
+    assert named.tolist() == ["cv", "ctrv", "neither", "neither", "neither"]
 
 
 def test_verdict_counts_per_world():

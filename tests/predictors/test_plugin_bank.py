@@ -7,7 +7,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from app.bank.model_answers import BankMismatch, ModelAnswers
+from app.bank.model_answers import BankMismatch, ModelAnswers, trial_inputs
 from app.bank.verify import open_bundle
 from app.predictors.builtin import CheckpointPredictor, ConstantVelocity
 from app.predictors.ctrv import CTRV
@@ -17,13 +17,6 @@ from tests.conftest import TOMSTUDY, freeze_bundle_of
 from tests.study.test_bundle import bundle_root, copied
 
 
-def asked(bank: TrialBank, trial) -> tuple:
-    """The protocol's inputs of one bank trial."""
-    starts = np.array([[s.robot, s.human] for s in trial.start_states])
-    return (trial.model_input, starts, [s.robot_heading for s in trial.start_states],
-            bank.world(trial.world).dt_s, bank.data.steps_to_predict)
-
-
 def test_the_bank_stores_ctrvs_answer_to_every_trial(ctrv_study):
     bank = TrialBank.load(ctrv_study.layout, ctrv_study.study_id)
     trials = list(bank.by_id.values())
@@ -31,11 +24,11 @@ def test_the_bank_stores_ctrvs_answer_to_every_trial(ctrv_study):
     for trial in trials:
         assert sorted(trial.predictions) == ["ctrv", "ours", "vae"]  # JSON keys are sorted
         (stored,) = trial.predictions["ctrv"]
-        answer = ask(CTRV(), *asked(bank, trial))
+        answer = ask(CTRV(), *trial_inputs(bank, trial))
         assert stored.seed == NO_SEED and stored.code == -1 and stored.z == []
         assert stored.content_hash == CTRV().content_hash
         assert stored.actions == np.round(answer.actions, 5).tolist()
-        cv = ask(ConstantVelocity(), *asked(bank, trial))
+        cv = ask(ConstantVelocity(), *trial_inputs(bank, trial))
         assert trial.cv_actions == np.round(cv.actions, 5).tolist()
 
 
@@ -45,9 +38,9 @@ def test_the_checkpoints_answer_through_the_protocol_as_stored(ctrv_study):
     for name in ("ours", "vae"):
         stored = trial.predictions[name][0]
         model = bundle.model("obstacle", name, stored.seed)
-        answer = ask(CheckpointPredictor(model), *asked(bundle.bank, trial))
+        answer = ask(CheckpointPredictor(model), *trial_inputs(bundle.bank, trial))
         z, code, actions = model.trial(np.asarray(trial.model_input),
-                                       np.asarray(asked(bundle.bank, trial)[1]))
+                                       np.asarray(trial_inputs(bundle.bank, trial)[1]))
         assert answer.code == code == stored.code and answer.z == [float(v) for v in z]
         np.testing.assert_array_equal(answer.actions, actions)
 

@@ -4,12 +4,14 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
+from app.predictors import registry
 from app.predictors.builtin import ConstantVelocity
 from app.predictors.ctrv import CTRV
 from app.predictors.protocol import Predictor, PredictorAnswer, ask
 from app.predictors.registry import (
     GROUP,
     UnknownPredictor,
+    check_names,
     distribution,
     load_predictor,
     registered,
@@ -103,6 +105,20 @@ def test_a_labs_installed_package_is_found_by_its_entry_point(tmp_path, monkeypa
     assert distribution("drift") == {"distribution": "lab_predictors", "version": "0.3.1"}
 
 
+def test_check_names_scans_the_entry_points_once_a_call(tmp_path, monkeypatch):
+    scans = []
+    scan = registry.entry_points
+    monkeypatch.setattr(registry, "entry_points",
+                        lambda **kwargs: scans.append(kwargs) or scan(**kwargs))
+    assert check_names([]) == [] and scans == []
+    assert check_names(["ctrv"]) == ["ctrv"] and len(scans) == 1
+    with pytest.raises(ValueError, match=r"named 'nope' .*registered: ctrv\).*named 'nada'"):
+        check_names(["nope", "ctrv", "nada"])
+    assert scans == [{"group": GROUP}] * 2
+    monkeypatch.syspath_prepend(str(install_lab_plugin(tmp_path)))  # no cache between calls
+    assert check_names(["drift", "ctrv"]) == ["drift", "ctrv"] and len(scans) == 3
+
+
 def test_an_entry_point_that_makes_another_name_is_refused(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(install_lab_plugin(tmp_path, name="wrongname",
                                                        factory="StandStill")))
@@ -129,6 +145,8 @@ def test_a_study_config_names_registered_predictors_only():
     assert config_sha256(with_ctrv) != config_sha256(StudyConfig.model_validate(config))
     for names, message in ((["nope"], "no installed predictor is named 'nope'"),
                            (["vae"], "'vae' is one of the study's own predictors"),
+                           (["human"], "'human' is one of the study's own predictors"),
+                           (["policy"], "'policy' is one of the study's own predictors"),
                            (["ctrv", "ctrv"], "each predictor may be named once"),
                            (["Bad-Name"], "is not a predictor name")):
         with pytest.raises(ValidationError) as err:

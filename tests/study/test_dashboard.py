@@ -156,6 +156,10 @@ def test_replay_is_the_bank_clip_and_the_stored_clicks(client, small_study, bank
     assert [(c["start_index"], c["step"]) for c in replay["click_order"]] == [
         (i, j) for i in range(5) for j in range(3)]
     assert replay["response"]["history"] == body["history"]
+    # the canvas draws exactly `models` (replay.js has no list of its own), without plug-ins too
+    assert replay["models"] == ["ours", "vae", "policy"]
+    assert all(set(replay["models"]) <= set(s["paths"]) & set(s["errors"])
+               for s in replay["starts"])
     dt = clip["dt_s"]
     policy = np.asarray(record["policy_actions"])
     starts = np.asarray([s["robot"] for s in record["start_states"]])

@@ -84,7 +84,7 @@ def test_the_rows_hold_the_plugin_in_their_plugins_column(client, ctrv_study, ba
 
 
 def test_the_dashboard_and_summary_list_every_predictor(client, ctrv_study, bank):
-    finished_export(client, ctrv_study.study_id, bank)
+    export = load_csv(io.StringIO(finished_export(client, ctrv_study.study_id, bank)))
     r = client.get("/api/researcher/dashboard", params={"study_id": ctrv_study.study_id},
                         headers=ADMIN)
     assert r.status_code == 200, r.text
@@ -94,9 +94,6 @@ def test_the_dashboard_and_summary_list_every_predictor(client, ctrv_study, bank
     assert alignment["style"]["labels"]["ctrv"] == "ctrv"
     assert alignment["style"]["colors"]["ctrv"] == model_color("ctrv")
     assert alignment["style"]["colors"]["ours"] == MODEL_COLORS["ours"]
-    export = load_csv(io.StringIO(client.get(
-        "/api/researcher/export.csv", params={"study_id": ctrv_study.study_id},
-        headers=ADMIN).text))
     scored = export[~export["is_practice"] & ~export["attention_check"]]
     assert set(alignment["worlds"]) == {"highway", "obstacle"}
     for world, entry in alignment["worlds"].items():

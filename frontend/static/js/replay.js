@@ -4,8 +4,8 @@ import { MODEL_COLORS, MODEL_LABELS, el } from "./dashboard.js";
 import { ClipPlayer, followsRobot, trialClips } from "./player.js";
 import { agentStyle, clipToScene, drawAgent, drawBackground, drawClickMarker, drawTrace, prepareCanvas } from "./scene.js";
 
-// drawn by default; a replay's own `models` adds the study's plug-in predictors after them
-export const REPLAY_MODELS = ["ours", "vae", "policy"];
+// a replay's `models` names what it draws: Ours, the VAE, the policy, then the study's plug-in
+// predictors (app/researcher/replay.py)
 const PLUGIN_DASH = [5, 2, 1, 2];
 const CLICK_PLAYBACK_SPEED = 8; // trial milliseconds per wall-clock millisecond
 const MODEL_DASH = { ours: [], vae: [7, 4], policy: [2, 3] };
@@ -13,11 +13,6 @@ const $ = (id) => document.getElementById(id);
 
 function seconds(ms) {
   return `${(ms / 1000).toFixed(1)} s`;
-}
-
-/** The predictors a replay draws: Ours, the VAE, the policy and the study's plug-ins. */
-function replayModels(replay) {
-  return replay.models ?? REPLAY_MODELS;
 }
 
 /** A path from `start` through `points` in one model's colour and dash. */
@@ -53,7 +48,7 @@ function viewScene(replay, shown, closeUp) {
   const { scene, max_step_m: reach, segment, start_states: states } = replay.trial;
   if (!closeUp && !followsRobot(scene)) return scene;
   const points = shown.flatMap((start) => [start.robot, ...start.clicks.map((c) => c.at),
-    ...replayModels(replay).flatMap((m) => start.paths[m])]);
+    ...replay.models.flatMap((m) => start.paths[m])]);
   if (!closeUp) points.push(...segment.positions.flat(), ...states.map((s) => s.human));
   const xs = points.map((p) => p[0]);
   const ys = points.map((p) => p[1]);
@@ -100,7 +95,7 @@ export function drawAnswers(canvas, replay, tMs, only = null) {
   }
   // the models' moves last, over the clicks, so a close match does not hide them
   for (const start of shown) {
-    for (const model of replayModels(replay)) modelPath(ctx, view, model, start.robot, start.paths[model]);
+    for (const model of replay.models) modelPath(ctx, view, model, start.robot, start.paths[model]);
   }
   ctx.restore();
   canvas.dataset.clicksDrawn = String(drawn);
@@ -162,7 +157,7 @@ export class ReplayView {
       ...starts.map((s) => el("option", { value: String(s.start_index), textContent: `${s.start_index + 1} (${s.start_kind})` })));
     const slider = $("replay-time");
     slider.max = String(Math.ceil(this.endMs()));
-    $("replay-legend").replaceChildren(...["human", ...replayModels(this.replay)].map((m) => {
+    $("replay-legend").replaceChildren(...["human", ...this.replay.models].map((m) => {
       const swatch = el("span", { className: "swatch" });
       swatch.style.background = MODEL_COLORS[m];
       return el("span", { className: "legend-item" }, swatch, m === "human" ? "Participant's clicks (numbered in the order made)" : MODEL_LABELS[m]);
@@ -229,12 +224,12 @@ export class ReplayView {
   renderTables() {
     const { starts, click_order: order, response } = this.replay;
     const byKey = new Map(starts.flatMap((s) => s.clicks.map((c) => [`${s.start_index}:${c.step}`, [s, c]])));
-    const head = el("tr", {}, ...["#", "time", "start state", "step", ...replayModels(this.replay).map((m) => `error ${MODEL_LABELS[m]}`)]
+    const head = el("tr", {}, ...["#", "time", "start state", "step", ...this.replay.models.map((m) => `error ${MODEL_LABELS[m]}`)]
       .map((t) => el("th", { textContent: t })));
     const rows = order.map((o, k) => {
       const [start, click] = byKey.get(`${o.start_index}:${o.step}`);
       const cells = [k + 1, seconds(click.t_ms), `${start.start_index + 1} (${start.start_kind})`, click.step + 1,
-        ...replayModels(this.replay).map((m) => start.errors[m][click.step].toFixed(3))];
+        ...this.replay.models.map((m) => start.errors[m][click.step].toFixed(3))];
       return el("tr", {}, ...cells.map((c) => el("td", { textContent: String(c) })));
     });
     $("replay-clicks-count").textContent = `${order.length} clicks, in the order made; error = 1 - cos between the participant's move and the model's.`;
