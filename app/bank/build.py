@@ -129,7 +129,8 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
                                     model_history(inputs), rng)
     selection = config.main_trial_selection
     arms = selection.arm_sizes(config.bank_trials_per_world)
-    pool_size = arms["random"] + arms.get("models_disagree", 0) * selection.candidates_per_trial
+    rule_arm = sum(size for arm, size in arms.items() if arm != "random")
+    pool_size = arms["random"] + rule_arm * selection.candidates_per_trial
     needed = pool_size + config.practice_trials + config.attention_checks.per_world
     if len(candidates) < needed:
         raise ValueError(f"{world.name}: only {len(candidates)} held-out trajectories give a "
@@ -139,7 +140,8 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
                                     max_step, scene, rng)
     pool, tried = regular_trials(config, inputs, candidates[used:], pool_size, max_step, scene,
                                  rng)
-    main = main_trials(pool, arms)
+    main = main_trials(pool, arms, arm_scores(config, inputs, pool[arms["random"]:], max_step,
+                                              scene))
     used += tried
     checks, straightness = attention_trials(config, inputs, candidates[used:], max_step,
                                             scene, rng)
@@ -174,24 +176,56 @@ def model_disagreement(trial: TrialRecord) -> float:
                           for vae in trial.predictions["vae"]]))
 
 
-def main_trials(pool: list[TrialRecord], arms: dict[str, int]) -> list[TrialRecord]:
-    """The random arm (the pool's first trials), then the models_disagree arm: of the rest, per
-    robot label those where the families disagree most, robot labels taking turns."""
+def arm_scores(config: StudyConfig, inputs: WorldInputs, candidates: list[TrialRecord],
+               max_step: float, scene: dict) -> list[float]:
+    """How strongly the selection rule wants each candidate of its arm (higher first)."""
+    rule = config.main_trial_selection
+    if rule.rule != "discriminability":
+        return [model_disagreement(t) for t in candidates]
+    from app.observers.config import default_observers
+    from app.observers.family import answers_of, discriminability
+    from app.prediction_view import VIEW_FIELDS, click_direction_sd_deg
+
+    observers = default_observers()  # the configs dir's, frozen into the bundle beside it
+    world = provisional_world(inputs, candidates, max_step, scene, config)
+    view_sd = click_direction_sd_deg(world.model_dump(include=VIEW_FIELDS),
+                                     observers.click_sd_px.value)
+    answers = answers_of(world, world.trials, config.steps_to_predict, observers, view_sd)
+    chosen_on = np.array([inputs.seeds.index(s) for s in rule.selection_seeds])
+    return [float(v) for v in discriminability(answers, chosen_on)]
+
+
+def provisional_world(inputs: WorldInputs, candidates: list[TrialRecord], max_step: float,
+                      scene: dict, config: StudyConfig) -> WorldBank:
+    """The world's bank as it would be with `candidates` as its main trials (for scoring)."""
+    return WorldBank(world=inputs.world.name, dt_s=inputs.trajs.dt_s, scene=scene,
+                     robot_label_name=inputs.world.robot_label,
+                     label_names=inputs.trajs.label_names[inputs.world.robot_label],
+                     max_step_m=round(max_step, 4),
+                     min_step_m=round(config.prediction_input.min_step_fraction * max_step, 4),
+                     trials=[t.model_copy(update={"kind": "main"}) for t in candidates])
+
+
+def main_trials(pool: list[TrialRecord], arms: dict[str, int],
+                scores: list[float]) -> list[TrialRecord]:
+    """The random arm (the pool's first trials), then the rule's arm: of the rest (scored by
+    `scores`), per robot label the highest scored, robot labels taking turns."""
     random_arm, rest = pool[: arms["random"]], pool[arms["random"]:]
-    by_label: dict[int, list[TrialRecord]] = {}
-    for trial in rest:
-        by_label.setdefault(trial.robot_label, []).append(trial)
-    ranked = {label: sorted(trials, key=model_disagreement, reverse=True)
+    rule_arm = next((arm for arm in arms if arm != "random"), None)
+    by_label: dict[int, list[tuple[float, TrialRecord]]] = {}
+    for score, trial in zip(scores, rest, strict=True):
+        by_label.setdefault(trial.robot_label, []).append((score, trial))
+    ranked = {label: [t for _, t in sorted(trials, key=lambda st: st[0], reverse=True)]
               for label, trials in by_label.items()}
-    disputed = interleave(ranked)[: arms.get("models_disagree", 0)]
+    chosen = interleave(ranked)[: arms.get(rule_arm, 0)]
     return ([t.model_copy(update={"arm": "random"}) for t in random_arm]
-            + [t.model_copy(update={"arm": "models_disagree"}) for t in disputed])
+            + [t.model_copy(update={"arm": rule_arm}) for t in chosen])
 
 
 def selection_meta(rule: str, arms: dict[str, int], pool: list[TrialRecord],
                    main: list[TrialRecord]) -> dict:
     """meta.json's account of the main-trial selection: the arms, and the mean family
-    disagreement of each arm and of the candidates the models_disagree arm was chosen from."""
+    disagreement of each arm and of the candidates the rule's arm was chosen from."""
     def mean_disagreement(trials: list[TrialRecord]) -> float | None:
         return round(float(np.mean([model_disagreement(t) for t in trials])), 4) if trials \
             else None

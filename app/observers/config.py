@@ -33,6 +33,12 @@ class PositiveSourced(Sourced):
     value: float = Field(gt=0)
 
 
+class UnitSourced(Sourced):
+    """A share in [0, 1] and where it comes from."""
+
+    value: float = Field(ge=0, le=1)
+
+
 class IntentChoice(_WithSource):
     """How an observer turns its posterior into one intent: sample it, or take its mode."""
 
@@ -65,6 +71,7 @@ class ObserversConfig(StrictModel):
     """All observer presets' parameters."""
 
     lane_change_duration_s: PositiveSourced
+    momentum_weight: UnitSourced  # coarse_momentum: the intent's weight against motion seen
     inference: InferenceConfig
     coarse_noise: NoiseConfig
     precise_noise: NoiseConfig

@@ -43,3 +43,63 @@ def verdict_line(name: str, summary: dict) -> str:
                          f"{pass_rate(summary['pass_rate'][world]).strip()})"
                          for world, ok in summary["passed"].items())
     return f"instrument on the {name} bank: {verdicts}"
+
+
+def goal_table(result: dict, exploratory: dict[str, str]) -> list[str]:
+    """The design goal per world, arm and seed set: each variant's P(primary concludes Ours);
+    then each world's verdict (exploratory worlds named with why) and the designs that would
+    meet it."""
+    variants = list(dict.fromkeys(row["variant"] for row in result["rows"]))
+    lines = ["\ndesign goal: P(primary test concludes Ours) per observer, participants and "
+             "trials random", f"{'world':<10}{'arm':<18}{'seeds':<17}"
+             + "".join(f"{short(v):>10}" for v in variants) + f"{'old':>6}"]
+    groups: dict[tuple, dict] = {}
+    for row in result["rows"]:
+        groups.setdefault((row["world"], row["arm"], row["seeds"]), {})[row["variant"]] = row
+    for (world, arm, seeds), row in groups.items():
+        old = row["coarse"]["participants_only_power"]
+        lines.append(f"{world:<10}{arm:<18}{seeds:<17}"
+                     + "".join(f"{row[v]['p_ours']:>10.2f}" for v in variants) + f"{old:>6.2f}")
+    lines += goal_notes(result)
+    lines += [goal_verdict(world, met, exploratory) for world, met in result["goal_met"].items()]
+    lines += needed_lines(result["needed"])
+    return lines
+
+
+def short(variant: str) -> str:
+    """A variant's column name."""
+    return {"coarse": "straight", "coarse_scene": "scene", "coarse_momentum": "momentum",
+            "constant_velocity": "cv"}.get(variant, variant)
+
+
+def goal_notes(result: dict) -> list[str]:
+    """What the goal table's numbers are."""
+    d = result["design"]
+    return [f"design: {d['participants']} participants, {d['bank_trials']} bank trials, "
+            f"{d['trials_each']} each; {result['reps']} simulated studies per cell; primary = "
+            f"family err_ours - err_vae, min F', two-sided alpha {result['alpha']}",
+            f"goal: straight, scene, momentum >= {result['goal_power']}, precise <= "
+            f"{result['alpha']} (arm all, seeds family); cv is reported, never tested; old = the "
+            "participants-only power of the straight observer (trials fixed, one-sided t)"]
+
+
+def goal_verdict(world: str, met: bool, exploratory: dict[str, str]) -> str:
+    """One world's line: meets the goal, misses it, or exploratory and why."""
+    if world in exploratory:
+        return f"{world}: EXPLORATORY ({'meets' if met else 'misses'} the goal): " \
+               f"{exploratory[world]}"
+    return f"{world}: {'meets the goal' if met else 'MISSES the goal'}"
+
+
+def needed_lines(needed: list[dict]) -> list[str]:
+    """Per world and bank size, the fewest participants that meet the goal."""
+    if not needed:
+        return []
+    lines = ["participants needed to meet the goal (bank trials: participants, - = none "
+             "within 240 or a precise observer concludes Ours):"]
+    worlds = dict.fromkeys(row["world"] for row in needed)
+    for world in worlds:
+        cells = [f"{r['bank_trials']}: {r['participants_needed'] or '-'}" for r in needed
+                 if r["world"] == world]
+        lines.append(f"  {world:<10}" + ", ".join(cells))
+    return lines

@@ -24,6 +24,10 @@ Presets:
   Perceptual noise: the perceived speed is off by a Weber fraction (one draw per trial),
   each click's direction by a Gaussian angle.
 - coarse_relative: coarse with the relative lane reading (a sensitivity preset).
+- coarse_scene: coarse along the shortest way around the scene's obstacles (Obstacle; the
+  lane course already follows the road in Highway, so there it is coarse).
+- coarse_momentum: coarse with each move blended with the motion seen (the heading drawn at
+  the start, then its own last move): people extrapolate motion (Freyd & Finke 1984).
 - precise: the world's own next moves from each start state (policy actions, see
   app/pilot/bots.py for where they come from) with the same, smaller, noise.
 - random: uniformly random directions and lengths.
@@ -36,9 +40,11 @@ import numpy as np
 from scipy.special import logsumexp
 
 from app.observers.config import NoiseConfig, ObserversConfig, default_observers
-from app.worlds.intents import IntentOptions, Intents, trial_intents
+from app.worlds.intents import IntentOptions, Intents, Move, momentum_course, trial_intents
 
-PRESETS = ("coarse", "precise", "random", "coarse_relative")
+PRESETS = ("coarse", "precise", "random", "coarse_relative", "coarse_scene", "coarse_momentum")
+# the coarse family (issue 30): what a coarse observer does with the intent it inferred
+COARSE_PRESETS = ("coarse", "coarse_relative", "coarse_scene", "coarse_momentum")
 MIN_SPEED_FACTOR = 0.05  # a perceived speed never turns negative
 STEP_MARGIN = 0.02  # keep clicked step lengths this fraction inside the server's limits
 
@@ -60,10 +66,12 @@ def robot_track(positions) -> np.ndarray:
     return np.asarray(positions, dtype=np.float64)[:, 0, :]
 
 
-def payload_intents(payload: dict, config: ObserversConfig, relative: bool) -> Intents:
+def payload_intents(payload: dict, config: ObserversConfig, relative: bool,
+                    route: str = "straight") -> Intents:
     """The intents an observer reads into this trial's segment, in the payload's world."""
     options = IntentOptions(relative_lanes=relative,
-                            lane_change_duration_s=config.lane_change_duration_s.value)
+                            lane_change_duration_s=config.lane_change_duration_s.value,
+                            route=route)
     examples = [robot_track(c["positions"]) for c in payload.get("examples") or []]
     return trial_intents(payload["scene"], payload["dt_s"],
                          robot_track(payload["segment"]["positions"]), options, examples)
@@ -205,24 +213,43 @@ def walk(payload: dict, next_move) -> np.ndarray:
     return clicks
 
 
-def trial_reading(payload: dict, config: ObserversConfig,
-                  relative: bool) -> tuple[Intents, Reading]:
+def trial_reading(payload: dict, config: ObserversConfig, relative: bool,
+                  route: str = "straight") -> tuple[Intents, Reading]:
     """The intents of a trial and the observer's posterior over them (no randomness: a simulated
     study may compute it once per trial and pass it to `predict`)."""
-    intents = payload_intents(payload, config, relative)
+    intents = payload_intents(payload, config, relative, route)
     return intents, read_intents(payload, intents, config)
+
+
+def preset_route(preset: str) -> str:
+    """How a coarse preset moves to an intent: straight, or the scene's way round obstacles."""
+    return "scene" if preset == "coarse_scene" else "straight"
+
+
+def start_headings(payload: dict) -> list[float]:
+    """The robot's heading [rad] drawn at each start state."""
+    return [float(s["robot_heading"]) for s in payload["start_states"]]
+
+
+def intent_course(payload: dict, intents: Intents, intent: int, factor: float,
+                  momentum: float | None) -> Move:
+    """How an observer acting on `intent` moves from each start (momentum: blended with the
+    motion seen, `momentum` the intent's weight)."""
+    move = intents.course(intent, start_positions(payload), factor)
+    return move if momentum is None else momentum_course(move, start_headings(payload), momentum)
 
 
 def predict_coarse(payload: dict, rng: np.random.Generator, config: ObserversConfig,
                    relative: bool | None = None, noise: NoiseConfig | None = None,
-                   reading: tuple[Intents, Reading] | None = None) -> np.ndarray:
+                   reading: tuple[Intents, Reading] | None = None, route: str = "straight",
+                   momentum: float | None = None) -> np.ndarray:
     """Clicks of the coarse observer: infer an intent, then move the way that intent moves."""
     if relative is None:
         relative = config.inference.lane_reading.value == "relative"
     noise = config.coarse_noise if noise is None else noise
-    intents, posterior = reading or trial_reading(payload, config, relative)
+    intents, posterior = reading or trial_reading(payload, config, relative, route)
     intent = choose_intent(posterior, config.inference.intent_choice.value, rng)
-    move = intents.course(intent, start_positions(payload), speed_factor(noise, rng))
+    move = intent_course(payload, intents, intent, speed_factor(noise, rng), momentum)
 
     def next_move(i: int, k: int, position: np.ndarray) -> tuple[np.ndarray, float]:
         direction, length = move(i, position)
@@ -270,9 +297,10 @@ def predict(preset: str, payload: dict, rng: np.random.Generator,
         raise ValueError(f"preset: unknown observer preset {preset!r}; "
                          f"choose one of {', '.join(PRESETS)}")
     config = config or default_observers()
-    if preset in ("coarse", "coarse_relative"):
+    if preset in COARSE_PRESETS:
+        momentum = config.momentum_weight.value if preset == "coarse_momentum" else None
         return predict_coarse(payload, rng, config, reads_relative(preset, config),
-                              reading=reading)
+                              reading=reading, route=preset_route(preset), momentum=momentum)
     if preset == "precise":
         if policy_actions is None:
             raise ValueError(f"precise bot: no policy actions for trial {payload['trial_id']}")

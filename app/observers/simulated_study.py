@@ -127,8 +127,8 @@ def simulated_trials(bank: TrialBank, preset: str, n: int, trials_per_world: int
             for index, trial_id in enumerate(chosen):
                 trial, payload = main[world][trial_id]
                 if preset.startswith("coarse") and trial_id not in readings:
-                    readings[trial_id] = inverse_planning.trial_reading(payload, observers,
-                                                                        relative)
+                    readings[trial_id] = inverse_planning.trial_reading(
+                        payload, observers, relative, inverse_planning.preset_route(preset))
                 clicks = inverse_planning.predict(preset, payload, rng, trial.policy_actions,
                                                   observers, readings.get(trial_id))
                 check_answer(bank, trial, clicks)  # the instrument grid's answers too

@@ -217,11 +217,21 @@ class MainTrialSelection(StrictModel):
     reads the models' answers only, averaged over seeds so no single training run decides, never
     a participant's or a simulated observer's, and favours neither model. Each participant sees
     both arms in proportion to their sizes (app/assignment.py `pick_by_arm`).
+    `discriminability` (issue 30): the second arm keeps, per robot label, the candidates where
+    the hypotheses differ most: the smallest, over the coarse observers of the family
+    (app/observers/family.py), of the precise observer's expected family err_ours - err_vae
+    minus that coarse observer's, scored on the `selection_seeds` only, so the seeds left out
+    confirm the design (`tomstudy instrument`). It reads the observers' expected answers and
+    the models' answers of the selection seeds, never a participant's.
     """
 
-    rule: Literal["random", "models_disagree"] = "random"
+    rule: Literal["random", "models_disagree", "discriminability"] = "random"
     candidates_per_trial: int = Field(default=1, ge=1, le=8)
     random_arm_trials: int = Field(default=0, ge=0)
+    selection_seeds: list[int] = Field(default_factory=list)
+
+    # a selection without selection seeds dumps as before the key existed (same config hash)
+    _without_empty_seeds = omitted_when_empty("selection_seeds")
 
     @model_validator(mode="after")
     def _one_candidate_when_random(self) -> "MainTrialSelection":
@@ -231,14 +241,22 @@ class MainTrialSelection(StrictModel):
         if self.rule == "random" and self.random_arm_trials:
             raise ValueError("random_arm_trials: only with rule models_disagree (with rule "
                              "random every main trial is in the random arm)")
+        if (self.rule == "discriminability") != bool(self.selection_seeds):
+            raise ValueError("selection_seeds: required with rule discriminability (the seeds "
+                             "the design may read), and only with it")
         return self
+
+    @property
+    def second_arm(self) -> str | None:
+        """The name of the arm chosen by the rule (None when every trial is random)."""
+        return None if self.rule == "random" else self.rule
 
     def arm_sizes(self, bank_trials: int) -> dict[str, int]:
         """Main trials per arm in a world's bank of `bank_trials` main trials."""
         if self.rule == "random":
             return {"random": bank_trials}
         return {"random": self.random_arm_trials,
-                "models_disagree": bank_trials - self.random_arm_trials}
+                self.rule: bank_trials - self.random_arm_trials}
 
 
 class WorldIntro(StrictModel):
@@ -283,21 +301,28 @@ class StudyConfig(StrictModel):
     # Ours', the VAE's and constant velocity's: installed entry point names, never code
     predictors: list[str] = []
     bundle: BundleSource = "built"
+    # worlds whose design cannot meet the design goal (`tomstudy instrument`): world -> what it
+    # can and cannot test; reported as exploratory, never as a test of the hypothesis
+    exploratory_worlds: dict[str, Annotated[str, Field(min_length=20)]] = {}
 
     @field_validator("predictors")
     @classmethod
     def _registered(cls, names: list[str]) -> list[str]:
         return check_names(names)
 
-    # a study without plug-ins dumps as before the key existed: same config hash, so
-    # sessions that ran it before an upgrade still show as running the loaded config
-    _without_empty_predictors = omitted_when_empty("predictors")
+    # a study without plug-ins (or exploratory worlds) dumps as before the keys existed: same
+    # config hash, so sessions that ran it before an upgrade still show as running the loaded
+    # config
+    _without_empty_keys = omitted_when_empty("predictors", "exploratory_worlds")
 
     @model_validator(mode="after")
     def _consistent(self) -> "StudyConfig":
         unexplained = [w for w in self.worlds if w not in self.world_intros]
         if unexplained:
             raise ValueError(f"world_intros: no introduction for world(s) {', '.join(unexplained)}")
+        strangers = sorted(set(self.exploratory_worlds) - set(self.worlds))
+        if strangers:
+            raise ValueError(f"exploratory_worlds: {', '.join(strangers)} not in worlds")
         if len(set(self.worlds)) != len(self.worlds):
             raise ValueError("worlds: each world may appear once")
         if self.bank_trials_per_world < self.trials_per_world:
@@ -305,12 +330,23 @@ class StudyConfig(StrictModel):
         if self.main_trial_selection.random_arm_trials > self.bank_trials_per_world:
             raise ValueError("main_trial_selection.random_arm_trials must be <= "
                              "bank_trials_per_world")
+        chosen_on = self.main_trial_selection.selection_seeds
+        if chosen_on and not (set(chosen_on) < set(self.models.seeds)):
+            raise ValueError("main_trial_selection.selection_seeds: must be some, not all, of "
+                             "models.seeds (the others confirm the design)")
         if self.attention_checks.min_passing_starts > self.start_states:
             raise ValueError("attention_checks.min_passing_starts must be <= start_states")
         keys = [q.key for q in self.survey]
         if len(set(keys)) != len(keys):
             raise ValueError("survey: question keys must be unique")
         return self
+
+
+def held_out_seeds(config: StudyConfig) -> list[int]:
+    """The model seeds no design choice read: all but the selection seeds (none for a rule that
+    reads every seed's family)."""
+    chosen_on = config.main_trial_selection.selection_seeds
+    return [s for s in config.models.seeds if s not in chosen_on] if chosen_on else []
 
 
 # the study config's keys that shape the trial bank: a change to any of them rebuilds it

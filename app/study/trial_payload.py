@@ -6,12 +6,16 @@ participant's step fields (a random `trial_id` ref, numbering) and the predictio
 simulated study adds the bank's trial id and world.
 """
 
-from app.study.trials import TrialBank, TrialRecord
+from app.study.trials import TrialBank, TrialRecord, WorldBank
 
 
 def trial_payload(bank: TrialBank, trial: TrialRecord) -> dict:
     """Scene, clips, start states and click limits of one trial, as the page receives them."""
-    world = bank.world(trial.world)
+    return world_trial_payload(bank.world(trial.world), bank.data.steps_to_predict, trial)
+
+
+def world_trial_payload(world: WorldBank, steps_to_predict: int, trial: TrialRecord) -> dict:
+    """`trial_payload` from one world's bank (also one being built)."""
     return {"scene": world.scene, "dt_s": world.dt_s, **trial.browser_payload(),
-            "steps_to_predict": bank.data.steps_to_predict,
+            "steps_to_predict": steps_to_predict,
             "max_step_m": world.max_step_m, "min_step_m": world.min_step_m}

@@ -28,11 +28,13 @@ Everything is read from what the browser is shown: the scene as JSON (bank.json'
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from functools import lru_cache
+from typing import Literal, Protocol
 
 import numpy as np
 
 from app.data.trajectory import wrap_angle
+from app.worlds.geodesic import GeodesicFields
 
 LANE_OFFSETS = np.array([-1, 0, 1])  # relative reading: merge left (towards lane 0), keep, right
 LATERAL_CANDIDATES = 41  # lateral moves the lane likelihood normalises over
@@ -42,6 +44,9 @@ TURN_CANDIDATES = 41  # heading changes the turn likelihood normalises over
 TURN_THRESHOLD_DEG = 30.0  # a clip turning more than this ends in a turn (recorded worlds')
 MIN_TURN_RATE_DEG_S = 5.0  # slower reads as straight on: under 30 deg over a 6 s clip
 MOVING_M = 1e-3  # a shorter step has no direction
+# the scene-aware route's grid: geometry of what is drawn, no parameter of a person
+ROUTE_GRID_M = 0.1
+ROUTE_BLOCKED_FACTOR = 1000.0  # an obstacle nobody drives through
 
 # move(i, position) -> (direction, length [m]) of start state i's next move
 Move = Callable[[int, np.ndarray], tuple[np.ndarray, float]]
@@ -53,6 +58,8 @@ class IntentOptions:
 
     relative_lanes: bool
     lane_change_duration_s: float
+    # Obstacle: straight at the goal, or the shortest way around the drawn obstacles
+    route: Literal["straight", "scene"] = "straight"
 
 
 class Intents(Protocol):
@@ -83,7 +90,7 @@ def trial_intents(scene: dict, dt_s: float, segment_track: np.ndarray,
         return LaneIntents(scene, dt_s, segment_track, options)
     if scene.get("recorded"):
         return TurnIntents(dt_s, segment_track, example_tracks)
-    return GoalIntents(scene, dt_s, segment_track)
+    return GoalIntents(scene, dt_s, segment_track, options.route == "scene")
 
 
 def segment_speed(track: np.ndarray, dt_s: float) -> float:
@@ -165,11 +172,14 @@ class LaneIntents:
 
 
 class GoalIntents:
-    """The goal discs of a plane scene."""
+    """The goal discs of a plane scene; the coarse move goes straight at the goal or, with
+    `around_obstacles`, along the shortest way around the scene's obstacles."""
 
-    def __init__(self, scene: dict, dt_s: float, track: np.ndarray) -> None:
+    def __init__(self, scene: dict, dt_s: float, track: np.ndarray,
+                 around_obstacles: bool = False) -> None:
         self.goals = np.array([[g["x_m"], g["y_m"]] for g in scene["goals"]], dtype=np.float64)
         self.dt_s, self.track = dt_s, track
+        self.routes = scene_routes(scene) if around_obstacles else None
         self.labels = np.arange(len(self.goals))
         self.feasible = np.ones(len(self.goals), dtype=bool)
 
@@ -197,12 +207,51 @@ class GoalIntents:
         """Straight at the goal at the segment's speed, stopping on it."""
         goal = self.goals[label]
         reach = segment_speed(self.track, self.dt_s) * speed_factor * self.dt_s
+        routes = self.routes
 
         def move(i: int, position: np.ndarray) -> tuple[np.ndarray, float]:
             to_goal = goal - position
-            return to_goal, min(reach, float(np.linalg.norm(to_goal)))
+            length = min(reach, float(np.linalg.norm(to_goal)))
+            if routes is None:
+                return to_goal, length
+            downhill = routes.downhill(label, position)
+            return (downhill if downhill.any() else to_goal), length
 
         return move
+
+
+def scene_routes(scene: dict) -> GeodesicFields:
+    """Shortest ways to the scene's goals around its obstacles grown by the robot's radius."""
+    robot = next(a for a in scene["agents"] if a["name"] == "robot")
+    radius = max(robot["width_m"], robot["length_m"]) / 2
+    bounds = scene["bounds"]
+    if bounds["x_min_m"] != 0 or bounds["y_min_m"] != 0:
+        raise ValueError("scene.bounds: scene-aware routes need a plane from (0, 0)")
+    return _routes((bounds["x_max_m"], bounds["y_max_m"]),
+                   tuple((o["x_m"], o["y_m"], o["radius_m"] + radius) for o in scene["obstacles"]),
+                   tuple((g["x_m"], g["y_m"]) for g in scene["goals"]))
+
+
+@lru_cache(maxsize=8)
+def _routes(size: tuple, discs: tuple, goals: tuple) -> GeodesicFields:
+    return GeodesicFields(size, list(discs), list(goals), ROUTE_GRID_M, ROUTE_BLOCKED_FACTOR)
+
+
+def momentum_course(move: Move, start_headings: list[float], weight: float) -> Move:
+    """`move` with each direction blended with the previous move's (at first the heading
+    drawn at the start): `weight` on the intent, 1 - weight on the motion seen."""
+    previous = {i: np.array([np.cos(h), np.sin(h)]) for i, h in enumerate(start_headings)}
+
+    def blended(i: int, position: np.ndarray) -> tuple[np.ndarray, float]:
+        direction, length = move(i, position)
+        norm = float(np.hypot(*direction))
+        intent = direction / norm if norm > 1e-9 else previous[i]
+        mixed = weight * intent + (1 - weight) * previous[i]
+        mixed_norm = float(np.hypot(*mixed))
+        previous[i] = mixed / mixed_norm if mixed_norm > 1e-9 else intent
+        return previous[i], length
+
+    return blended
 
 
 def move_headings(track: np.ndarray) -> np.ndarray:

@@ -13,13 +13,12 @@ from typing import Protocol
 
 import numpy as np
 from pydantic import Field, model_validator
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 
 from app.configio import StrictModel, load_yaml_model
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Circle, Scene
 from app.data.trajectory import HUMAN, ROBOT, Covered, Episode, Rejected
 from app.layout import Layout
+from app.worlds.geodesic import GeodesicFields
 from app.worlds.mpc import SamplingMPC
 
 AGENTS = (ROBOT, HUMAN)
@@ -124,70 +123,14 @@ class ObstacleConfig(StrictModel):
         return self
 
 
-class GeodesicFields:
-    """Shortest-path distance [m] to each goal around the obstacles, on a grid, interpolated."""
-
-    def __init__(self, config: ObstacleConfig):
-        step = config.geodesic.grid_step_m
-        self.step = step
-        self.nx = int(round(config.width_m / step)) + 1
-        self.ny = int(round(config.height_m / step)) + 1
-        xs, ys = np.meshgrid(np.arange(self.nx) * step, np.arange(self.ny) * step)
-        nodes = np.stack([xs.ravel(), ys.ravel()], axis=1)
-        blocked = np.zeros(len(nodes), dtype=bool)
-        for obs in config.obstacles:
-            reach = obs.radius_m + config.agent_radius_m + config.geodesic.inflation_m
-            blocked |= np.hypot(nodes[:, 0] - obs.x_m, nodes[:, 1] - obs.y_m) < reach
-        graph = self._grid_graph(blocked, config.geodesic.blocked_cost_factor)
-        sources = [self._node(goal.x_m, goal.y_m) for goal in config.goals]
-        dist = dijkstra(graph, directed=False, indices=sources)
-        self.values = dist.reshape(len(sources), self.ny, self.nx)
-
-    def _node(self, x: float, y: float) -> int:
-        i = int(np.clip(round(x / self.step), 0, self.nx - 1))
-        j = int(np.clip(round(y / self.step), 0, self.ny - 1))
-        return j * self.nx + i
-
-    def _grid_graph(self, blocked: np.ndarray, blocked_factor: float):
-        """16-connected grid; an edge touching a blocked node is `blocked_factor` times longer."""
-        index = np.arange(self.nx * self.ny).reshape(self.ny, self.nx)
-        rows, cols, weights = [], [], []
-        # 16 neighbours (knight moves too) keep the grid metric within ~3% of Euclidean, so
-        # paths in the open are straight rather than axis-or-diagonal
-        for di, dj in ((1, 0), (0, 1), (1, 1), (1, -1), (2, 1), (1, 2), (2, -1), (1, -2)):
-            j_lo, j_hi = max(0, -dj), self.ny - max(0, dj)
-            i_lo, i_hi = max(0, -di), self.nx - max(0, di)
-            src = index[j_lo:j_hi, i_lo:i_hi]
-            dst = index[j_lo + dj:j_hi + dj, i_lo + di:i_hi + di]
-            src, dst = src.ravel(), dst.ravel()
-            length = self.step * np.hypot(di, dj)
-            touches = blocked[src] | blocked[dst]
-            rows.append(src)
-            cols.append(dst)
-            weights.append(np.where(touches, length * blocked_factor, length))
-        n = self.nx * self.ny
-        return coo_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(n, n)).tocsr()
-
-    def distance(self, goal: int, points: np.ndarray) -> np.ndarray:
-        """Bilinearly interpolated distance to `goal` at points [..., 2] -> [...]."""
-        fx = np.clip(points[..., 0] / self.step, 0, self.nx - 1 - 1e-9)
-        fy = np.clip(points[..., 1] / self.step, 0, self.ny - 1 - 1e-9)
-        i0, j0 = fx.astype(np.int64), fy.astype(np.int64)
-        tx, ty = fx - i0, fy - j0
-        v = self.values[goal]
-        top = v[j0, i0] * (1 - tx) + v[j0, i0 + 1] * tx
-        bottom = v[j0 + 1, i0] * (1 - tx) + v[j0 + 1, i0 + 1] * tx
-        return top * (1 - ty) + bottom * ty
-
-    def downhill(self, goal: int, point: np.ndarray) -> np.ndarray:
-        """Unit vector [2] along which the distance to `goal` falls fastest at `point`."""
-        h = self.step
-        offsets = np.array([[h, 0.0], [-h, 0.0], [0.0, h], [0.0, -h]])
-        d = self.distance(goal, point[None] + offsets)
-        grad = np.array([d[0] - d[1], d[2] - d[3]]) / (2 * h)
-        norm = np.linalg.norm(grad)
-        return -grad / norm if norm > 1e-9 else np.zeros(2)
+def world_fields(config: ObstacleConfig) -> GeodesicFields:
+    """The policy's distance-to-goal fields: obstacles grown by the agent and the inflation."""
+    grown = config.agent_radius_m, config.geodesic.inflation_m
+    return GeodesicFields(
+        (config.width_m, config.height_m),
+        [(o.x_m, o.y_m, o.radius_m + grown[0] + grown[1]) for o in config.obstacles],
+        [(g.x_m, g.y_m) for g in config.goals],
+        config.geodesic.grid_step_m, config.geodesic.blocked_cost_factor)
 
 
 class AgentPolicy(Protocol):
@@ -212,7 +155,7 @@ class ObstacleWorld:
         self.config = config
         self.agent_policy = agent_policy  # None: both agents run the sampling MPC
         self.dt_s = config.dt_s
-        self.fields = GeodesicFields(config)
+        self.fields = world_fields(config)
         goal_names = [goal.label for goal in config.goals]
         self.label_names = {
             "robot_goal": goal_names,

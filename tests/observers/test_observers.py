@@ -354,11 +354,17 @@ def test_instrument_command_prints_the_table(tmp_path, monkeypatch):
     get_settings.cache_clear()
     try:
         result = CliRunner().invoke(cli, ["instrument", "--n", "4", "--replications", "2",
-                                          "--bank", str(bank), "--out", str(tmp_path / "o")])
+                                          "--bank", str(bank), "--out", str(tmp_path / "o"),
+                                          "--goal-reps", "20", "--no-search"])
     finally:
         get_settings.cache_clear()
     written = json.loads((tmp_path / "o" / "instrument.json").read_text())
-    assert result.exit_code == (0 if all(written["passed"].values()) else 1), result.output
+    goal = json.loads((tmp_path / "o" / "goal.json").read_text())
+    missed = [w for w, met in goal["goal_met"].items() if not met
+              and w not in goal["exploratory"]]
+    assert result.exit_code == (1 if missed else 0), result.output
+    assert "obstacle: EXPLORATORY" in result.output  # paper_study.yaml marks it
+    assert f"{'highway':<10}{'all':<18}{'family':<17}" in result.output
     assert f"{'highway':<14}absolute" in result.output
     assert f"{'obstacle':<14}relative" in result.output
     assert "start kind" in result.output and f"{'obstacle':<14}all" in result.output
