@@ -6,8 +6,8 @@ Highway lane change completes, well before an Obstacle goal is reached); main tr
 the config's `main_trial_selection` in two arms (the first usable ones; and of further ones,
 those where the Ours and VAE families disagree most, robot labels taking turns); `start_states`
 start states on the data near the robot; every seed of both models, a constant-velocity
-baseline and the world's own policy (`World.robot_policy_actions`) answered for every start
-state, and every plug-in predictor the config names (app/predictors/), each a family of one
+baseline and the world's own policy (`World.robot_policy_actions`, its expected move: the mean
+of POLICY_ROLLOUTS runs) answered for every start state, and every plug-in predictor the config names (app/predictors/), each a family of one
 answer. Everything is computed from the rounded numbers the participant is shown. Nothing here
 depends on which world it is.
 Start states are chosen by start_states.py.
@@ -47,6 +47,7 @@ from app.worlds.registry import World, build_world
 
 STEP_PERCENTILE = 99.5
 EXTRA_CANDIDATES = 40  # segments tried as attention checks (the most obvious win)
+POLICY_ROLLOUTS = 8  # runs of the world's policy averaged into its expected move
 
 
 @dataclass
@@ -357,9 +358,8 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
     predictions |= {p.name: [stored_answer(p, NO_SEED, *asked)] for p in inputs.plugins}
     labels = {k: int(v[src]) for k, v in trajs.labels.items()}
     human_v = (segment[-1, HUMAN] - segment[-2, HUMAN]) / dt
-    policy = [inputs.world.robot_policy_actions(
-        np.asarray([s.robot, s.human]), s.robot_heading, s.robot_speed, human_v, labels,
-        config.steps_to_predict, rng) for s in states]
+    policy = [expected_policy(inputs.world, s, human_v, labels, config.steps_to_predict, rng)
+              for s in states]
     record = TrialRecord(
         trial_id="", world=inputs.world.name, kind="", source_index=src, segment_start=start,
         robot_label=labels[label_name], examples=examples, segment=shown, start_states=states,
@@ -368,6 +368,17 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
         policy_actions=np.round(np.asarray(policy), 5).tolist(), clip_sha256="")
     return record.model_copy(update={"clip_sha256": clip_sha256(
         scene, dt, record.browser_payload())})
+
+
+def expected_policy(world: World, state, human_v: np.ndarray, labels: dict, n_steps: int,
+                    rng: np.random.Generator) -> np.ndarray:
+    """The robot policy's expected actions [n, 2] from a start state: the mean of
+    POLICY_ROLLOUTS runs of a stochastic policy (the precise observer's answer and every check's
+    truth: one run's sampling noise moves steps 2-3 by 4-6 degrees)."""
+    runs = [world.robot_policy_actions(np.asarray([state.robot, state.human]),
+                                       state.robot_heading, state.robot_speed, human_v, labels,
+                                       n_steps, rng) for _ in range(POLICY_ROLLOUTS)]
+    return np.mean(runs, axis=0)
 
 
 def stored_answer(predictor: Predictor, seed: int, model_input: list, joint: np.ndarray,
