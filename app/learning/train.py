@@ -20,6 +20,7 @@ from app.data.trajectory import ROBOT, TrajectorySet
 from app.data.windows import Windows, make_windows, segment_features, split_by_trajectory
 from app.layout import CHECKPOINT_FILE, Layout
 from app.learning.checkpoint import (
+    RUN_ONLY_SOURCE_KEYS,
     load_model,
     model_from_payload,
     save_checkpoint,
@@ -328,7 +329,8 @@ def _data_meta(trajs: TrajectorySet, windows: dict[str, Windows], extra: dict | 
         "human_end_median": [float(v) for v in np.median(human_end, axis=0)],
     }
     if extra:
-        meta["source"] = json.loads(json.dumps(extra, default=str))
+        source = {k: v for k, v in extra.items() if k not in RUN_ONLY_SOURCE_KEYS}
+        meta["source"] = json.loads(json.dumps(source, default=str))
     return meta
 
 

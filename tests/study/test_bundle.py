@@ -215,8 +215,9 @@ def test_the_paper_studys_shipped_bundle_verifies_on_this_machine():
 
 
 def test_same_weights_tells_weights_from_what_else_a_checkpoint_records(small_study):
-    """A from-scratch build on one machine trains the same weights, but its content hash
-    also covers the data's recorded simulation wall time: the comparison says which."""
+    """A from-scratch build on one machine trains the same weights, but an older checkpoint's
+    content hash also covers the data's recorded simulation wall time: the comparison says
+    which."""
     import copy
     import dataclasses
 
