@@ -72,7 +72,7 @@ def build_bundle(settings: Settings, study_id: str, workers: int = 2, n_trajecto
                     round(time.perf_counter() - started, 1), phases)
     say(f"froze {out} ({len(bundle.manifest['files'])} files)")
     for row in bundle.manifest["unconverged"]:
-        say(cap_warning(row))
+        say(cap_warning(row, layout.model_dir(row["world"], row["model"], row["seed"])))
     return bundle
 
 

@@ -32,12 +32,14 @@ def unconverged(rows: list[dict]) -> list[dict]:
     return [row for row in rows if not row["converged"]]
 
 
-def cap_warning(row: dict) -> str:
-    """`bundle build`'s warning of a checkpoint that hit its cap still improving."""
+def cap_warning(row: dict, model_dir: Path) -> str:
+    """`bundle build`'s warning of a checkpoint (trained into `model_dir`) that hit its cap
+    still improving."""
     return (f"WARNING: {row['world']}/{row['model']} seed {row['seed']} did not converge: it "
             f"ran all {row['epochs_run']} of its max_epochs {row['max_epochs']} with the "
-            f"validation loss still improving (best epoch {row['best_epoch']}); raise "
-            f"max_epochs in training.yaml and train it again")
+            f"validation loss still improving (best epoch {row['best_epoch']}); to train it "
+            f"to convergence, raise max_epochs in training.yaml, delete {model_dir} and build "
+            f"again")
 
 
 def stopping_lines(rows: list[dict]) -> list[str]:
