@@ -2,8 +2,7 @@
 
 The manifest lists every file's SHA-256 and size, the bank's hash, each checkpoint's content
 hash, the checkpoints whose training hit its cap unconverged, and where and how the bundle
-was built; gzip files carry no name or time, so equal
-content gives equal bytes.
+was built; gzip files carry no name or time, so equal content gives equal bytes.
 """
 
 import json

@@ -4,9 +4,9 @@ A `shipped` study (the paper's) is served from the bundle in the configs dir as 
 clone simulates and trains nothing. A `built` study's bundle is made once by `build_bundle`,
 the steps `tomstudy bundle build` runs: simulate both worlds, train every seed of both models
 (app/learning/family.py), build the bank and freeze it (app/bank/bundle.py), warning of
-every checkpoint whose training hit its cap before converging. Each step is
-skipped when its output exists (the bank also when it still matches its checkpoints), so an
-interrupted build resumes. A bundle that exists is served as it is: rebuilding is explicit.
+every checkpoint whose training hit its cap before converging. Each step is skipped when its
+output exists (the bank also when it still matches its checkpoints), so an interrupted build
+resumes. A bundle that exists is served as it is: rebuilding is explicit.
 """
 
 import json
