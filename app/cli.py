@@ -434,11 +434,13 @@ def bundle_verify(
                                                 "study is served from)")] = None,
 ) -> None:
     """Check every file against the manifest and recompute every stored answer (every
-    checkpoint's and plug-in predictor's) on this machine; print the largest differences; exit
-    1 if any is beyond tolerance or a plug-in is not installed."""
+    checkpoint's and plug-in predictor's) on this machine; print the largest differences, then
+    each checkpoint's training epochs and whether it converged; exit 1 if any answer is beyond
+    tolerance or a plug-in is not installed."""
     from app.bank.bundle import BundleError
     from app.bank.model_answers import agreement_lines, recompute
     from app.bank.served import served_bundle
+    from app.bank.training_report import checkpoint_stopping, stopping_lines
     from app.bank.verify import open_bundle
 
     try:
@@ -450,6 +452,7 @@ def bundle_verify(
                f"bytes, every SHA-256 as in the manifest; bank {opened.bank.sha256[:12]}")
     _, checks = recompute(opened.bank, opened.predictor)
     echo_lines(agreement_lines(checks, opened.plugins))
+    echo_lines(stopping_lines(checkpoint_stopping(opened.root, opened.manifest["models"])))
     if not all(c.ok for c in checks):
         raise typer.Exit(1)
 

@@ -106,7 +106,7 @@ def compare_checkpoints(old: dict, new: dict) -> list[dict]:
 
 def same_weights(old: Bundle, new: Bundle, row: dict) -> dict:
     """Whether a checkpoint pair holds the same weights, and which other recorded keys differ
-    (a content hash also covers what the data's simulation recorded, its wall time say)."""
+    (an older checkpoint's content hash also covers the data's simulation wall time)."""
     if row["same"] or not (row["old"] and row["new"]):  # a content hash covers the weights
         return {"same_weights": row["same"], "other_keys_differ": []}
     a, b = (bundle.model(row["world"], row["model"], row["seed"]) for bundle in (old, new))

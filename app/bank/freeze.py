@@ -1,8 +1,8 @@
 """Freezing a study's bundle: its bank, checkpoints, data meta and configs, with a manifest.
 
 The manifest lists every file's SHA-256 and size, the bank's hash, each checkpoint's content
-hash and where and how the bundle was built; gzip files carry no name or time, so equal
-content gives equal bytes.
+hash, the checkpoints whose training hit its cap unconverged, and where and how the bundle
+was built; gzip files carry no name or time, so equal content gives equal bytes.
 """
 
 import json
@@ -28,6 +28,7 @@ from app.bank.bundle import (
     checkpoint_file,
     metrics_file,
 )
+from app.bank.training_report import checkpoint_stopping, unconverged
 from app.bank.verify import open_bundle
 from app.fileio import sha256_bytes, sha256_file, write_gzip
 from app.layout import Layout
@@ -91,8 +92,9 @@ def freeze(config: StudyConfig, study_id: str, configs_dir: Path, layout: Layout
             target.write_bytes(data)
         entries[name] = {"sha256": sha256_file(target), "bytes": target.stat().st_size}
     bank = TrialBank.read(staging / BANK)
-    write_json(staging / MANIFEST, manifest(config, study_id, bank, entries, wall_time_s,
-                                            phases))
+    record = manifest(config, study_id, bank, entries, wall_time_s, phases)
+    record["unconverged"] = unconverged(checkpoint_stopping(staging, record["models"]))
+    write_json(staging / MANIFEST, record)
     shutil.rmtree(out, ignore_errors=True)
     out.parent.mkdir(parents=True, exist_ok=True)
     os.replace(staging, out)

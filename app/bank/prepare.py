@@ -3,9 +3,10 @@
 A `shipped` study (the paper's) is served from the bundle in the configs dir as it is: a fresh
 clone simulates and trains nothing. A `built` study's bundle is made once by `build_bundle`,
 the steps `tomstudy bundle build` runs: simulate both worlds, train every seed of both models
-(app/learning/family.py), build the bank and freeze it (app/bank/bundle.py). Each step is
-skipped when its output exists (the bank also when it still matches its checkpoints), so an
-interrupted build resumes. A bundle that exists is served as it is: rebuilding is explicit.
+(app/learning/family.py), build the bank and freeze it (app/bank/bundle.py), warning of
+every checkpoint whose training hit its cap before converging. Each step is skipped when its
+output exists (the bank also when it still matches its checkpoints), so an interrupted build
+resumes. A bundle that exists is served as it is: rebuilding is explicit.
 """
 
 import json
@@ -17,6 +18,7 @@ from pathlib import Path
 
 from app.bank.bundle import MANIFEST, Bundle, bundle_dir, shipped_dir
 from app.bank.freeze import freeze
+from app.bank.training_report import cap_warning
 from app.bank.verify import open_bundle
 from app.fileio import sha256_file
 from app.layout import Layout
@@ -69,6 +71,8 @@ def build_bundle(settings: Settings, study_id: str, workers: int = 2, n_trajecto
     bundle = freeze(config, study_id, settings.configs_dir, layout, out,
                     round(time.perf_counter() - started, 1), phases)
     say(f"froze {out} ({len(bundle.manifest['files'])} files)")
+    for row in bundle.manifest["unconverged"]:
+        say(cap_warning(row, layout.model_dir(row["world"], row["model"], row["seed"])))
     return bundle
 
 

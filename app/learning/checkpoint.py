@@ -3,7 +3,11 @@
 A checkpoint is a plain dict (tensors, lists, numbers, strings) so that
 `torch.load(path, weights_only=True)` reads it. It holds the weights, model args,
 normalisation, data meta and hash, train config, per-code summaries and a content hash
-(sha256 over everything else) that `load_model` verifies.
+(sha256 over everything else) that `load_model` verifies. The data meta leaves out how long
+and on how many processes the data was simulated (RUN_ONLY_SOURCE_KEYS): they are not what
+the data is, and the same data trained with the same seed must give the same content hash.
+Checkpoints made before this carry them, and verify as they are (the hash is over what the
+file holds).
 
 Inference runs in numpy on the same weights (no torch call per request): one study
 trial is a handful of small matrix products, where torch's per-call overhead dominates.
@@ -28,6 +32,9 @@ from app.learning.networks import Normaliser
 FORMAT = "tomstudy-model-v1"
 REQUIRED_KEYS = ("format", "kind", "world", "dt_s", "model_args", "state_dict", "norm",
                  "data_meta", "data_hash", "train_config", "codes", "content_hash")
+# keys of the data's meta.json that say how a simulation ran, not what it made (its
+# content_sha256 says that): left out of a checkpoint's data meta, so of its content hash
+RUN_ONLY_SOURCE_KEYS = ("wall_time_s", "workers")
 
 
 class CheckpointError(Exception):

@@ -29,7 +29,9 @@ class TrainConfig(StrictModel):
     decoder_hidden: list[int] = Field(default_factory=lambda: [128, 128])
     lr: float = Field(3e-3, gt=0)
     batch_size: int = Field(512, ge=1)
-    max_epochs: int = Field(100, ge=1)
+    # a cap well above the epochs these models need to converge (at most 136 measured on
+    # simulated data): training stops on patience_epochs (app/learning/convergence.py)
+    max_epochs: int = Field(400, ge=1)
     patience_epochs: int = Field(12, ge=1)
     beta_kl: float = Field(0.01, ge=0)
     vae_latent_dim: int = Field(2, ge=1)

@@ -5,7 +5,8 @@ Run: tomstudy select --world highway [--config FILE] [--train-config FILE] [--ou
 The grids and rules are in study_configs/model_selection.yaml, fixed before any run. Every
 grid cell trains on the train split of var/data/<world>/trajectories.npz (training.yaml's
 values plus the cell's, its `selected:` section ignored, seed from the selection config) and
-is scored on the validation split only:
+is scored on the validation split only (each cell trains until its validation loss converges
+or max_epochs, app/learning/convergence.py; the report says which):
 - criterion: validation task loss, pred_weight * L_pred + recon_weight * L_recon (normalised
   MSE as in training; L_recon averaged over every step t of the segment), in eval mode (the
   VAE's posterior mean, Ours' rounded codes), as the deployed models run. The KL term is
@@ -38,6 +39,7 @@ from app.data.trajectory import TrajectorySet
 from app.layout import Layout
 from app.learning.checkpoint import model_from_payload, trajectory_hash
 from app.learning.config import TrainConfig, WorldSelection, load_train_config
+from app.learning.convergence import stopping_record
 from app.learning.jobs import JobPool, job_pool
 from app.learning.model_metrics import code_usage, evaluate
 from app.learning.models import model_args
@@ -137,7 +139,8 @@ def score_cell(model_name: str, values: dict, base: TrainConfig, data: Prepared,
     cfg = cell_config(base, values)
     model, _, history = fit_network(model_name, seed, cfg, data, progress=False)
     row = {"model": model_name, "settings": values, **task_loss(model, data.val, cfg),
-           "epochs": len(history), "wall_s": round(time.perf_counter() - started, 1)}
+           **stopping_record(history, cfg.patience_epochs),
+           "wall_s": round(time.perf_counter() - started, 1)}
     if model_name == "ours":
         row.update(val_code_usage(model, data.val, cfg.min_code_share))
     return row, model
@@ -235,11 +238,13 @@ def yaml_lines(result: dict) -> str:
 
 
 def markdown(result: dict) -> str:
-    """One table of every cell (chosen cells in bold) plus the sensitivity row and rules."""
+    """One table of every cell (chosen cells in bold; epochs run and whether the validation
+    loss converged before max_epochs) plus the sensitivity row and rules."""
     lines = [f"# Model selection: {result['world']} (seed {result['seed']}, validation split)",
              "", f"- VAE rule: {result['rules']['vae']}", f"- Ours rule: {result['rules']['ours']}",
              "", "| model | setting | val task loss | val pred | val recon | val KL | codes used "
-             "| perplexity | epochs | chosen |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| perplexity | epochs | converged | chosen |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for row in result["rows"] + [result["sensitivity"]]:
         lines.append(_markdown_row(row))
     lines += ["", "Test split, for information only (never used to choose):", ""]
@@ -258,7 +263,8 @@ def _markdown_row(row: dict) -> str:
             "**chosen**" if row.get("chosen") else
             "not eligible" if row.get("eligible") is False else "")
     cells = [row["model"], setting, f"{row['val_task_loss']:.4f}", f"{row['val_pred']:.4f}",
-             f"{row['val_recon']:.4f}", kl, codes, ppl, str(row["epochs"]), mark]
+             f"{row['val_recon']:.4f}", kl, codes, ppl, str(row["epochs_run"]),
+             "yes" if row["converged"] else "no: hit the cap", mark]
     if row.get("chosen"):
         cells[2] = f"**{cells[2]}**"
     return "| " + " | ".join(cells) + " |"

@@ -20,12 +20,14 @@ from app.data.trajectory import ROBOT, TrajectorySet
 from app.data.windows import Windows, make_windows, segment_features, split_by_trajectory
 from app.layout import CHECKPOINT_FILE, Layout
 from app.learning.checkpoint import (
+    RUN_ONLY_SOURCE_KEYS,
     load_model,
     model_from_payload,
     save_checkpoint,
     trajectory_hash,
 )
 from app.learning.config import MODELS, TrainConfig
+from app.learning.convergence import EarlyStopping, stopping_record
 from app.learning.model_metrics import code_usage, derived_labels, evaluate
 from app.learning.models import build_model, model_args
 from app.learning.networks import Batch, LatentActionModel, Normaliser
@@ -150,11 +152,12 @@ def _validate(model, data: SplitTensors, cfg: TrainConfig, t: torch.Tensor) -> d
 
 def fit(model, train: SplitTensors, val: SplitTensors, cfg: TrainConfig, seed: int,
         progress: bool = True) -> list[dict]:
-    """Adam with early stopping on validation loss; leaves the best weights in `model`."""
+    """Adam until the validation loss converges (app/learning/convergence.py) or max_epochs;
+    leaves the best epoch's weights in `model`."""
     gen = torch.Generator().manual_seed(seed)
     val_t = torch.randint(0, cfg.segment_len, (len(val.x),), generator=gen)
     optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    history, best, best_state, stale = [], float("inf"), None, 0
+    history, best_state, stopping = [], None, EarlyStopping(cfg.patience_epochs)
     bar = tqdm(range(cfg.max_epochs), desc=f"train {type(model).__name__}", disable=not progress)
     for epoch in bar:
         train_loss = _epoch(model, train, cfg, gen, optimiser)
@@ -162,13 +165,10 @@ def fit(model, train: SplitTensors, val: SplitTensors, cfg: TrainConfig, seed: i
         history.append({"epoch": epoch, "train_total": train_loss,
                         **{f"val_{k}": v for k, v in scores.items()}})
         bar.set_postfix(train=f"{train_loss:.4f}", val=f"{scores['total']:.4f}")
-        if scores["total"] < best - 1e-5:
-            best, stale = scores["total"], 0
+        if stopping.improved(epoch, scores["total"]):
             best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-        else:
-            stale += 1
-            if stale >= cfg.patience_epochs:
-                break
+        elif stopping.done:
+            break
     model.load_state_dict(best_state)
     model.eval()
     return history
@@ -308,7 +308,8 @@ def _train(trajs: TrajectorySet, model_name: str, seed: int, cfg: TrainConfig, o
     test = evaluate(loaded, windows["test"], trajs.label_names, cfg.min_code_share)
     metrics = {
         "kind": model_name, "world": trajs.world, "seed": seed, "content_hash": content,
-        "train_wall_time_s": round(train_seconds, 2), "epochs_run": len(history),
+        "train_wall_time_s": round(train_seconds, 2),
+        **stopping_record(history, cfg.patience_epochs),
         "best_val": min(h["val_total"] for h in history), "history": history,
         "n_windows": {k: len(w) for k, w in windows.items()},
         "n_codes_used": payload["codes"]["n_codes_used"], "codes": payload["codes"],
@@ -328,7 +329,8 @@ def _data_meta(trajs: TrajectorySet, windows: dict[str, Windows], extra: dict | 
         "human_end_median": [float(v) for v in np.median(human_end, axis=0)],
     }
     if extra:
-        meta["source"] = json.loads(json.dumps(extra, default=str))
+        source = {k: v for k, v in extra.items() if k not in RUN_ONLY_SOURCE_KEYS}
+        meta["source"] = json.loads(json.dumps(source, default=str))
     return meta
 
 

@@ -87,6 +87,18 @@ def test_same_seed_gives_the_same_checkpoint(lane_trajs, tmp_path, trained):
     assert load_model(again).content_hash == load_model(trained["ours"]).content_hash
 
 
+def test_how_long_the_data_took_to_simulate_is_not_in_the_content_hash(lane_trajs, tmp_path):
+    hashes = set()
+    for run, (wall_time_s, workers) in enumerate([(12.3, 1), (45.6, 2)]):
+        meta = {"world": "lanes", "seed": 1, "wall_time_s": wall_time_s, "workers": workers}
+        path = train_and_save(lane_trajs, "ours", 0, FAST, tmp_path / str(run), data_meta=meta,
+                              progress=False)
+        model = load_model(path)
+        assert model.data_meta["source"] == {"world": "lanes", "seed": 1}
+        hashes.add(model.content_hash)
+    assert len(hashes) == 1
+
+
 def test_corrupt_checkpoint_is_a_clear_error(trained, tmp_path):
     good = trained["ours"].read_bytes()
     truncated = tmp_path / "truncated.pt"

@@ -114,6 +114,12 @@ def test_selection_picks_the_argmin_on_validation_and_writes_its_outputs(tiny_tr
     write_outputs(result, tmp_path)
     saved = json.loads((tmp_path / "selection.json").read_text())
     assert saved["chosen"] == result["chosen"] and "**chosen**" in markdown(result)
+    cells = result["rows"] + [result["sensitivity"]]
+    assert all(1 <= row["epochs_run"] <= TINY.max_epochs
+               and row["converged"] == (row["stopped_by"] == "patience") for row in cells)
+    table = markdown(result)
+    assert "| epochs | converged |" in table
+    assert table.count(" | yes | ") + table.count(" | no: hit the cap | ") == len(cells)
     pasted = yaml.safe_load("selected:\n" + (tmp_path / "selected.yaml").read_text())
     applied = TrainConfig(**pasted).for_world("lanes")
     assert (applied.levels, applied.beta_kl) == ([2, 2], best["settings"]["beta_kl"])

@@ -100,6 +100,19 @@ def test_serving_without_a_bundle_says_how_to_build_it(small_study, tmp_path):
     assert "tomstudy bundle build --study small_study" in run.stderr
 
 
+def training_rows(stdout: str) -> dict:
+    """`bundle verify`'s training table: (world, model, seed) -> (epochs run, cap, converged)."""
+    lines = stdout.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.split()[-1:] == ["training"])
+    rows = {}
+    for cells in (line.split() for line in lines[start + 1:]):
+        if len(cells) < 7 or not cells[2].isdigit():
+            break
+        rows[(cells[0], cells[1], int(cells[2]))] = (int(cells[3]), int(cells[5]),
+                                                     cells[6] == "converged")
+    return rows
+
+
 def refrozen_with(study: SmallStudy, change) -> None:
     """Change the working bank's JSON with `change` and freeze the bundle again."""
     path = Layout(study.data_dir).bank(study.study_id)
@@ -140,6 +153,10 @@ def test_bundle_verify_recomputes_every_seed_of_every_model(small_study):
         (w, m, s) for w in ("highway", "obstacle") for m in ("ours", "vae") for s in SMALL_SEEDS}
     bank = open_bundle(bundle_root(small_study)).bank
     assert all(int(r[3]) == len(bank.world(r[0]).trials) and r[-1] == "ok" for r in checked)
+    # the small study trains 2 epochs with a patience of 2: every checkpoint hits its cap
+    assert training_rows(run.stdout) == {(r[0], r[1], int(r[2])): (2, 2, False)
+                                         for r in checked}
+    assert "NOT CONVERGED (hit the cap)" in run.stdout
 
 
 def test_a_changed_answer_shows_in_the_comparison_of_two_bundles(small_study, tmp_path):
@@ -172,6 +189,14 @@ def test_build_bundle_skips_what_exists_and_refreezes(small_study, tmp_path):
         f"training 0 {m} checkpoint(s) on 2 process(es); 4 already exist"
         for m in ("ours", "vae")]
     assert bundle.bank.sha256 == open_bundle(bundle_root(small_study)).bank.sha256
+    checkpoints = [(w, m, s) for w in ("highway", "obstacle") for m in ("ours", "vae")
+                   for s in SMALL_SEEDS]
+    assert [(r["world"], r["model"], r["seed"], r["epochs_run"], r["max_epochs"], r["stopped_by"])
+            for r in bundle.manifest["unconverged"]] == [(*c, 2, 2, "cap") for c in checkpoints]
+    warned = [s for s in said if s.startswith("WARNING")]
+    assert len(warned) == len(checkpoints) and all(
+        f"{w}/{m} seed {s} did not converge" in line and "max_epochs 2" in line
+        for (w, m, s), line in zip(checkpoints, warned, strict=True))
     config = config_of(study)
     layout = Layout(study.data_dir)
     assert bank_is_current(layout, study.study_id, config)
@@ -212,11 +237,18 @@ def test_the_paper_studys_shipped_bundle_verifies_on_this_machine():
                if len(r) == 8 and r[2].isdigit()]
     assert len(checked) == 2 * 2 * len(config.models.seeds)
     assert all(r[-1] == "ok" for r in checked)
+    # its metrics predate the convergence record: replayed from each history, a checkpoint
+    # that ran all its epochs hit the cap
+    training = training_rows(run.stdout)
+    assert len(training) == len(checked)
+    assert all(converged == (epochs < cap) for epochs, cap, converged in training.values())
+    assert not all(converged for _, _, converged in training.values())
 
 
 def test_same_weights_tells_weights_from_what_else_a_checkpoint_records(small_study):
-    """A from-scratch build on one machine trains the same weights, but its content hash
-    also covers the data's recorded simulation wall time: the comparison says which."""
+    """A from-scratch build on one machine trains the same weights, but an older checkpoint's
+    content hash also covers the data's recorded simulation wall time: the comparison says
+    which."""
     import copy
     import dataclasses
 
