@@ -149,13 +149,16 @@ def plot_power(curve: pd.DataFrame, alpha: float, preset: str, base: Path) -> li
     colors = ["#0072B2", "#D55E00", "#009E73"]
     for i, (world, group) in enumerate(curve.groupby("world", sort=True)):
         ax.plot(group["n"], group["power"], color=colors[i % 3], lw=1.8,
-                label=f"{world} (d_z = {group['d_z'].iloc[0]:.2f})")
+                label=f"{world} (d_z = {group['d_z'].iloc[0]:.2f}), participants random")
+        if "power_trials_random" in group and group["power_trials_random"].notna().any():
+            ax.plot(group["n"], group["power_trials_random"], color=colors[i % 3], lw=1.8,
+                    ls="--", label=f"{world}, participants and trials random (primary)")
     ax.axhline(0.8, color="grey", ls="--", lw=0.8)
     ax.axvline(22, color="grey", ls=":", lw=0.8)
     ax.text(22.5, 0.05, "paper: n = 22", fontsize=7, color="grey")
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel("participants n")
-    ax.set_ylabel(f"power (one-sided paired t, alpha = {alpha})")
+    ax.set_ylabel(f"power (alpha = {alpha})")
     ax.set_title(f"Power to find Ours < VAE with '{preset}' simulated participants", fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)

@@ -266,7 +266,10 @@ def power(
     out: Annotated[Path | None, typer.Option(help="output folder")] = None,
     seed: Annotated[int, typer.Option(min=0)] = 0,
 ) -> None:
-    """Power to detect Ours < VAE vs n, from bots run in process on the trial bank."""
+    """Power to detect Ours < VAE vs n, from bots run in process on the trial bank: with
+    participants random (seed 0, one-sided paired t) and, for an observer of the family, with
+    participants and trials random (the primary test: family, min F'; power.csv
+    power_trials_random)."""
     from app.observers.inverse_planning import PRESETS
     from app.observers.simulated_study import run_power
 
@@ -276,8 +279,11 @@ def power(
     out = out or get_settings().layout.power_report(study, preset)
     summary = run_power(inputs.bank, preset, inputs.trials_per_world, out, n_max, pool, reps,
                         alpha, seed, inputs.observers)
+    random_trials = summary["n_for_power_0.8_trials_random"]
     for world, needed in summary["n_for_power_0.8"].items():
-        typer.echo(f"{world}: d_z = {summary['d_z'][world]:.3f}, n for power 0.8 = {needed}")
+        typer.echo(f"{world}: d_z = {summary['d_z'][world]:.3f}, n for power 0.8 = {needed} "
+                   f"(participants random, one-sided paired t); {random_trials[world]} "
+                   f"(participants and trials random: the primary test, family, min F')")
     typer.echo(f"wrote {out}")
 
 

@@ -190,6 +190,8 @@ def run_power(bank_path: Path, preset: str, trials_per_world: int, out_dir: Path
     means = participant_means(frame)
     n_values = list(range(3, n_max + 1))
     curve = power_curve(means, n_values, reps, alpha, seed)
+    curve["power_trials_random"] = trials_random_power(bank, preset, curve, trials_per_world,
+                                                       alpha, observers, seed)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     curve.to_csv(out_dir / "power.csv", index=False)
@@ -201,14 +203,48 @@ def run_power(bank_path: Path, preset: str, trials_per_world: int, out_dir: Path
                "power_at": {f"{w}@{n}": float(g.loc[g["n"] == n, "power"].iloc[0])
                             for w, g in curve.groupby("world") for n in (10, 22, n_max)
                             if n in set(g["n"])},
+               "n_for_power_0.8_trials_random": {
+                   world: _smallest_n(group, 0.8, "power_trials_random")
+                   for world, group in curve.groupby("world")},
                "figures": [str(f) for f in figures]}
     write_json(out_dir / "power.json", summary)
     return summary
 
 
-def _smallest_n(group: pd.DataFrame, target: float) -> int | None:
-    reached = group[group["power"] >= target]
+def _smallest_n(group: pd.DataFrame, target: float, column: str = "power") -> int | None:
+    reached = group[group[column] >= target]
     return int(reached["n"].min()) if len(reached) else None
+
+
+TRIALS_RANDOM_REPS = 200
+
+
+def trials_random_power(bank: TrialBank, preset: str, curve: pd.DataFrame,
+                        trials_per_world: int, alpha: float, observers: ObserversConfig | None,
+                        seed: int) -> list[float]:
+    """Per row of `curve` (world, n): P(the primary test, the family with participants and trials
+    random, concludes Ours) at the bank's size (app/observers/design_goal.py); NaN for a preset
+    outside the observer family."""
+    from app.observers.design_goal import Design, simulate_verdicts
+    from app.observers.family import VARIANTS, world_answers
+    from app.prediction_view import VIEW_FIELDS, click_direction_sd_deg
+
+    if preset not in VARIANTS:
+        return [float("nan")] * len(curve)
+    observers = observers or default_observers()
+    rng, out, answers = np.random.default_rng(seed), [], {}
+    for world, n in curve[["world", "n"]].itertuples(index=False, name=None):
+        if world not in answers:
+            view = click_direction_sd_deg(bank.world(world).model_dump(include=VIEW_FIELDS),
+                                          observers.click_sd_px.value)
+            answers[world] = world_answers(bank, world, observers, view, (preset,))
+        found = answers[world]
+        pool = np.arange(len(found.trial_ids))
+        design = Design(int(n), len(pool), trials_per_world)
+        verdicts = simulate_verdicts(found, preset, np.arange(len(found.seeds)), design, pool,
+                                     TRIALS_RANDOM_REPS, alpha, rng)["crossed"]
+        out.append(float(np.mean(verdicts == -1)))
+    return out
 
 
 def population_frames(bank: TrialBank, n: int, trials_per_world: int, seed: int,

@@ -211,3 +211,21 @@ def test_the_rule_keeps_the_highest_scored_candidates_per_label():
     assert [t.arm for t in chosen] == ["random", "discriminability", "discriminability"]
     assert chosen[1] is not pool[1] and chosen[1].robot_label == 0
     assert chosen[2].robot_label == 1
+
+
+def test_power_reports_trials_random_beside_participants_only(tmp_path):
+    import json
+
+    import pandas as pd
+
+    from app.observers.simulated_study import run_power
+
+    bank = tmp_path / "bank.json"
+    bank.write_text(json.dumps(bank_with_examples()))
+    summary = run_power(bank, "coarse", 4, tmp_path / "p", n_max=6, pool=12, reps=50,
+                        observers=CONFIG)
+    curve = pd.read_csv(tmp_path / "p" / "power.csv")
+    assert curve["power_trials_random"].between(0, 1).all()
+    assert set(summary["n_for_power_0.8_trials_random"]) == {"highway", "obstacle"}
+    run_power(bank, "random", 4, tmp_path / "r", n_max=4, pool=8, reps=20, observers=CONFIG)
+    assert pd.read_csv(tmp_path / "r" / "power.csv")["power_trials_random"].isna().all()
