@@ -17,7 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field
 # Export contract, in order. Types: the reader casts to these, so CSV and DB agree.
 STRING_COLUMNS = ("study_id", "participant_id", "recruitment", "outcome", "world",
                   "trial_id", "arm", "clip_sha256", "start_kind", "ours_sha256", "vae_sha256",
-                  "submission_id", "submitted_at", "config_sha256", "bank_sha256")
+                  "click_input", "submission_id", "submitted_at", "config_sha256", "bank_sha256")
 BOOL_COLUMNS = ("completed", "replaced", "attention_passed", "is_practice", "attention_check")
 INT_COLUMNS = ("world_position", "trial_index", "start_index", "step", "ours_code",
                "vae_code", "replays")
@@ -31,8 +31,8 @@ EXPORT_COLUMNS = (
     "attention_check", "arm", "clip_sha256", "start_index", "start_kind", "step", "start_x",
     "start_y", "human_x", "human_y", "click_x", "click_y", "human_vx", "human_vy", "ours_vx",
     "ours_vy", "vae_vx", "vae_vy", "cv_vx", "cv_vy", "policy_vx", "policy_vy", "ours_code",
-    "vae_code", "ours_sha256", "vae_sha256", "click_time_ms", "trial_duration_ms", "replays",
-    "submission_id", "submitted_at", "config_sha256", "bank_sha256",
+    "vae_code", "ours_sha256", "vae_sha256", "click_time_ms", "click_input", "trial_duration_ms",
+    "replays", "submission_id", "submitted_at", "config_sha256", "bank_sha256",
 )
 # Each plug-in predictor of a study (app/predictors/) adds these columns, in the study config's
 # order after the contract's, named <predictor>_<field>; a plug-in's code is -1 when it has none
@@ -53,7 +53,7 @@ def plugin_names(columns) -> list[str]:
 
 
 # columns added after the first export, with the value an older export's rows read as
-ADDED_COLUMNS = {"arm": "", "replaced": False}
+ADDED_COLUMNS = {"arm": "", "replaced": False, "click_input": ""}
 SORT_KEYS = ["participant_id", "trial_index", "trial_id", "start_index", "step"]
 
 # Every export except predictions (whose rows carry each model's hash already) names

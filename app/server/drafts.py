@@ -46,7 +46,8 @@ def save_draft(db: Session, ctx: StudyContext, participant: Participant, body: D
 
 def check_shape(ctx: StudyContext, step: TrialStep, body: DraftSave) -> None:
     """The draft fits the trial: a list of clicks per start state, at most the steps to
-    predict each, a time per click, and a start state that exists (422 naming the field)."""
+    predict each, a time (and, when sent, an input device) per click, and a start state that
+    exists (422 naming the field)."""
     states = len(ctx.bank.by_id[step.trial_id].start_states)
     steps = ctx.bank.data.steps_to_predict
     if len(body.points) != states or len(body.click_times_ms) != states:
@@ -56,8 +57,20 @@ def check_shape(ctx: StudyContext, step: TrialStep, body: DraftSave) -> None:
         if len(points) > steps or len(times) != len(points):
             raise Refused(422, f"points.{i}: at most {steps} clicks, each with its time in "
                                f"click_times_ms.{i}")
+    if body.click_inputs is not None:
+        check_click_inputs(body.points, body.click_inputs)
     if body.index >= states:
         raise Refused(422, f"index: the trial has {states} start states")
+
+
+def check_click_inputs(points: list[list], inputs: list[list]) -> None:
+    """One input device per click, start state by start state (422 naming click_inputs)."""
+    if len(inputs) != len(points):
+        raise Refused(422, f"click_inputs: one list per start state ({len(points)}) is needed")
+    for i, (clicks, devices) in enumerate(zip(points, inputs, strict=True)):
+        if len(devices) != len(clicks):
+            raise Refused(422, f"click_inputs.{i}: one input per click of points.{i} "
+                               f"({len(clicks)}), got {len(devices)}")
 
 
 def current_draft(db: Session, participant: Participant) -> dict | None:

@@ -85,8 +85,16 @@ def prediction_rows(ctx: StudyContext, participant: Participant, trial: TrialRec
     columns |= {"submission_id": np.full(k * n, str(body.submission_id)),
                 "participant_id": np.full(k * n, participant.id),
                 "trial_id": np.full(k * n, trial.trial_id),
-                "click_time_ms": np.asarray(body.click_times_ms, dtype=np.float64).ravel()}
+                "click_time_ms": np.asarray(body.click_times_ms, dtype=np.float64).ravel(),
+                "click_input": click_inputs(body, k * n)}
     return [with_plugins(row, ctx.config.predictors) for row in as_rows(columns)]
+
+
+def click_inputs(body: PredictionCreate, size: int) -> np.ndarray:
+    """Each click's input device, start state major as the rows; None where not sent."""
+    if body.click_inputs is None:
+        return np.full(size, None, dtype=object)
+    return np.asarray(body.click_inputs, dtype=object).ravel()
 
 
 def with_plugins(row: dict, plugins: list[str]) -> dict:

@@ -17,6 +17,7 @@ HISTORY_MAX_ENTRIES = 500  # undo and reset presses kept with a trial (the newes
 EVENTS_PER_REQUEST = 100  # telemetry events in one POST .../events
 ScreenOutReason = Literal["touch_only", "window_too_small"]  # app.js checks each on the device
 EventKind = Literal["visibility_hidden", "visibility_shown", "resize", "clip_finished", "replay"]
+ClickInput = Literal["mouse", "keyboard", "touch"]  # the device a click was placed with
 
 # ---------------------------------------------------------------- request bodies
 
@@ -90,6 +91,8 @@ class PredictionCreate(SubmissionBody):
     submitted_at_ms: float = PydField(ge=0)
     replays: int = PydField(default=0, ge=0, le=10_000)
     history: list[HistoryEntry] = PydField(default=[], max_length=HISTORY_MAX_ENTRIES)
+    # as click_times_ms; None (unknown) from a client older than the field, as history was
+    click_inputs: list[list[ClickInput]] | None = None
 
 
 class DraftSave(_Body):
@@ -100,6 +103,7 @@ class DraftSave(_Body):
     index: int = PydField(ge=0, le=100)  # the start state being answered
     points: list[list[Point]] = PydField(max_length=100)
     click_times_ms: list[list[float]] = PydField(max_length=100)
+    click_inputs: list[list[ClickInput]] | None = PydField(default=None, max_length=100)
     history: list[HistoryEntry] = PydField(default=[], max_length=HISTORY_MAX_ENTRIES)
     shown_at_ms: float = PydField(ge=0)  # when the trial was first shown (browser epoch ms)
     replays: int = PydField(default=0, ge=0, le=10_000)

@@ -160,6 +160,9 @@ class PredictionRow(SQLModel, table=True):
     ours_sha256: str = Field(max_length=64)
     vae_sha256: str = Field(max_length=64)
     click_time_ms: float
+    # the device the click came from (schemas.ClickInput); NULL: unknown, as in rows stored
+    # before 0007 or sent by a client without it
+    click_input: str | None = Field(default=None, max_length=8)
     # each plug-in predictor's answer: {"<name>": {"vx", "vy", "code", "sha256"}} (migration
     # 0006 says why a JSON column); {} in a study without plug-ins
     plugins: dict = Field(default_factory=dict,

@@ -20,11 +20,14 @@ MAX_TRIAL_MS = 6 * 3600 * 1000  # a trial "shown" longer than this is a broken c
 # ---------------------------------------------------------------- clicks
 
 def validate_points(bank: TrialBank, trial: TrialRecord, body: PredictionCreate) -> np.ndarray:
-    """Clicked positions [K, n, 2] after checking counts, bounds and move lengths."""
+    """Clicked positions [K, n, 2] after checking counts (of clicks, their times and
+    inputs), bounds and move lengths."""
     world = bank.world(trial.world)
     k, n = len(trial.start_states), bank.data.steps_to_predict
     _check_counts("points", body.points, k, n)
     _check_counts("click_times_ms", body.click_times_ms, k, n)
+    if body.click_inputs is not None:
+        _check_counts("click_inputs", body.click_inputs, k, n)
     check_times(body)
     check_history(body, k)
     points = np.asarray(body.points, dtype=np.float64)

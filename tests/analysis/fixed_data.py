@@ -58,7 +58,8 @@ def _row(p, world, w, t, s, k, start, click, human, rng) -> list:
         "vae_vx": vae[0], "vae_vy": vae[1], "cv_vx": cv[0], "cv_vy": cv[1],
         "policy_vx": policy[0], "policy_vy": policy[1], "ours_code": s % 2, "vae_code": t % 2,
         "ours_sha256": "o" * 8, "vae_sha256": "v" * 8, "click_time_ms": 100.0 * (k + 1),
-        "trial_duration_ms": 8000.0, "replays": 0, "submission_id": f"sub-{p}-{w}-{t}",
+        "click_input": "mouse", "trial_duration_ms": 8000.0, "replays": 0,
+        "submission_id": f"sub-{p}-{w}-{t}",
         "submitted_at": "2026-01-01T00:00:00Z", "config_sha256": "f" * 8, "bank_sha256": "b" * 8,
     }
     return [values[c] for c in EXPORT_COLUMNS]

@@ -2,11 +2,12 @@
 
 import json
 import math
+import re
 import uuid
 from pathlib import Path
 
 from app.layout import Layout
-from tests.conftest import ADMIN_TOKEN, SmallStudy
+from tests.conftest import ADMIN_TOKEN, REPO, SmallStudy
 from tests.e2e.conftest import BROWSER_STUDY
 
 VIEWPORT = {"width": 1280, "height": 900}
@@ -17,6 +18,9 @@ PIXEL = """([x, y]) => Array.from(document.querySelector('#trial-canvas').getCon
 ROBOT_RGB = (0x00, 0x72, 0xB2)
 CLIP_JUMP_MS = 2000  # fake-clock jump per poll while clips play
 THINK_MS = 1500  # fake-clock time between two clicks
+# an arrow key moves the keyboard cursor by this share of max_step_m (predict.js's own)
+KEY_STEP_FRACTION = float(re.search(r"^const KEY_STEP_FRACTION = ([\d.]+);", (
+    REPO / "frontend" / "static" / "js" / "predict.js").read_text(), re.M).group(1))
 
 
 def fresh_recruitment() -> str:
@@ -171,16 +175,38 @@ def watch_clips(page) -> None:
     raise AssertionError("the clips never finished")
 
 
-def place(page, trial: dict, start: int, steps: list[int],
-          think_ms: float = THINK_MS) -> list[list[float]]:
+def place(page, trial: dict, start: int, steps: list[int], think_ms: float = THINK_MS,
+          keyboard: bool = False) -> list[list[float]]:
     """Click these steps of the planned path from start state `start`, `think_ms` of the
-    page's clock apart; returns the points."""
-    path = planned_path(trial, trial["start_states"][start])
+    page's clock apart (with `keyboard`: move the cross there with the arrow keys and press
+    Enter, which lands within a key step of the point on each axis); returns the points."""
+    state = trial["start_states"][start]
+    path = planned_path(trial, state)
     for j in steps:
         if think_ms:
             page.clock.fast_forward(think_ms)
-        page.click("#trial-canvas", position=canvas_px(page, path[j]))
+        if keyboard:
+            page.focus("#trial-canvas")
+            for key in arrow_presses(trial, state["robot"], path, j):
+                page.keyboard.press(key)
+            page.keyboard.press("Enter")
+        else:
+            page.click("#trial-canvas", position=canvas_px(page, path[j]))
     return [path[j] for j in steps]
+
+
+def arrow_presses(trial: dict, start: list[float], path: list, j: int) -> list[str]:
+    """The arrow keys that move the keyboard cursor, which starts at the last click, from
+    `path[j - 1]` (or `start`) to `path[j]`, both rounded to whole key steps from `start`."""
+    key_step = trial["max_step_m"] * KEY_STEP_FRACTION
+
+    def steps_to(point) -> list[int]:
+        return [round((point[axis] - start[axis]) / key_step) for axis in (0, 1)]
+
+    before = steps_to(path[j - 1]) if j else [0, 0]
+    dx, dy = (after - at for at, after in zip(before, steps_to(path[j]), strict=True))
+    return (["ArrowRight" if dx > 0 else "ArrowLeft"] * abs(dx)
+            + ["ArrowDown" if dy > 0 else "ArrowUp"] * abs(dy))  # +y is down the canvas
 
 
 def start_predicting(page) -> None:

@@ -12,27 +12,32 @@ import sqlite3
 from contextlib import closing
 from pathlib import Path
 
+import httpx
 import pytest
 import yaml
 
 from app.configio import load_yaml_model
 from app.server.routes.pages import PAGE_RULES
 from app.study.config import StudyConfig
-from tests.conftest import REPO
+from tests.conftest import ADMIN_TOKEN, REPO
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
     THINK_MS,
     VIEWPORT,
     answer_survey,
+    answer_trial,
     canvas_px,
     canvas_view,
     current_state,
     fresh_recruitment,
     onward,
     open_dashboard,
+    place,
     planned_path,
+    start_predicting,
     through_instructions,
     visible,
+    wait_saved,
     watch_clips,
 )
 
@@ -113,8 +118,10 @@ def check_input_rules(page) -> None:
     assert "Too short" in page.inner_text("#trial-message")
     assert "0 of 3 positions placed" in page.inner_text("#trial-caption")
     page.focus("#trial-canvas")
-    for _ in range(3):
-        page.keyboard.press("Enter")  # the keyboard cursor starts one valid move ahead
+    page.keyboard.press("Enter")  # the keyboard cursor starts at the robot: nothing to place
+    assert "arrow keys first" in page.inner_text("#trial-message")
+    assert "0 of 3 positions placed" in page.inner_text("#trial-caption")
+    place(page, trial, 0, [0, 1, 2], think_ms=0, keyboard=True)
     assert "3 of 3 positions placed" in page.inner_text("#trial-caption")
     assert page.is_enabled("#next")
     page.keyboard.press("Backspace")
@@ -234,6 +241,56 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
     assert stored_ending(browser_server.db_path, PID) == (outcome, code)
 
 
+def test_enter_alone_answers_nothing_and_keyboard_clicks_are_recorded(chromium, browser_server):
+    context = chromium.new_context(viewport=VIEWPORT)
+    page = context.new_page()
+    errors = []
+    page.on("pageerror", lambda err: errors.append(str(err)))
+    page.clock.install()
+    recruitment = fresh_recruitment()
+    page.goto(f"{browser_server.url}/s/{BROWSER_STUDY}?{recruitment}")
+    through_instructions(page)
+    trial = current_state(page)["step"]
+    start_predicting(page)
+    k, n = len(trial["start_states"]), trial["steps_to_predict"]
+
+    page.focus("#trial-canvas")
+    for key in ["Enter", " "] * (k * n):  # more presses than the trial has clicks
+        page.keyboard.press(key)
+
+    message = page.locator("#trial-message")  # the trial's live region, read out politely
+    assert (message.get_attribute("role"), message.get_attribute("aria-live")) == (
+        "status", "polite")
+    assert message.inner_text().startswith("Move the cross with the arrow keys first")
+    assert page.inner_text("#trial-caption").endswith("0 of 3 positions placed.")
+    assert page.is_disabled("#next")
+
+    place(page, trial, 0, list(range(n)), keyboard=True)  # the first start state by keyboard
+    page.click("#next")
+    place(page, trial, 1, [0])  # then one mouse click, and a reload: the draft keeps both
+    wait_saved(page)
+    page.reload()
+    visible(page, "trial")
+    answer_trial(page)  # the rest by mouse
+    context.close()
+    assert errors == []
+
+    pid = dict(pair.split("=") for pair in recruitment.split("&"))["PROLIFIC_PID"]
+    with closing(sqlite3.connect(browser_server.db_path)) as db:
+        stored = db.execute(
+            "SELECT start_index, step, click_input FROM predictionrow JOIN participant ON "
+            "participant.id = predictionrow.participant_id WHERE external_id = ?",
+            (pid,)).fetchall()
+    expected = {(i, j): "keyboard" if i == 0 else "mouse" for i in range(k) for j in range(n)}
+    assert {(i, j): device for i, j, device in stored} == expected
+    export = httpx.get(f"{browser_server.url}/api/researcher/export/predictions.csv"
+                      f"?study_id={BROWSER_STUDY}",
+                      headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}).text
+    mine = public_id_of(browser_server.db_path, pid)
+    rows = [r for r in csv.DictReader(io.StringIO(export)) if r["participant_id"] == mine]
+    assert {(int(r["start_index"]), int(r["step"])): r["click_input"] for r in rows} == expected
+
+
 def stored_histories(db_path: Path, external_id: str) -> dict[str, list]:
     """Bank trial id -> the undo/reset history stored with that trial."""
     with closing(sqlite3.connect(db_path)) as db:
@@ -322,7 +379,7 @@ MODULE_CHECKS = """async () => {
     const input = new PredictionInput(canvas, trial, { rules: PREDICTION_RULES });
     input.shownAtPerf = performance.now();
     const refusals = [[0.1, 4], [5, 4], [2, 6], [0, 11.5]].map((p) => input.refusal(p));
-    const placed = [[3, 4], [6, 4], [9, 4], [12, 4]].map((p) => input.place(p));
+    const placed = [[3, 4], [6, 4], [9, 4], [12, 4]].map((p) => input.place(p, "mouse"));
     input.undo();
     const metreY = view.toPx([0, 1])[1] - view.toPx([0, 0])[1];
     const metreX = view.toPx([1, 0])[0] - view.toPx([0, 0])[0];

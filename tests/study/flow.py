@@ -50,21 +50,25 @@ def straight_clicks(trial: dict, direction_rad: float | None = None) -> list:
 
 
 def prediction_body(trial: dict, points: list | None = None, duration_ms: float = 8000) -> dict:
-    """A valid prediction submission for `trial`: clicks spread over the client's duration."""
+    """A valid prediction submission for `trial`: mouse clicks spread over the client's
+    duration."""
     points = points if points is not None else straight_clicks(trial)
     k, n = len(trial["start_states"]), trial["steps_to_predict"]
     gap = duration_ms / (k * n + 1)
     return {"submission_id": new_id(), "trial_id": trial["trial_id"], "points": points,
             "click_times_ms": [[gap * (i * n + j + 1) for j in range(n)] for i in range(k)],
+            "click_inputs": [["mouse"] * n for _ in range(k)],
             "shown_at_ms": 1000.0, "submitted_at_ms": 1000.0 + duration_ms, "replays": 1}
 
 
 def draft_body(trial: dict, clicks: int = 2, seq: int = 1) -> dict:
-    """A draft of `trial` (PUT .../draft): `clicks` of its first start state's straight moves."""
+    """A draft of `trial` (PUT .../draft): `clicks` of its first start state's straight moves,
+    by mouse."""
     first = straight_clicks(trial)[0][:clicks]
     rest = [[] for _ in trial["start_states"][1:]]
     return {"trial_id": trial["trial_id"], "seq": seq, "index": 0, "points": [first, *rest],
             "click_times_ms": [[1000.0 * (j + 1) for j in range(clicks)], *rest],
+            "click_inputs": [["mouse"] * clicks, *rest],
             "history": [], "shown_at_ms": 1000.0, "replays": 0}
 
 

@@ -6,9 +6,12 @@ import math
 
 import pandas as pd
 import pytest
+from sqlalchemy import select
 
+from analysis.load import load_csv
 from app.configio import load_yaml_model
 from app.server.plan import Phase
+from app.server.tables import PredictionRow
 from app.study.config import StudyConfig
 from tests.study.flow import (
     ADMIN,
@@ -125,6 +128,38 @@ def test_retried_submission_is_stored_once_with_the_same_answer(client, small_st
     assert len(pd.read_csv(io.StringIO(csv))) == per_trial[0] * per_trial[1]
     consent_again = p.post("consent", {"submission_id": new_id(), "agree": True})
     assert consent_again.status_code == 409
+
+
+def test_each_clicks_input_device_is_stored_and_exported(client, small_study, per_trial):
+    k, n = per_trial
+    p = at_first_trial(client, small_study.study_id)
+    body = prediction_body(p.state()["step"])
+    pen = [["mouse", "pen", "mouse"], *body["click_inputs"][1:]]
+    r = p.post("predictions", dict(body, submission_id=new_id(), click_inputs=pen))
+    assert r.status_code == 422 and r.json()["message"] == \
+        "click_inputs.0.1: Input should be 'mouse', 'keyboard' or 'touch'", r.text
+    r = p.post("predictions", dict(body, submission_id=new_id(),
+                                   click_inputs=body["click_inputs"][:-1]))
+    assert r.status_code == 422 and r.json()["detail"].startswith(
+        f"click_inputs: expected {k} start states"), r.text
+    devices = [[("mouse", "keyboard", "touch")[(i + j) % 3] for j in range(n)] for i in range(k)]
+    assert p.post("predictions", dict(body, click_inputs=devices)).status_code == 201
+    older = prediction_body(p.pass_screens()["step"])  # a client that predates the field
+    del older["click_inputs"]
+    assert p.post("predictions", older).status_code == 201
+
+    with client.app.state.engine.connect() as conn:
+        stored = conn.execute(select(PredictionRow.submission_id, PredictionRow.start_index,
+                                     PredictionRow.step, PredictionRow.click_input)).all()
+    assert [d for s, _, _, d in stored if s == older["submission_id"]] == [None] * k * n
+    assert {(i, j): d for s, i, j, d in stored if s == body["submission_id"]} == {
+        (i, j): devices[i][j] for i in range(k) for j in range(n)}
+    csv = client.get(f"/api/researcher/export.csv?study_id={small_study.study_id}",
+                     headers=ADMIN).text
+    frame = load_csv(io.StringIO(csv))
+    by_submission = frame.groupby("submission_id")["click_input"].agg(list)
+    assert by_submission[body["submission_id"]] == [d for row in devices for d in row]
+    assert by_submission[older["submission_id"]] == [""] * k * n  # unknown
 
 
 def test_events_are_stored_once(client, small_study):

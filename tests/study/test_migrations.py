@@ -155,15 +155,17 @@ def test_upgrading_keeps_every_row_and_value(db_url, tmp_path, small_study):
     added = snapshot(engine, {"participant": ["config_sha256", "bank_sha256", "app_version",
                                               "outcome", "completion_code", "completed",
                                               "completed_at", "ended_at"],
-                              "trialresponse": ["history"], "predictionrow": ["plugins"]})
+                              "trialresponse": ["history"],
+                              "predictionrow": ["plugins", "click_input"]})
     # a session completed before endings existed ended as `completed`; its code is unknown
     assert {row[:5] for row in added["participant"]} == {("", "", "", None, None),
                                                          ("", "", "", "completed", None)}
     for *_, outcome, _code, completed, completed_at, ended_at in added["participant"]:
         assert (outcome == "completed") == bool(completed) and ended_at == completed_at
     assert added["trialresponse"] == [([],)] * FIXTURE_ROWS["trialresponse"]
-    # rows answered before plug-in predictors existed hold none (0006)
-    assert added["predictionrow"] == [({},)] * FIXTURE_ROWS["predictionrow"]
+    # rows answered before plug-in predictors existed hold none (0006); their clicks' input
+    # device was never recorded (0007)
+    assert added["predictionrow"] == [({}, None)] * FIXTURE_ROWS["predictionrow"]
     with make_client(small_study, db_url) as client:  # the ORM writes into the old tables
         Participant(client, small_study.study_id).start()
         assert client.get("/healthz").status_code == 200
@@ -208,6 +210,29 @@ def test_0006_adds_plugin_answers_and_takes_them_away_again(db_url):
     with engine.connect() as conn:
         assert "plugins" in [c["name"] for c in inspect(conn).get_columns("predictionrow")]
     engine.dispose()
+
+
+def test_0007_leaves_the_input_of_clicks_stored_before_it_unknown(db_url, tmp_path):
+    source = make_engine(load_fixture(tmp_path / "old.db"))
+    engine = make_engine(db_url)
+    migrate_to(engine, "0001")
+    copy_rows(source, engine)
+    migrate_to(engine, "0006")
+    columns = {"predictionrow": ["id", "click_x", "click_time_ms", "plugins"]}
+    before = snapshot(engine, columns)
+
+    migrate_to(engine, "0007")
+
+    assert snapshot(engine, columns) == before
+    inputs = snapshot(engine, {"predictionrow": ["click_input"]})["predictionrow"]
+    assert inputs == [(None,)] * FIXTURE_ROWS["predictionrow"]
+    with engine.begin() as conn:
+        command.downgrade(migrate.alembic_config(conn), "0006")
+        columns_0006 = [c["name"] for c in inspect(conn).get_columns("predictionrow")]
+    assert "click_input" not in columns_0006 and "plugins" in columns_0006
+    assert snapshot(engine, columns) == before
+    engine.dispose()
+    source.dispose()
 
 
 def test_db_upgrade_on_the_database_9c39751_made(tmp_path):

@@ -8,6 +8,7 @@ dashboard) and the scripts in frontend/static/js keep no copy of them.
 
 import dataclasses
 import re
+from typing import get_args
 
 import pytest
 
@@ -16,6 +17,7 @@ from app.data.scene import BROWSER_PALETTE
 from app.prediction_view import MIN_WINDOW_PX
 from app.server.endings import FINISHED
 from app.server.schemas import (
+    ClickInput,
     ClientInfo,
     DraftSave,
     EventIn,
@@ -108,6 +110,15 @@ def test_app_js_has_one_device_check_per_screen_out_reason():
 def test_app_js_has_one_input_per_survey_question_kind():
     keys = table_keys((JS / "app.js").read_text(), "QUESTION_INPUTS")
     assert keys == schema_of(SurveyQuestion, "kind")["enum"]
+
+
+def test_predict_js_records_exactly_the_click_inputs_the_server_takes():
+    source = (JS / "predict.js").read_text()
+    pointers = re.search(r"^const POINTER_INPUTS = \{\n(.*?)^\};", source, re.M | re.S)
+    keyboard = re.search(r'^const KEYBOARD_INPUT = "(\w+)";', source, re.M)
+    assert pointers and keyboard, "predict.js names its click inputs in these two constants"
+    recorded = set(re.findall(r': "(\w+)",', pointers.group(1))) | {keyboard.group(1)}
+    assert recorded == set(get_args(ClickInput))
 
 
 def test_app_js_logs_exactly_the_event_kinds_the_server_takes():

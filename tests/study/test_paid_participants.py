@@ -47,6 +47,7 @@ def test_a_draft_comes_back_with_its_trial_until_the_trial_is_stored(client, sma
     draft = p.state()["step"]["draft"]
     assert draft["seq"] == 3 and [len(points) for points in draft["points"]] == [2, 0, 0, 0, 0]
     assert draft["shown_at_ms"] == 1000.0 and draft["index"] == 0
+    assert draft["click_inputs"] == [["mouse", "mouse"], [], [], [], []]
     p.answer_trial()
     assert p.pass_screens()["step"]["draft"] is None  # the next trial starts clean
 
@@ -61,6 +62,12 @@ def test_a_draft_must_fit_the_current_trial(client, small_study):
     four["points"][0].append(four["points"][0][-1])
     four["click_times_ms"][0].append(9000.0)
     assert p.put("draft", four).json()["detail"].startswith("points.0:")
+    others = [[] for _ in trial["start_states"][1:]]
+    unmatched = draft_body(trial, clicks=2) | {"click_inputs": [["mouse"], *others]}
+    assert p.put("draft", unmatched).json()["detail"].startswith("click_inputs.0:")
+    pen = draft_body(trial, clicks=2) | {"click_inputs": [["mouse", "pen"], *others]}
+    r = p.put("draft", pen)
+    assert r.status_code == 422 and r.json()["message"].startswith("click_inputs.0.1:")
     p.answer_trial()
     p.pass_screens()
     r = p.put("draft", draft_body(trial))  # the practice, already stored

@@ -24,6 +24,15 @@ const FINE_FACTOR = 0.25; // with Shift held
 const BELOW_CANVAS_PX = 72; // the legend line and the card's padding under the canvas
 const MIN_CANVAS_PX = 280;
 const VIEW_MARGIN_PX = 24;
+// The input device each click records (the server's schemas.ClickInput): a pointer's by its
+// pointerType, a stylus counted as touch since it points on the screen as a finger does.
+const POINTER_INPUTS = {
+  mouse: "mouse",
+  touch: "touch",
+  pen: "touch",
+};
+const KEYBOARD_INPUT = "keyboard";
+const CURSOR_NOT_MOVED = "Move the cross with the arrow keys first: it starts at the robot's current position.";
 
 function distance(a, b) {
   return Math.hypot(b[0] - a[0], b[1] - a[1]);
@@ -36,6 +45,11 @@ function lastHeading(clip, agent) {
   const a = p[p.length - 2]?.[agent] ?? p[0][agent];
   const b = p[p.length - 1][agent];
   return Math.atan2(b[1] - a[1], b[0] - a[0]);
+}
+
+/** The input a pointer click came from (a click without a known pointer counts as the mouse's). */
+function pointerInput(pointerType) {
+  return POINTER_INPUTS[pointerType] ?? POINTER_INPUTS.mouse;
 }
 
 function fmt(metres) {
@@ -70,18 +84,23 @@ export class PredictionInput {
     this.steps = trial.steps_to_predict;
     this.points = trial.start_states.map(() => []);
     this.clickTimes = trial.start_states.map(() => []);
+    this.clickInputs = trial.start_states.map(() => []);
     this.history = []; // undo and reset presses, stored with the trial
     this.index = 0;
     this.hover = null;
     this.cursor = null;
+    this.cursorMoved = false; // Enter places the cursor only after the arrow keys moved it
     this.showCursor = false;
+    this.pointerType = ""; // of the last pointerdown, for a click event that lacks its own
     this.listeners = [];
   }
 
-  /** Take up a saved draft (drafts.py): clicks, times, history, start state and the clock. */
+  /** Take up a saved draft (drafts.py): clicks, times, inputs, history, start state and the clock. */
   restore(draft) {
     this.points = draft.points.map((p) => p.map((q) => [...q]));
     this.clickTimes = draft.click_times_ms.map((t) => [...t]);
+    // null: a draft saved by a page from before inputs were recorded; this trial's stay unknown
+    this.clickInputs = draft.click_inputs?.map((d) => [...d]) ?? null;
     this.history = [...draft.history];
     this.index = draft.index;
     this.shownAtEpoch = draft.shown_at_ms;
@@ -95,6 +114,7 @@ export class PredictionInput {
       index: this.index,
       points: this.points,
       click_times_ms: this.clickTimes,
+      click_inputs: this.clickInputs,
       history: this.history.slice(-this.rules.history_max_entries),
       shown_at_ms: this.shownAtEpoch,
     };
@@ -112,7 +132,10 @@ export class PredictionInput {
       this.shownAtEpoch = Date.now();
     }
     this.pause();
-    this.listen(this.canvas, "click", (e) => this.place(this.eventPoint(e)));
+    this.listen(this.canvas, "pointerdown", (e) => { this.pointerType = e.pointerType; });
+    this.listen(this.canvas, "click", (e) => {
+      this.place(this.eventPoint(e), pointerInput(e.pointerType || this.pointerType));
+    });
     this.listen(this.canvas, "mousemove", (e) => this.setHover(this.eventPoint(e)));
     this.listen(this.canvas, "mouseleave", () => this.setHover(null));
     this.listen(this.canvas, "keydown", (e) => this.handleKey(e));
@@ -193,7 +216,8 @@ export class PredictionInput {
     return null;
   }
 
-  place(point) {
+  /** Place `point` as the next position, placed with `input` (POINTER_INPUTS, KEYBOARD_INPUT). */
+  place(point, input) {
     const why = this.refusal(point);
     if (why) {
       this.onMessage(why, "error");
@@ -201,6 +225,7 @@ export class PredictionInput {
     }
     this.current.push(point);
     this.clickTimes[this.index].push(this.elapsedMs());
+    this.clickInputs?.[this.index].push(input);
     const left = this.steps - this.current.length;
     this.onMessage(left ? `Position ${this.current.length} placed. ${left} to go.` : "All positions placed for this start state.", "ok");
     this.resetCursor();
@@ -219,6 +244,7 @@ export class PredictionInput {
     this.history.push({ action: "undo", start_index: this.index, t_ms: this.elapsedMs() });
     this.current.pop();
     this.clickTimes[this.index].pop();
+    this.clickInputs?.[this.index].pop();
     this.onMessage("Last position removed.", "ok");
     this.resetCursor();
     this.render();
@@ -229,6 +255,7 @@ export class PredictionInput {
     this.history.push({ action: "reset", start_index: this.index, t_ms: this.elapsedMs() });
     this.points[this.index] = [];
     this.clickTimes[this.index] = [];
+    if (this.clickInputs) this.clickInputs[this.index] = [];
     this.onMessage("Positions for this start state cleared.", "ok");
     this.resetCursor();
     this.render();
@@ -251,18 +278,13 @@ export class PredictionInput {
     this.render();
   }
 
-  /** Keyboard cursor starts one mid-length move ahead along the robot's current direction. */
+  /**
+   * The keyboard cursor starts at the robot (the last click or the start state), pointing
+   * nowhere: a cursor placed ahead of it would let Enter alone answer constant velocity.
+   */
   resetCursor() {
-    const anchor = this.anchor();
-    const n = this.current.length;
-    const prev = n >= 2 ? this.current[n - 2] : this.startState.robot;
-    const heading = n ? Math.atan2(anchor[1] - prev[1], anchor[0] - prev[0]) : this.robotHeading;
-    const reach = (this.trial.min_step_m + this.trial.max_step_m) / 2;
-    const ahead = (angle) => [anchor[0] + reach * Math.cos(angle), anchor[1] + reach * Math.sin(angle)];
-    // Straight ahead, or the nearest turn that stays inside the scene.
-    const turns = [0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5, 6].map((k) => (k * Math.PI) / 6);
-    const inside = turns.map((turn) => ahead(heading + turn)).find((p) => this.insideScene(p));
-    this.cursor = inside ?? ahead(heading);
+    this.cursor = [...this.anchor()];
+    this.cursorMoved = false;
   }
 
   insideScene([x, y]) {
@@ -276,11 +298,13 @@ export class PredictionInput {
     if (moves[event.key]) {
       this.showCursor = true;
       this.cursor = [this.cursor[0] + moves[event.key][0], this.cursor[1] + moves[event.key][1]];
+      this.cursorMoved = true;
       this.render();
     } else if (event.key === "Enter" || event.key === " ") {
       this.showCursor = true;
       if (this.stateDone()) this.onChange(this, { confirm: true });
-      else this.place(this.cursor);
+      else if (!this.cursorMoved) this.refuseUnmovedCursor();
+      else this.place(this.cursor, KEYBOARD_INPUT);
     } else if (event.key === "Backspace") {
       this.undo();
     } else {
@@ -289,12 +313,18 @@ export class PredictionInput {
     event.preventDefault();
   }
 
+  refuseUnmovedCursor() {
+    this.onMessage(CURSOR_NOT_MOVED, "error");
+    this.render(); // the cross, at the robot
+  }
+
   /** The request body for POST /predictions (submission_id is added by the caller). */
   body(replays) {
     return {
       trial_id: this.trial.trial_id,
       points: this.points,
       click_times_ms: this.clickTimes,
+      click_inputs: this.clickInputs,
       shown_at_ms: this.shownAtEpoch,
       submitted_at_ms: Date.now(),
       replays,
