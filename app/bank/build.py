@@ -141,8 +141,8 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
                                     max_step, scene, rng)
     pool, tried = regular_trials(config, inputs, candidates[used:], pool_size, max_step, scene,
                                  rng)
-    main = main_trials(pool, arms, arm_scores(config, inputs, pool[arms["random"]:], max_step,
-                                              scene))
+    scores = arm_scores(config, inputs, pool[arms["random"]:], max_step, scene)
+    main = main_trials(pool, arms, scores)
     used += tried
     checks, straightness = attention_trials(config, inputs, candidates[used:], max_step,
                                             scene, rng)
@@ -159,7 +159,7 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
                      trials=trials)
     meta = world_meta(inputs, trials, straightness)
     meta["segments_skipped_no_data_starts"] = used - len(practice) - len(pool)
-    meta["main_trial_selection"] = selection_meta(selection.rule, arms, pool, main)
+    meta["main_trial_selection"] = selection_meta(selection, arms, pool, main, scores)
     return bank, meta
 
 
@@ -223,18 +223,26 @@ def main_trials(pool: list[TrialRecord], arms: dict[str, int],
             + [t.model_copy(update={"arm": rule_arm}) for t in chosen])
 
 
-def selection_meta(rule: str, arms: dict[str, int], pool: list[TrialRecord],
-                   main: list[TrialRecord]) -> dict:
-    """meta.json's account of the main-trial selection: the arms, and the mean family
-    disagreement of each arm and of the candidates the rule's arm was chosen from."""
+def selection_meta(selection, arms: dict[str, int], pool: list[TrialRecord],
+                   main: list[TrialRecord], scores: list[float]) -> dict:
+    """meta.json's account of the main-trial selection: the arms, the mean family disagreement
+    of each arm and of the candidates the rule's arm was chosen from, and the rule's scores
+    (of the candidates and of those it kept) with the seeds it read."""
     def mean_disagreement(trials: list[TrialRecord]) -> float | None:
         return round(float(np.mean([model_disagreement(t) for t in trials])), 4) if trials \
             else None
 
-    return {"rule": rule, "arms": arms, "candidates": len(pool) - arms["random"],
-            "ours_vs_vae_candidates": mean_disagreement(pool[arms["random"]:]),
+    candidates = pool[arms["random"]:]
+    kept = {(t.source_index, t.segment_start) for t in main if t.arm != "random"}
+    chosen = [s for s, t in zip(scores, candidates, strict=True)
+              if (t.source_index, t.segment_start) in kept]
+    return {"rule": selection.rule, "arms": arms, "candidates": len(candidates),
+            "ours_vs_vae_candidates": mean_disagreement(candidates),
             **{f"ours_vs_vae_{arm}": mean_disagreement([t for t in main if t.arm == arm])
-               for arm in arms}}
+               for arm in arms},
+            "selection_seeds": selection.selection_seeds or "every seed",
+            "score_candidates": round(float(np.mean(scores)), 4) if scores else None,
+            "score_kept": round(float(np.mean(chosen)), 4) if chosen else None}
 
 
 def regular_trials(config: StudyConfig, inputs: WorldInputs, candidates: list, count: int,
