@@ -41,7 +41,10 @@ SMALL_TRAJECTORIES = 70
 PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/predictors",
                     "app/bank/build.py", "app/bank/start_states.py", "app/study/trials.py",
                     "app/study/config.py", "app/bank/bundle.py", "app/bank/freeze.py",
-                    "app/bank/verify.py", "app/fileio.py", "analysis/atomic.py", "study_configs"]
+                    "app/bank/verify.py", "app/fileio.py", "analysis/atomic.py", "study_configs",
+                    # the attention checks are chosen by the observers at the view's noise
+                    "app/bank/attention.py", "app/observers", "app/prediction_view.py",
+                    "app/study/clicks.py", "app/study/trial_payload.py"]
 
 
 @dataclass(frozen=True)
