@@ -35,6 +35,22 @@ def omitted_when_empty(*keys: str):
     return serialize
 
 
+def omitted_when_default(*keys: str):
+    """A model's serializer that leaves out these keys while they hold their default, so a
+    config that leaves a newer key out, or sets it to its default, dumps as before the key
+    existed. Read such a key from the model, not from its dump."""
+
+    @model_serializer(mode="wrap")
+    def serialize(self, handler):
+        data = handler(self)
+        for key in keys:
+            if key in data and getattr(self, key) == type(self).model_fields[key].default:
+                del data[key]
+        return data
+
+    return serialize
+
+
 def describe_validation_error(err: ValidationError, source: str) -> str:
     """One line per problem: `source: field.path: message`."""
     lines = []

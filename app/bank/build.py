@@ -24,10 +24,12 @@ from tqdm import tqdm
 import app
 from analysis.alignment import alignment_error
 from analysis.atomic import write_json
+from app.bank.attention import choose_checks
 from app.bank.start_states import NoStartStates, covered_states, start_states
 from app.data.trajectory import HUMAN, ROBOT, Covered, TrajectorySet
 from app.fileio import sha256_file
 from app.layout import Layout
+from app.observers.config import default_observers
 from app.predictors.builtin import CheckpointPredictor, ConstantVelocity
 from app.predictors.protocol import Predictor, ask
 from app.predictors.registry import load_predictor
@@ -46,7 +48,7 @@ from app.study.trials import (
 from app.worlds.registry import World, build_world
 
 STEP_PERCENTILE = 99.5
-EXTRA_CANDIDATES = 40  # segments tried as attention checks (the most obvious win)
+EXTRA_CANDIDATES = 40  # segments tried as attention checks (app/bank/attention.py)
 POLICY_ROLLOUTS = 8  # runs of the world's policy averaged into its expected move
 
 
@@ -144,8 +146,8 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
     scores = arm_scores(config, inputs, pool[arms["random"]:], max_step, scene)
     main = main_trials(pool, arms, scores)
     used += tried
-    checks, straightness = attention_trials(config, inputs, candidates[used:], max_step,
-                                            scene, rng)
+    checks, attention = attention_trials(config, inputs, candidates[used:], main, max_step,
+                                         scene, rng)
     built = practice + main + checks
     kinds = (["practice"] * len(practice) + ["main"] * len(main)
              + ["attention"] * len(checks))
@@ -157,7 +159,7 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
                      max_step_m=round(max_step, 4),
                      min_step_m=round(config.prediction_input.min_step_fraction * max_step, 4),
                      trials=trials)
-    meta = world_meta(inputs, trials, straightness)
+    meta = world_meta(inputs, trials, attention)
     meta["segments_skipped_no_data_starts"] = used - len(practice) - len(pool)
     meta["main_trial_selection"] = selection_meta(selection, arms, pool, main, scores)
     return bank, meta
@@ -268,7 +270,7 @@ def regular_trials(config: StudyConfig, inputs: WorldInputs, candidates: list, c
     return built, tried
 
 
-def world_meta(inputs: WorldInputs, trials: list[TrialRecord], straightness: dict) -> dict:
+def world_meta(inputs: WorldInputs, trials: list[TrialRecord], attention: dict) -> dict:
     """Input hashes and counts for meta.json."""
     labels = [t.robot_label for t in trials if t.kind == "main"]
     starts = [s.start_kind for t in trials if t.kind == "main" for s in t.start_states]
@@ -287,7 +289,7 @@ def world_meta(inputs: WorldInputs, trials: list[TrialRecord], straightness: dic
         "trials": {kind: sum(t.kind == kind for t in trials)
                    for kind in ("main", "practice", "attention")},
         "main_robot_labels": {str(v): labels.count(v) for v in sorted(set(labels))},
-        "attention_max_angle_deg": straightness,
+        "attention_checks": attention,
         "start_states_from": {"trajectories": inputs.covered_trajectories,
                               "robot_states": len(inputs.covered)},
         "main_start_kinds": {k: starts.count(k) for k in sorted(set(starts))},
@@ -420,38 +422,29 @@ def pick_examples(trajs: TrajectorySet, held_out: np.ndarray, src: int, label_na
 
 # ---------------------------------------------------------------- kinds
 
-def obviousness_deg(trial: TrialRecord) -> float:
-    """Largest angle between the policy's first move and the constant-velocity move."""
-    policy = np.asarray(trial.policy_actions)[:, 0]
-    cv = np.asarray(trial.cv_actions)[:, 0]
-    cos = (policy * cv).sum(-1) / (np.linalg.norm(policy, axis=-1)
-                                   * np.linalg.norm(cv, axis=-1) + 1e-12)
-    return float(np.degrees(np.arccos(np.clip(cos, -1, 1))).max())
-
-
-def attention_trials(config: StudyConfig, inputs: WorldInputs, candidates: list, max_step: float,
-                     scene: dict, rng: np.random.Generator) -> tuple[list[TrialRecord], dict]:
-    """The most obvious of up to EXTRA_CANDIDATES segments, as attention checks.
+def attention_trials(config: StudyConfig, inputs: WorldInputs, candidates: list,
+                     main: list[TrialRecord], max_step: float, scene: dict,
+                     rng: np.random.Generator) -> tuple[list[TrialRecord], dict]:
+    """Of up to EXTRA_CANDIDATES segments, the checks app/bank/attention.py keeps: failed by
+    going straight on, passed by every attentive observer (or else the fairest).
 
     Their start states come from the same rule and the same data as main trials', so
     nothing the browser gets (where the starts lie, how far apart) tells a check from a
-    main trial; what makes one a check is a segment after which the robot's own policy
-    plainly keeps going the way it goes, from every start state.
+    main trial.
     """
     rule = config.attention_checks
     pool = []
     for src, start, end in tqdm(candidates[:EXTRA_CANDIDATES],
-                                desc=f"attention checks {inputs.world.name}", unit="trial"):
+                                desc=f"attention candidates {inputs.world.name}", unit="trial"):
         try:
             pool.append(make_trial(config, inputs, src, start, end, max_step, scene, rng))
         except NoStartStates:
             continue
-    angles = [obviousness_deg(t) for t in pool]
-    chosen = [int(i) for i in np.argsort(angles, kind="stable")[: rule.per_world]]
-    if len(chosen) < rule.per_world:
+    if len(pool) < rule.per_world:
         raise ValueError(f"{inputs.world.name}: not enough segments left for "
                          f"{rule.per_world} attention check(s); simulate more")
-    picked = [round(angles[i], 2) for i in chosen]
-    return [pool[i] for i in chosen], {
-        "chosen": picked, "candidates": len(pool),
-        "meets_candidate_rule": all(a <= rule.candidate_max_angle_deg for a in picked)}
+    chosen, meta = choose_checks(
+        provisional_world(inputs, pool, max_step, scene, config),
+        provisional_world(inputs, main, max_step, scene, config), config.steps_to_predict,
+        rule, default_observers())
+    return [pool[i] for i in chosen], meta

@@ -2,14 +2,14 @@
 
 Pure functions of the request, the bank and the study config (no database): each
 refusal is a `Refused(422, "field: message")` naming the offending field. Where a click may
-land is app/study/clicks.py's rule, shared with the simulated study.
+land is app/study/clicks.py's rule, shared with the simulated study; when an attention check
+passes is its rule too, shared with the bank that chooses the checks.
 """
 
 import numpy as np
 
-from analysis.alignment import alignment_error
 from app.server.schemas import PredictionCreate
-from app.study.clicks import check_points, robot_starts, step_moves
+from app.study.clicks import check_passed, check_points, robot_starts, step_moves
 from app.study.config import AttentionChecks, SurveyQuestion
 from app.study.errors import Refused
 from app.study.trials import TrialBank, TrialRecord
@@ -78,10 +78,7 @@ def _check_counts(field: str, values: list, k: int, n: int) -> None:
 def attention_passed(rule: AttentionChecks, trial: TrialRecord, points: np.ndarray) -> bool:
     """Passed if enough first moves point within the allowed angle of the robot's true move."""
     first = step_moves(robot_starts(trial), points)[:, 0]
-    truth = np.asarray(trial.policy_actions, dtype=np.float64)[:, 0]
-    max_error = 1.0 - np.cos(np.deg2rad(rule.max_angle_deg))  # alignment error of that angle
-    within = alignment_error(first, truth) <= max_error
-    return int(within.sum()) >= rule.min_passing_starts
+    return check_passed(rule, first, np.asarray(trial.policy_actions, dtype=np.float64)[:, 0])
 
 
 # ---------------------------------------------------------------- survey

@@ -8,6 +8,8 @@ simulated study runs every simulated answer through the same check.
 
 import numpy as np
 
+from analysis.alignment import alignment_error
+from app.study.config import AttentionChecks
 from app.study.errors import Refused
 from app.study.trials import TrialRecord, WorldBank
 
@@ -29,6 +31,15 @@ def step_moves(starts: np.ndarray, points: np.ndarray) -> np.ndarray:
 def clicks_to_actions(starts: np.ndarray, points: np.ndarray, dt_s: float) -> np.ndarray:
     """Clicked positions [K, n, 2] -> actions [K, n, 2] (m/s): each move divided by dt."""
     return step_moves(starts, points) / dt_s
+
+
+def check_passed(rule: AttentionChecks, first_moves: np.ndarray, truth: np.ndarray) -> bool:
+    """An attention check's verdict on first moves [K, 2]: at least `min_passing_starts` of
+    them within `max_angle_deg` of the robot's true first moves [K, 2] (never where either
+    has no direction)."""
+    max_error = 1.0 - np.cos(np.deg2rad(rule.max_angle_deg))  # alignment error of that angle
+    within = alignment_error(first_moves, truth) <= max_error
+    return int(within.sum()) >= rule.min_passing_starts
 
 
 def check_points(world: WorldBank, starts: np.ndarray, points: np.ndarray) -> None:

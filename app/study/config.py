@@ -10,7 +10,13 @@ from typing import Annotated, Literal
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from analysis.contracts import ExclusionRules
-from app.configio import ConfigError, StrictModel, load_yaml_model, omitted_when_empty
+from app.configio import (
+    ConfigError,
+    StrictModel,
+    load_yaml_model,
+    omitted_when_default,
+    omitted_when_empty,
+)
 from app.predictors.registry import check_names
 from app.settings import Settings
 
@@ -35,20 +41,28 @@ class SegmentSteps(StrictModel):
 
 
 class AttentionChecks(StrictModel):
-    """Trials whose answer is obvious: the robot keeps moving the way it plainly moves.
+    """Trials that catch inattention and never reject an attentive person.
 
     Their start states follow the main trials' rule (so their geometry gives nothing
-    away); the bank picks the segments where the world's own policy from every start state
-    moves closest to the robot's last segment velocity (meta.json reports the angle and
-    whether it is within `candidate_max_angle_deg`). A participant passes one if, in at
-    least `min_passing_starts` of the start states, the first clicked move is within
-    `max_angle_deg` of the policy's first move.
+    away). A participant passes one if, in at least `min_passing_starts` of the start
+    states, the first clicked move is within `max_angle_deg` of the world policy's first
+    move. The bank (app/bank/attention.py) keeps the segments that constant velocity fails
+    (going straight on is not enough) and that every attentive observer of the family
+    passes with probability >= `min_attentive_pass_rate` at the view's click noise; where
+    none is both, the fairest, and meta.json says the rule was not met. So the angle, the
+    passing starts and the pass rate shape the bank: a check is fair at its own threshold.
+    `candidate_max_angle_deg` is retired (issue 30): no rule reads it; it is accepted so
+    configs and bundles written before still validate.
     """
 
     per_world: int = Field(default=1, ge=0)
     max_angle_deg: float = Field(default=45.0, gt=0, le=180)
     min_passing_starts: int = Field(default=4, ge=1)
     candidate_max_angle_deg: float = Field(default=15.0, gt=0, le=180)
+    min_attentive_pass_rate: float = Field(default=0.95, gt=0, le=1)
+
+    # a config at the default rate dumps as before the key existed (same config hash)
+    _without_default_rate = omitted_when_default("min_attentive_pass_rate")
 
 
 class SurveyQuestion(StrictModel):
@@ -353,18 +367,23 @@ def held_out_seeds(config: StudyConfig) -> list[int]:
 BANK_DESIGN_KEYS = ("worlds", "examples_per_trial", "segment_steps", "start_states",
                     "steps_to_predict", "practice_trials", "bank_trials_per_world", "bank_seed",
                     "main_trial_selection", "prediction_input", "models", "predictors")
-BANK_ATTENTION_KEYS = ("per_world", "candidate_max_angle_deg")  # the rest only score answers
+# the attention check rule's keys that shape the bank (which segment is a fair check): the rest
+# of `attention_checks` is retired
+BANK_ATTENTION_KEYS = ("per_world", "max_angle_deg", "min_passing_starts",
+                       "min_attentive_pass_rate")
 
 
 def bank_design(config: dict) -> dict | None:
     """The bank-shaping part of a study config (validated, so defaults count), or None if the
     config no longer validates."""
     try:
-        valid = StudyConfig.model_validate(config).model_dump(mode="json")
+        model = StudyConfig.model_validate(config)
     except ValidationError:
         return None
+    valid = model.model_dump(mode="json")
     design = {key: valid.get(key, []) for key in BANK_DESIGN_KEYS}  # only predictors may lack
-    return design | {"attention_checks": {k: valid["attention_checks"][k]
+    # read from the model: a key at its default is left out of the dump
+    return design | {"attention_checks": {k: getattr(model.attention_checks, k)
                                           for k in BANK_ATTENTION_KEYS}}
 
 

@@ -203,8 +203,11 @@ def test_build_bundle_skips_what_exists_and_refreezes(small_study, tmp_path):
     assert not bank_is_current(layout, study.study_id, config.model_copy(update={"bank_seed": 3}))
     assert bank_is_current(layout, study.study_id, config.model_copy(update={"title": "renamed"}))
     rescored = config.attention_checks.model_copy(update={"max_angle_deg": 30.0})
+    assert not bank_is_current(layout, study.study_id,  # a check is fair at its threshold
+                               config.model_copy(update={"attention_checks": rescored}))
+    retired = config.attention_checks.model_copy(update={"candidate_max_angle_deg": 5.0})
     assert bank_is_current(layout, study.study_id,
-                           config.model_copy(update={"attention_checks": rescored}))
+                           config.model_copy(update={"attention_checks": retired}))
     said.clear()
     assert prepare_study(settings, study.study_id, say=said.append) == bundle.root
     assert said == [f"serving the built bundle {bundle.root}"]

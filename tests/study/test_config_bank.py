@@ -25,6 +25,7 @@ from app.configio import ConfigError, load_yaml_model
 from app.fileio import sha256_file
 from app.layout import Layout
 from app.main import UnsafeSettings, create_app
+from app.observers.family import GOAL_VARIANTS
 from app.server.db import create_tables
 from app.server.deps import get_db
 from app.server.tables import Participant
@@ -242,6 +243,9 @@ def test_a_models_disagree_bank_keeps_the_most_controversial_of_its_candidates(s
         assert selection["ours_vs_vae_models_disagree"] >= selection["ours_vs_vae_candidates"]
         assert len(bank.trials_of(name, "main")) == config.bank_trials_per_world
         assert world_meta["trials"]["attention"] == config.attention_checks.per_world
+        checks = world_meta["attention_checks"]  # app/bank/attention.py's account
+        assert len(checks["chosen"]) == config.attention_checks.per_world
+        assert set(checks["chosen"][0]["pass_probability"]) == set(GOAL_VARIANTS)
 
 
 def test_random_selection_takes_one_candidate_per_trial_and_has_one_arm():
