@@ -116,10 +116,22 @@ def score_candidate(world: WorldBank, steps_to_predict: int, trial: TrialRecord,
 
 def ranked_checks(scores: list[CandidateScore], rule: AttentionChecks) -> list[int]:
     """Candidate indices to keep as the world's `per_world` checks: those that meet the rule
-    first, the fairest first among equals."""
-    order = sorted(range(len(scores)),
-                   key=lambda i: (not scores[i].meets_rule(rule), -scores[i].fairness))
-    return order[: rule.per_world]
+    first, the fairest first among equals; failing that, fair ones where going straight comes
+    nearest to failing first, then the fairest."""
+    def key(i: int) -> tuple:
+        score = scores[i]
+        fair = score.fairness >= rule.min_attentive_pass_rate
+        nearest = -cv_margin_deg(score, rule) if fair and not score.meets_rule(rule) else 0.0
+        return not score.meets_rule(rule), not fair, nearest, -score.fairness
+
+    return sorted(range(len(scores)), key=key)[: rule.per_world]
+
+
+def cv_margin_deg(score: CandidateScore, rule: AttentionChecks) -> float:
+    """The angle going straight must be off at enough starts to fail the check: it fails when
+    this exceeds `max_angle_deg` (the (K - min_passing_starts + 1)-th largest start angle)."""
+    angles_deg = sorted(score.cv_vs_policy_deg, reverse=True)
+    return angles_deg[len(angles_deg) - rule.min_passing_starts]
 
 
 def choose_checks(candidates: WorldBank, served: WorldBank, steps_to_predict: int,
@@ -135,7 +147,8 @@ def choose_checks(candidates: WorldBank, served: WorldBank, steps_to_predict: in
     meta = attention_meta(scores, chosen, rule, view_sd_deg)
     if not meta["rule_met"]:
         tqdm.write(f"{candidates.world}: no attention candidate that constant velocity fails "
-                   f"is fair to every attentive observer; kept the fairest (meta.json)")
+                   f"is fair to every attentive observer; kept a fair one where going straight "
+                   f"comes nearest to failing, else the fairest (meta.json)")
     return chosen, meta
 
 

@@ -126,3 +126,14 @@ def test_the_shipped_paper_bundle_still_shapes_the_bank_the_live_config_asks_for
     config = load_study_config(Settings(configs_dir=configs), "paper_study")
     check_design(open_bundle(shipped_dir(configs, "paper_study")), config,
                  Path(configs) / "paper_study.yaml")
+
+
+def test_without_a_check_that_straight_fails_a_fair_one_where_straight_comes_nearest_is_kept():
+    from app.bank.attention import CandidateScore, ranked_checks
+
+    def score(angles, fairness):
+        return CandidateScore(angles, False, {"coarse": fairness, "precise": 1.0})
+
+    scores = [score([1, 2, 3, 4, 5], 0.999), score([1, 2, 3, 30, 40], 0.97),
+              score([50, 60, 70, 80, 90], 0.5)]
+    assert ranked_checks(scores, RULE) == [1]
