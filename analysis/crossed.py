@@ -98,3 +98,23 @@ def crossed_test(diff, participant_ids, trial_ids) -> CrossedResult:
         n_trials=int(clips.max()) + 1, t_participants=float(out["t_participants"][0]),
         t_trials=float(out["t_trials"][0]), min_f=float(out["min_f"][0]),
         df=float(out["df"][0]), p_two_sided=float(out["p_two_sided"][0]))
+
+
+def primary_table(family_rows, alpha: float, exploratory: dict[str, str]):
+    """The pre-registered primary test per world on the family's rows (err_ours, err_vae as the
+    mean over seeds per kept row): per (participant, trial) mean difference, min F', verdict
+    (ours, vae, neither at alpha; both factors must agree) and whether the world is exploratory."""
+    import pandas as pd
+
+    cells = (family_rows.assign(diff=family_rows["err_ours"] - family_rows["err_vae"])
+             .groupby(["world", "participant_id", "trial_id"], sort=True)["diff"].mean()
+             .reset_index())
+    rows = []
+    for world, part in cells.groupby("world", sort=True):
+        result = crossed_test(part["diff"], part["participant_id"], part["trial_id"])
+        verdict = int(crossed_verdicts({k: np.array([v]) for k, v in result.as_dict().items()},
+                                       alpha)[0])
+        rows.append({"world": world, **result.as_dict(),
+                     "verdict": {-1: "ours", 1: "vae", 0: "neither"}[verdict],
+                     "exploratory": world in exploratory})
+    return pd.DataFrame(rows)

@@ -24,6 +24,7 @@ from tqdm import tqdm
 from analysis.atomic import write_json
 from analysis.bank import Bank, family_hashes, read_bank
 from analysis.contracts import MODELS, ExclusionRules
+from analysis.crossed import primary_table
 from analysis.csvsafe import write_csv
 from analysis.html import render_page
 from analysis.load import data_hash, load_csv
@@ -144,6 +145,7 @@ def robustness(kept: pd.DataFrame, bank: Bank | None, bank_path: Path,
     'family' the mean over seeds on the rows that ran the bank."""
     seeds = seed_results(kept, bank, str(bank_path))
     answer_sets = {"primary": kept} | ({"family": seeds.family_rows} if seeds.ok else {})
+    family_rows = seeds.family_rows if seeds.ok else None
     tables = {"per_seed": seeds.per_seed, "family": seeds.family,
               "by_arm": by_arm_table(answer_sets), "mixed_model": mixed_model_table(answer_sets),
               "leave_one_trial_out": leave_one_trial_out(answer_sets)}
@@ -162,8 +164,21 @@ def robustness(kept: pd.DataFrame, bank: Bank | None, bank_path: Path,
         "by_arm": nested(tables["by_arm"], ["world", "arm", "answers"]),
         "mixed_model": nested(tables["mixed_model"], ["world", "arm", "answers"]),
         "leave_one_trial_out": influence_summary(tables["leave_one_trial_out"]),
+        "family_rows": family_rows,
     }
     return summary, figures, tables["mixed_model"]
+
+
+def preregistered_primary(family_rows: pd.DataFrame | None, inputs: StudyInputs,
+                          out_dir: Path) -> dict:
+    """The pre-registered primary test (family, participants and trials random, min F') per
+    world, written to primary.csv; {} without the family's rows."""
+    if family_rows is None:
+        return {}
+    exploratory = inputs.config.get("exploratory_worlds") or {}
+    table = primary_table(family_rows, ALPHA, exploratory)
+    write_csv(table, out_dir / "primary.csv", float_format="%.10g")
+    return nested(table, ["world"]) | {"exploratory_worlds": exploratory}
 
 
 def every_predictor(kept: pd.DataFrame, mixed_model: pd.DataFrame,
@@ -208,6 +223,7 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
     steps.update(1)
     bank = read_bank(inputs.bank)
     extra, extra_figures, mixed_model = robustness(kept, bank, inputs.bank, out_dir)
+    extra["primary"] = preregistered_primary(extra.pop("family_rows"), inputs, out_dir)
     steps.update(1)
     predictors, predictor_figures = every_predictor(kept, mixed_model, out_dir)
     figures = plot_errors(means, results, out_dir / "alignment_error") + extra_figures
@@ -310,6 +326,8 @@ def headline(summary: dict) -> list[str]:
     """The lines `analyze` prints: per world the primary test, the family's and the trials'."""
     lines = []
     for world, res in summary["ours_vs_vae"].items():
+        if world in summary.get("primary", {}):
+            lines.append(_primary_line(world, summary["primary"][world]))
         w = summary["worlds"][world]
         lines.append(f"{world}: n={res['n']} Ours {w['err_ours']['mean']:.3f} VAE "
                      f"{w['err_vae']['mean']:.3f} CV {w['err_cv']['mean']:.3f} | "
@@ -325,6 +343,14 @@ def headline(summary: dict) -> list[str]:
     if seeds["status"] != "ok" or seeds["other_banks"] or seeds["rows_not_in_bank"]:
         lines.append(f"per seed: {seeds['note']}")
     return lines
+
+
+def _primary_line(world: str, res: dict) -> str:
+    kind = "EXPLORATORY, not a test of the hypothesis" if res["exploratory"] else "primary"
+    return (f"{world} ({kind}): family Ours - VAE {fmt(res['mean_diff'])}, participants and "
+            f"trials random (min F'({fmt(res['df'], 1)}) = {fmt(res['min_f'], 2)}, p = "
+            f"{fmt(res['p_two_sided'], 2)}; {res['n_participants']} participants, "
+            f"{res['n_trials']} trials) -> {res['verdict']}")
 
 
 def _predictors_line(predictors: dict, world: str) -> str:

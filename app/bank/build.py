@@ -4,13 +4,14 @@ Per world: the test split every checkpoint held out (all seeds share the split);
 where the world says the robot's behaviour is still visible (`World.visible_ends`: before a
 Highway lane change completes, well before an Obstacle goal is reached); main trials kept by
 the config's `main_trial_selection` in two arms (the first usable ones; and of further ones,
-those where the Ours and VAE families disagree most, robot labels taking turns); `start_states`
-start states on the data near the robot; every seed of both models, a constant-velocity
-baseline and the world's own policy (`World.robot_policy_actions`, its expected move: the mean
-of POLICY_ROLLOUTS runs) answered for every start state, and every plug-in predictor the config names (app/predictors/), each a family of one
-answer. Everything is computed from the rounded numbers the participant is shown. Nothing here
-depends on which world it is.
-Start states are chosen by start_states.py.
+those the rule ranks first, robot labels taking turns: where the Ours and VAE families disagree
+most, or where the observer hypotheses differ most); `start_states` start states on the data
+near the robot; every seed of both models, a constant-velocity baseline and the world's own
+policy (`World.robot_policy_actions`, its expected move: the mean of POLICY_ROLLOUTS runs)
+answered for every start state, and every plug-in predictor the config names
+(app/predictors/), each a family of one answer. Everything is computed from the rounded numbers
+the participant is shown. Nothing here depends on which world it is.
+Start states are chosen by start_states.py; attention checks by attention.py.
 """
 
 import platform

@@ -114,6 +114,13 @@ def test_report_from_csv(tmp_path, inputs, capsys):
         mixed = summary["mixed_model"][world]["pooled"]["primary"]
         assert mixed["status"] in ("ok", "boundary") and mixed["n_participants"] == 11
         assert summary["leave_one_trial_out"][world]["family"]["most_influential"]["trial_id"]
+        primary_test = summary["primary"][world]  # the family, participants and trials random
+        assert primary_test["n_participants"] == 10 and primary_test["verdict"] in (
+            "ours", "vae", "neither")
+        assert primary_test["mean_diff"] == pytest.approx(family.loc[world, "mean_diff"],
+                                                          abs=0.02)
+    assert summary["primary"]["exploratory_worlds"] == {}
+    assert (out / "primary.csv").is_file() and "Pre-registered primary test" in html
     influence = pd.read_csv(out / "leave_one_trial_out.csv")
     trials = kept.groupby("world")["trial_id"].nunique().sum()
     assert len(influence) == 2 * trials  # each main trial, for primary and family answers
@@ -122,6 +129,7 @@ def test_report_from_csv(tmp_path, inputs, capsys):
         assert section in html
     printed = capsys.readouterr().out
     assert "family (3 Ours x 3 VAE seeds)" in printed and "trials as random" in printed
+    assert "highway (primary): family Ours - VAE" in printed
     assert "1 participant(s)) ran another bank" in printed
 
 
