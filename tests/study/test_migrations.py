@@ -137,11 +137,18 @@ def test_every_revision_downgrades_and_upgrades_again(db_url):
 
 # ---------------------------------------------------------------- upgrades keep every row
 
-def test_upgrading_keeps_every_row_and_value(db_url, tmp_path, small_study):
+def old_rows_at(db_url: str, tmp_path, revision: str):
+    """The old fixture's engine, and its rows copied into `db_url` migrated to `revision`."""
     source = make_engine(load_fixture(tmp_path / "old.db"))
     engine = make_engine(db_url)
     migrate_to(engine, "0001")
     copy_rows(source, engine)
+    migrate_to(engine, revision)
+    return source, engine
+
+
+def test_upgrading_keeps_every_row_and_value(db_url, tmp_path, small_study):
+    source, engine = old_rows_at(db_url, tmp_path, "0001")
     before = snapshot(engine)
     assert {name: len(rows) for name, rows in before.items()} == FIXTURE_ROWS
 
@@ -176,11 +183,7 @@ def test_upgrading_keeps_every_row_and_value(db_url, tmp_path, small_study):
 
 
 def test_0004_moves_a_session_that_ended_early_back_to_the_step_it_ended_at(db_url, tmp_path):
-    source = make_engine(load_fixture(tmp_path / "old.db"))
-    engine = make_engine(db_url)
-    migrate_to(engine, "0001")
-    copy_rows(source, engine)
-    migrate_to(engine, "0003")
+    source, engine = old_rows_at(db_url, tmp_path, "0003")
     with engine.begin() as conn:  # the unfinished session declined, as 0003's code stored it
         conn.execute(text("UPDATE participant SET outcome = 'declined_consent', "
                           "position = 20 WHERE id = 5"))
@@ -213,11 +216,7 @@ def test_0006_adds_plugin_answers_and_takes_them_away_again(db_url):
 
 
 def test_0007_leaves_the_input_of_clicks_stored_before_it_unknown(db_url, tmp_path):
-    source = make_engine(load_fixture(tmp_path / "old.db"))
-    engine = make_engine(db_url)
-    migrate_to(engine, "0001")
-    copy_rows(source, engine)
-    migrate_to(engine, "0006")
+    source, engine = old_rows_at(db_url, tmp_path, "0006")
     columns = {"predictionrow": ["id", "click_x", "click_time_ms", "plugins"]}
     before = snapshot(engine, columns)
 
