@@ -157,27 +157,39 @@ def goal_met(rows: pd.DataFrame, alpha: float) -> bool:
                 and (precise["p_ours"] <= alpha).all())
 
 
-def needed_design(answers: WorldAnswers, base: Design, reps: int, alpha: float,
-                  rng: np.random.Generator) -> list[dict]:
-    """Per bank size T, the fewest participants whose design meets the goal on the family
-    (trials resampled from the whole bank), or None within DESIGN_PARTICIPANTS."""
-    family = np.arange(answers.valid.shape[2])
+def needed_design(answers: WorldAnswers, base: Design, seeds: dict[str, np.ndarray],
+                  reps: int, alpha: float, rng: np.random.Generator) -> list[dict]:
+    """Per bank size T, the fewest participants whose design meets the goal on the family and
+    the held-out family (trials resampled from the whole bank), or None within
+    DESIGN_PARTICIPANTS."""
     pool = np.arange(len(answers.trial_ids))
+    sets = [seeds[label] for label in ("family", "held-out family") if label in seeds]
     out = []
     for bank_trials in DESIGN_TRIALS:
         found = None
         for n in DESIGN_PARTICIPANTS:
-            design = Design(n, bank_trials, base.trials_each)
-            verdicts = {v: simulate_verdicts(answers, v, family, design, pool, reps, alpha,
-                                             rng)["crossed"] for v in GOAL_VARIANTS}
-            if precise_fails(verdicts["precise"], alpha):
-                break  # more participants only make a precise false positive likelier
-            if all(np.mean(verdicts[v] == -1) >= GOAL_POWER for v in COARSE_VARIANTS):
-                found = n
+            outcome = design_outcome(answers, Design(n, bank_trials, base.trials_each), sets,
+                                     pool, reps, alpha, rng)
+            if outcome != "short":
+                found = n if outcome == "met" else None
                 break
         out.append({"world": answers.world, "bank_trials": bank_trials,
                     "trials_each": base.trials_each, "participants_needed": found})
     return out
+
+
+def design_outcome(answers: WorldAnswers, design: Design, sets: list[np.ndarray],
+                   pool: np.ndarray, reps: int, alpha: float, rng: np.random.Generator) -> str:
+    """'met' (every seed set meets the goal), 'precise' (a precise population concludes Ours
+    too often: more participants only make that likelier) or 'short'."""
+    for subset in sets:
+        verdicts = {v: simulate_verdicts(answers, v, subset, design, pool, reps, alpha,
+                                         rng)["crossed"] for v in GOAL_VARIANTS}
+        if precise_fails(verdicts["precise"], alpha):
+            return "precise"
+        if not all(np.mean(verdicts[v] == -1) >= GOAL_POWER for v in COARSE_VARIANTS):
+            return "short"
+    return "met"
 
 
 def precise_fails(verdicts: np.ndarray, alpha: float) -> bool:
@@ -200,7 +212,7 @@ def run_design_goal(bank: TrialBank, design: Design, observers, view_sd_deg: dic
                                                  & (world_rows["seeds"] == label)], alpha)
                       for label in ("family", "held-out family") if label in sets}
         if search:
-            needed += needed_design(answers, design, search_reps, alpha, rng)
+            needed += needed_design(answers, design, sets, search_reps, alpha, rng)
     return {"alpha": alpha, "goal_power": GOAL_POWER, "reps": reps, "search_reps": search_reps,
             "design": design.__dict__, "held_out_seeds": held_out_seeds,
             "goal_met": {world: all(m.values()) for world, m in met.items()},

@@ -101,8 +101,9 @@ def needed_lines(needed: list[dict]) -> list[str]:
     """Per world and bank size, the fewest participants that meet the goal."""
     if not needed:
         return []
-    lines = ["participants needed to meet the goal (bank trials: participants, - = none "
-             "within 240 or a precise observer concludes Ours):"]
+    lines = ["participants needed to meet the goal on the family and the held-out family "
+             "(bank trials: participants; - = none within 240, or a precise observer "
+             "concludes Ours):"]
     worlds = dict.fromkeys(row["world"] for row in needed)
     for world in worlds:
         cells = [f"{r['bank_trials']}: {r['participants_needed'] or '-'}" for r in needed

@@ -229,3 +229,16 @@ def test_power_reports_trials_random_beside_participants_only(tmp_path):
     assert set(summary["n_for_power_0.8_trials_random"]) == {"highway", "obstacle"}
     run_power(bank, "random", 4, tmp_path / "r", n_max=4, pool=8, reps=20, observers=CONFIG)
     assert pd.read_csv(tmp_path / "r" / "power.csv")["power_trials_random"].isna().all()
+
+
+def test_the_rule_never_reads_a_held_out_seed():
+    bank = trial_bank(bank_with_examples())
+    before = discriminability(world_answers(bank, "highway", CONFIG, 2.9), np.array([0]))
+    for trial in bank.trials_of("highway", "main"):  # seed index 1 answers the opposite way
+        held_out = trial.predictions["vae"][1]
+        trial.predictions["vae"][1] = held_out.model_copy(update={
+            "actions": (-np.asarray(held_out.actions)).tolist()})
+    after = discriminability(world_answers(bank, "highway", CONFIG, 2.9), np.array([0]))
+    assert np.array_equal(before, after)
+    assert not np.array_equal(before, discriminability(
+        world_answers(bank, "highway", CONFIG, 2.9), np.array([0, 1])))
