@@ -51,14 +51,14 @@ def goal_table(result: dict, exploratory: dict[str, str]) -> list[str]:
     meet it."""
     variants = list(dict.fromkeys(row["variant"] for row in result["rows"]))
     lines = ["\ndesign goal: P(primary test concludes Ours) per observer, participants and "
-             "trials random", f"{'world':<10}{'arm':<18}{'seeds':<17}"
+             "trials random", f"{'world':<14}{'arm':<18}{'seeds':<17}"
              + "".join(f"{short(v):>10}" for v in variants) + f"{'old':>6}"]
     groups: dict[tuple, dict] = {}
     for row in result["rows"]:
         groups.setdefault((row["world"], row["arm"], row["seeds"]), {})[row["variant"]] = row
     for (world, arm, seeds), row in groups.items():
         old = row["coarse"]["participants_only_power"]
-        lines.append(f"{world:<10}{arm:<18}{seeds:<17}"
+        lines.append(f"{world:<14}{arm:<18}{seeds:<17}"
                      + "".join(f"{row[v]['p_ours']:>10.2f}" for v in variants) + f"{old:>6.2f}")
     lines += goal_notes(result)
     lines += [goal_verdict(world, result["goal_met_by_seeds"][world], exploratory)
@@ -108,5 +108,5 @@ def needed_lines(needed: list[dict]) -> list[str]:
     for world in worlds:
         cells = [f"{r['bank_trials']}: {r['participants_needed'] or '-'}" for r in needed
                  if r["world"] == world]
-        lines.append(f"  {world:<10}" + ", ".join(cells))
+        lines.append(f"  {world:<14}" + ", ".join(cells))
     return lines

@@ -364,7 +364,7 @@ def test_instrument_command_prints_the_table(tmp_path, monkeypatch):
               and w not in goal["exploratory"]]
     assert result.exit_code == (1 if missed else 0), result.output
     assert "obstacle: EXPLORATORY" in result.output  # paper_study.yaml marks it
-    assert f"{'highway':<10}{'all':<18}{'family':<17}" in result.output
+    assert f"{'highway':<14}{'all':<18}{'family':<17}" in result.output
     assert f"{'highway':<14}absolute" in result.output
     assert f"{'obstacle':<14}relative" in result.output
     assert "start kind" in result.output and f"{'obstacle':<14}all" in result.output
