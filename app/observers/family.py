@@ -2,9 +2,10 @@
 
 Variants (parameters and sources: study_configs/observers.yaml; none reads a model):
 - coarse: infers the robot's intent (inverse planning) and moves straight the way it goes;
-- coarse_scene: the same intent along the shortest way around the scene's obstacles (in
-  Highway the lane course already follows the road, and recorded worlds have no route yet,
-  so there it answers as coarse);
+- coarse_scene: the same intent read into the scene: Obstacle along the shortest way around
+  the obstacles; a recorded world turning no further than it must to stay on the road the
+  scene draws; in Highway the lane course already follows the road, so there it answers as
+  coarse;
 - coarse_momentum: the intent blended with the motion seen (representational momentum);
 - precise: the world's own policy from each start state (the bank's `policy_actions`);
 - constant_velocity: keeps going as the robot went (a named observer without an intent,

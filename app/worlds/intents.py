@@ -13,14 +13,17 @@ is the only place that knows it, behind one interface (`Intents`):
 - goals (Obstacle): one of the scene's goal discs. Progress of a step is the straight-line
   distance gained towards the goal over the step's length (about cos of the angle to the
   goal), normalised over all directions of the same length. The coarse move: straight at
-  the goal at the segment's speed.
+  the goal at the segment's speed, or (scene-aware) along the shortest way to it around the
+  scene's obstacles.
 - turns (recorded worlds, whose roads have no lanes or goals a scene could name): the robot
   turns one way, goes straight on, or turns the other way. A turn's nominal rate is how
   sharply the robots of the trial's example clips turn (their median heading change per
   second, at least MIN_TURN_RATE_DEG_S). Progress of a step is how close its heading change
   comes to the intent's nominal change per step, in units of that change, normalised over
   heading changes up to three nominal ones either way. The coarse move: on from the robot's
-  current heading, turning at the intent's rate, at the segment's speed.
+  current heading, turning at the intent's rate, at the segment's speed; the scene-aware one
+  turns no further than it must to keep each move's end on the road the scene draws (its
+  driven area).
 
 Everything is read from what the browser is shown: the scene as JSON (bank.json's
 `scene`), dt and robot tracks [T+1, 2].
@@ -89,7 +92,8 @@ def trial_intents(scene: dict, dt_s: float, segment_track: np.ndarray,
     if scene["lanes"]:
         return LaneIntents(scene, dt_s, segment_track, options)
     if scene.get("recorded"):
-        return TurnIntents(dt_s, segment_track, example_tracks)
+        road = scene_road(scene) if options.route == "scene" else None
+        return TurnIntents(dt_s, segment_track, example_tracks, road)
     return GoalIntents(scene, dt_s, segment_track, options.route == "scene")
 
 
@@ -279,12 +283,14 @@ def turn_rate(example_tracks: list[np.ndarray], dt_s: float) -> float:
 
 
 class TurnIntents:
-    """Turning one way, straight on, or the other way (recorded worlds)."""
+    """Turning one way, straight on, or the other way (recorded worlds); with a `road` (where
+    the scene draws road), the coarse move turns no further than it must to stay on it."""
 
     labels = TURN_SIGNS
 
-    def __init__(self, dt_s: float, track: np.ndarray, example_tracks: list[np.ndarray]) -> None:
-        self.dt_s, self.track = dt_s, track
+    def __init__(self, dt_s: float, track: np.ndarray, example_tracks: list[np.ndarray],
+                 road: "Road | None" = None) -> None:
+        self.dt_s, self.track, self.road = dt_s, track, road
         self.step_rad = turn_rate(example_tracks, dt_s) * dt_s  # a nominal turn per step
         self.feasible = np.ones(len(TURN_SIGNS), dtype=bool)
 
@@ -310,8 +316,47 @@ class TurnIntents:
         headings = dict.fromkeys(range(len(starts)), start)
         length = segment_speed(self.track, self.dt_s) * speed_factor * self.dt_s
 
+        road = self.road
+
         def move(i: int, position: np.ndarray) -> tuple[np.ndarray, float]:
             headings[i] += label * self.step_rad
+            if road is not None:
+                headings[i] = road.keep_on(position, headings[i], length, label)
             return np.array([np.cos(headings[i]), np.sin(headings[i])]), length
 
         return move
+
+
+ROAD_TURNS_DEG = np.arange(5, 91, 5)  # how far a scene-aware observer turns to stay on road
+
+
+class Road:
+    """The road a recorded scene draws: its driven-area cells (app/data/scene.py DrivenArea)."""
+
+    def __init__(self, driven: dict) -> None:
+        self.cell, self.x0, self.y0 = driven["cell_m"], driven["x0_m"], driven["y0_m"]
+        self.cells = {(row, col) for row, first, last in driven["runs"]
+                      for col in range(first, last + 1)}
+
+    def contains(self, point: np.ndarray) -> bool:
+        """Whether a point lies on a drawn road cell."""
+        cell = (int((point[1] - self.y0) // self.cell), int((point[0] - self.x0) // self.cell))
+        return cell in self.cells
+
+    def keep_on(self, position: np.ndarray, heading: float, length: float, sign: int) -> float:
+        """`heading`, or the one turned least (the intent's way first) whose move of `length`
+        ends on the road; `heading` when none does within 90 degrees."""
+        first = -1.0 if sign < 0 else 1.0
+        for turn in np.radians(np.concatenate([[0.0], ROAD_TURNS_DEG])):
+            for side in ((first, -first) if turn else (1.0,)):
+                angle = heading + side * turn
+                end = position + length * np.array([np.cos(angle), np.sin(angle)])
+                if self.contains(end):
+                    return float(angle)
+        return heading
+
+
+def scene_road(scene: dict) -> Road | None:
+    """The recorded scene's road, or None where it draws no driven area."""
+    driven = (scene.get("recorded") or {}).get("driven")
+    return Road(driven) if driven else None

@@ -242,3 +242,22 @@ def test_the_rule_never_reads_a_held_out_seed():
     assert np.array_equal(before, after)
     assert not np.array_equal(before, discriminability(
         world_answers(bank, "highway", CONFIG, 2.9), np.array([0, 1])))
+
+
+def test_the_scene_aware_observer_keeps_a_recorded_car_on_the_drawn_road():
+    from app.worlds.intents import Road, TurnIntents
+
+    road = Road({"cell_m": 1.0, "x0_m": 0.0, "y0_m": 0.0,
+                 "runs": [[row, 0, 60] for row in range(0, 3)]})  # a road 3 m wide along x
+    track = np.array([[x, 2.5] for x in np.arange(0.0, 6.0, 1.0)])
+    sharp = [np.array([[5 * np.cos(a), 5 * np.sin(a)] for a in np.linspace(0, 1.5, 7)])]
+    starts = np.array([[5.0, 2.5]])  # turning 0.3 rad a step leaves the road by step 2
+    for intents, stays in ((TurnIntents(0.5, track, sharp), False),
+                           (TurnIntents(0.5, track, sharp, road), True)):
+        move, position = intents.course(1, starts, 1.0), starts[0]
+        ends = []
+        for _ in range(3):
+            direction, length = move(0, position)
+            position = position + length * direction / np.linalg.norm(direction)
+            ends.append(road.contains(position))
+        assert all(ends) is stays
