@@ -226,10 +226,9 @@ def run_goal_report(bank_path, design: Design, observers, held_out: list[int],
     from pathlib import Path
 
     from analysis.atomic import write_json
-    from app.observers.simulated_study import load_bank
     from app.prediction_view import VIEW_FIELDS, click_direction_sd_deg
 
-    bank = load_bank(Path(bank_path))
+    bank = TrialBank.read(Path(bank_path))
     view = {world: click_direction_sd_deg(world_bank.model_dump(include=VIEW_FIELDS),
                                           observers.click_sd_px.value)
             for world, world_bank in bank.data.worlds.items()}

@@ -76,6 +76,7 @@ def test_a_world_without_its_config_file_is_named(tmp_path):
     data = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
     data["worlds"] = ["highway", "mars"]
     data["world_intros"]["mars"] = {"title": "Mars", "text": "Red."}
+    data.pop("exploratory_worlds")  # names obstacle, which this study no longer has
     (tmp_path / "red.yaml").write_text(yaml.safe_dump(data))
     with pytest.raises(ConfigError, match=r"red.yaml: worlds.1: no world 'mars': describe it "
                                           r"in .*worlds/mars.yaml \(a recorded world"):
@@ -312,7 +313,8 @@ def test_build_trials_is_reproducible(small_study, tmp_path):
 def test_models_disagree_keeps_the_most_controversial_trials_per_label(small_study):
     bank = TrialBank.load(small_study.layout, small_study.study_id)
     pool = bank.trials_of("obstacle", "main")
-    kept = main_trials(pool, {"random": 1, "models_disagree": 3})
+    kept = main_trials(pool, {"random": 1, "models_disagree": 3},
+                       [model_disagreement(t) for t in pool[1:]])
     assert [t.arm for t in kept] == ["random"] + ["models_disagree"] * 3
     assert kept[0].trial_id == pool[0].trial_id  # the random arm: the pool's first
     rest, disputed = pool[1:], kept[1:]
