@@ -42,8 +42,8 @@ test: $(STAMP)
 	$(BIN)/ruff check app analysis tests benchmarks
 	$(BIN)/pytest -q
 
-# Pilot end to end on a fresh database: serve STUDY, KIND bots (coarse|coarse_relative|precise|
-# random), analyze. The database is app/layout.py's pilot_database(KIND) under the default data
+# Pilot end to end on a fresh database: serve STUDY, KIND bots (coarse|coarse_scene|
+# coarse_momentum|coarse_relative|precise|random), analyze. The database is app/layout.py's pilot_database(KIND) under the default data
 # dir (STUDY other than paper_study: pilot_<STUDY>_<KIND>). Bots answer without thinking from
 # one address, so this loopback server has no rate limits.
 KIND ?= coarse

@@ -199,7 +199,9 @@ def fields(
 def pilot(
     url: Annotated[str, typer.Option(help="the study server")] = "http://127.0.0.1:8000",
     n: Annotated[int, typer.Option("--n", min=1, help="bots to run")] = 22,
-    preset: Annotated[str, typer.Option("--kind", help="coarse, precise or random")] = "coarse",
+    preset: Annotated[str, typer.Option("--kind", help="an observer preset: coarse, "
+                                        "coarse_scene, coarse_momentum, coarse_relative, "
+                                        "precise or random")] = "coarse",
     concurrency: Annotated[int, typer.Option(min=1, help="bots at once")] = 8,
     study: Annotated[str, typer.Option(help="study id")] = "paper_study",
     seed: Annotated[int, typer.Option(min=0)] = 0,
@@ -257,8 +259,9 @@ def warn(message: str) -> None:
 @cli.command()
 def power(
     study: Annotated[str, typer.Option(help="study id")] = "paper_study",
-    preset: Annotated[str, typer.Option("--kind", help="coarse, precise, random or "
-                                        "coarse_relative")] = "coarse",
+    preset: Annotated[str, typer.Option("--kind", help="an observer preset: coarse, "
+                                        "coarse_scene, coarse_momentum, coarse_relative, "
+                                        "precise or random")] = "coarse",
     n_max: Annotated[int, typer.Option("--n-max", min=3, help="largest n")] = 60,
     pool: Annotated[int, typer.Option(min=3, help="simulated participants")] = 400,
     reps: Annotated[int, typer.Option(min=10, help="resampled studies per n")] = 2000,
