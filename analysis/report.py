@@ -18,11 +18,13 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
 from analysis.atomic import write_json
 from analysis.bank import Bank, family_hashes, read_bank
+from analysis.ceiling import ceiling_table, explainable_share
 from analysis.contracts import MODELS, ExclusionRules
 from analysis.crossed import primary_table
 from analysis.csvsafe import write_csv
@@ -169,6 +171,21 @@ def robustness(kept: pd.DataFrame, bank: Bank | None, bank_path: Path,
     return summary, figures, tables["mixed_model"]
 
 
+def noise_ceiling(kept: pd.DataFrame, means: pd.DataFrame, out_dir: Path) -> dict:
+    """The human noise ceiling per world (ceiling.csv) with each model's share of it."""
+    table = ceiling_table(kept)
+    if table.empty:
+        return {}
+    write_csv(table, out_dir / "ceiling.csv", float_format="%.10g")
+    out = nested(table, ["world"])
+    for world, entry in out.items():
+        errors = means[means["world"] == world]
+        shares = {m: explainable_share(float(errors[f"err_{m}"].mean()), entry["lower"],
+                                       entry["lower_ci95_high"]) for m in ("ours", "vae", "cv")}
+        entry["share"] = {m: None if np.isnan(v) else v for m, v in shares.items()}
+    return out
+
+
 def preregistered_primary(family_rows: pd.DataFrame | None, inputs: StudyInputs,
                           out_dir: Path) -> dict:
     """The pre-registered primary test (family, participants and trials random, min F') per
@@ -224,6 +241,7 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
     bank = read_bank(inputs.bank)
     extra, extra_figures, mixed_model = robustness(kept, bank, inputs.bank, out_dir)
     extra["primary"] = preregistered_primary(extra.pop("family_rows"), inputs, out_dir)
+    extra["noise_ceiling"] = noise_ceiling(kept, means, out_dir)
     steps.update(1)
     predictors, predictor_figures = every_predictor(kept, mixed_model, out_dir)
     figures = plot_errors(means, results, out_dir / "alignment_error") + extra_figures
@@ -339,10 +357,19 @@ def headline(summary: dict) -> list[str]:
         lines.append(_trials_line(summary["mixed_model"][world]["pooled"]["primary"],
                                   summary["leave_one_trial_out"][world]["primary"]))
         lines.append(_predictors_line(summary["predictors"], world))
+        if world in summary.get("noise_ceiling", {}):
+            lines.append(_ceiling_line(summary["noise_ceiling"][world]))
     seeds = summary["seeds"]
     if seeds["status"] != "ok" or seeds["other_banks"] or seeds["rows_not_in_bank"]:
         lines.append(f"per seed: {seeds['note']}")
     return lines
+
+
+def _ceiling_line(ceiling: dict) -> str:
+    shares = ", ".join(f"{m} {fmt(v, 2)}" for m, v in ceiling["share"].items())
+    return (f"  noise ceiling (people predicting each other): lower {fmt(ceiling['lower'])}, "
+            f"upper {fmt(ceiling['upper'])}, split-half r {fmt(ceiling['split_half_r'], 2)}; "
+            f"share of the explainable alignment: {shares}")
 
 
 def _primary_line(world: str, res: dict) -> str:

@@ -121,6 +121,11 @@ def test_report_from_csv(tmp_path, inputs, capsys):
                                                           abs=0.02)
     assert summary["primary"]["exploratory_worlds"] == {}
     assert (out / "primary.csv").is_file() and "Pre-registered primary test" in html
+    ceiling = summary["noise_ceiling"]  # coarse bots agree far more than chance
+    assert set(ceiling) == {"highway", "obstacle"} and "Human noise ceiling" in html
+    for entry in ceiling.values():
+        assert 0 <= entry["upper"] <= entry["lower"] < 1
+        assert set(entry["share"]) == {"ours", "vae", "cv"}
     influence = pd.read_csv(out / "leave_one_trial_out.csv")
     trials = kept.groupby("world")["trial_id"].nunique().sum()
     assert len(influence) == 2 * trials  # each main trial, for primary and family answers
@@ -130,6 +135,7 @@ def test_report_from_csv(tmp_path, inputs, capsys):
     printed = capsys.readouterr().out
     assert "family (3 Ours x 3 VAE seeds)" in printed and "trials as random" in printed
     assert "highway (primary): family Ours - VAE" in printed
+    assert "noise ceiling (people predicting each other)" in printed
     assert "1 participant(s)) ran another bank" in printed
 
 
