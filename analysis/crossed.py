@@ -13,6 +13,7 @@ of the trials, and needs no iterative fit: a simulated study can run it thousand
 from dataclasses import asdict, dataclass
 
 import numpy as np
+import pandas as pd
 from scipy import stats
 
 
@@ -104,8 +105,6 @@ def primary_table(family_rows, alpha: float, exploratory: dict[str, str]):
     """The pre-registered primary test per world on the family's rows (err_ours, err_vae as the
     mean over seeds per kept row): per (participant, trial) mean difference, min F', verdict
     (ours, vae, neither at alpha; both factors must agree) and whether the world is exploratory."""
-    import pandas as pd
-
     cells = (family_rows.assign(diff=family_rows["err_ours"] - family_rows["err_vae"])
              .groupby(["world", "participant_id", "trial_id"], sort=True)["diff"].mean()
              .reset_index())

@@ -139,15 +139,15 @@ def nested(table: pd.DataFrame, keys: list[str]) -> dict:
     return out
 
 
-def robustness(kept: pd.DataFrame, bank: Bank | None, bank_path: Path,
+def robustness(kept: pd.DataFrame, bank: Bank | None, inputs: StudyInputs,
                out_dir: Path) -> tuple[dict, list[Path], pd.DataFrame]:
-    """Per seed pair and family, per arm, the crossed mixed model and leave-one-trial-out:
-    their summary.json entries, CSVs and figures, and the mixed models' table (every_predictor
-    reuses its fits). 'primary' is the export's (primary seed's) answers on every kept row;
-    'family' the mean over seeds on the rows that ran the bank."""
-    seeds = seed_results(kept, bank, str(bank_path))
+    """The pre-registered primary test, per seed pair and family, per arm, the crossed mixed
+    model and leave-one-trial-out: their summary.json entries, CSVs and figures, and the mixed
+    models' table (every_predictor reuses its fits). 'primary' answers are the export's (the
+    primary seed's) on every kept row; 'family' the mean over seeds on the rows that ran the
+    bank."""
+    seeds = seed_results(kept, bank, str(inputs.bank))
     answer_sets = {"primary": kept} | ({"family": seeds.family_rows} if seeds.ok else {})
-    family_rows = seeds.family_rows if seeds.ok else None
     tables = {"per_seed": seeds.per_seed, "family": seeds.family,
               "by_arm": by_arm_table(answer_sets), "mixed_model": mixed_model_table(answer_sets),
               "leave_one_trial_out": leave_one_trial_out(answer_sets)}
@@ -166,7 +166,9 @@ def robustness(kept: pd.DataFrame, bank: Bank | None, bank_path: Path,
         "by_arm": nested(tables["by_arm"], ["world", "arm", "answers"]),
         "mixed_model": nested(tables["mixed_model"], ["world", "arm", "answers"]),
         "leave_one_trial_out": influence_summary(tables["leave_one_trial_out"]),
-        "family_rows": family_rows,
+        "primary": preregistered_primary(seeds.family_rows if seeds.ok else None,
+                                         inputs.config.get("exploratory_worlds") or {},
+                                         out_dir),
     }
     return summary, figures, tables["mixed_model"]
 
@@ -186,13 +188,12 @@ def noise_ceiling(kept: pd.DataFrame, means: pd.DataFrame, out_dir: Path) -> dic
     return out
 
 
-def preregistered_primary(family_rows: pd.DataFrame | None, inputs: StudyInputs,
+def preregistered_primary(family_rows: pd.DataFrame | None, exploratory: dict[str, str],
                           out_dir: Path) -> dict:
     """The pre-registered primary test (family, participants and trials random, min F') per
     world, written to primary.csv; {} without the family's rows."""
     if family_rows is None:
         return {}
-    exploratory = inputs.config.get("exploratory_worlds") or {}
     table = primary_table(family_rows, ALPHA, exploratory)
     write_csv(table, out_dir / "primary.csv", float_format="%.10g")
     return nested(table, ["world"]) | {"exploratory_worlds": exploratory}
@@ -239,8 +240,7 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
     ade = displacement_errors(kept)
     steps.update(1)
     bank = read_bank(inputs.bank)
-    extra, extra_figures, mixed_model = robustness(kept, bank, inputs.bank, out_dir)
-    extra["primary"] = preregistered_primary(extra.pop("family_rows"), inputs, out_dir)
+    extra, extra_figures, mixed_model = robustness(kept, bank, inputs, out_dir)
     extra["noise_ceiling"] = noise_ceiling(kept, means, out_dir)
     steps.update(1)
     predictors, predictor_figures = every_predictor(kept, mixed_model, out_dir)

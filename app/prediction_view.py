@@ -74,6 +74,11 @@ def click_resolution_deg(world_bank: Mapping) -> float:
     return prediction_view(world_bank).resolution_deg
 
 
+def view_click_sd_deg(world_bank, click_sd_px: float) -> float:
+    """`click_direction_sd_deg` of a world's bank model (a WorldBank, loaded or being built)."""
+    return click_direction_sd_deg(world_bank.model_dump(include=VIEW_FIELDS), click_sd_px)
+
+
 def click_direction_sd_deg(world_bank: Mapping, click_sd_px: float) -> float:
     """Direction SD (deg) of a move at the median true step clicked with `click_sd_px` of
     spread on screen."""

@@ -28,7 +28,7 @@ from tqdm import tqdm
 from analysis.alignment import ZERO_SPEED_MPS
 from app.observers.config import ObserversConfig
 from app.observers.family import GOAL_VARIANTS, angles, click_sd_rad, observer_options
-from app.prediction_view import VIEW_FIELDS, click_direction_sd_deg
+from app.prediction_view import view_click_sd_deg
 from app.study.clicks import check_passed
 from app.study.config import AttentionChecks
 from app.study.trial_payload import world_trial_payload
@@ -138,8 +138,7 @@ def choose_checks(candidates: WorldBank, served: WorldBank, steps_to_predict: in
                   rule: AttentionChecks, observers: ObserversConfig) -> tuple[list[int], dict]:
     """The indices of `candidates.trials` to keep as checks, and meta.json's account of them;
     clicks carry the click noise of the view `served` (the world's main trials) is shown in."""
-    view_sd_deg = click_direction_sd_deg(served.model_dump(include=VIEW_FIELDS),
-                                         observers.click_sd_px.value)
+    view_sd_deg = view_click_sd_deg(served, observers.click_sd_px.value)
     scores = [score_candidate(candidates, steps_to_predict, t, rule, observers, view_sd_deg)
               for t in tqdm(candidates.trials, desc=f"attention checks {candidates.world}",
                             unit="candidate")]

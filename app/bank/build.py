@@ -188,12 +188,11 @@ def arm_scores(config: StudyConfig, inputs: WorldInputs, candidates: list[TrialR
         return [model_disagreement(t) for t in candidates]
     from app.observers.config import default_observers
     from app.observers.family import answers_of, discriminability
-    from app.prediction_view import VIEW_FIELDS, click_direction_sd_deg
+    from app.prediction_view import view_click_sd_deg
 
     observers = default_observers()  # the configs dir's, frozen into the bundle beside it
     world = provisional_world(inputs, candidates, max_step, scene, config)
-    view_sd = click_direction_sd_deg(world.model_dump(include=VIEW_FIELDS),
-                                     observers.click_sd_px.value)
+    view_sd = view_click_sd_deg(world, observers.click_sd_px.value)
     answers = answers_of(world, world.trials, config.steps_to_predict, observers, view_sd)
     chosen_on = np.array([inputs.seeds.index(s) for s in rule.selection_seeds])
     return [float(v) for v in discriminability(answers, chosen_on)]

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 from tqdm import tqdm
 
 from analysis.crossed import crossed_verdicts, group_t, grouped_means, min_f_prime
@@ -48,17 +49,13 @@ class Design:
     trials_each: int
 
 
-def study_cells(rng: np.random.Generator, reps: int, design: Design, pool: np.ndarray,
-                resample: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per simulated study: each cell's bank trial, participant and study-trial ids [R, C].
-
-    With `resample` the study's T trials are drawn with replacement from `pool` (trials
-    random); without, the study shows the pool itself (T = its size: trials fixed)."""
-    n, m = design.participants, design.trials_each
-    t = design.bank_trials if resample else len(pool)
-    m = min(m, t)
-    draws = (pool[rng.integers(len(pool), size=(reps, t))] if resample
-             else np.tile(pool, (reps, 1)))
+def study_cells(rng: np.random.Generator, reps: int, design: Design, pool: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per simulated study: each cell's bank trial, participant and study-trial ids [R, C]; the
+    study's T trials are drawn with replacement from `pool` (trials random)."""
+    n, t = design.participants, design.bank_trials
+    m = min(design.trials_each, t)
+    draws = pool[rng.integers(len(pool), size=(reps, t))]
     order = rng.permuted(np.tile(np.arange(t), (reps, 1)), axis=1)
     seen = (np.arange(n)[:, None] * m + np.arange(m)[None]) % t  # balanced exposure
     slots = order[:, seen.ravel()]
@@ -81,18 +78,19 @@ def cell_differences(answers: WorldAnswers, variant: str, seeds: np.ndarray,
 
 
 def simulate_verdicts(answers: WorldAnswers, variant: str, seeds: np.ndarray, design: Design,
-                      pool: np.ndarray, reps: int, alpha: float, rng: np.random.Generator,
-                      resample: bool = True) -> dict[str, np.ndarray]:
-    """Over `reps` simulated studies: the primary test's verdict (-1 Ours, +1 VAE, 0) and,
-    for comparison, the old participants-only one-sided paired t (trials fixed)."""
+                      pool: np.ndarray, reps: int, alpha: float, rng: np.random.Generator
+                      ) -> dict[str, np.ndarray]:
+    """Over `reps` simulated studies: the primary test's verdict (-1 Ours, +1 VAE, 0) and, for
+    comparison, whether the earlier analysis's test (participants only: a one-sided paired t
+    over the participants' means, blind to the clips' own effects) finds Ours < VAE in the same
+    study."""
     cells = design.participants * min(design.trials_each, design.bank_trials)
     per_rep = cells * 2 * len(seeds) * answers.delta[variant].shape[-2] * \
         answers.delta[variant].shape[-1]
     chunk = max(1, CHUNK_FLOATS // per_rep)
     crossed, by_person = [], []
     for start in range(0, reps, chunk):
-        trials, people, slots = study_cells(rng, min(chunk, reps - start), design, pool,
-                                            resample)
+        trials, people, slots = study_cells(rng, min(chunk, reps - start), design, pool)
         diff = cell_differences(answers, variant, seeds, trials, rng)
         crossed.append(crossed_verdicts(min_f_prime(diff, people, slots), alpha))
         t, df = group_t(*grouped_means(diff, people, design.participants))
@@ -102,8 +100,6 @@ def simulate_verdicts(answers: WorldAnswers, variant: str, seeds: np.ndarray, de
 
 def paired_less(t: np.ndarray, df: np.ndarray) -> np.ndarray:
     """One-sided p (mean < 0) of one-sample t statistics; 1 where t is undefined."""
-    from scipy import stats
-
     ok = np.isfinite(t) & (df > 0)
     return np.where(ok, stats.t.cdf(np.where(ok, t, 0.0), np.where(ok, df, 1.0)), 1.0)
 
@@ -226,11 +222,10 @@ def run_goal_report(bank_path, design: Design, observers, held_out: list[int],
     from pathlib import Path
 
     from analysis.atomic import write_json
-    from app.prediction_view import VIEW_FIELDS, click_direction_sd_deg
+    from app.prediction_view import view_click_sd_deg
 
     bank = TrialBank.read(Path(bank_path))
-    view = {world: click_direction_sd_deg(world_bank.model_dump(include=VIEW_FIELDS),
-                                          observers.click_sd_px.value)
+    view = {world: view_click_sd_deg(world_bank, observers.click_sd_px.value)
             for world, world_bank in bank.data.worlds.items()}
     result = run_design_goal(bank, design, observers, view, held_out, alpha, reps,
                              max(20, reps // 2), seed, search)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.alignment import has_direction
 from app.observers import inverse_planning as ip
 from app.observers.config import NoiseConfig, ObserversConfig
 from app.study.clicks import clicks_to_actions, robot_starts
@@ -31,7 +32,6 @@ from app.study.trials import TrialBank, TrialRecord, WorldBank
 COARSE_VARIANTS = ("coarse", "coarse_scene", "coarse_momentum")
 GOAL_VARIANTS = (*COARSE_VARIANTS, "precise")
 VARIANTS = (*GOAL_VARIANTS, "constant_velocity")
-NO_DIRECTION = 1e-6  # a model action shorter than this [m/s] scores 1, as in the analysis
 
 
 @dataclass(frozen=True)
@@ -103,7 +103,7 @@ def model_angles(trial: TrialRecord) -> tuple[np.ndarray, np.ndarray]:
     """Angles and has-a-direction mask of every seed's answers [2, S, K, n]."""
     actions = np.array([[a.actions for a in trial.predictions[m]] for m in ("ours", "vae")],
                        dtype=np.float64)
-    return angles(actions), np.hypot(actions[..., 0], actions[..., 1]) >= NO_DIRECTION
+    return angles(actions), has_direction(actions)  # without one an answer scores 1
 
 
 def padded(options: list[list[tuple[float, np.ndarray]]]) -> tuple[np.ndarray, np.ndarray]:

@@ -256,12 +256,11 @@ def run_instrument_grid(bank_path, trials_per_world: int, out_dir, observers: Ob
     from analysis.atomic import write_json
     from analysis.plots import plot_grid_pass_rates
     from app.observers.simulated_study import load_bank
-    from app.prediction_view import VIEW_FIELDS, click_direction_sd_deg
+    from app.prediction_view import view_click_sd_deg
 
     bank = load_bank(bank_path)
     if view_deg is None:  # the noise the prediction view allows, from its pixel scale
-        view_deg = {world: click_direction_sd_deg(world_bank.model_dump(include=VIEW_FIELDS),
-                                                  observers.click_sd_px.value)
+        view_deg = {world: view_click_sd_deg(world_bank, observers.click_sd_px.value)
                     for world, world_bank in bank.data.worlds.items()}
     grid = run_grid(bank, trials_per_world, observers, n, seed, alpha, replications, view_deg)
     summary = summarise_grid(grid, alpha)

@@ -81,8 +81,9 @@ def goal_notes(result: dict) -> list[str]:
             f"family err_ours - err_vae, min F', two-sided alpha {result['alpha']}",
             f"goal: straight, scene, momentum >= {result['goal_power']}, precise <= "
             f"{result['alpha']} (arm all; the family, and the held-out family where the design "
-            "read only some seeds); cv is reported, never tested; old = the "
-            "participants-only power of the straight observer (trials fixed, one-sided t)"]
+            "read only some seeds); cv is reported, never tested; old = how often the earlier "
+            "participants-only test (one-sided paired t) says Ours for the straight observer "
+            "in the same simulated studies"]
 
 
 def goal_verdict(world: str, met: dict[str, bool], exploratory: dict[str, str]) -> str:

@@ -228,7 +228,7 @@ def trials_random_power(bank: TrialBank, preset: str, curve: pd.DataFrame,
     outside the observer family."""
     from app.observers.design_goal import Design, simulate_verdicts
     from app.observers.family import VARIANTS, world_answers
-    from app.prediction_view import VIEW_FIELDS, click_direction_sd_deg
+    from app.prediction_view import view_click_sd_deg
 
     if preset not in VARIANTS:
         return [float("nan")] * len(curve)
@@ -236,8 +236,7 @@ def trials_random_power(bank: TrialBank, preset: str, curve: pd.DataFrame,
     rng, out, answers = np.random.default_rng(seed), [], {}
     for world, n in curve[["world", "n"]].itertuples(index=False, name=None):
         if world not in answers:
-            view = click_direction_sd_deg(bank.world(world).model_dump(include=VIEW_FIELDS),
-                                          observers.click_sd_px.value)
+            view = view_click_sd_deg(bank.world(world), observers.click_sd_px.value)
             answers[world] = world_answers(bank, world, observers, view, (preset,))
         found = answers[world]
         pool = np.arange(len(found.trial_ids))
