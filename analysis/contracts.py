@@ -84,11 +84,15 @@ SCHEMAS = {"survey": SURVEY, "events": EVENTS, "participants": PARTICIPANTS}
 WHAT = ("predictions", *SCHEMAS)
 
 MODELS = ("ours", "vae", "cv", "policy")
+# the coarse observers the bank stores beside the models (app/observers/predictor.py), exported
+# as plug-in columns; the family's precise observer is `policy`, its constant velocity `cv`
+COARSE_OBSERVERS = ("coarse", "coarse_scene", "coarse_momentum")
 # Okabe-Ito, safe for colour-blind readers; `human` is the participants' answers
 MODEL_COLORS = {"ours": "#E69F00", "vae": "#0072B2", "cv": "#009E73", "policy": "#CC79A7",
                 "human": "#000000"}
-MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy",
-                "human": "Participants"}
+MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy (precise)",
+                "human": "Participants", "coarse": "Coarse observer",
+                "coarse_scene": "Coarse, scene", "coarse_momentum": "Coarse, momentum"}
 # plug-in predictors' colours: the rest of Okabe-Ito, then Paul Tol's muted set
 PLUGIN_COLORS = ("#D55E00", "#56B4E9", "#882255", "#44AA99", "#117733", "#999933", "#AA4499",
                  "#332288")

@@ -18,6 +18,7 @@ import pandas as pd
 from analysis.contracts import (
     ADDED_COLUMNS,
     BOOL_COLUMNS,
+    COARSE_OBSERVERS,
     EXPORT_COLUMNS,
     INT_COLUMNS,
     PLUGIN_FIELDS,
@@ -81,11 +82,12 @@ def normalise(frame: pd.DataFrame) -> pd.DataFrame:
 
 def expand_plugins(frame: pd.DataFrame, names: list[str] | None = None) -> pd.DataFrame:
     """The server's `plugins` JSON column as each plug-in predictor's export columns (`names`,
-    or every plug-in the rows hold); a row without a plug-in's answer gets empty cells."""
+    or every one the rows hold); a row without a plug-in's answer gets empty cells."""
     cells = frame.pop("plugins") if "plugins" in frame.columns else [{}] * len(frame)
     cells = [json.loads(c) if isinstance(c, str) else (c or {}) for c in cells]
-    if names is None:
-        names = list(dict.fromkeys(name for cell in cells for name in cell))
+    if names is None:  # the coarse observers first, as the server's export orders them
+        found = list(dict.fromkeys(name for cell in cells for name in cell))
+        names = sorted(found, key=lambda n: (COARSE_OBSERVERS + (n,)).index(n))
     for name in names:
         for field, column in zip(PLUGIN_FIELDS, plugin_columns(name), strict=True):
             frame[column] = [cell.get(name, {}).get(field) for cell in cells]

@@ -31,10 +31,12 @@ from app.data.trajectory import HUMAN, ROBOT, Covered, TrajectorySet
 from app.fileio import sha256_file
 from app.layout import Layout
 from app.observers.config import default_observers
+from app.observers.predictor import observer_predictors
 from app.predictors.builtin import CheckpointPredictor, ConstantVelocity
 from app.predictors.protocol import Predictor, ask
 from app.predictors.registry import load_predictor
 from app.study.config import StudyConfig
+from app.study.trial_payload import predictor_inputs
 from app.study.trials import (
     HEADING_DECIMALS,
     NO_SEED,
@@ -160,6 +162,8 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
                      max_step_m=round(max_step, 4),
                      min_step_m=round(config.prediction_input.min_step_fraction * max_step, 4),
                      trials=trials)
+    bank = with_code_answers(bank, config.steps_to_predict,
+                             [*observer_predictors(default_observers()), *inputs.plugins])
     meta = world_meta(inputs, trials, attention)
     meta["segments_skipped_no_data_starts"] = used - len(practice) - len(pool)
     meta["main_trial_selection"] = selection_meta(selection, arms, pool, main, scores)
@@ -365,7 +369,6 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
     predictions = {kind: [stored_answer(CheckpointPredictor(model), seed, *asked)
                           for seed, model in zip(inputs.seeds, family, strict=True)]
                    for kind, family in inputs.models.items()}
-    predictions |= {p.name: [stored_answer(p, NO_SEED, *asked)] for p in inputs.plugins}
     labels = {k: int(v[src]) for k, v in trajs.labels.items()}
     human_v = (segment[-1, HUMAN] - segment[-2, HUMAN]) / dt
     policy = [expected_policy(inputs.world, s, human_v, labels, config.steps_to_predict, rng)
@@ -391,11 +394,24 @@ def expected_policy(world: World, state, human_v: np.ndarray, labels: dict, n_st
     return np.mean(runs, axis=0)
 
 
+def with_code_answers(world: WorldBank, n_steps: int,
+                      predictors: list[Predictor]) -> WorldBank:
+    """The world's bank with every trial answered by each code predictor (the coarse observers,
+    then the config's plug-ins), asked with the trial as its participants are shown it."""
+    trials = []
+    for trial in world.trials:
+        asked = predictor_inputs(world, n_steps, trial)
+        answers = {p.name: [stored_answer(p, NO_SEED, *asked)] for p in predictors}
+        trials.append(trial.model_copy(update={"predictions": trial.predictions | answers}))
+    return world.model_copy(update={"trials": trials})
+
+
 def stored_answer(predictor: Predictor, seed: int, model_input: list, joint: np.ndarray,
-                  headings: list[float], dt_s: float, n_steps: int) -> ModelAnswer:
+                  headings: list[float], dt_s: float, n_steps: int,
+                  shown: dict | None = None) -> ModelAnswer:
     """One predictor's answer to a trial: its latent, code and actions from every start state
     (rounded as stored; app/bank/model_answers.py recomputes them at start-up)."""
-    answer = ask(predictor, model_input, joint, headings, dt_s, n_steps)
+    answer = ask(predictor, model_input, joint, headings, dt_s, n_steps, shown)
     return ModelAnswer(seed=seed, z=answer.z, code=answer.code,
                        actions=np.round(answer.actions, 5).tolist(),
                        content_hash=predictor.content_hash)

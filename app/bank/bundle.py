@@ -15,7 +15,8 @@
     <bundle>/configs/...                           the study, training, selection, observer and
                                                    world configs that made it
 
-A plug-in predictor (app/predictors/) is code, not a file of the bundle: the manifest's
+The coarse observers (app/observers/predictor.py) answer under the bundle's own observers
+config. A plug-in predictor (app/predictors/) is code, not a file of the bundle: the manifest's
 `predictors` records each one's name, content hash and the distribution and version that
 provided it, and the server recomputes its answers from the installed plug-in at start-up.
 
@@ -30,6 +31,8 @@ from pathlib import Path
 
 from app.configio import load_yaml_model
 from app.layout import Layout
+from app.observers.config import OBSERVERS_FILE, load_observers
+from app.observers.predictor import OBSERVER_PREDICTORS, ObserverPredictor
 from app.predictors.builtin import CheckpointPredictor
 from app.predictors.registry import load_predictor
 from app.study.config import StudyConfig
@@ -40,7 +43,7 @@ MANIFEST = "manifest.json"
 BANK = "bank.json.gz"
 BANK_META = "bank_meta.json"
 MODELS = ("ours", "vae")
-SHARED_CONFIGS = ("training.yaml", "model_selection.yaml", "observers.yaml")
+SHARED_CONFIGS = ("training.yaml", "model_selection.yaml", OBSERVERS_FILE)
 BUNDLES = "bundles"  # the folder of shipped bundles in the configs dir
 
 
@@ -101,9 +104,12 @@ class Bundle:
 
     def predictor(self, world: str, name: str, seed: int):
         """The predictor whose answers the bank stores as `name`: a checkpoint of the bundle
-        (Ours, the VAE), or an installed plug-in (UnknownPredictor when it is not installed)."""
+        (Ours, the VAE), a coarse observer under the bundle's observers config, or an installed
+        plug-in (UnknownPredictor when it is not installed)."""
         if name in MODELS:
             return CheckpointPredictor(self.model(world, name, seed))
+        if name in OBSERVER_PREDICTORS:
+            return ObserverPredictor(name, load_observers(self.root / "configs" / OBSERVERS_FILE))
         if name not in self._plugins:
             self._plugins[name] = load_predictor(name)
         return self._plugins[name]

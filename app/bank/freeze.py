@@ -32,6 +32,7 @@ from app.bank.training_report import checkpoint_stopping, unconverged
 from app.bank.verify import open_bundle
 from app.fileio import sha256_bytes, sha256_file, write_gzip
 from app.layout import Layout
+from app.observers.predictor import OBSERVER_PREDICTORS
 from app.predictors.registry import distribution
 from app.study.config import StudyConfig
 from app.study.trials import TrialBank
@@ -124,7 +125,8 @@ def plugin_entries(bank: TrialBank) -> dict:
     installed distribution and version that provide it."""
     first = next(iter(bank.by_id.values()))
     return {name: {"content_hash": family[0].content_hash, **distribution(name)}
-            for name, family in sorted(first.predictions.items()) if name not in MODELS}
+            for name, family in sorted(first.predictions.items())
+            if name not in MODELS and name not in OBSERVER_PREDICTORS}
 
 
 def build_environment(wall_time_s: float | None, phases: dict[str, float] | None = None) -> dict:

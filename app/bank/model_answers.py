@@ -19,6 +19,7 @@ import numpy as np
 from analysis.alignment import ZERO_SPEED_MPS
 from app.predictors.protocol import ask
 from app.predictors.registry import UnknownPredictor, distribution
+from app.study.trial_payload import predictor_inputs
 from app.study.trials import ModelAnswer, TrialRecord
 
 ACTION_TOLERANCE_MPS = 1e-4
@@ -85,12 +86,8 @@ def largest_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def trial_inputs(bank, trial: TrialRecord) -> tuple:
-    """What every predictor is asked for one trial: history, start states, robot headings,
-    dt and steps (as the bank built it)."""
-    starts = np.array([[s.robot, s.human] for s in trial.start_states], dtype=np.float64)
-    headings = [s.robot_heading for s in trial.start_states]
-    return (trial.model_input, starts, headings, bank.world(trial.world).dt_s,
-            bank.data.steps_to_predict)
+    """What every predictor is asked for one trial of a loaded bank (predictor_inputs)."""
+    return predictor_inputs(bank.world(trial.world), bank.data.steps_to_predict, trial)
 
 
 def agreement_of(predictor_of, key: tuple) -> tuple:
@@ -150,11 +147,11 @@ def mismatch_message(check: Agreement) -> str:
 def agreement_lines(checks: list[Agreement], plugins: dict[str, dict]) -> list[str]:
     """What `tomstudy bundle verify` prints: one row per predictor (a plug-in's seed is '-'),
     then, per plug-in, the distribution the bundle was frozen with and the installed one."""
-    lines = [f"{'world':<14}{'model':<7}{'seed':>5}{'answers':>9}{'max m':>11}{'max deg':>10}"
+    lines = [f"{'world':<14}{'model':<16}{'seed':>5}{'answers':>9}{'max m':>11}{'max deg':>10}"
              f"{'codes':>7}  verdict"]
     for c in checks:
         seed = str(c.seed) if c.seed >= 0 else "-"
-        lines.append(f"{c.world:<14}{c.model:<7}{seed:>5}{c.answers:>9}{c.max_metres:>11.2e}"
+        lines.append(f"{c.world:<14}{c.model:<16}{seed:>5}{c.answers:>9}{c.max_metres:>11.2e}"
                      f"{c.max_degrees:>10.2e}{len(c.codes_changed):>7}  "
                      f"{'ok' if c.ok else 'MISMATCH'}")
     lines.append(f"max m = largest |stored - recomputed| action x dt (one step's position); "

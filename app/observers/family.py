@@ -23,13 +23,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.alignment import has_direction
+from analysis.contracts import COARSE_OBSERVERS
 from app.observers import inverse_planning as ip
 from app.observers.config import NoiseConfig, ObserversConfig
 from app.study.clicks import clicks_to_actions, robot_starts
 from app.study.trial_payload import world_trial_payload
 from app.study.trials import TrialBank, TrialRecord, WorldBank
 
-COARSE_VARIANTS = ("coarse", "coarse_scene", "coarse_momentum")
+COARSE_VARIANTS = COARSE_OBSERVERS
 GOAL_VARIANTS = (*COARSE_VARIANTS, "precise")
 VARIANTS = (*GOAL_VARIANTS, "constant_velocity")
 
@@ -60,13 +61,19 @@ def observer_options(variant: str, payload: dict, trial: TrialRecord,
         return [(1.0, np.asarray(trial.policy_actions, dtype=np.float64))]
     if variant == "constant_velocity":
         return [(1.0, np.asarray(trial.cv_actions, dtype=np.float64))]
+    return coarse_options(variant, payload, robot_starts(trial), observers)
+
+
+def coarse_options(variant: str, payload: dict, starts: np.ndarray,
+                   observers: ObserversConfig) -> list[tuple[float, np.ndarray]]:
+    """(weight, actions [K, n, 2] m/s) of each intent a coarse variant may act on, from the
+    robot's start positions `starts` [K, 2] (m)."""
     relative = ip.reads_relative("coarse", observers)
     intents, reading = ip.trial_reading(payload, observers, relative, ip.preset_route(variant))
     weights = reading.posterior
     if observers.inference.intent_choice.value == "map":
         weights = np.eye(len(weights))[int(np.argmax(weights))]
     momentum = observers.momentum_weight.value if variant == "coarse_momentum" else None
-    starts = robot_starts(trial)
     return [(float(w), clicks_to_actions(starts, intent_walk(payload, intents, int(label),
                                                              momentum), payload["dt_s"]))
             for w, label in zip(weights, reading.intents, strict=True) if w > 0]

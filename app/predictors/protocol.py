@@ -7,6 +7,11 @@ Shape legend: T history steps, K start states, n steps to predict.
 - headings [K] (rad): each start state's robot heading (the world's drawing heading);
 - the answer's actions [K, n, 2] (m/s): the robot's velocity over each of the n steps.
 
+A predictor that also reads the scene (`reads_scene = True`, as the coarse observers of
+app/observers/predictor.py) is asked with `shown=`: what the participant is shown for the
+trial (app/study/trial_payload.py: the scene, dt, the example clips, the segment and the start
+states with their headings, the click limits). A lab's plug-in may declare it too.
+
 `content_hash` names what makes the answers reproducible (a checkpoint's content hash; for a
 code predictor a hash of its parameters and version, `code_hash`): the bank stores it beside
 every answer, and a server recomputes the answers at start-up and refuses a bank whose stored
@@ -65,10 +70,18 @@ def checked_answer(predictor: Predictor, answer: PredictorAnswer, k: int,
     return PredictorAnswer(actions, int(answer.code), [float(v) for v in answer.z])
 
 
+def reads_scene(predictor: Predictor) -> bool:
+    """True if the predictor answers from what the participant is shown as well."""
+    return bool(getattr(predictor, "reads_scene", False))
+
+
 def ask(predictor: Predictor, history, starts, headings, dt_s: float,
-        n_steps: int) -> PredictorAnswer:
-    """The predictor's checked answer to one trial (inputs as float64 arrays)."""
+        n_steps: int, shown: dict | None = None) -> PredictorAnswer:
+    """The predictor's checked answer to one trial (inputs as float64 arrays); `shown` (the
+    trial as the participant sees it) reaches only a predictor that reads the scene."""
     starts = np.asarray(starts, dtype=np.float64)
+    scene = {"shown": shown} if reads_scene(predictor) else {}
     answer = predictor.answer(np.asarray(history, dtype=np.float64), starts,
-                              np.asarray(headings, dtype=np.float64), float(dt_s), n_steps)
+                              np.asarray(headings, dtype=np.float64), float(dt_s), n_steps,
+                              **scene)
     return checked_answer(predictor, answer, len(starts), n_steps)

@@ -4,18 +4,19 @@ A distribution registers `name = "package.module:factory"` in that group (in its
 pyproject.toml's `[project.entry-points."tomstudy.predictors"]`); once it is installed, a study
 config's `predictors: [name]` asks for it. The factory takes no arguments and returns a
 Predictor (app/predictors/protocol.py) whose `name` is the entry point's: a config holds only
-names, never class paths or code. Ours, the VAE, constant velocity and the policy are the
-study's own columns and cannot be taken by a plug-in.
+names, never class paths or code. Ours, the VAE, constant velocity, the policy and the coarse
+observers are the study's own columns and cannot be taken by a plug-in.
 """
 
 import re
 from importlib.metadata import EntryPoint, entry_points
 
-from analysis.contracts import MODELS
+from analysis.contracts import COARSE_OBSERVERS, MODELS
 from app.predictors.protocol import Predictor
 
 GROUP = "tomstudy.predictors"
-RESERVED = (*MODELS, "human")  # the export's own column prefixes: the models' and the person's
+# the export's own column prefixes: the models', the coarse observers' and the person's
+RESERVED = (*MODELS, *COARSE_OBSERVERS, "human")
 NAME = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
 MAX_NAME = 32
 

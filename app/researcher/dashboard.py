@@ -26,6 +26,7 @@ from app.server.context import StudyContext
 from app.server.sessions import as_utc, session_status
 from app.server.state import progress_of
 from app.server.tables import Participant
+from app.study.config import stored_predictors
 
 FIELD_CODES = 3  # most common codes per model, as the report's figures
 
@@ -171,7 +172,7 @@ def alignment(db: Session, ctx: StudyContext, rule_set: str) -> dict:
 
     names = every_predictor(ctx)
     out = {"rules": rule_set, "predictors": names, "style": model_style(names)}
-    frame = predictions_frame(db, ctx.study_id, ctx.config.predictors)
+    frame = predictions_frame(db, ctx.study_id, stored_predictors(ctx.config))
     if frame.empty:
         return out | {"exclusions": {}, "worlds": {}, "fields": {}}
     kept, counts = kept_rows(frame, ctx, rule_set)

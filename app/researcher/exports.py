@@ -31,7 +31,7 @@ from app.server.plan import trial_steps
 from app.server.schemas import SERVER_EVENTS
 from app.server.sessions import as_utc, session_status
 from app.server.tables import Event, Participant, PredictionRow, Submission, TrialResponse
-from app.study.config import StudyConfig
+from app.study.config import StudyConfig, stored_predictors
 
 _FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields
               and c != "participant_id"]
@@ -40,7 +40,7 @@ _FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields
 def export_table(db: Session, config: StudyConfig, study_id: str, what: str) -> pd.DataFrame:
     """One of the exports (`WHAT`) of a study as a typed DataFrame."""
     if what == "predictions":
-        return predictions_frame(db, study_id, config.predictors)
+        return predictions_frame(db, study_id, stored_predictors(config))
     if what == "survey":
         return survey_frame(db, config, study_id)
     if what == "events":

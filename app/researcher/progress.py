@@ -13,6 +13,7 @@ from app.server.context import StudyContext
 from app.server.recruitment import preview_path
 from app.server.sessions import session_status
 from app.server.tables import Participant
+from app.study.config import stored_predictors
 
 
 def progress(db: Session, ctx: StudyContext) -> dict:
@@ -63,10 +64,11 @@ def exclusion_rules(ctx: StudyContext, rule_set: str):
 
 def every_predictor(ctx: StudyContext) -> list[str]:
     """Every predictor of the study in the order researchers see them (Ours, the VAE, constant
-    velocity, each plug-in of the config), then the policy as the reference."""
+    velocity, the coarse observers, each plug-in of the config), then the policy (the precise
+    observer) as the reference."""
     from analysis.predictors import BUILT_IN, REFERENCE
 
-    return [*BUILT_IN, *ctx.config.predictors, REFERENCE]
+    return [*BUILT_IN, *stored_predictors(ctx.config), REFERENCE]
 
 
 def alignment_summary(frame: pd.DataFrame, ctx: StudyContext) -> dict:
@@ -103,7 +105,7 @@ def _world_means(means: pd.DataFrame, names: tuple[str, ...]) -> dict:
 
 def summary(db: Session, ctx: StudyContext) -> dict:
     """The dashboard's JSON: progress, exclusions and running alignment error."""
-    frame = predictions_frame(db, ctx.study_id, ctx.config.predictors)
+    frame = predictions_frame(db, ctx.study_id, stored_predictors(ctx.config))
     return {"study_id": ctx.study_id, "title": ctx.config.title,
             "preview_link": preview_path(ctx.study_id, ctx.preview_key),
             "progress": progress(db, ctx), "alignment_error": alignment_summary(frame, ctx),

@@ -13,6 +13,7 @@ from app.server.context import StudyContext
 from app.server.sessions import as_utc
 from app.server.state import static_trial
 from app.server.tables import Participant, PredictionRow, TrialResponse
+from app.study.config import stored_predictors
 from app.study.errors import Refused
 
 REPLAY_MODELS = ("ours", "vae", "policy", "cv")
@@ -107,6 +108,8 @@ def trial_replay(db: Session, ctx: StudyContext, public_id: str, trial_id: str) 
     rows = db.execute(select(PredictionRow).where(
         PredictionRow.submission_id == response.submission_id)).scalars().all()
     order = sorted((r.click_time_ms, r.start_index, r.step) for r in rows)
+    code_predictors = [name for name in stored_predictors(ctx.config)
+                       if all(name in r.plugins for r in rows)]  # older rows lack the observers
     return {
         "public_id": public_id, "trial_id": trial_id, "clip_sha256": response.clip_sha256,
         "trial": trial,
@@ -119,7 +122,7 @@ def trial_replay(db: Session, ctx: StudyContext, public_id: str, trial_id: str) 
             "server_duration_ms": response.server_duration_ms, "replays": response.replays,
             "received_at": as_utc(response.received_at).isoformat(),
             "history": response.history or []},
-        "starts": start_replays(rows, trial["dt_s"], ctx.config.predictors),
-        "models": [*DRAWN, *ctx.config.predictors],
+        "starts": start_replays(rows, trial["dt_s"], code_predictors),
+        "models": [*DRAWN, *code_predictors],
         "click_order": [{"t_ms": t, "start_index": i, "step": j} for t, i, j in order],
     }

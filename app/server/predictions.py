@@ -87,7 +87,7 @@ def prediction_rows(ctx: StudyContext, participant: Participant, trial: TrialRec
                 "trial_id": np.full(k * n, trial.trial_id),
                 "click_time_ms": np.asarray(body.click_times_ms, dtype=np.float64).ravel(),
                 "click_input": click_inputs(body, k * n)}
-    return [with_plugins(row, ctx.config.predictors) for row in as_rows(columns)]
+    return [with_plugins(row, ctx.bank.code_predictors) for row in as_rows(columns)]
 
 
 def click_inputs(body: PredictionCreate, size: int) -> np.ndarray:
@@ -98,7 +98,8 @@ def click_inputs(body: PredictionCreate, size: int) -> np.ndarray:
 
 
 def with_plugins(row: dict, plugins: list[str]) -> dict:
-    """A row whose plug-in predictors' columns are gathered into its `plugins` JSON."""
+    """A row whose code predictors' columns (coarse observers', plug-ins') are gathered into its
+    `plugins` JSON."""
     gathered = {name: {field: row.pop(column) for field, column
                        in zip(PLUGIN_FIELDS, plugin_columns(name), strict=True)}
                 for name in plugins}

@@ -9,7 +9,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 
-from analysis.contracts import ExclusionRules
+from analysis.contracts import COARSE_OBSERVERS, ExclusionRules
 from app.configio import (
     ConfigError,
     StrictModel,
@@ -354,6 +354,12 @@ class StudyConfig(StrictModel):
         if len(set(keys)) != len(keys):
             raise ValueError("survey: question keys must be unique")
         return self
+
+
+def stored_predictors(config: StudyConfig) -> list[str]:
+    """The code predictors a study's bank answers with, as the export names them: the coarse
+    observers, then the config's plug-ins."""
+    return [*COARSE_OBSERVERS, *config.predictors]
 
 
 def held_out_seeds(config: StudyConfig) -> list[int]:

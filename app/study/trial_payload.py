@@ -19,3 +19,12 @@ def world_trial_payload(world: WorldBank, steps_to_predict: int, trial: TrialRec
     return {"scene": world.scene, "dt_s": world.dt_s, **trial.browser_payload(),
             "steps_to_predict": steps_to_predict,
             "max_step_m": world.max_step_m, "min_step_m": world.min_step_m}
+
+
+def predictor_inputs(world: WorldBank, steps_to_predict: int, trial: TrialRecord) -> tuple:
+    """What every predictor is asked for one trial (app/predictors/protocol.py's `ask`): the
+    history, start states, robot headings, dt, steps and the trial as it is shown."""
+    starts = [[s.robot, s.human] for s in trial.start_states]
+    headings = [s.robot_heading for s in trial.start_states]
+    return (trial.model_input, starts, headings, world.dt_s, steps_to_predict,
+            world_trial_payload(world, steps_to_predict, trial))

@@ -12,7 +12,8 @@ Shape legend per trial: E examples, L segment steps, K start states, n steps to 
   segment's end (T = the checkpoints' segment_len; it may reach back before the shown segment)
 - predictions[model][s].actions, cv_actions, policy_actions [K, n, 2] (m/s); predictions holds
   one answer per seed of the study's model family (ours, vae), the primary seed first, then one
-  answer (seed NO_SEED) per plug-in predictor of the study config (app/predictors/)
+  answer (seed NO_SEED) per coarse observer (app/observers/predictor.py) and per plug-in
+  predictor of the study config (app/predictors/)
 """
 
 import json
@@ -163,6 +164,13 @@ class TrialBank:
     def by_id(self) -> dict[str, TrialRecord]:
         """Every trial by its id."""
         return {t.trial_id: t for w in self.data.worlds.values() for t in w.trials}
+
+    @cached_property
+    def code_predictors(self) -> list[str]:
+        """The predictors besides Ours and the VAE whose answers the bank stores, in stored
+        order: the coarse observers (none in a bank built before them), the plug-ins."""
+        first = next(iter(self.by_id.values()))
+        return [name for name in first.predictions if name not in ("ours", "vae")]
 
     def world(self, name: str) -> WorldBank:
         """The bank of one world."""

@@ -7,6 +7,7 @@ import subprocess
 import numpy as np
 import pytest
 
+from analysis.contracts import COARSE_OBSERVERS
 from app.bank.model_answers import BankMismatch, ModelAnswers, trial_inputs
 from app.bank.verify import open_bundle
 from app.predictors.builtin import CheckpointPredictor, ConstantVelocity
@@ -22,7 +23,7 @@ def test_the_bank_stores_ctrvs_answer_to_every_trial(ctrv_study):
     trials = list(bank.by_id.values())
     assert {t.world for t in trials} == {"highway", "obstacle"} and len(trials) > 10
     for trial in trials:
-        assert sorted(trial.predictions) == ["ctrv", "ours", "vae"]  # JSON keys are sorted
+        assert sorted(trial.predictions) == sorted(["ctrv", *COARSE_OBSERVERS, "ours", "vae"])
         (stored,) = trial.predictions["ctrv"]
         answer = ask(CTRV(), *trial_inputs(bank, trial))
         assert stored.seed == NO_SEED and stored.code == -1 and stored.z == []
@@ -45,9 +46,10 @@ def test_the_checkpoints_answer_through_the_protocol_as_stored(ctrv_study):
         np.testing.assert_array_equal(answer.actions, actions)
 
 
-def test_the_small_study_without_predictors_stores_only_the_models(small_study):
+def test_the_small_study_without_predictors_stores_the_models_and_observers(small_study):
     bank = TrialBank.load(small_study.layout, small_study.study_id)
-    assert all(sorted(t.predictions) == ["ours", "vae"] for t in bank.by_id.values())
+    assert all(sorted(t.predictions) == sorted([*COARSE_OBSERVERS, "ours", "vae"])
+               for t in bank.by_id.values())
     assert "predictors" not in open_bundle(bundle_root(small_study)).manifest
 
 
@@ -98,7 +100,8 @@ def test_a_server_refuses_plugin_answers_it_does_not_reproduce(ctrv_study, tmp_p
     rows = [line.split() for line in run.stdout.splitlines()]
     verdicts = {(r[0], r[1]): r[-1] for r in rows if len(r) == 8 and r[2] == "-"}
     assert run.returncode == 1
-    assert verdicts == {("highway", "ctrv"): "MISMATCH", ("obstacle", "ctrv"): "MISMATCH"}
+    assert verdicts == {("highway", "ctrv"): "MISMATCH", ("obstacle", "ctrv"): "MISMATCH"} | {
+        (world, name): "ok" for world in ("highway", "obstacle") for name in COARSE_OBSERVERS}
     assert "plug-in ctrv: frozen with tomstudy 0.1.0" in run.stdout
 
 
@@ -120,7 +123,8 @@ def test_bundle_verify_passes_the_plugin_study(ctrv_study):
     assert run.returncode == 0, run.stdout + run.stderr
     rows = [line.split() for line in run.stdout.splitlines()]
     assert {(r[0], r[1], r[-1]) for r in rows if len(r) == 8 and r[2] == "-"} == {
-        ("highway", "ctrv", "ok"), ("obstacle", "ctrv", "ok")}
+        (world, name, "ok") for world in ("highway", "obstacle")
+        for name in ("ctrv", *COARSE_OBSERVERS)}
 
 
 def test_a_plugin_changes_nothing_else_in_the_bank(ctrv_study, small_study):

@@ -11,7 +11,13 @@ from sqlalchemy import select
 from sqlmodel import Session
 
 from analysis.alignment import alignment_error
-from analysis.contracts import EXPORT_COLUMNS, MODEL_COLORS, model_color, plugin_columns
+from analysis.contracts import (
+    COARSE_OBSERVERS,
+    EXPORT_COLUMNS,
+    MODEL_COLORS,
+    model_color,
+    plugin_columns,
+)
 from analysis.load import load_csv, load_database
 from app.predictors.ctrv import CTRV
 from app.predictors.protocol import ask
@@ -19,6 +25,8 @@ from app.server.db import make_engine
 from app.server.tables import PredictionRow
 from app.study.trials import TrialBank
 from tests.study.flow import ADMIN, at_first_trial, prolific
+
+STORED = [*COARSE_OBSERVERS, "ctrv"]  # the code predictors a row stores, in export order
 
 
 @pytest.fixture(scope="session")
@@ -54,7 +62,8 @@ def test_a_plugins_answer_is_stored_and_exported_exactly(client, ctrv_study, ban
                                                          db_url):
     text = finished_export(client, ctrv_study.study_id, bank)
     frame = pd.read_csv(io.StringIO(text))
-    assert list(frame.columns) == [*EXPORT_COLUMNS, *plugin_columns("ctrv")]
+    assert list(frame.columns) == [*EXPORT_COLUMNS, *(column for name in STORED
+                                                      for column in plugin_columns(name))]
     assert len(frame) > 0 and frame["trial_id"].nunique() > 5
     assert (frame["ctrv_code"] == -1).all()
     assert set(frame["ctrv_sha256"]) == {CTRV().content_hash}
@@ -66,6 +75,9 @@ def test_a_plugins_answer_is_stored_and_exported_exactly(client, ctrv_study, ban
         assert np.round(exported, 5).tolist() == stored  # the bank's, as the bank rounds
         answer = ctrv_of(trial, dt_of[trial["world"]])
         assert exported == answer[start, step].tolist()  # the server's, exactly
+        for name in COARSE_OBSERVERS:
+            assert (np.round([row[f"{name}_vx"], row[f"{name}_vy"]], 5).tolist()
+                    == trial["predictions"][name][0]["actions"][start][step])
     from_csv = load_csv(io.StringIO(text))
     from_db = load_database(db_url, ctrv_study.study_id)
     pd.testing.assert_frame_equal(from_db, from_csv)
@@ -79,7 +91,7 @@ def test_the_rows_hold_the_plugin_in_their_plugins_column(client, ctrv_study, ba
     with Session(engine) as db:
         cells = db.execute(select(PredictionRow.plugins, PredictionRow.ours_sha256)).all()
     engine.dispose()
-    assert cells and all(set(plugins) == {"ctrv"} and set(plugins["ctrv"]) ==
+    assert cells and all(set(plugins) == set(STORED) and set(plugins["ctrv"]) ==
                          {"vx", "vy", "code", "sha256"} for plugins, _ in cells)
 
 
@@ -89,7 +101,7 @@ def test_the_dashboard_and_summary_list_every_predictor(client, ctrv_study, bank
                         headers=ADMIN)
     assert r.status_code == 200, r.text
     alignment = r.json()["alignment"]
-    names = ["ours", "vae", "cv", "ctrv", "policy"]
+    names = ["ours", "vae", "cv", *STORED, "policy"]
     assert alignment["predictors"] == names
     assert alignment["style"]["labels"]["ctrv"] == "ctrv"
     assert alignment["style"]["colors"]["ctrv"] == model_color("ctrv")
@@ -119,7 +131,7 @@ def test_the_replay_draws_the_plugin_from_its_stored_answer(client, ctrv_study, 
     trial_id = trials.json()["trials"][-1]["trial_id"]
     replay = client.get(f"{base}/{trial_id}", params={"study_id": ctrv_study.study_id},
                              headers=ADMIN).json()
-    assert replay["models"] == ["ours", "vae", "policy", "ctrv"]
+    assert replay["models"] == ["ours", "vae", "policy", *STORED]
     record = bank[trial_id]
     starts = np.asarray([s["robot"] for s in record["start_states"]])
     dt_s = dt_of[record["world"]]
