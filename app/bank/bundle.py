@@ -1,8 +1,8 @@
 """A study's frozen bundle: the one thing a server serves and a preregistration can name.
 
     <bundle>/manifest.json                         format, SHA-256 and size of every other file,
-                                                   the bank's hash, every checkpoint's content
-                                                   hash, the checkpoints that hit their training
+                                                   the bank's hash, every checkpoint's and
+                                                   coarse observer's content hash, the checkpoints that hit their training
                                                    cap unconverged, and where and how it was
                                                    built
     <bundle>/bank.json.gz                          the trial bank (app/study/trials.py)

@@ -104,8 +104,8 @@ def freeze(config: StudyConfig, study_id: str, configs_dir: Path, layout: Layout
 
 def manifest(config: StudyConfig, study_id: str, bank: TrialBank, entries: dict,
              wall_time_s: float | None, phases: dict[str, float] | None = None) -> dict:
-    """The manifest: the files, what the bank answers with (checkpoints and plug-ins), and where
-    it was built."""
+    """The manifest: the files, what the bank answers with (checkpoints, coarse observers and
+    plug-ins), and where it was built."""
     models = {world: {model: {str(a.seed): a.content_hash
                               for a in bank.trials_of(world, "main")[0].predictions[model]}
                       for model in MODELS}
@@ -117,7 +117,18 @@ def manifest(config: StudyConfig, study_id: str, bank: TrialBank, entries: dict,
     plugins = plugin_entries(bank)
     if plugins:
         out["predictors"] = plugins
+    observers = observer_entries(bank)
+    if observers:
+        out["observers"] = observers
     return out
+
+
+def observer_entries(bank: TrialBank) -> dict[str, str]:
+    """Each coarse observer the bank stores answers of: its content hash (the observer
+    parameters' values it answered under; the bundle's observers.yaml holds them)."""
+    first = next(iter(bank.by_id.values()))
+    return {name: first.predictions[name][0].content_hash for name in OBSERVER_PREDICTORS
+            if name in first.predictions}
 
 
 def plugin_entries(bank: TrialBank) -> dict:

@@ -73,8 +73,12 @@ def test_an_observer_needs_the_trial_as_shown(small_study, observers):
         ObserverPredictor("precise", observers)
 
 
-def test_the_server_verifies_the_observers_and_refuses_altered_answers(small_study, tmp_path):
-    answers = ModelAnswers(open_bundle(bundle_root(small_study)))
+def test_the_server_verifies_the_observers_and_refuses_altered_answers(small_study, tmp_path,
+                                                                      observers):
+    bundle = open_bundle(bundle_root(small_study))
+    assert bundle.manifest["observers"] == {p.name: p.content_hash
+                                            for p in observer_predictors(observers)}
+    answers = ModelAnswers(bundle)
     checks = [c for c in answers.agreements if c.model in COARSE_OBSERVERS]
     assert len(checks) == 2 * len(COARSE_OBSERVERS) and all(c.ok and c.answers for c in checks)
     study = copied(small_study, tmp_path)

@@ -10,6 +10,7 @@ import pytest
 from scipy import stats
 from sqlalchemy import update
 
+from analysis.contracts import COARSE_OBSERVERS
 from app.server.tables import Participant, TrialResponse
 from tests.study.flow import ADMIN, at_first_trial, prediction_body, straight_clicks
 from tests.study.flow import Participant as Person
@@ -156,8 +157,9 @@ def test_replay_is_the_bank_clip_and_the_stored_clicks(client, small_study, bank
     assert [(c["start_index"], c["step"]) for c in replay["click_order"]] == [
         (i, j) for i in range(5) for j in range(3)]
     assert replay["response"]["history"] == body["history"]
-    # the canvas draws exactly `models` (replay.js has no list of its own), without plug-ins too
-    assert replay["models"] == ["ours", "vae", "policy"]
+    # the canvas draws exactly `models` (replay.js has no list of its own): the coarse observers
+    # too, without plug-ins
+    assert replay["models"] == ["ours", "vae", "policy", *COARSE_OBSERVERS]
     assert all(set(replay["models"]) <= set(s["paths"]) & set(s["errors"])
                for s in replay["starts"])
     dt = clip["dt_s"]
