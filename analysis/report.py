@@ -25,7 +25,7 @@ from tqdm import tqdm
 from analysis.atomic import write_json
 from analysis.bank import Bank, family_hashes, read_bank
 from analysis.ceiling import ceiling_table, explainable_share
-from analysis.contracts import MODELS, ExclusionRules
+from analysis.contracts import MODELS, SMALLEST_EFFECT_OF_INTEREST, ExclusionRules
 from analysis.crossed import primary_table
 from analysis.csvsafe import write_csv
 from analysis.html import render_page
@@ -168,7 +168,7 @@ def robustness(kept: pd.DataFrame, bank: Bank | None, inputs: StudyInputs,
         "leave_one_trial_out": influence_summary(tables["leave_one_trial_out"]),
         "primary": preregistered_primary(seeds.family_rows if seeds.ok else None,
                                          inputs.config.get("exploratory_worlds") or {},
-                                         out_dir),
+                                         smallest_effect(inputs.config), out_dir),
     }
     return summary, figures, tables["mixed_model"]
 
@@ -188,13 +188,19 @@ def noise_ceiling(kept: pd.DataFrame, means: pd.DataFrame, out_dir: Path) -> dic
     return out
 
 
+def smallest_effect(config: dict) -> float:
+    """The study's smallest effect of interest (a config at the default leaves it out)."""
+    return float(config.get("smallest_effect_of_interest", SMALLEST_EFFECT_OF_INTEREST))
+
+
 def preregistered_primary(family_rows: pd.DataFrame | None, exploratory: dict[str, str],
-                          out_dir: Path) -> dict:
+                          sesoi: float, out_dir: Path) -> dict:
     """The pre-registered primary test (family, participants and trials random, min F') per
-    world, written to primary.csv; {} without the family's rows."""
+    world with the evidence for a null beside it, written to primary.csv; {} without the
+    family's rows."""
     if family_rows is None:
         return {}
-    table = primary_table(family_rows, ALPHA, exploratory)
+    table = primary_table(family_rows, ALPHA, exploratory, sesoi)
     write_csv(table, out_dir / "primary.csv", float_format="%.10g")
     return nested(table, ["world"]) | {"exploratory_worlds": exploratory}
 
@@ -372,12 +378,20 @@ def _ceiling_line(ceiling: dict) -> str:
             f"share of the explainable alignment: {shares}")
 
 
+def _ratio(value: float | None) -> str:
+    """A Bayes factor in three significant digits (they span many orders), None as '-'."""
+    return "-" if value is None else f"{value:.3g}"
+
+
 def _primary_line(world: str, res: dict) -> str:
     kind = "EXPLORATORY, not a test of the hypothesis" if res["exploratory"] else "primary"
-    return (f"{world} ({kind}): family Ours - VAE {fmt(res['mean_diff'])}, participants and "
+    return (f"{world} ({kind}): family Ours - VAE {fmt(res['mean_diff'])} "
+            f"[{fmt(res['ci95_low'])}, {fmt(res['ci95_high'])}], participants and "
             f"trials random (min F'({fmt(res['df'], 1)}) = {fmt(res['min_f'], 2)}, p = "
             f"{fmt(res['p_two_sided'], 2)}; {res['n_participants']} participants, "
-            f"{res['n_trials']} trials) -> {res['verdict']}")
+            f"{res['n_trials']} trials) -> {res['verdict']}; within +-{fmt(res['sesoi'])}: "
+            f"TOST p = {fmt(res['tost_p'], 2)}, BF10 = {_ratio(res['bf10'])} -> "
+            f"{res['conclusion']}")
 
 
 def _predictors_line(predictors: dict, world: str) -> str:
