@@ -28,6 +28,7 @@ from analysis.ceiling import ceiling_table, explainable_share
 from analysis.contracts import MODELS, SMALLEST_EFFECT_OF_INTEREST, ExclusionRules
 from analysis.crossed import primary_table
 from analysis.csvsafe import write_csv
+from analysis.direct import direct_summary, direct_table
 from analysis.html import render_page
 from analysis.load import data_hash, load_csv
 from analysis.metrics import (
@@ -193,6 +194,16 @@ def smallest_effect(config: dict) -> float:
     return float(config.get("smallest_effect_of_interest", SMALLEST_EFFECT_OF_INTEREST))
 
 
+def direct_test(kept: pd.DataFrame, exploratory: dict[str, str], out_dir: Path) -> dict:
+    """The direct test of the claim per world (analysis/direct.py), written to direct.csv;
+    {} where the export holds no observer's answers."""
+    table = direct_table(kept, ALPHA, exploratory)
+    if table.empty:
+        return {}
+    write_csv(table, out_dir / "direct.csv", float_format="%.10g")
+    return direct_summary(table)
+
+
 def preregistered_primary(family_rows: pd.DataFrame | None, exploratory: dict[str, str],
                           sesoi: float, out_dir: Path) -> dict:
     """The pre-registered primary test (family, participants and trials random, min F') per
@@ -248,6 +259,7 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
     bank = read_bank(inputs.bank)
     extra, extra_figures, mixed_model = robustness(kept, bank, inputs, out_dir)
     extra["noise_ceiling"] = noise_ceiling(kept, means, out_dir)
+    extra["direct"] = direct_test(kept, inputs.config.get("exploratory_worlds") or {}, out_dir)
     steps.update(1)
     predictors, predictor_figures = every_predictor(kept, mixed_model, out_dir)
     figures = plot_errors(means, results, out_dir / "alignment_error") + extra_figures
@@ -365,6 +377,8 @@ def headline(summary: dict) -> list[str]:
         lines.append(_predictors_line(summary["predictors"], world))
         if world in summary.get("noise_ceiling", {}):
             lines.append(_ceiling_line(summary["noise_ceiling"][world]))
+        if world in summary.get("direct", {}):
+            lines.append(_direct_line(summary["direct"][world]))
     seeds = summary["seeds"]
     if seeds["status"] != "ok" or seeds["other_banks"] or seeds["rows_not_in_bank"]:
         lines.append(f"per seed: {seeds['note']}")
@@ -376,6 +390,14 @@ def _ceiling_line(ceiling: dict) -> str:
     return (f"  noise ceiling (people predicting each other): lower {fmt(ceiling['lower'])}, "
             f"upper {fmt(ceiling['upper'])}, split-half r {fmt(ceiling['split_half_r'], 2)}; "
             f"share of the explainable alignment: {shares}")
+
+
+def _direct_line(direct: dict) -> str:
+    tests = "; ".join(f"{name} {fmt(v['mean_diff'])} [{fmt(v['ci95_low'])}, "
+                      f"{fmt(v['ci95_high'])}] p_holm={fmt(v['p_holm'], 2)} {v['verdict']}"
+                      for name, v in direct["variants"].items())
+    return (f"  direct test (each coarse observer - the precise one, participants and trials "
+            f"random, Holm): {tests} -> {direct['verdict']}")
 
 
 def _ratio(value: float | None) -> str:
