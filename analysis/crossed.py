@@ -16,6 +16,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from analysis.equivalence import conclusion, paired_bf10, t_interval, tost_p
+
 
 @dataclass(frozen=True)
 class CrossedResult:
@@ -101,19 +103,56 @@ def crossed_test(diff, participant_ids, trial_ids) -> CrossedResult:
         df=float(out["df"][0]), p_two_sided=float(out["p_two_sided"][0]))
 
 
-def primary_table(family_rows, alpha: float, exploratory: dict[str, str]):
+def crossed_standard_error(diff, participant_ids, trial_ids) -> tuple[float, float]:
+    """The SE of the mean difference with participants and trials random, and its df:
+    sqrt(SE_participants^2 + SE_trials^2) on Welch-Satterthwaite df. Where the participants'
+    and the trials' means are the cells' mean (a balanced design), min F' is (mean / SE)^2
+    on (1, df) exactly; unlike |mean| / sqrt(min F') it stays defined where the mean is 0."""
+    frame = pd.DataFrame({"diff": np.asarray(diff, dtype=np.float64),
+                          "participant": np.asarray(participant_ids),
+                          "trial": np.asarray(trial_ids)})
+    means = [frame.groupby(factor)["diff"].mean() for factor in ("participant", "trial")]
+    variances = np.array([m.var(ddof=1) / len(m) if len(m) > 1 else np.nan for m in means])
+    dfs = np.array([len(m) - 1 for m in means], dtype=np.float64)
+    total = variances.sum()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        df = total ** 2 / (variances ** 2 / dfs).sum()
+    return float(np.sqrt(total)), float(df)
+
+
+def crossed_verdict(result: CrossedResult, alpha: float) -> str:
+    """ours, vae or neither: the first model where its error is significantly lower at alpha
+    with both factors agreeing, the second where higher."""
+    verdict = int(crossed_verdicts({k: np.array([v]) for k, v in result.as_dict().items()},
+                                   alpha)[0])
+    return {-1: "ours", 1: "vae", 0: "neither"}[verdict]
+
+
+def primary_table(family_rows, alpha: float, exploratory: dict[str, str], sesoi: float):
     """The pre-registered primary test per world on the family's rows (err_ours, err_vae as the
     mean over seeds per kept row): per (participant, trial) mean difference, min F', verdict
-    (ours, vae, neither at alpha; both factors must agree) and whether the world is exploratory."""
+    (ours, vae, neither at alpha; both factors must agree), whether the world is exploratory,
+    and the evidence for a null beside it (analysis/equivalence.py): the 95% CI, TOST against
+    +-sesoi, the JZS BF10 and the conclusion (ours, vae, equivalent or inconclusive)."""
     cells = (family_rows.assign(diff=family_rows["err_ours"] - family_rows["err_vae"])
              .groupby(["world", "participant_id", "trial_id"], sort=True)["diff"].mean()
              .reset_index())
     rows = []
     for world, part in cells.groupby("world", sort=True):
         result = crossed_test(part["diff"], part["participant_id"], part["trial_id"])
-        verdict = int(crossed_verdicts({k: np.array([v]) for k, v in result.as_dict().items()},
-                                       alpha)[0])
-        rows.append({"world": world, **result.as_dict(),
-                     "verdict": {-1: "ours", 1: "vae", 0: "neither"}[verdict],
-                     "exploratory": world in exploratory})
+        verdict = crossed_verdict(result, alpha)
+        rows.append({"world": world, **result.as_dict(), "verdict": verdict,
+                     "exploratory": world in exploratory,
+                     **null_evidence(part, result.mean_diff, verdict, alpha, sesoi)})
     return pd.DataFrame(rows)
+
+
+def null_evidence(cells: pd.DataFrame, mean: float, verdict: str, alpha: float,
+                  sesoi: float) -> dict:
+    """One world's 95% CI, TOST p against +-sesoi, BF10 and conclusion from its cells."""
+    se, df = crossed_standard_error(cells["diff"], cells["participant_id"], cells["trial_id"])
+    low, high = t_interval(mean, se, df)
+    tost = tost_p(mean, se, df, sesoi)
+    people = cells.groupby("participant_id")["diff"].mean()
+    return {"ci95_low": low, "ci95_high": high, "sesoi": sesoi, "tost_p": tost,
+            "bf10": paired_bf10(people), "conclusion": conclusion(verdict, tost, alpha)}

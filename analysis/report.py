@@ -25,9 +25,10 @@ from tqdm import tqdm
 from analysis.atomic import write_json
 from analysis.bank import Bank, family_hashes, read_bank
 from analysis.ceiling import ceiling_table, explainable_share
-from analysis.contracts import MODELS, ExclusionRules
+from analysis.contracts import MODELS, SMALLEST_EFFECT_OF_INTEREST, ExclusionRules
 from analysis.crossed import primary_table
 from analysis.csvsafe import write_csv
+from analysis.direct import direct_summary, direct_table
 from analysis.html import render_page
 from analysis.load import data_hash, load_csv
 from analysis.metrics import (
@@ -168,7 +169,7 @@ def robustness(kept: pd.DataFrame, bank: Bank | None, inputs: StudyInputs,
         "leave_one_trial_out": influence_summary(tables["leave_one_trial_out"]),
         "primary": preregistered_primary(seeds.family_rows if seeds.ok else None,
                                          inputs.config.get("exploratory_worlds") or {},
-                                         out_dir),
+                                         smallest_effect(inputs.config), out_dir),
     }
     return summary, figures, tables["mixed_model"]
 
@@ -188,13 +189,29 @@ def noise_ceiling(kept: pd.DataFrame, means: pd.DataFrame, out_dir: Path) -> dic
     return out
 
 
+def smallest_effect(config: dict) -> float:
+    """The study's smallest effect of interest (a config at the default leaves it out)."""
+    return float(config.get("smallest_effect_of_interest", SMALLEST_EFFECT_OF_INTEREST))
+
+
+def direct_test(kept: pd.DataFrame, exploratory: dict[str, str], out_dir: Path) -> dict:
+    """The direct test of the claim per world (analysis/direct.py), written to direct.csv;
+    {} where the export holds no observer's answers."""
+    table = direct_table(kept, ALPHA, exploratory)
+    if table.empty:
+        return {}
+    write_csv(table, out_dir / "direct.csv", float_format="%.10g")
+    return direct_summary(table)
+
+
 def preregistered_primary(family_rows: pd.DataFrame | None, exploratory: dict[str, str],
-                          out_dir: Path) -> dict:
+                          sesoi: float, out_dir: Path) -> dict:
     """The pre-registered primary test (family, participants and trials random, min F') per
-    world, written to primary.csv; {} without the family's rows."""
+    world with the evidence for a null beside it, written to primary.csv; {} without the
+    family's rows."""
     if family_rows is None:
         return {}
-    table = primary_table(family_rows, ALPHA, exploratory)
+    table = primary_table(family_rows, ALPHA, exploratory, sesoi)
     write_csv(table, out_dir / "primary.csv", float_format="%.10g")
     return nested(table, ["world"]) | {"exploratory_worlds": exploratory}
 
@@ -242,6 +259,7 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
     bank = read_bank(inputs.bank)
     extra, extra_figures, mixed_model = robustness(kept, bank, inputs, out_dir)
     extra["noise_ceiling"] = noise_ceiling(kept, means, out_dir)
+    extra["direct"] = direct_test(kept, inputs.config.get("exploratory_worlds") or {}, out_dir)
     steps.update(1)
     predictors, predictor_figures = every_predictor(kept, mixed_model, out_dir)
     figures = plot_errors(means, results, out_dir / "alignment_error") + extra_figures
@@ -359,6 +377,8 @@ def headline(summary: dict) -> list[str]:
         lines.append(_predictors_line(summary["predictors"], world))
         if world in summary.get("noise_ceiling", {}):
             lines.append(_ceiling_line(summary["noise_ceiling"][world]))
+        if world in summary.get("direct", {}):
+            lines.append(_direct_line(summary["direct"][world]))
     seeds = summary["seeds"]
     if seeds["status"] != "ok" or seeds["other_banks"] or seeds["rows_not_in_bank"]:
         lines.append(f"per seed: {seeds['note']}")
@@ -372,12 +392,28 @@ def _ceiling_line(ceiling: dict) -> str:
             f"share of the explainable alignment: {shares}")
 
 
+def _direct_line(direct: dict) -> str:
+    tests = "; ".join(f"{name} {fmt(v['mean_diff'])} [{fmt(v['ci95_low'])}, "
+                      f"{fmt(v['ci95_high'])}] p_holm={fmt(v['p_holm'], 2)} {v['verdict']}"
+                      for name, v in direct["variants"].items())
+    return (f"  direct test (each coarse observer - the precise one, participants and trials "
+            f"random, Holm): {tests} -> {direct['verdict']}")
+
+
+def _ratio(value: float | None) -> str:
+    """A Bayes factor in three significant digits (they span many orders), None as '-'."""
+    return "-" if value is None else f"{value:.3g}"
+
+
 def _primary_line(world: str, res: dict) -> str:
     kind = "EXPLORATORY, not a test of the hypothesis" if res["exploratory"] else "primary"
-    return (f"{world} ({kind}): family Ours - VAE {fmt(res['mean_diff'])}, participants and "
+    return (f"{world} ({kind}): family Ours - VAE {fmt(res['mean_diff'])} "
+            f"[{fmt(res['ci95_low'])}, {fmt(res['ci95_high'])}], participants and "
             f"trials random (min F'({fmt(res['df'], 1)}) = {fmt(res['min_f'], 2)}, p = "
             f"{fmt(res['p_two_sided'], 2)}; {res['n_participants']} participants, "
-            f"{res['n_trials']} trials) -> {res['verdict']}")
+            f"{res['n_trials']} trials) -> {res['verdict']}; within +-{fmt(res['sesoi'])}: "
+            f"TOST p = {fmt(res['tost_p'], 2)}, BF10 = {_ratio(res['bf10'])} -> "
+            f"{res['conclusion']}")
 
 
 def _predictors_line(predictors: dict, world: str) -> str:

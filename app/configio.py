@@ -23,27 +23,27 @@ def omitted_when_empty(*keys: str):
     """A model's serializer that leaves out these keys while their value is None or empty, so a
     model given a newer key dumps, byte for byte (and hash for hash), as it did before the key
     existed. Assign it in the class body: `_serialized = omitted_when_empty("key")`."""
-
-    @model_serializer(mode="wrap")
-    def serialize(self, handler):
-        data = handler(self)
-        for key in keys:
-            if key in data and data[key] in (None, [], {}):
-                del data[key]
-        return data
-
-    return serialize
+    return omitted_when(empty=keys)
 
 
 def omitted_when_default(*keys: str):
     """A model's serializer that leaves out these keys while they hold their default, so a
     config that leaves a newer key out, or sets it to its default, dumps as before the key
     existed. Read such a key from the model, not from its dump."""
+    return omitted_when(default=keys)
+
+
+def omitted_when(empty: tuple[str, ...] = (), default: tuple[str, ...] = ()):
+    """Both rules in one serializer (a model has one): the `empty` keys are left out while
+    None or empty, the `default` keys while they hold their default."""
 
     @model_serializer(mode="wrap")
     def serialize(self, handler):
         data = handler(self)
-        for key in keys:
+        for key in empty:
+            if key in data and data[key] in (None, [], {}):
+                del data[key]
+        for key in default:
             if key in data and getattr(self, key) == type(self).model_fields[key].default:
                 del data[key]
         return data

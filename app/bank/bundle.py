@@ -2,9 +2,9 @@
 
     <bundle>/manifest.json                         format, SHA-256 and size of every other file,
                                                    the bank's hash, every checkpoint's and
-                                                   coarse observer's content hash, the checkpoints that hit their training
-                                                   cap unconverged, and where and how it was
-                                                   built
+                                                   coarse observer's content hash, the
+                                                   checkpoints that hit their training cap
+                                                   unconverged, and where and how it was built
     <bundle>/bank.json.gz                          the trial bank (app/study/trials.py)
     <bundle>/bank_meta.json                        how the bank was built (its meta.json)
     <bundle>/models/<world>/<model>/seed<k>.pt.gz  every checkpoint whose answers the bank stores

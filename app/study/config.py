@@ -9,11 +9,12 @@ from typing import Annotated, Literal
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 
-from analysis.contracts import COARSE_OBSERVERS, ExclusionRules
+from analysis.contracts import COARSE_OBSERVERS, SMALLEST_EFFECT_OF_INTEREST, ExclusionRules
 from app.configio import (
     ConfigError,
     StrictModel,
     load_yaml_model,
+    omitted_when,
     omitted_when_default,
     omitted_when_empty,
 )
@@ -318,16 +319,20 @@ class StudyConfig(StrictModel):
     # worlds whose design cannot meet the design goal (`tomstudy instrument`): world -> what it
     # can and cannot test; reported as exploratory, never as a test of the hypothesis
     exploratory_worlds: dict[str, Annotated[str, Field(min_length=20)]] = {}
+    # the equivalence test beside the primary one (analysis/equivalence.py): an Ours - VAE
+    # difference in mean alignment error smaller than this is treated as no difference
+    smallest_effect_of_interest: float = Field(default=SMALLEST_EFFECT_OF_INTEREST, gt=0, le=2)
 
     @field_validator("predictors")
     @classmethod
     def _registered(cls, names: list[str]) -> list[str]:
         return check_names(names)
 
-    # a study without plug-ins (or exploratory worlds) dumps as before the keys existed: same
-    # config hash, so sessions that ran it before an upgrade still show as running the loaded
-    # config
-    _without_empty_keys = omitted_when_empty("predictors", "exploratory_worlds")
+    # a study without plug-ins (or exploratory worlds, or with the default smallest effect)
+    # dumps as before the keys existed: same config hash, so sessions that ran it before an
+    # upgrade still show as running the loaded config
+    _without_new_keys = omitted_when(empty=("predictors", "exploratory_worlds"),
+                                     default=("smallest_effect_of_interest",))
 
     @model_validator(mode="after")
     def _consistent(self) -> "StudyConfig":

@@ -8,9 +8,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.contracts import ExclusionRules
+from analysis.contracts import SMALLEST_EFFECT_OF_INTEREST, ExclusionRules
 from analysis.metrics import add_alignment_errors
-from analysis.report import AnalysisError, StudyInputs, run_analyze, start_kind_table
+from analysis.report import (
+    AnalysisError,
+    StudyInputs,
+    run_analyze,
+    smallest_effect,
+    start_kind_table,
+)
 from app.observers.simulated_study import simulate_participants
 from tests.analysis.fixed_data import fixed_predictions, small_bank, trial_bank, with_seeds
 
@@ -119,8 +125,16 @@ def test_report_from_csv(tmp_path, inputs, capsys):
             "ours", "vae", "neither")
         assert primary_test["mean_diff"] == pytest.approx(family.loc[world, "mean_diff"],
                                                           abs=0.02)
+        assert primary_test["sesoi"] == 0.005  # the config's default (it sets none)
+        assert primary_test["ci95_low"] < primary_test["mean_diff"] < primary_test["ci95_high"]
+        assert 0 <= primary_test["tost_p"] <= 1 and primary_test["bf10"] > 0
+        assert primary_test["conclusion"] == (primary_test["verdict"] if primary_test[
+            "verdict"] != "neither" else "equivalent" if primary_test["tost_p"] < 0.01
+            else "inconclusive")
     assert summary["primary"]["exploratory_worlds"] == {}
     assert (out / "primary.csv").is_file() and "Pre-registered primary test" in html
+    assert list(pd.read_csv(out / "primary.csv").columns[-6:]) == [
+        "ci95_low", "ci95_high", "sesoi", "tost_p", "bf10", "conclusion"]
     ceiling = summary["noise_ceiling"]  # coarse bots agree far more than chance
     assert set(ceiling) == {"highway", "obstacle"} and "Human noise ceiling" in html
     for entry in ceiling.values():
@@ -135,8 +149,14 @@ def test_report_from_csv(tmp_path, inputs, capsys):
     printed = capsys.readouterr().out
     assert "family (3 Ours x 3 VAE seeds)" in printed and "trials as random" in printed
     assert "highway (primary): family Ours - VAE" in printed
+    assert "within +-0.005: TOST p = " in printed and "BF10 = " in printed
     assert "noise ceiling (people predicting each other)" in printed
     assert "1 participant(s)) ran another bank" in printed
+
+
+def test_the_smallest_effect_comes_from_the_config_or_its_default():
+    assert smallest_effect({}) == SMALLEST_EFFECT_OF_INTEREST
+    assert smallest_effect({"smallest_effect_of_interest": 0.02}) == 0.02
 
 
 def test_without_a_bank_the_report_says_so_and_keeps_the_rest(tmp_path):

@@ -15,6 +15,7 @@ from fastapi.testclient import TestClient
 from sqlalchemy.pool import StaticPool
 from sqlmodel import Session, create_engine, select
 
+from analysis.contracts import SMALLEST_EFFECT_OF_INTEREST
 from app.bank.build import (
     build_trials,
     main_trials,
@@ -30,7 +31,13 @@ from app.server.db import create_tables
 from app.server.deps import get_db
 from app.server.tables import Participant
 from app.settings import Settings
-from app.study.config import MainTrialSelection, StudyConfig, load_study_config
+from app.study.config import (
+    MainTrialSelection,
+    StudyConfig,
+    bank_design,
+    config_sha256,
+    load_study_config,
+)
 from app.study.trials import TrialBank, clip_sha256
 from tests.conftest import REPO, TOMSTUDY, SmallStudy, build_bundle_of
 from tests.study import flow
@@ -58,6 +65,8 @@ def test_paper_study_config_matches_the_paper():
      "recruitment: .*prolific_redirect_url: only the placeholder"),
     ({"recruitment": {"completion_code": "X", "mturk_redirect_url": "http://x/{completion_code}"}},
      "recruitment: .*mturk_redirect_url: must be empty or an https"),
+    ({"smallest_effect_of_interest": 0}, "smallest_effect_of_interest"),
+    ({"smallest_effect_of_interest": 2.5}, "smallest_effect_of_interest"),
 ])
 def test_config_errors_name_the_key(tmp_path, change, field):
     data = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
@@ -66,6 +75,21 @@ def test_config_errors_name_the_key(tmp_path, change, field):
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(ConfigError, match=f"bad.yaml: {field}"):
         load_yaml_model(path, StudyConfig)
+
+
+def test_the_smallest_effect_of_interest_leaves_the_hash_and_the_bank_as_they_were():
+    data = yaml.safe_load((REPO / "study_configs" / "paper_study.yaml").read_text())
+    paper = StudyConfig.model_validate(data)
+    assert paper.smallest_effect_of_interest == SMALLEST_EFFECT_OF_INTEREST == 0.005
+    del data["smallest_effect_of_interest"]
+    before_the_key = StudyConfig.model_validate(data)
+    assert "smallest_effect_of_interest" not in paper.model_dump()
+    assert config_sha256(paper) == config_sha256(before_the_key)
+    assert "exploratory_worlds" in paper.model_dump()  # the other keys' rule still holds
+    wider = StudyConfig.model_validate(data | {"smallest_effect_of_interest": 0.01})
+    assert wider.model_dump(mode="json")["smallest_effect_of_interest"] == 0.01
+    assert config_sha256(wider) != config_sha256(paper)
+    assert bank_design(wider.model_dump(mode="json")) == bank_design(data)  # not a design key
 
 
 def test_a_world_without_its_config_file_is_named(tmp_path):
