@@ -155,8 +155,8 @@ def agreement_lines(checks: list[Agreement], plugins: dict[str, dict]) -> list[s
                      f"{c.max_degrees:>10.2e}{len(c.codes_changed):>7}  "
                      f"{'ok' if c.ok else 'MISMATCH'}")
     lines.append(f"max m = largest |stored - recomputed| action x dt (one step's position); "
-                 f"codes = trials encoded to another code; ok = same checkpoint or plug-in "
-                 f"version, same codes, actions within {ACTION_TOLERANCE_MPS} m/s")
+                 f"codes = trials encoded to another code; ok = same checkpoint, observer or "
+                 f"plug-in version, same codes, actions within {ACTION_TOLERANCE_MPS} m/s")
     lines += [plugin_line(name, entry) for name, entry in plugins.items()]
     lines += [f"{c.world}/{c.model}: {c.missing}" for c in checks if c.missing]
     return lines
