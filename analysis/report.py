@@ -174,17 +174,21 @@ def robustness(kept: pd.DataFrame, bank: Bank | None, inputs: StudyInputs,
     return summary, figures, tables["mixed_model"]
 
 
-def noise_ceiling(kept: pd.DataFrame, means: pd.DataFrame, out_dir: Path) -> dict:
-    """The human noise ceiling per world (ceiling.csv) with each model's share of it."""
+def noise_ceiling(kept: pd.DataFrame, out_dir: Path) -> dict:
+    """The human noise ceiling per world (ceiling.csv) with every predictor's share of it (the
+    models, the baselines, the observers and any plug-in)."""
     table = ceiling_table(kept)
     if table.empty:
         return {}
     write_csv(table, out_dir / "ceiling.csv", float_format="%.10g")
     out = nested(table, ["world"])
+    names = tuple(c.removeprefix("err_") for c in kept.columns if c.startswith("err_"))
+    means = participant_means(kept, names)
     for world, entry in out.items():
         errors = means[means["world"] == world]
         shares = {m: explainable_share(float(errors[f"err_{m}"].mean()), entry["lower"],
-                                       entry["lower_ci95_high"]) for m in ("ours", "vae", "cv")}
+                                       entry["lower_ci95_high"])
+                  for m in names}
         entry["share"] = {m: None if np.isnan(v) else v for m, v in shares.items()}
     return out
 
@@ -258,7 +262,7 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
     steps.update(1)
     bank = read_bank(inputs.bank)
     extra, extra_figures, mixed_model = robustness(kept, bank, inputs, out_dir)
-    extra["noise_ceiling"] = noise_ceiling(kept, means, out_dir)
+    extra["noise_ceiling"] = noise_ceiling(kept, out_dir)
     extra["direct"] = direct_test(kept, inputs.config.get("exploratory_worlds") or {}, out_dir)
     steps.update(1)
     predictors, predictor_figures = every_predictor(kept, mixed_model, out_dir)
