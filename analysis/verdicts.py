@@ -23,8 +23,7 @@ CLAIMS = {
 }
 # an entry without `conclusion`: the two-sided difference test alone (no equivalence test)
 TWO_SIDED = {"ours": "Ours", "vae": "VAE"}
-NO_DIFFERENCE = ("no difference between the two models could be shown "
-                 "(equivalence was not tested)")
+NO_DIFFERENCE = "no difference between the two models could be shown; equivalence was not tested"
 DIRECT_CLAIMS = {
     "coarse": "people's predictions align better with the coarse observers than with the "
               "precise one",

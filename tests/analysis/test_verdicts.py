@@ -37,8 +37,8 @@ def test_each_conclusion_is_one_sentence_with_its_ci_and_counts(conclusion, word
 @pytest.mark.parametrize(("verdict", "words"), [
     ("ours", "people's predictions align better with Ours than with the VAE"),
     ("vae", "people's predictions align better with the VAE than with Ours"),
-    ("neither", "no difference between the two models could be shown (equivalence was not "
-                "tested)"),
+    ("neither", "no difference between the two models could be shown; equivalence was not "
+                "tested"),
 ])
 def test_without_the_new_keys_the_two_sided_verdict_is_said_with_its_p(verdict, words):
     sentence = primary_sentence("highway", OLD | {"verdict": verdict})
