@@ -3,7 +3,7 @@
 
 `primary_sentence` reads one world's entry of summary["primary"] (the pre-registered test:
 the model family, participants and trials random, min F'). An entry with a `conclusion`
-(Ours, VAE, equivalent, inconclusive: the difference test and the equivalence test within
+(ours, vae, equivalent, inconclusive, any case: the difference test and the equivalence test within
 the smallest effect size of interest, SESOI) is said as such, with its 95% CI; an entry
 without one has only the two-sided verdict (ours, vae, neither) and is said with its p,
 never as equivalence. `direct_sentence` reads one world's entry of summary["direct"] (do
@@ -15,14 +15,14 @@ import math
 EXPLORATORY = "EXPLORATORY — not a test of the hypothesis"
 # summary["primary"] holds each world's entry and, under this key, the exploratory worlds
 EXPLORATORY_KEY = "exploratory_worlds"
-CLAIMS = {
-    "Ours": "people's predictions align better with Ours than with the VAE",
-    "VAE": "people's predictions align better with the VAE than with Ours",
+CLAIMS = {  # by conclusion, in lower case (primary_table writes ours, vae, equivalent, ...)
+    "ours": "people's predictions align better with Ours than with the VAE",
+    "vae": "people's predictions align better with the VAE than with Ours",
     "equivalent": "the two models are equivalent within ±{sesoi}",
     "inconclusive": "inconclusive: neither a difference nor equivalence could be shown",
 }
 # an entry without `conclusion`: the two-sided difference test alone (no equivalence test)
-TWO_SIDED = {"ours": "Ours", "vae": "VAE"}
+TWO_SIDED = ("ours", "vae")
 NO_DIFFERENCE = "no difference between the two models could be shown; equivalence was not tested"
 DIRECT_CLAIMS = {
     "coarse": "people's predictions align better with the coarse observers than with the "
@@ -57,12 +57,12 @@ def world_label(world: str, exploratory: bool) -> str:
 def claim(entry: dict) -> str:
     """What the primary test concludes, in words (without the numbers)."""
     if "conclusion" in entry:
-        text = CLAIMS.get(entry["conclusion"], f"conclusion {entry['conclusion']}")
+        text = CLAIMS.get(str(entry["conclusion"]).lower(), f"conclusion {entry['conclusion']}")
         sesoi = entry.get("sesoi")
         return text.format(sesoi=fmt(sesoi) if _finite(sesoi) else "the smallest effect of "
                            "interest")
-    model = TWO_SIDED.get(entry.get("verdict"))
-    return CLAIMS[model] if model else NO_DIFFERENCE
+    verdict = entry.get("verdict")
+    return CLAIMS[verdict] if verdict in TWO_SIDED else NO_DIFFERENCE
 
 
 def estimate(entry: dict) -> str:

@@ -201,7 +201,7 @@ def equivalence_and_direct_test_on_the_first_page(summary: dict, out: Path) -> N
     (the exploratory world's too) and their columns."""
     equivalence = {"ci95_low": -0.5, "ci95_high": -0.2, "sesoi": 0.05, "tost_p": 0.9,
                    "bf10": 12.0}
-    summary["primary"]["highway"] |= equivalence | {"conclusion": "Ours"}
+    summary["primary"]["highway"] |= equivalence | {"conclusion": "ours"}
     summary["primary"]["obstacle"] |= equivalence | {"conclusion": "inconclusive",
                                                      "exploratory": True}
     variant = {"mean_diff": -0.03, "ci95_low": -0.05, "ci95_high": -0.01, "p_holm": 0.004,

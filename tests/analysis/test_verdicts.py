@@ -16,11 +16,13 @@ OLD = {"mean_diff": -0.0412, "n_participants": 22, "n_trials": 40, "t_participan
        "exploratory": False}
 # ... and with the equivalence test's keys
 NEW = OLD | {"ci95_low": -0.0801, "ci95_high": -0.0023, "sesoi": 0.05, "tost_p": 0.4,
-             "bf10": 3.2, "conclusion": "Ours"}
+             "bf10": 3.2, "conclusion": "ours"}
 
 
 @pytest.mark.parametrize(("conclusion", "words"), [
+    ("ours", "Highway: people's predictions align better with Ours than with the VAE ("),
     ("Ours", "Highway: people's predictions align better with Ours than with the VAE ("),
+    ("vae", "Highway: people's predictions align better with the VAE than with Ours ("),
     ("VAE", "Highway: people's predictions align better with the VAE than with Ours ("),
     ("equivalent", "Highway: the two models are equivalent within ±0.050 ("),
     ("inconclusive", "Highway: inconclusive: neither a difference nor equivalence could be "

@@ -35,7 +35,7 @@ def reports(tmp_path_factory) -> dict:
     run_analyze("paper_study", out, root / "export.csv", "", inputs)
     summary = json.loads((out / "summary.json").read_text())
     summary["primary"]["highway"] |= {"ci95_low": -0.5, "ci95_high": -0.2, "sesoi": 0.05,
-                                      "tost_p": 0.9, "bf10": 12.0, "conclusion": "Ours"}
+                                      "tost_p": 0.9, "bf10": 12.0, "conclusion": "ours"}
     summary["direct"] = {"highway": {"verdict": "coarse", "exploratory": False, "variants": {
         "coarse_scene": {"mean_diff": -0.03, "ci95_low": -0.05, "ci95_high": -0.01,
                          "p_holm": 0.004, "verdict": "coarse"}}}}
