@@ -27,7 +27,13 @@ $(STAMP): $(RUNTIME_STAMP) $(LOCK)
 	$(UV) -c $(LOCK) -e '.[dev]'
 	touch $(STAMP)
 
-install: $(STAMP)
+# axe-core for the browser tests' accessibility checks (tests/e2e/axe.py), pinned by the lock
+AXE := tests/e2e/node_modules/axe-core/axe.min.js
+$(AXE): tests/e2e/package.json tests/e2e/package-lock.json
+	npm ci --prefix tests/e2e --no-audit --no-fund --loglevel=error
+	touch $(AXE)
+
+install: $(STAMP) $(AXE)
 
 data: $(STAMP)
 	$(BIN)/tomstudy simulate highway --n 2000 --seed 0 --if-missing
@@ -38,7 +44,7 @@ data: $(STAMP)
 serve: $(RUNTIME_STAMP)
 	$(BIN)/tomstudy serve --prepare --study paper_study $(SERVE_ARGS)
 
-test: $(STAMP)
+test: $(STAMP) $(AXE)
 	$(BIN)/ruff check app analysis tests benchmarks
 	$(BIN)/pytest -q
 

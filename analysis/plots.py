@@ -295,3 +295,53 @@ def _trial_panel(ax, rows: pd.DataFrame, y: np.ndarray, colors: np.ndarray) -> N
     ax.set_xlabel("err_ours - err_vae without the trial (< 0 favours Ours)", fontsize=8)
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(axis="x", alpha=0.3)
+
+
+def plot_ceiling(worlds: dict, ceiling: dict, base: Path, reference: str = "") -> list[Path]:
+    """Per world: each predictor's mean alignment error with its 95% CI beside the human
+    noise ceiling (the band from its upper to its lower bound) and chance (1).
+
+    `worlds` is summary["predictors"]["worlds"] ({world: {name: {mean, ci95}}}), `ceiling`
+    summary["noise_ceiling"] ({world: {lower, upper, ...}}; a world may lack one); the
+    `reference` predictor (the policy) is labelled as such."""
+    names = list(worlds)
+    rows = max(len(entry) for entry in worlds.values())
+    fig, axes = plt.subplots(1, len(names), figsize=(4.8 * len(names), 0.45 * rows + 2.2),
+                             squeeze=False)
+    for ax, world in zip(axes[0], names, strict=True):
+        _ceiling_panel(ax, worlds[world], ceiling.get(world), reference)
+        ax.set_title(world[:1].upper() + world[1:], fontsize=10)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncols=len(labels), fontsize=8,
+               frameon=False)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    return save(fig, base)
+
+
+def _ceiling_panel(ax, predictors: dict, ceiling: dict | None, reference: str) -> None:
+    """One world's panel: a row per predictor (first on top), the ceiling band, chance."""
+    ax.axvline(1.0, color="grey", lw=0.8, ls="--", label="a random direction (chance)")
+    y = np.arange(len(predictors))[::-1]
+    for row, (name, entry) in zip(y, predictors.items(), strict=True):
+        mean, (low, high) = entry["mean"], entry["ci95"]
+        if low is not None and high is not None and np.isfinite([low, high]).all():
+            ax.errorbar(mean, row, xerr=[[mean - low], [high - mean]], fmt="none",
+                        ecolor="black", capsize=3, lw=1, zorder=2)
+        ax.scatter(mean, row, s=40, color=model_color(name), edgecolor="black", zorder=3)
+    labels = [model_label(n) + (" (reference)" if n == reference else "") for n in predictors]
+    ax.set_yticks(y, labels, fontsize=8)
+    ax.set_xlim(left=0)
+    if ceiling is not None:
+        _ceiling_band(ax, ceiling["upper"], ceiling["lower"])
+    ax.set_xlabel("alignment error (1 - cos): lower = closer to people", fontsize=8)
+    ax.grid(axis="x", alpha=0.3)
+
+
+def _ceiling_band(ax, upper: float, lower: float) -> None:
+    """The noise ceiling from its upper to its lower bound (error), at least 1% of the axis
+    wide so that a ceiling near 0 still shows; the lower bound as a line."""
+    left, right = sorted((upper, lower))
+    width = max(right - left, 0.01 * ax.get_xlim()[1])
+    ax.axvspan(left, left + width, color="#bbbbbb", zorder=0,
+               label="people predicting each other (noise ceiling, upper to lower bound)")
+    ax.axvline(lower, color="#555555", lw=1, zorder=1)

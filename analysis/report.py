@@ -37,7 +37,13 @@ from analysis.metrics import (
     participant_means,
     zero_vector_counts,
 )
-from analysis.plots import plot_errors, plot_fields, plot_leave_one_trial_out, plot_seed_pairs
+from analysis.plots import (
+    plot_ceiling,
+    plot_errors,
+    plot_fields,
+    plot_leave_one_trial_out,
+    plot_seed_pairs,
+)
 from analysis.predictors import (
     FAMILY,
     REFERENCE,
@@ -58,6 +64,14 @@ from analysis.stats import (
     plain_records,
 )
 from analysis.trial_effects import influence_summary, leave_one_trial_out, mixed_model_table
+from analysis.verdicts import (
+    EXPLORATORY_KEY,
+    direct_sentences,
+    fmt,
+    fmt_p,
+    primary_sentence,
+    primary_sentences,
+)
 
 WAIVABLE = ("failed_attention_check", "incomplete", "too_fast")
 
@@ -268,6 +282,9 @@ def analyze(frame: pd.DataFrame, study_id: str, out_dir: Path, inputs: StudyInpu
     predictors, predictor_figures = every_predictor(kept, mixed_model, out_dir)
     figures = plot_errors(means, results, out_dir / "alignment_error") + extra_figures
     figures += predictor_figures
+    if extra["noise_ceiling"]:
+        figures += plot_ceiling(predictors["worlds"], extra["noise_ceiling"],
+                                out_dir / "noise_ceiling", reference=REFERENCE)
     figures += plot_fields(kept, bank.scenes() if bank else {}, out_dir / "fields")
     steps.update(1)
     per_participant = means.merge(ade, on=["participant_id", "world"], how="left")
@@ -332,19 +349,73 @@ def _version() -> str:
         return "unknown"
 
 
-def fmt(value, digits: int = 3) -> str:
-    """A report number: fixed digits, tiny values in short g form, None as '-'."""
-    if value is None:
-        return "-"
-    if isinstance(value, float):
-        return f"{value:.{digits}g}" if abs(value) < 1e-3 and value != 0 else f"{value:.{digits}f}"
-    return str(value)
-
-
 def render_html(summary: dict, pngs: list[Path]) -> str:
-    """The report page: tables of every test and mean, exclusions, embedded figures."""
+    """The report page: first the answer (the primary test per world in words, the direct
+    test, every predictor against the noise ceiling), then every table and figure in Details."""
+    primary = {world: entry for world, entry in summary.get("primary", {}).items()
+               if world != EXPLORATORY_KEY}
     return render_page("study_report.html.j2", filters={"fmt": fmt}, s=summary, alpha=ALPHA,
-                       models=MODELS, figures=pngs, page_width_px=1200)
+                       models=MODELS, figures=figure_sections(pngs), page_width_px=1200,
+                       answers=primary_sentences(primary), primary_rows=primary,
+                       equivalence=any("conclusion" in entry for entry in primary.values()),
+                       direct=direct_sentences(summary.get("direct", {})))
+
+
+# Each figure's place in the report and its caption: what is plotted, what lower or higher means
+FIGURES = {
+    "noise_ceiling": ("answer", "Every predictor against how well people predict each other",
+                      "Per world, each predictor's mean alignment error with the participants' "
+                      "predictions (dot: mean over participants, bar: 95% CI). Alignment error "
+                      "is 1 - cos of the angle between a predictor's move and a participant's: "
+                      "0 is the same direction, 1 what a random direction scores (dashed line), "
+                      "2 the opposite; lower is closer to what people predict. The grey band is "
+                      "the human noise ceiling, from its upper bound (each participant against "
+                      "everyone's mean move, their own included) to its lower bound (against "
+                      "the other participants' mean): a predictor inside the band predicts "
+                      "people about as well as people predict each other."),
+    "alignment_error": ("primary_seed", "Alignment error of Ours, the VAE and constant velocity",
+                        "Per world, the alignment error (1 - cos) of Ours, the VAE and constant "
+                        "velocity with the primary seed's answers: one dot per participant (their "
+                        "mean), grey lines join one participant's values, black the mean with "
+                        "its 95% CI. Lower is closer to what people predict. The panel titles "
+                        "give the paired t-test of Ours vs the VAE (two-sided p)."),
+    "predictors": ("predictors", "Alignment error of every predictor",
+                   "Per world, every predictor's alignment error (1 - cos): one dot per "
+                   "participant (their mean), grey lines join one participant's values, black "
+                   "the mean with its 95% CI; the policy (the world's own moves) is a "
+                   "reference. Lower is closer to what people predict."),
+    "seed_pairs": ("families", "Ours - VAE per seed pair and for the family",
+                   "Per world, Ours' alignment error minus the VAE's for each pair of training "
+                   "seeds (dots) and for the family, the mean over seeds (diamond), with 95% "
+                   "CIs. Below 0 people's predictions align better with Ours, above 0 with the "
+                   "VAE. Colour: the model a two-sided paired test favours at p < {alpha} (grey: "
+                   "neither)."),
+    "leave_one_trial_out": ("influence", "Ours - VAE with each influential trial left out",
+                            "Per world and set of answers, the Ours - VAE difference in "
+                            "alignment error with one trial left out (dot and 95% CI, the most "
+                            "influential trials first), beside the difference over all trials "
+                            "(blue line). Left of 0 favours Ours, right of 0 the VAE; red: "
+                            "leaving that trial out changes the verdict."),
+    "fields": ("fields", "Participants' first moves beside each model's",
+               "{world}: at each start state, the participants' mean first move (black arrow) "
+               "beside a model's (colour), for each model's most common latent codes. Arrows "
+               "pointing the same way mean the model predicts what people predict; each panel "
+               "gives the model's mean alignment error there (lower is closer)."),
+}
+
+
+def figure_sections(pngs: list[Path]) -> dict[str, list[dict]]:
+    """The report's figures by section (FIGURES), each with its alt text and caption; a
+    figure FIGURES does not know goes to 'other', captioned by its name."""
+    out: dict[str, list[dict]] = {}
+    for png in pngs:
+        stem, _, world = png.stem.partition("_") if png.stem.startswith("fields_") else (
+            png.stem, "", "")
+        section, alt, caption = FIGURES.get(stem, ("other", png.stem, png.name))
+        out.setdefault(section, []).append(
+            {"path": png, "alt": f"{alt}: {world}" if world else alt,
+             "caption": caption.format(world=world[:1].upper() + world[1:], alpha=ALPHA)})
+    return out
 
 
 def run_analyze(study_id: str, out_dir: Path, csv: Path | None, database_url: str,
@@ -367,7 +438,8 @@ def headline(summary: dict) -> list[str]:
     lines = []
     for world, res in summary["ours_vs_vae"].items():
         if world in summary.get("primary", {}):
-            lines.append(_primary_line(world, summary["primary"][world]))
+            lines.append(primary_sentence(world, summary["primary"][world]))
+            lines.append("  " + _primary_line(world, summary["primary"][world]))
         w = summary["worlds"][world]
         lines.append(f"{world}: n={res['n']} Ours {w['err_ours']['mean']:.3f} VAE "
                      f"{w['err_vae']['mean']:.3f} CV {w['err_cv']['mean']:.3f} | "
@@ -398,7 +470,7 @@ def _ceiling_line(ceiling: dict) -> str:
 
 def _direct_line(direct: dict) -> str:
     tests = "; ".join(f"{name} {fmt(v['mean_diff'])} [{fmt(v['ci95_low'])}, "
-                      f"{fmt(v['ci95_high'])}] p_holm={fmt(v['p_holm'], 2)} {v['verdict']}"
+                      f"{fmt(v['ci95_high'])}] p_holm={fmt_p(v['p_holm'])} {v['verdict']}"
                       for name, v in direct["variants"].items())
     return (f"  direct test (each coarse observer - the precise one, participants and trials "
             f"random, Holm): {tests} -> {direct['verdict']}")
@@ -414,9 +486,9 @@ def _primary_line(world: str, res: dict) -> str:
     return (f"{world} ({kind}): family Ours - VAE {fmt(res['mean_diff'])} "
             f"[{fmt(res['ci95_low'])}, {fmt(res['ci95_high'])}], participants and "
             f"trials random (min F'({fmt(res['df'], 1)}) = {fmt(res['min_f'], 2)}, p = "
-            f"{fmt(res['p_two_sided'], 2)}; {res['n_participants']} participants, "
+            f"{fmt_p(res['p_two_sided'])}; {res['n_participants']} participants, "
             f"{res['n_trials']} trials) -> {res['verdict']}; within +-{fmt(res['sesoi'])}: "
-            f"TOST p = {fmt(res['tost_p'], 2)}, BF10 = {_ratio(res['bf10'])} -> "
+            f"TOST p = {fmt_p(res['tost_p'])}, BF10 = {_ratio(res['bf10'])} -> "
             f"{res['conclusion']}")
 
 
@@ -432,7 +504,7 @@ def _predictors_line(predictors: dict, world: str) -> str:
 def _family_line(fam: dict, pairs: dict) -> str:
     return (f"  family ({fam['ours_seeds']} Ours x {fam['vae_seeds']} VAE seeds): Ours "
             f"{fmt(fam['err_ours'])} VAE {fmt(fam['err_vae'])} | diff {fmt(fam['mean_diff'])} "
-            f"t={fmt(fam['t'], 2)} p={fmt(fam['p_two_sided'], 2)} -> {fam['verdict']}; seed "
+            f"t={fmt(fam['t'], 2)} p={fmt_p(fam['p_two_sided'])} -> {fam['verdict']}; seed "
             f"pairs favour Ours {pairs['ours']}, VAE {pairs['vae']}, neither {pairs['neither']}")
 
 
@@ -440,5 +512,5 @@ def _trials_line(mixed: dict, influence: dict) -> str:
     top = influence["most_influential"]
     flips = ", ".join(influence["flipping_trials"]) or "none"
     return (f"  trials as random: diff {fmt(mixed['estimate'])} [{fmt(mixed['ci95_low'])}, "
-            f"{fmt(mixed['ci95_high'])}] p={fmt(mixed['p'], 2)} ({mixed['status']}); without "
+            f"{fmt(mixed['ci95_high'])}] p={fmt_p(mixed['p'])} ({mixed['status']}); without "
             f"{top['trial_id']} the diff moves most ({fmt(top['shift'])}); flips: {flips}")

@@ -165,19 +165,50 @@ def _panel(model: str, code: int, states: pd.DataFrame, arrow_m: float) -> dict:
                        for r in points.tolist()]}
 
 
+_BANKS: dict = {}  # the loaded trial bank as the analysis reads it, by its SHA-256
+
+
+def analysis_bank(ctx: StudyContext):
+    """The study's trial bank as analysis.bank.Bank (every seed's answers), built once."""
+    from analysis.bank import Bank
+
+    if ctx.bank.sha256 not in _BANKS:
+        _BANKS[ctx.bank.sha256] = Bank(ctx.bank.data.model_dump(mode="json"), ctx.bank.sha256)
+    return _BANKS[ctx.bank.sha256]
+
+
+def primary_verdicts(kept: pd.DataFrame, ctx: StudyContext) -> dict[str, str]:
+    """Per world, the report's first-page sentence (analysis.verdicts.primary_sentence) for
+    the pre-registered primary test on the rows kept so far; {} until rows ran the bank."""
+    from analysis.crossed import primary_table
+    from analysis.seeds import seed_results
+    from analysis.stats import ALPHA, plain_records
+    from analysis.verdicts import primary_sentence
+
+    if kept.empty:
+        return {}
+    seeds = seed_results(kept, analysis_bank(ctx), "the loaded trial bank")
+    if not seeds.ok:
+        return {}
+    table = primary_table(seeds.family_rows, ALPHA, ctx.config.exploratory_worlds,
+                          ctx.config.smallest_effect_of_interest)
+    return {row["world"]: primary_sentence(row["world"], row) for row in plain_records(table)}
+
+
 def alignment(db: Session, ctx: StudyContext, rule_set: str) -> dict:
-    """Exclusions, per-world error CIs of every predictor (with their colours and labels, one
-    definition: analysis/contracts.py) and field panels under one rule set."""
+    """Exclusions, the primary test's verdict per world in words, per-world error CIs of every
+    predictor (with their colours and labels, one definition: analysis/contracts.py) and field
+    panels under one rule set."""
     from analysis.contracts import model_style
 
     names = every_predictor(ctx)
     out = {"rules": rule_set, "predictors": names, "style": model_style(names)}
     frame = predictions_frame(db, ctx.study_id, stored_predictors(ctx.config))
     if frame.empty:
-        return out | {"exclusions": {}, "worlds": {}, "fields": {}}
+        return out | {"exclusions": {}, "verdicts": {}, "worlds": {}, "fields": {}}
     kept, counts = kept_rows(frame, ctx, rule_set)
-    return out | {"exclusions": counts, "worlds": world_errors(kept, names),
-                  "fields": world_fields(kept, ctx)}
+    return out | {"exclusions": counts, "verdicts": primary_verdicts(kept, ctx),
+                  "worlds": world_errors(kept, names), "fields": world_fields(kept, ctx)}
 
 
 def dashboard(db: Session, ctx: StudyContext, rule_set: str = "kept",

@@ -2,7 +2,10 @@
 
 import gzip
 import hashlib
+import html as html_text
 import json
+import re
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -13,10 +16,12 @@ from analysis.metrics import add_alignment_errors
 from analysis.report import (
     AnalysisError,
     StudyInputs,
+    render_html,
     run_analyze,
     smallest_effect,
     start_kind_table,
 )
+from analysis.verdicts import EXPLORATORY, direct_sentence, primary_sentence
 from app.observers.simulated_study import simulate_participants
 from tests.analysis.fixed_data import fixed_predictions, small_bank, trial_bank, with_seeds
 
@@ -132,14 +137,14 @@ def test_report_from_csv(tmp_path, inputs, capsys):
             "verdict"] != "neither" else "equivalent" if primary_test["tost_p"] < 0.01
             else "inconclusive")
     assert summary["primary"]["exploratory_worlds"] == {}
-    assert (out / "primary.csv").is_file() and "Pre-registered primary test" in html
+    assert (out / "primary.csv").is_file() and "pre-registered primary test in numbers" in html
     assert list(pd.read_csv(out / "primary.csv").columns[-6:]) == [
         "ci95_low", "ci95_high", "sesoi", "tost_p", "bf10", "conclusion"]
     ceiling = summary["noise_ceiling"]  # coarse bots agree far more than chance
     assert set(ceiling) == {"highway", "obstacle"} and "Human noise ceiling" in html
     for entry in ceiling.values():
         assert 0 <= entry["upper"] <= entry["lower"] < 1
-        assert set(entry["share"]) == {"ours", "vae", "cv"}
+        assert {"ours", "vae", "cv", "policy"} <= set(entry["share"])  # and any observer
     influence = pd.read_csv(out / "leave_one_trial_out.csv")
     trials = kept.groupby("world")["trial_id"].nunique().sum()
     assert len(influence) == 2 * trials  # each main trial, for primary and family answers
@@ -150,8 +155,79 @@ def test_report_from_csv(tmp_path, inputs, capsys):
     assert "family (3 Ours x 3 VAE seeds)" in printed and "trials as random" in printed
     assert "highway (primary): family Ours - VAE" in printed
     assert "within +-0.005: TOST p = " in printed and "BF10 = " in printed
+    assert printed.startswith(primary_sentence("highway", summary["primary"]["highway"]) + "\n")
     assert "noise ceiling (people predicting each other)" in printed
     assert "1 participant(s)) ran another bank" in printed
+    first_page_answers(html, summary)
+    every_figure_captioned(html, summary)
+    equivalence_and_direct_test_on_the_first_page(summary, out)
+
+
+def sections(html: str) -> tuple[str, str]:
+    """The report's first section (the answer) and everything from Details on."""
+    answer = re.search(r'<section class="answer" id="answer" aria-labelledby="answer-heading">'
+                       r'(.*?)</section>', html, re.S)
+    assert answer, "no answer section"
+    details = html.index('<section id="details" aria-labelledby="details-heading">')
+    assert answer.end() <= details
+    return answer.group(1), html[details:]
+
+
+def first_page_answers(html: str, summary: dict) -> None:
+    """The first section says each world's primary verdict in words, then the ceiling
+    figure; the first table of the page comes after it, under Details."""
+    answer, details = sections(html)
+    assert "<table" not in html[:html.index('<section id="details"')]
+    lines = re.findall(r'<li data-world="(\w+)">(.*?)</li>', answer, re.S)
+    worlds = [w for w in summary["primary"] if w != "exploratory_worlds"]
+    assert [w for w, _ in lines] == worlds == ["highway", "obstacle"]
+    for world, line in lines:
+        assert html_text.unescape(line) == primary_sentence(world, summary["primary"][world])
+        verdict = summary["primary"][world]["verdict"]
+        said = {"ours": "align better with Ours than with the VAE",
+                "vae": "align better with the VAE than with Ours",
+                "neither": "no difference between the two models could be shown"}[verdict]
+        assert said in html_text.unescape(line)
+    assert answer.index("</ul>") < answer.index("<figure>")  # verdicts, then the figure
+    assert "noise ceiling" in html_text.unescape(answer) and "<table" in details
+    assert "<p>Details" not in answer and details.index("<h2 id=\"details-heading\">") < 80
+
+
+def every_figure_captioned(html: str, summary: dict) -> None:
+    """Each figure has a caption in words (what is plotted, what lower means), never its
+    file name, and the ceiling figure is among them."""
+    captions = re.findall(r"<figcaption>(.*?)</figcaption>", html, re.S)
+    pngs = [name for name in summary["figures"] if name.endswith(".png")]
+    assert "noise_ceiling.png" in pngs and len(captions) == len(pngs)
+    for caption in captions:
+        assert not re.search(r"\.(png|svg)\b", caption) and len(caption) > 120
+        assert re.search(r"lower|below 0|left of 0", caption, re.I), caption
+    assert "<th>p &lt; 0.01</th>" not in html  # the one-sided column says which test it is
+    assert "Ours &lt; VAE at one-sided p &lt; 0.01" in html
+
+
+def equivalence_and_direct_test_on_the_first_page(summary: dict, out: Path) -> None:
+    """A summary with the equivalence test's keys and the direct test renders both sentences
+    (the exploratory world's too) and their columns."""
+    equivalence = {"ci95_low": -0.5, "ci95_high": -0.2, "sesoi": 0.05, "tost_p": 0.9,
+                   "bf10": 12.0}
+    summary["primary"]["highway"] |= equivalence | {"conclusion": "ours"}
+    summary["primary"]["obstacle"] |= equivalence | {"conclusion": "inconclusive",
+                                                     "exploratory": True}
+    variant = {"mean_diff": -0.03, "ci95_low": -0.05, "ci95_high": -0.01, "p_holm": 0.004,
+               "verdict": "coarse"}
+    summary["direct"] = {"highway": {"variants": {"coarse_scene": variant},
+                                     "verdict": "coarse", "exploratory": False}}
+    page = render_html(summary, sorted(out.glob("*.png")))
+    answer, details = sections(page)
+    answer = html_text.unescape(answer)
+    assert ("Highway: people's predictions align better with Ours than with the VAE (Ours - "
+            "VAE alignment error") in answer and "95% CI [-0.500, -0.200]" in answer
+    assert f"Obstacle ({EXPLORATORY}): inconclusive: neither a difference" in answer
+    assert direct_sentence("highway", summary["direct"]["highway"]) in answer
+    assert answer.index("direct test") > answer.index("Obstacle (")
+    assert "TOST p (equivalence, two one-sided tests)" in details
+    assert "coarse_scene" in details
 
 
 def test_the_smallest_effect_comes_from_the_config_or_its_default():

@@ -3,10 +3,11 @@
 import asyncio
 import re
 
+import httpx
 import pytest
 
 from app.pilot.bots import run_bots
-from tests.conftest import REPO
+from tests.conftest import ADMIN_TOKEN, REPO
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import researcher_page
 
@@ -39,6 +40,7 @@ def test_dashboard_lists_sessions_and_replays_a_trial(browser_server, bot_sessio
     rows = page.locator("table.sessions tbody tr")
     assert rows.count() >= BOTS
     assert page.locator("table.sessions th", has_text="external id").count() == 0
+    shown_verdicts(page, browser_server.url)
     # bots answer faster than people: by the server's clock most end `excluded` (too fast)
     finished = re.compile("completed|excluded")
     done = [row for row in rows.all_inner_texts() if finished.search(row)]
@@ -70,3 +72,21 @@ def test_dashboard_lists_sessions_and_replays_a_trial(browser_server, bot_sessio
     page.screenshot(path=str(SCREENSHOTS / "dashboard_replay_e2e.png"), full_page=True)
     assert errors == []
     page.close()
+
+
+def shown_verdicts(page, url: str) -> None:
+    """The page lists, per world, the primary test's sentence the dashboard API gives (the
+    report's, analysis/verdicts.py), or says there is none yet."""
+    board = httpx.get(f"{url}/api/researcher/dashboard", params={"study_id": BROWSER_STUDY},
+                      headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}, timeout=30).json()
+    verdicts = board["alignment"]["verdicts"]
+    page.wait_for_selector("#verdicts li")
+    items = page.locator("#verdicts li")
+    if verdicts:
+        assert items.all_inner_texts() == list(verdicts.values())
+        assert [items.nth(i).get_attribute("data-world") for i in range(items.count())] == list(
+            verdicts)
+    else:
+        assert items.all_inner_texts() == ["Not yet: the test needs kept participants whose "
+                                           "answers ran the loaded trial bank."]
+    assert page.text_content("#verdicts-heading").startswith("The answer so far")

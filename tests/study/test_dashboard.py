@@ -10,8 +10,15 @@ import pytest
 from scipy import stats
 from sqlalchemy import update
 
+from analysis.bank import read_bank
 from analysis.contracts import COARSE_OBSERVERS
+from analysis.load import load_csv
+from analysis.metrics import add_alignment_errors, apply_exclusions
+from analysis.report import preregistered_primary
+from analysis.seeds import seed_results
+from analysis.verdicts import EXPLORATORY, primary_sentences
 from app.server.tables import Participant, TrialResponse
+from app.study.config import load_study_config
 from tests.study.flow import ADMIN, at_first_trial, prediction_body, straight_clicks
 from tests.study.flow import Participant as Person
 
@@ -97,6 +104,33 @@ def test_error_cis_equal_scipy_on_the_same_rows(client, small_study, finished):
     assert board["alignment"]["exclusions"]["excluded_incomplete"] == 1
     live = dashboard(client, small_study.study_id, rules="live")["alignment"]
     assert live["exclusions"].get("excluded_incomplete", 0) == 0
+
+
+def test_the_primary_verdict_in_words_is_the_reports(client, small_study, finished, tmp_path):
+    """The dashboard says per world the sentence report.html's first page says, on the same
+    kept rows: the export through the analysis' exclusions, seeds and primary test."""
+    board = dashboard(client, small_study.study_id)["alignment"]
+    csv = client.get("/api/researcher/export.csv", params={"study_id": small_study.study_id},
+                     headers=ADMIN).text
+    (tmp_path / "export.csv").write_text(csv)
+    frame = load_csv(tmp_path / "export.csv")
+    bank = read_bank(small_study.layout.bank(small_study.study_id))
+    assert set(frame["bank_sha256"]) == {bank.sha256}  # every row joins every seed's answers
+    config = load_study_config(small_study.settings("sqlite://"), small_study.study_id)
+    kept = add_alignment_errors(apply_exclusions(frame, config.exclusions).kept)
+    seeds = seed_results(kept, bank, "bank")
+    primary = preregistered_primary(seeds.family_rows, config.exploratory_worlds,
+                                    config.smallest_effect_of_interest, tmp_path)
+    expected = primary_sentences(json.loads(json.dumps(primary, default=float)))
+    assert set(expected) == {"highway", "obstacle"}
+    assert board["verdicts"] == expected
+    for world, sentence in board["verdicts"].items():
+        exploratory = world in config.exploratory_worlds
+        assert sentence.startswith(world.capitalize() + (f" ({EXPLORATORY}): " if exploratory
+                                                         else ": "))
+        assert "3 participants" in sentence
+    live = dashboard(client, small_study.study_id, rules="live")["alignment"]["verdicts"]
+    assert set(live) == {"highway", "obstacle"}
 
 
 def test_field_panels_hold_each_models_top_codes(client, small_study, finished):

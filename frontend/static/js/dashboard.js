@@ -205,6 +205,21 @@ export function errorPlot(world, entry, models) {
   return plot;
 }
 
+/** Per world, the pre-registered primary test's verdict in words: the report's first-page
+ * sentence (analysis/verdicts.py primary_sentence), computed by the server. */
+export function renderVerdicts(container, verdicts) {
+  const worlds = Object.entries(verdicts ?? {});
+  if (!worlds.length) {
+    container.replaceChildren(el("li", { textContent: "Not yet: the test needs kept participants whose answers ran the loaded trial bank." }));
+    return;
+  }
+  container.replaceChildren(...worlds.map(([world, sentence]) => {
+    const item = el("li", { textContent: sentence });
+    item.dataset.world = world;
+    return item;
+  }));
+}
+
 /** Per world: the error plot and a table of mean [95% CI] per predictor (`predictors`, in
  * order; `style` their colours and labels). */
 export function renderErrors(container, worlds, predictors, style) {

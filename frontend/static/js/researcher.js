@@ -1,6 +1,6 @@
 // Researcher dashboard: token in sessionStorage, sessions, live plots, replays, CSV export.
 import { ApiError, ResearcherApi, requestJson } from "./api.js";
-import { ParticipantsTable, renderErrors, renderFields, renderVersions } from "./dashboard.js";
+import { ParticipantsTable, renderErrors, renderFields, renderVerdicts, renderVersions } from "./dashboard.js";
 import { ReplayView } from "./replay.js";
 
 const TOKEN_KEY = "tomstudy.researcher.token";
@@ -204,6 +204,7 @@ class Dashboard {
     this.table.show(board.participants);
     const { alignment } = board;
     $("exclusions").textContent = exclusionsText(alignment.exclusions);
+    renderVerdicts($("verdicts"), alignment.verdicts);
     renderErrors($("error-plots"), alignment.worlds, alignment.predictors, alignment.style);
     const key = JSON.stringify(alignment.fields); // redraw the canvases only when they change
     if (key !== this.fieldsKey) renderFields($("fields"), alignment.fields);
