@@ -90,7 +90,7 @@ COARSE_OBSERVERS = ("coarse", "coarse_scene", "coarse_momentum")
 # Okabe-Ito, safe for colour-blind readers; `human` is the participants' answers
 MODEL_COLORS = {"ours": "#E69F00", "vae": "#0072B2", "cv": "#009E73", "policy": "#CC79A7",
                 "human": "#000000"}
-MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy (precise)",
+MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy",
                 "human": "Participants", "coarse": "Coarse observer",
                 "coarse_scene": "Coarse, scene", "coarse_momentum": "Coarse, momentum"}
 # plug-in predictors' colours: the rest of Okabe-Ito, then Paul Tol's muted set

@@ -13,7 +13,8 @@ from tests.e2e.test_dashboard_browser import CANVAS_COLOURS
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
-LABELS = ["Ours", "VAE", "Const. vel.", "ctrv", "Policy"]
+LABELS = ["Ours", "VAE", "Const. vel.", "Coarse observer", "Coarse, scene", "Coarse, momentum",
+          "ctrv", "Policy"]
 # Pixels of a canvas within `tolerance` levels per channel of an RGB colour. The replay strokes
 # a model's moves at 0.9 alpha and anti-aliased, so few of its pixels are the colour exactly;
 # 10 levels take in its squares over its own line and its line over dark ground, and nothing
