@@ -29,7 +29,7 @@ SPLITS = 50
 
 def unit_moves(rows: pd.DataFrame) -> np.ndarray:
     """Participants' predicted moves [N, 2] as unit vectors (0 where a move has no length)."""
-    moves = rows[["human_vx", "human_vy"]].to_numpy(np.float64)
+    moves = rows[["participant_vx", "participant_vy"]].to_numpy(np.float64)
     norm = np.hypot(moves[:, 0], moves[:, 1])[:, None]
     return np.divide(moves, norm, out=np.zeros_like(moves), where=norm > 0)
 

@@ -14,25 +14,35 @@ import hashlib
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+# Every export's first column, export_version: 1 = before the rename below (an export without
+# the column), 2 = the participant's answer renamed (RENAMED_COLUMNS).
+EXPORT_VERSION = 2
+# export_version 2's renames, an older export's name -> the current one; the database keeps the
+# old names (the person agent's position stays human_x, human_y)
+RENAMED_COLUMNS = {"human_vx": "participant_vx", "human_vy": "participant_vy",
+                   "click_x": "participant_click_x", "click_y": "participant_click_y"}
+STORED_NAMES = {new: old for old, new in RENAMED_COLUMNS.items()}  # export -> database name
+
 # Export contract, in order. Types: the reader casts to these, so CSV and DB agree.
 STRING_COLUMNS = ("study_id", "participant_id", "recruitment", "outcome", "world",
                   "trial_id", "arm", "clip_sha256", "start_kind", "ours_sha256", "vae_sha256",
                   "click_input", "submission_id", "submitted_at", "config_sha256", "bank_sha256")
 BOOL_COLUMNS = ("completed", "replaced", "attention_passed", "is_practice", "attention_check")
-INT_COLUMNS = ("world_position", "trial_index", "start_index", "step", "ours_code",
-               "vae_code", "replays")
-FLOAT_COLUMNS = ("start_x", "start_y", "human_x", "human_y", "click_x", "click_y",
-                 "human_vx", "human_vy", "ours_vx", "ours_vy", "vae_vx", "vae_vy",
-                 "cv_vx", "cv_vy", "policy_vx", "policy_vy", "click_time_ms",
+INT_COLUMNS = ("export_version", "world_position", "trial_index", "start_index", "step",
+               "ours_code", "vae_code", "replays")
+FLOAT_COLUMNS = ("start_x", "start_y", "human_x", "human_y", "participant_click_x",
+                 "participant_click_y", "participant_vx", "participant_vy", "ours_vx", "ours_vy",
+                 "vae_vx", "vae_vy", "cv_vx", "cv_vy", "policy_vx", "policy_vy", "click_time_ms",
                  "trial_duration_ms")
 EXPORT_COLUMNS = (
-    "study_id", "participant_id", "recruitment", "completed", "outcome", "replaced",
-    "attention_passed", "world", "world_position", "trial_id", "trial_index", "is_practice",
-    "attention_check", "arm", "clip_sha256", "start_index", "start_kind", "step", "start_x",
-    "start_y", "human_x", "human_y", "click_x", "click_y", "human_vx", "human_vy", "ours_vx",
-    "ours_vy", "vae_vx", "vae_vy", "cv_vx", "cv_vy", "policy_vx", "policy_vy", "ours_code",
-    "vae_code", "ours_sha256", "vae_sha256", "click_time_ms", "click_input", "trial_duration_ms",
-    "replays", "submission_id", "submitted_at", "config_sha256", "bank_sha256",
+    "export_version", "study_id", "participant_id", "recruitment", "completed", "outcome",
+    "replaced", "attention_passed", "world", "world_position", "trial_id", "trial_index",
+    "is_practice", "attention_check", "arm", "clip_sha256", "start_index", "start_kind", "step",
+    "start_x", "start_y", "human_x", "human_y", "participant_click_x", "participant_click_y",
+    "participant_vx", "participant_vy", "ours_vx", "ours_vy", "vae_vx", "vae_vy", "cv_vx",
+    "cv_vy", "policy_vx", "policy_vy", "ours_code", "vae_code", "ours_sha256", "vae_sha256",
+    "click_time_ms", "click_input", "trial_duration_ms", "replays", "submission_id",
+    "submitted_at", "config_sha256", "bank_sha256",
 )
 # Each plug-in predictor of a study (app/predictors/) adds these columns, in the study config's
 # order after the contract's, named <predictor>_<field>; a plug-in's code is -1 when it has none
@@ -53,26 +63,27 @@ def plugin_names(columns) -> list[str]:
 
 
 # columns added after the first export, with the value an older export's rows read as
-ADDED_COLUMNS = {"arm": "", "replaced": False, "click_input": ""}
+ADDED_COLUMNS = {"arm": "", "replaced": False, "click_input": "", "export_version": 1}
 SORT_KEYS = ["participant_id", "trial_index", "trial_id", "start_index", "step"]
 
 # Every export except predictions (whose rows carry each model's hash already) names
 # the models a session's answers came from as JSON: {"<world>": {"ours": sha, "vae": sha}}.
 STUDY_VERSION = {"config_sha256": "text", "bank_sha256": "text", "models_sha256": "text"}
+VERSIONED = {"export_version": "int"}  # EXPORT_VERSION, first in every export
 
 SURVEY = {
-    "study_id": "text", "participant_id": "text", "question": "text", "kind": "text",
+    **VERSIONED, "study_id": "text", "participant_id": "text", "question": "text", "kind": "text",
     "answer": "text", "answered_at": "time", **STUDY_VERSION,
 }
 EVENTS = {
-    "study_id": "text", "participant_id": "text", "source": "text", "kind": "text",
+    **VERSIONED, "study_id": "text", "participant_id": "text", "source": "text", "kind": "text",
     "t_client_ms": "float", "t_trial_ms": "float", "received_at": "time",
     "trial_id": "text", "start_index": "int", "clicks": "int", "replays": "int", "w": "int",
     "h": "int",
     **STUDY_VERSION,
 }
 PARTICIPANTS = {
-    "study_id": "text", "external_id": "text", "recruitment": "text",
+    **VERSIONED, "study_id": "text", "external_id": "text", "recruitment": "text",
     "participant_id": "text", "outcome": "text", "completion_code": "text",
     "status": "text", "started_at": "time", "ended_at": "time", "duration_min": "float",
     "last_seen": "time", "world_order": "text", "steps_done": "int", "steps_total": "int",

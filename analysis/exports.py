@@ -14,7 +14,7 @@ from typing import IO
 import numpy as np
 import pandas as pd
 
-from analysis.contracts import SCHEMAS
+from analysis.contracts import ADDED_COLUMNS, SCHEMAS
 from analysis.csvsafe import restore_text
 from analysis.load import load_csv
 
@@ -41,7 +41,8 @@ def _cast(values: pd.Series, kind: str) -> pd.Series:
 
 
 def read_export(source: Path | IO[str], what: str) -> pd.DataFrame:
-    """An export CSV as written, with the dtypes of its contract."""
+    """An export CSV as written, with the dtypes of its contract (an export older than a
+    column, such as export_version, reads with the value of ADDED_COLUMNS)."""
     if what == "predictions":
         return load_csv(source)
     schema = SCHEMAS[what]
@@ -50,4 +51,5 @@ def read_export(source: Path | IO[str], what: str) -> pd.DataFrame:
     raw = pd.read_csv(source, dtype={c: str for c in text} | {c: np.float64 for c in numbers},
                       keep_default_na=False, na_values={c: [""] for c in numbers},
                       true_values=["True"], false_values=["False"])
+    raw = raw.assign(**{c: v for c, v in ADDED_COLUMNS.items() if c in schema and c not in raw})
     return typed(restore_text(raw, text), schema)

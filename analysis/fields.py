@@ -15,8 +15,9 @@ def state_table(rows: pd.DataFrame) -> pd.DataFrame:
     move and code, and the sums and counts of each model's error over all steps."""
     first = rows[rows["step"] == rows["step"].min()]
     table = first.groupby(["trial_id", "start_index"], sort=True).agg(
-        x=("start_x", "first"), y=("start_y", "first"), human_vx=("human_vx", "mean"),
-        human_vy=("human_vy", "mean"), ours_vx=("ours_vx", "first"),
+        x=("start_x", "first"), y=("start_y", "first"),
+        participant_vx=("participant_vx", "mean"), participant_vy=("participant_vy", "mean"),
+        ours_vx=("ours_vx", "first"),
         ours_vy=("ours_vy", "first"), vae_vx=("vae_vx", "first"), vae_vy=("vae_vy", "first"),
         ours_code=("ours_code", "first"), vae_code=("vae_code", "first"))
     errors = rows.groupby(["trial_id", "start_index"], sort=True).agg(

@@ -3,7 +3,8 @@
 Both readers return the same tidy DataFrame: one row per (participant, trial, start state,
 step), the columns of the export contract (app/server/API.md) with fixed dtypes, then each
 plug-in predictor's four columns (`<name>_vx`, `_vy`, `_code`, `_sha256`), sorted by
-participant, trial, start state and step. `participant_id` is the session's random
+participant, trial, start state and step. An older export reads under the current column
+names, its own `export_version` kept. `participant_id` is the session's random
 public id: the predictions carry no platform id.
 """
 
@@ -20,9 +21,12 @@ from analysis.contracts import (
     BOOL_COLUMNS,
     COARSE_OBSERVERS,
     EXPORT_COLUMNS,
+    EXPORT_VERSION,
     INT_COLUMNS,
     PLUGIN_FIELDS,
+    RENAMED_COLUMNS,
     SORT_KEYS,
+    STORED_NAMES,
     STRING_COLUMNS,
     plugin_columns,
     plugin_names,
@@ -68,8 +72,11 @@ def _cast(values: pd.Series, kind: str) -> pd.Series:
 
 def normalise(frame: pd.DataFrame) -> pd.DataFrame:
     """Cast the export columns (and plug-in predictors' columns) to fixed dtypes and sort;
-    other columns are dropped, and columns newer than the export (ADDED_COLUMNS) get the value
-    older rows read as."""
+    other columns are dropped, an export without export_version (version 1) has its renamed
+    columns (RENAMED_COLUMNS) read under their current names, and columns newer than the
+    export (ADDED_COLUMNS) get the value older rows read as."""
+    if "export_version" not in frame.columns:
+        frame = frame.rename(columns=RENAMED_COLUMNS)
     frame = frame.assign(**{c: v for c, v in ADDED_COLUMNS.items() if c not in frame.columns})
     missing = [c for c in EXPORT_COLUMNS if c not in frame.columns]
     if missing:
@@ -77,7 +84,23 @@ def normalise(frame: pd.DataFrame) -> pd.DataFrame:
     out = pd.DataFrame(index=frame.index)
     for col, kind in column_kinds(frame.columns).items():
         out[col] = _cast(frame[col], kind)
+    _check_version(out["export_version"])
     return out.sort_values(SORT_KEYS, kind="stable").reset_index(drop=True)
+
+
+def _check_version(versions: pd.Series) -> None:
+    """Refuse rows of an export newer than this code reads (its columns may mean other things)."""
+    newest = int(versions.max()) if len(versions) else EXPORT_VERSION
+    if newest > EXPORT_VERSION:
+        raise DataError(f"export_version: {newest} is newer than this analysis reads "
+                        f"({EXPORT_VERSION}); update tomstudy")
+
+
+def stored_columns(table, skip: tuple[str, ...] = ()) -> list:
+    """The export contract's columns `table` (a database table) holds, each labelled with its
+    export name (the database keeps the names before export_version 2: STORED_NAMES)."""
+    return [table.c[STORED_NAMES.get(c, c)].label(c) for c in EXPORT_COLUMNS
+            if STORED_NAMES.get(c, c) in table.c and c not in skip]
 
 
 def expand_plugins(frame: pd.DataFrame, names: list[str] | None = None) -> pd.DataFrame:
@@ -153,8 +176,7 @@ def load_database(url: str, study_id: str) -> pd.DataFrame:
                 trial.c.world, trial.c.world_position, trial.c.trial_id, trial.c.trial_index,
                 trial.c.is_practice, trial.c.attention_check, trial.c.clip_sha256,
                 *[trial.c[c] for c in ADDED_COLUMNS if c in trial.c],  # older schemas lack them
-                *[pred.c[c] for c in EXPORT_COLUMNS if c in pred.c and c not in
-                  ("participant_id", "trial_id", "submission_id")],
+                *stored_columns(pred, ("participant_id", "trial_id", "submission_id")),
                 trial.c.duration_ms.label("trial_duration_ms"), trial.c.replays,
                 pred.c.submission_id, trial.c.received_at.label("submitted_at"),
                 *[pred.c[c] for c in ("plugins",) if c in pred.c])  # older schemas lack it
@@ -168,6 +190,7 @@ def load_database(url: str, study_id: str) -> pd.DataFrame:
     if frame.empty:
         frame = pd.DataFrame(columns=list(EXPORT_COLUMNS))
     frame["submitted_at"] = frame["submitted_at"].map(_iso_time)
+    frame["export_version"] = EXPORT_VERSION  # the rows as the export writes them now
     return normalise(expand_plugins(frame))
 
 

@@ -27,22 +27,23 @@ UNIT_KEYS = ["participant_id", "world"]
 
 def add_alignment_errors(frame: pd.DataFrame,
                          models: tuple[str, ...] | None = None) -> pd.DataFrame:
-    """A copy of `frame` with `err_<model>` columns: human action vs each model's action (by
-    default the contract's MODELS and every plug-in predictor the rows hold)."""
+    """A copy of `frame` with `err_<model>` columns: the participant's action vs each model's
+    action (by default the contract's MODELS and every plug-in predictor the rows hold)."""
     if models is None:
         models = (*MODELS, *plugin_names(frame.columns))
     out = frame.copy()
-    human = frame[["human_vx", "human_vy"]].to_numpy(np.float64)
+    participant = frame[["participant_vx", "participant_vy"]].to_numpy(np.float64)
     for model in models:
         other = frame[[f"{model}_vx", f"{model}_vy"]].to_numpy(np.float64)
-        out[f"err_{model}"] = alignment_error(human, other)
+        out[f"err_{model}"] = alignment_error(participant, other)
     return out
 
 
 def zero_vector_counts(frame: pd.DataFrame, models: tuple[str, ...] = MODELS) -> dict[str, int]:
-    """How many rows each model (and the human column) has an action shorter than ZERO_SPEED_MPS."""
+    """How many rows each model (and the participant) has an action shorter than
+    ZERO_SPEED_MPS."""
     counts = {}
-    for who in ("human", *models):
+    for who in ("participant", *models):
         counts[who] = int(np.sum(~has_direction(frame[[f"{who}_vx", f"{who}_vy"]].to_numpy())))
     return counts
 

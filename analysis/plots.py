@@ -79,11 +79,11 @@ def field_panel(ax, states: pd.DataFrame, model: str, scene: dict | None,
     else:
         ax.invert_yaxis()
         ax.set_aspect("equal")
-    for who, width in (("human", 0.006), (model, 0.004)):
+    for who, style, width in (("participant", "human", 0.006), (model, model, 0.004)):
         ux, uy = unit(states[f"{who}_vx"].to_numpy(), states[f"{who}_vy"].to_numpy())
         ax.quiver(states["x"], states["y"], ux * arrow_m, uy * arrow_m, angles="xy",
-                  scale_units="xy", scale=1, color=MODEL_COLORS[who], width=width, zorder=4,
-                  label=MODEL_LABELS[who])
+                  scale_units="xy", scale=1, color=MODEL_COLORS[style], width=width, zorder=4,
+                  label=MODEL_LABELS[style])
     return panel_error(states, model)
 
 

@@ -73,11 +73,11 @@ def join_seeds(kept: pd.DataFrame, bank: Bank) -> SeedJoin:
     on_bank = kept["bank_sha256"] == bank.sha256
     others = kept.loc[~on_bank]
     answers = seed_answers(bank.data)
-    rows = kept.loc[on_bank, [*ROW_KEYS, "human_vx", "human_vy", "ours_vx", "ours_vy",
-                              "vae_vx", "vae_vy"]]
+    rows = kept.loc[on_bank, [*ROW_KEYS, "participant_vx", "participant_vy", "ours_vx",
+                              "ours_vy", "vae_vx", "vae_vy"]]
     joined = rows.merge(answers, on=ANSWER_KEYS, how="inner")
-    human = joined[["human_vx", "human_vy"]].to_numpy(np.float64)
-    joined["err"] = alignment_error(human, joined[["vx", "vy"]].to_numpy(np.float64))
+    participant = joined[["participant_vx", "participant_vy"]].to_numpy(np.float64)
+    joined["err"] = alignment_error(participant, joined[["vx", "vy"]].to_numpy(np.float64))
     matched = int(joined[ROW_KEYS].drop_duplicates().shape[0])
     return SeedJoin(
         errors=joined[[*ROW_KEYS, "model", "seed_index", "seed", "err"]],

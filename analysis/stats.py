@@ -166,11 +166,12 @@ def infer_dt_s(frame: pd.DataFrame, ids: np.ndarray | None = None) -> pd.Series:
     """Per world, the step dt [s] implied by clicks and human actions (median of |dp| / |v|)."""
     ids = prediction_ids(frame) if ids is None else ids
     first = _first_rows(ids)
-    click_x, click_y = frame["click_x"].to_numpy(), frame["click_y"].to_numpy()
+    click_x = frame["participant_click_x"].to_numpy()
+    click_y = frame["participant_click_y"].to_numpy()
     prev_x = np.where(first, frame["start_x"].to_numpy(), np.r_[np.nan, click_x[:-1]])
     prev_y = np.where(first, frame["start_y"].to_numpy(), np.r_[np.nan, click_y[:-1]])
     moved = np.hypot(click_x - prev_x, click_y - prev_y)
-    speed = np.hypot(frame["human_vx"].to_numpy(), frame["human_vy"].to_numpy())
+    speed = np.hypot(frame["participant_vx"].to_numpy(), frame["participant_vy"].to_numpy())
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = pd.Series(np.where(speed > 0, moved / speed, np.nan), index=frame.index)
     return ratio.groupby(frame["world"]).median().rename("dt_s")
@@ -187,7 +188,8 @@ def displacement_errors(frame: pd.DataFrame,
     dt = frame["world"].map(infer_dt_s(frame, ids)).to_numpy()
     last = _last_rows(ids)
     out = frame[UNIT_KEYS].copy()
-    click_x, click_y = frame["click_x"].to_numpy(), frame["click_y"].to_numpy()
+    click_x = frame["participant_click_x"].to_numpy()
+    click_y = frame["participant_click_y"].to_numpy()
     for model in models:
         px = frame["start_x"].to_numpy() + dt * _cumsum_within(frame[f"{model}_vx"].to_numpy(), ids)
         py = frame["start_y"].to_numpy() + dt * _cumsum_within(frame[f"{model}_vy"].to_numpy(), ids)

@@ -28,7 +28,7 @@ from tqdm import tqdm
 
 from analysis.alignment import alignment_error
 from analysis.atomic import write_json
-from analysis.contracts import EXPORT_COLUMNS
+from analysis.contracts import EXPORT_COLUMNS, EXPORT_VERSION, RENAMED_COLUMNS
 from analysis.load import normalise
 from analysis.metrics import add_alignment_errors, participant_means
 from analysis.plots import plot_power, plot_trial_contrast
@@ -147,11 +147,13 @@ def simulate_participants(bank: TrialBank, preset: str, n: int, trials_per_world
 
 
 def export_frame(parts: list[dict[str, np.ndarray]], study_id: str, preset: str) -> pd.DataFrame:
-    """Concatenate per-trial columns and fill the constant export columns."""
+    """Concatenate per-trial columns (stored names, renamed as the export names them) and fill
+    the constant export columns."""
     cols = {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
-    frame = pd.DataFrame(cols)
+    frame = pd.DataFrame(cols).rename(columns=RENAMED_COLUMNS)
     size = len(frame)
-    constants = {"study_id": study_id, "recruitment": "simulated", "completed": True,
+    constants = {"export_version": EXPORT_VERSION, "study_id": study_id,
+                 "recruitment": "simulated", "completed": True,
                  "outcome": "completed", "replaced": False, "config_sha256": "", "bank_sha256": "",
                  "attention_passed": True, "is_practice": False, "attention_check": False,
                  "trial_duration_ms": SIMULATED_TRIAL_MS, "replays": 0, "submitted_at": "",

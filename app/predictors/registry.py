@@ -15,8 +15,9 @@ from analysis.contracts import COARSE_OBSERVERS, MODELS
 from app.predictors.protocol import Predictor
 
 GROUP = "tomstudy.predictors"
-# the export's own column prefixes: the models', the coarse observers' and the person's
-RESERVED = (*MODELS, *COARSE_OBSERVERS, "human")
+# the export's own column prefixes: the models', the coarse observers', the person agent's and
+# the participant's
+RESERVED = (*MODELS, *COARSE_OBSERVERS, "human", "participant")
 NAME = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
 MAX_NAME = 32
 
@@ -40,7 +41,7 @@ def listing(plugins: dict[str, EntryPoint]) -> str:
 def name_problem(name: str, plugins: dict[str, EntryPoint]) -> str:
     """Why `name` cannot name a plug-in in a study ('' when it can); `plugins` is registered()."""
     if name in RESERVED:
-        return f"{name!r} is one of the study's own predictors, not a plug-in"
+        return f"{name!r} is one of the study's own predictors or column prefixes, not a plug-in"
     if not NAME.match(name) or len(name) > MAX_NAME:
         return (f"{name!r} is not a predictor name (lower-case letters, digits and single "
                 f"underscores, starting with a letter, at most {MAX_NAME} characters)")

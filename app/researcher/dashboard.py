@@ -156,7 +156,7 @@ def world_fields(kept: pd.DataFrame, ctx: StudyContext, k: int = FIELD_CODES) ->
 def _panel(model: str, code: int, states: pd.DataFrame, arrow_m: float) -> dict:
     from analysis.fields import panel_error, unit
 
-    hx, hy = unit(states["human_vx"].to_numpy(), states["human_vy"].to_numpy())
+    hx, hy = unit(states["participant_vx"].to_numpy(), states["participant_vy"].to_numpy())
     mx, my = unit(states[f"{model}_vx"].to_numpy(), states[f"{model}_vy"].to_numpy())
     points = np.column_stack([states["x"], states["y"], hx, hy, mx, my]).round(4)
     return {"model": model, "code": int(code), "trials": int(states["trial_id"].nunique()),

@@ -9,8 +9,9 @@
 
 The analysis exports carry the session's random `public_id` as `participant_id`, never
 the platform's id; only `participants` links the two. Every row carries the config and
-bank hashes of its own session, so a study changed mid-way shows it per row. Columns
-and dtypes: analysis/load.py (predictions) and analysis/exports.py (the others).
+bank hashes of its own session, so a study changed mid-way shows it per row, and the export's
+`export_version`. Columns and dtypes: analysis/load.py (predictions) and analysis/exports.py
+(the others).
 """
 
 import io
@@ -22,19 +23,24 @@ import pandas as pd
 from sqlalchemy import func, select
 from sqlmodel import Session
 
-from analysis.contracts import EVENTS, EXPORT_COLUMNS, PARTICIPANTS, SURVEY, WHAT, ExclusionRules
+from analysis.contracts import (
+    EVENTS,
+    EXPORT_COLUMNS,
+    EXPORT_VERSION,
+    PARTICIPANTS,
+    SURVEY,
+    WHAT,
+    ExclusionRules,
+)
 from analysis.csvsafe import write_csv
 from analysis.exports import typed
-from analysis.load import expand_plugins, normalise
+from analysis.load import expand_plugins, normalise, stored_columns
 from app.server.balance import exclusion_reasons, in_progress_cutoff, trial_speeds
 from app.server.plan import trial_steps
 from app.server.schemas import SERVER_EVENTS
 from app.server.sessions import as_utc, session_status
 from app.server.tables import Event, Participant, PredictionRow, Submission, TrialResponse
 from app.study.config import StudyConfig, stored_predictors
-
-_FROM_ROWS = [c for c in EXPORT_COLUMNS if c in PredictionRow.model_fields
-              and c != "participant_id"]
 
 
 def export_table(db: Session, config: StudyConfig, study_id: str, what: str) -> pd.DataFrame:
@@ -73,7 +79,7 @@ def predictions_frame(db: Session, study_id: str, plugins: list[str] = ()) -> pd
                trial.c.attention_check, trial.c.arm, trial.c.clip_sha256,
                trial.c.duration_ms.label("trial_duration_ms"), trial.c.replays,
                trial.c.received_at.label("submitted_at"), part.c.config_sha256,
-               part.c.bank_sha256, *[pred.c[c] for c in _FROM_ROWS], pred.c.plugins)
+               part.c.bank_sha256, *stored_columns(pred, ("participant_id",)), pred.c.plugins)
         .select_from(pred.join(trial, trial.c.submission_id == pred.c.submission_id)
                      .join(part, part.c.id == pred.c.participant_id))
         .where(part.c.study_id == study_id)
@@ -81,6 +87,7 @@ def predictions_frame(db: Session, study_id: str, plugins: list[str] = ()) -> pd
     rows = [dict(r) for r in db.execute(query).mappings()]
     frame = pd.DataFrame(rows, columns=[*EXPORT_COLUMNS, "plugins"])
     frame["submitted_at"] = [as_utc(t).isoformat() for t in frame["submitted_at"]]
+    frame["export_version"] = EXPORT_VERSION
     return normalise(expand_plugins(frame, list(plugins)))
 
 
@@ -107,8 +114,9 @@ def _models(db: Session, study_id: str) -> dict[int, str]:
 
 
 def _versions(sessions: list[Participant], models: dict[int, str]) -> dict[int, dict]:
-    """Session id -> the public id and the study version columns of its rows."""
-    return {p.id: {"study_id": p.study_id, "participant_id": p.public_id,
+    """Session id -> the export version, public id and study version columns of its rows."""
+    return {p.id: {"export_version": EXPORT_VERSION, "study_id": p.study_id,
+                   "participant_id": p.public_id,
                    "config_sha256": p.config_sha256, "bank_sha256": p.bank_sha256,
                    "models_sha256": models.get(p.id, "{}")} for p in sessions}
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from analysis.contracts import EXPORT_COLUMNS
+from analysis.contracts import EXPORT_COLUMNS, EXPORT_VERSION
 from analysis.load import normalise
 from app.study.trials import TrialBank
 
@@ -46,15 +46,17 @@ def _row(p, world, w, t, s, k, start, click, human, rng) -> list:
     cv = np.array([1.0, 0.0])
     policy = human + rng.normal(scale=0.1, size=2)
     values = {
-        "study_id": "paper_study", "participant_id": f"p{p:02d}", "recruitment": "prolific",
+        "export_version": EXPORT_VERSION, "study_id": "paper_study",
+        "participant_id": f"p{p:02d}", "recruitment": "prolific",
         "completed": True, "outcome": "completed", "replaced": False, "attention_passed": True,
         "world": world, "world_position": w, "trial_id": f"{world}-{t}", "trial_index": t,
         "is_practice": False, "attention_check": False, "arm": ("random", "models_disagree")[t % 2],
         "clip_sha256": "c" * 8,
         "start_index": s, "start_kind": START_KINDS[world][s], "step": k, "start_x": start[0],
         "start_y": start[1],
-        "human_x": 0.0, "human_y": 0.0, "click_x": click[0], "click_y": click[1],
-        "human_vx": human[0], "human_vy": human[1], "ours_vx": ours[0], "ours_vy": ours[1],
+        "human_x": 0.0, "human_y": 0.0, "participant_click_x": click[0],
+        "participant_click_y": click[1], "participant_vx": human[0], "participant_vy": human[1],
+        "ours_vx": ours[0], "ours_vy": ours[1],
         "vae_vx": vae[0], "vae_vy": vae[1], "cv_vx": cv[0], "cv_vy": cv[1],
         "policy_vx": policy[0], "policy_vy": policy[1], "ours_code": s % 2, "vae_code": t % 2,
         "ours_sha256": "o" * 8, "vae_sha256": "v" * 8, "click_time_ms": 100.0 * (k + 1),

@@ -16,8 +16,8 @@ def rows_from(directions: np.ndarray, world: str = "highway") -> pd.DataFrame:
     return pd.DataFrame({"participant_id": [f"p{i}" for i in p.ravel()], "world": world,
                          "trial_id": [f"t{j // 6}" for j in c.ravel()],
                          "start_index": (c.ravel() // 3) % 2, "step": c.ravel() % 3,
-                         "human_vx": 2 * np.cos(directions.ravel()),
-                         "human_vy": 2 * np.sin(directions.ravel())})
+                         "participant_vx": 2 * np.cos(directions.ravel()),
+                         "participant_vy": 2 * np.sin(directions.ravel())})
 
 
 def test_leave_one_out_is_against_the_others_mean_direction():

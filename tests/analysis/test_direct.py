@@ -44,8 +44,8 @@ def observer_rows(rng, people: str, n_people: int = 20, n_trials: int = 20, seen
                        "random": rng.uniform(-np.pi, np.pi)}[people]
                 row = {"world": world, "participant_id": f"p{p:02d}",
                        "trial_id": f"{world}-{trial:02d}", "step": step}
-                row |= dict(zip(("human_vx", "human_vy"), unit(aim + rng.normal(0, 0.3)),
-                                strict=True))
+                clicked = unit(aim + rng.normal(0, 0.3))
+                row |= dict(zip(("participant_vx", "participant_vy"), clicked, strict=True))
                 row |= dict(zip(("policy_vx", "policy_vy"), unit(precise[trial]), strict=True))
                 for name in variants:
                     move = unit(coarse[trial] + VARIANT_TURN[name])

@@ -6,6 +6,7 @@ import pandas as pd
 from sqlalchemy import insert
 from sqlmodel import Session
 
+from analysis.contracts import STORED_NAMES
 from analysis.csvsafe import write_csv
 from analysis.load import load_csv, load_database
 from app.researcher.exports import predictions_frame
@@ -39,7 +40,8 @@ def _store(engine, frame: pd.DataFrame) -> None:
                     shown_at_ms=0.0, submitted_at_ms=9000.0, duration_ms=9000.0,
                     client_duration_ms=9000.0, server_duration_ms=9500.0, replays=1,
                     clip_sha256=t["clip_sha256"]))
-                values = trial.assign(participant_id=ident)[pred_cols].to_dict("records")
+                stored = trial.assign(participant_id=ident).rename(columns=STORED_NAMES)
+                values = stored[pred_cols].to_dict("records")
                 conn.execute(insert(PredictionRow.__table__), values)
 
 

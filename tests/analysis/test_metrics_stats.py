@@ -41,7 +41,7 @@ def test_participant_means_and_ttest_match_a_hand_computation():
         for pid in sorted(set(frame["participant_id"])):
             rows = frame[(frame["participant_id"] == pid) & (frame["world"] == world)]
             for model in by_hand:
-                errs = [cos_distance((r.human_vx, r.human_vy),
+                errs = [cos_distance((r.participant_vx, r.participant_vy),
                                       (r[f"{model}_vx"], r[f"{model}_vy"]))
                         for _, r in rows.iterrows()]
                 by_hand[model].append(sum(errs) / len(errs))
@@ -113,7 +113,7 @@ def test_ade_fde_by_hand():
         dists = []
         for _, r in pred.iterrows():
             pos = pos + DT_S * np.array([r.ours_vx, r.ours_vy])
-            dists.append(math.hypot(pos[0] - r.click_x, pos[1] - r.click_y))
+            dists.append(math.hypot(pos[0] - r.participant_click_x, pos[1] - r.participant_click_y))
         ade.extend(dists)
         fde.append(dists[-1])
     row = got[(got["participant_id"] == "p00") & (got["world"] == "obstacle")].iloc[0]

@@ -25,7 +25,7 @@ NAMES = ["ours", "vae", "cv", "ctrv"]
 def with_ctrv(frame, seed: int = 11):
     """The rows with a plug-in `ctrv`: the person's move plus noise, code -1, one hash."""
     rng = np.random.default_rng(seed)
-    noisy = frame[["human_vx", "human_vy"]].to_numpy() + rng.normal(scale=0.8,
+    noisy = frame[["participant_vx", "participant_vy"]].to_numpy() + rng.normal(scale=0.8,
                                                                      size=(len(frame), 2))
     return normalise(frame.assign(ctrv_vx=noisy[:, 0], ctrv_vy=noisy[:, 1], ctrv_code=-1,
                                   ctrv_sha256="c" * 64))
@@ -40,7 +40,7 @@ def means_by_hand(frame, name: str) -> dict:
     """(participant, world) -> mean 1-cos between the person's and `name`'s moves, by hand."""
     sums: dict = {}
     for r in frame.itertuples():
-        error = cos_distance((r.human_vx, r.human_vy),
+        error = cos_distance((r.participant_vx, r.participant_vy),
                              (getattr(r, f"{name}_vx"), getattr(r, f"{name}_vy")))
         sums.setdefault((r.participant_id, r.world), []).append(error)
     return {key: sum(v) / len(v) for key, v in sums.items()}

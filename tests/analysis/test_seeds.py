@@ -45,8 +45,9 @@ def _by_hand_means(frame, bank: dict, model: str, index: int, world: str) -> np.
     means = []
     for pid in sorted(frame["participant_id"].unique()):
         rows = frame[(frame["participant_id"] == pid) & (frame["world"] == world)]
-        errs = [cos_distance((r.human_vx, r.human_vy), trials[r.trial_id]["predictions"][model]
-                              [index]["actions"][r.start_index][r.step])
+        errs = [cos_distance((r.participant_vx, r.participant_vy),
+                             trials[r.trial_id]["predictions"][model][index]["actions"]
+                             [r.start_index][r.step])
                 for r in rows.itertuples()]
         means.append(sum(errs) / len(errs))
     return np.array(means)

@@ -219,7 +219,8 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
     for row in mine:
         point, px_per_m = done["clicks"][row["trial_id"]][(int(row["start_index"]),
                                                            int(row["step"]))]
-        error_px = math.dist(point, (float(row["click_x"]), float(row["click_y"]))) * px_per_m
+        clicked = (float(row["participant_click_x"]), float(row["participant_click_y"]))
+        error_px = math.dist(point, clicked) * px_per_m
         assert error_px <= math.sqrt(2) + 1e-3, (row["trial_id"], error_px)
     for client_ms, server_ms, used_ms in trial_durations(browser_server.db_path, PID):
         assert client_ms >= per_trial * THINK_MS  # the page's (fake) clock, like a person's

@@ -223,7 +223,7 @@ def test_observers_never_read_the_models_answers():
     for world in read.data.worlds.values():
         p = simulated_payload(read, world.trials[0])
         assert not {"predictions", "cv_actions", "policy_actions"} & set(p)
-    clicks = ["participant_id", "trial_id", "click_x", "click_y"]
+    clicks = ["participant_id", "trial_id", "participant_click_x", "participant_click_y"]
     for preset in inverse_planning.PRESETS:
         clean = simulate_participants(read, preset, 4, 5, seed=3, show_progress=False)
         dirty = simulate_participants(trial_bank(poisoned), preset, 4, 5, seed=3,

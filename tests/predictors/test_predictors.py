@@ -146,6 +146,7 @@ def test_a_study_config_names_registered_predictors_only():
     for names, message in ((["nope"], "no installed predictor is named 'nope'"),
                            (["vae"], "'vae' is one of the study's own predictors"),
                            (["human"], "'human' is one of the study's own predictors"),
+                           (["participant"], "'participant' is one of the study's own"),
                            (["policy"], "'policy' is one of the study's own predictors"),
                            (["ctrv", "ctrv"], "each predictor may be named once"),
                            (["Bad-Name"], "is not a predictor name")):

@@ -59,7 +59,7 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
     frame = pd.read_csv(io.StringIO(r.text))
     assert len(frame) == total * k * n
     assert frame["completed"].dtype == bool and frame["attention_passed"].all()
-    assert frame["ours_code"].dtype.kind == "i" and frame["human_vx"].dtype.kind == "f"
+    assert frame["ours_code"].dtype.kind == "i" and frame["participant_vx"].dtype.kind == "f"
     assert frame.groupby("trial_id").size().eq(k * n).all()
     assert frame["is_practice"].sum() == 2 * k * n and frame["attention_check"].sum() == 2 * k * n
     for (trial_id, start), kinds in frame.groupby(["trial_id", "start_index"])["start_kind"]:
@@ -77,8 +77,8 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
     assert row["clip_sha256"] == stored["clip_sha256"]
     dt = json.loads(json.dumps(trial["dt_s"]))
     first = frame[(frame.trial_id == row.trial_id) & (frame.start_index == 0)]
-    assert math.isclose(first.iloc[0]["human_vx"],
-                        (first.iloc[0]["click_x"] - first.iloc[0]["start_x"]) / dt, rel_tol=1e-6)
+    moved = first.iloc[0]["participant_click_x"] - first.iloc[0]["start_x"]
+    assert math.isclose(first.iloc[0]["participant_vx"], moved / dt, rel_tol=1e-6)
     assert (frame["trial_duration_ms"] == 8000).all()
 
     summary = client.get(f"/api/researcher/summary?study_id={small_study.study_id}",

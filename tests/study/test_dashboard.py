@@ -77,7 +77,7 @@ def _independent_cis(csv_text: str) -> dict:
     rows = rows[rows["completed"] & ~rows["is_practice"] & ~rows["attention_check"]]
     out = {}
     for model in ("ours", "vae", "cv", "policy"):
-        h = rows[["human_vx", "human_vy"]].to_numpy()
+        h = rows[["participant_vx", "participant_vy"]].to_numpy()
         m = rows[[f"{model}_vx", f"{model}_vy"]].to_numpy()
         cos = (h * m).sum(1) / (np.linalg.norm(h, axis=1) * np.linalg.norm(m, axis=1))
         per = rows.assign(err=1 - cos).groupby(["world", "participant_id"])["err"].mean()

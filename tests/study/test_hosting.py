@@ -360,7 +360,7 @@ def test_a_loopback_server_without_a_token_makes_one_and_the_old_default_opens_n
         old = httpx.get(sheet, headers={"Authorization": f"Bearer {OLD_DEFAULT_TOKEN}"})
         assert old.status_code == 403
         made = httpx.get(sheet, headers={"Authorization": f"Bearer {printed[0]}"})
-        assert made.status_code == 200 and made.text.startswith("study_id,")
+        assert made.status_code == 200 and made.text.startswith("export_version,study_id,")
     finally:
         proc.terminate()
         proc.wait(timeout=10)

@@ -112,7 +112,7 @@ def test_the_dashboard_and_summary_list_every_predictor(client, ctrv_study, bank
         assert list(entry["models"]) == names, world
         (mine,) = entry["models"]["ctrv"]["participants"]
         rows = scored[scored["world"] == world]
-        by_hand = alignment_error(rows[["human_vx", "human_vy"]].to_numpy(),
+        by_hand = alignment_error(rows[["participant_vx", "participant_vy"]].to_numpy(),
                                   rows[["ctrv_vx", "ctrv_vy"]].to_numpy()).mean()
         assert mine == pytest.approx(by_hand, abs=1e-5)
     summary = client.get("/api/researcher/summary", params={"study_id": ctrv_study.study_id},
