@@ -3,11 +3,13 @@ against a real server, then analysed with every predictor side by side."""
 
 import asyncio
 import subprocess
+from itertools import combinations
 
 import pandas as pd
 import pytest
 from sqlalchemy import create_engine, func, select
 
+from analysis.contracts import COARSE_OBSERVERS
 from app.pilot.bots import run_bots
 from app.server.tables import PredictionRow
 from tests.conftest import TOMSTUDY, free_port, start_server
@@ -53,8 +55,8 @@ def test_bots_take_the_recorded_study_and_every_predictor_is_compared(
     pairwise = pd.read_csv(out / "pairwise.csv")
     assert set(pairwise["world"]) == {"roundabout", "intersection"}
     pairs = {frozenset((a, b)) for a, b in zip(pairwise["a"], pairwise["b"], strict=True)}
-    assert pairs == {frozenset(p) for p in (("ours", "vae"), ("ours", "cv"), ("ours", "ctrv"),
-                                            ("vae", "cv"), ("vae", "ctrv"), ("cv", "ctrv"))}
+    names = ("ours", "vae", "cv", *COARSE_OBSERVERS, "ctrv")
+    assert pairs == {frozenset(p) for p in combinations(names, 2)}
     means = pd.read_csv(out / "predictors.csv")
     assert {"err_ours", "err_vae", "err_cv", "err_ctrv"} <= set(means.columns)
     assert "ctrv" in (out / "report.html").read_text().lower()

@@ -12,7 +12,15 @@ from sqlalchemy import update
 from sqlmodel import Session
 from typer.testing import CliRunner
 
-from analysis.contracts import BOOL_COLUMNS, EXPORT_COLUMNS, INT_COLUMNS, SCHEMAS, WHAT
+from analysis.contracts import (
+    BOOL_COLUMNS,
+    COARSE_OBSERVERS,
+    EXPORT_COLUMNS,
+    INT_COLUMNS,
+    SCHEMAS,
+    WHAT,
+    plugin_columns,
+)
 from analysis.exports import read_export
 from analysis.load import load_csv, load_database
 from app.cli import cli
@@ -94,7 +102,8 @@ def test_each_export_reads_back_with_its_dtypes(client, small_study, study):
                 assert plain[col].dtype == PANDAS_DTYPES[kind], (what, col, plain[col].dtype)
     predictions = read_export(io.StringIO(export(client, small_study.study_id, "predictions")),
                               "predictions")
-    assert list(predictions.columns) == list(EXPORT_COLUMNS)
+    assert list(predictions.columns) == [*EXPORT_COLUMNS, *(c for name in COARSE_OBSERVERS
+                                                            for c in plugin_columns(name))]
     assert all(predictions[c].dtype == bool for c in BOOL_COLUMNS)
     assert all(predictions[c].dtype == np.int64 for c in INT_COLUMNS)
 
