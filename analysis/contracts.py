@@ -100,7 +100,8 @@ MODELS = ("ours", "vae", "cv", "policy")
 COARSE_OBSERVERS = ("coarse", "coarse_scene", "coarse_momentum")
 # Okabe-Ito, safe for colour-blind readers; `human` is the participants' answers
 MODEL_COLORS = {"ours": "#E69F00", "vae": "#0072B2", "cv": "#009E73", "policy": "#CC79A7",
-                "human": "#000000"}
+                "human": "#000000", "coarse": "#661100", "coarse_scene": "#6699CC",
+                "coarse_momentum": "#888888"}  # the observers' from Paul Tol's sets, no plug-in's
 MODEL_LABELS = {"ours": "Ours", "vae": "VAE", "cv": "Const. vel.", "policy": "Policy",
                 "human": "Participants", "coarse": "Coarse observer",
                 "coarse_scene": "Coarse, scene", "coarse_momentum": "Coarse, momentum"}
