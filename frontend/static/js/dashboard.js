@@ -165,7 +165,8 @@ function tickStep(value, ticks) {
 /** One world's error plot of every predictor in `models`: participants as dots (paired
  * lines), mean and 95% CI in black. */
 export function errorPlot(world, entry, models) {
-  const [w, h, left, top, bottom] = [440, 280, 56, 44, 36];
+  const crowded = models.length > 5; // seven labels do not fit side by side in 440 px: tilt them
+  const [w, h, left, top, bottom] = [440, crowded ? 320 : 280, 56, 44, crowded ? 76 : 36];
   const plot = svg("svg", { viewBox: `0 0 ${w} ${h}`, role: "img", class: "error-plot", "data-world": world });
   const highs = models.flatMap((m) => [...entry.models[m].participants, entry.models[m].ci95[1] ?? 0]);
   const yStep = tickStep(Math.max(...highs, 0.01), 4);
@@ -200,7 +201,10 @@ export function errorPlot(world, entry, models) {
     const meanDot = svg("circle", { cx, cy: y(mean), r: 4.5, class: "mean" });
     meanDot.append(svg("title", {}, `${MODEL_LABELS[model]}: ${num(mean)} [${num(ci95[0])}, ${num(ci95[1])}]`));
     plot.append(meanDot);
-    plot.append(svg("text", { x: x(i) + 0.1 * step, y: h - 14, "text-anchor": "middle", class: "tick" }, MODEL_LABELS[model]));
+    const [lx, ly] = [x(i) + 0.1 * step, crowded ? h - bottom + 16 : h - 14];
+    plot.append(svg("text", crowded
+      ? { x: lx, y: ly, "text-anchor": "end", transform: `rotate(-35 ${lx} ${ly})`, class: "tick" }
+      : { x: lx, y: ly, "text-anchor": "middle", class: "tick" }, MODEL_LABELS[model]));
   });
   return plot;
 }
