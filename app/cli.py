@@ -582,15 +582,30 @@ def export_cmd(
 
     if what not in WHAT:
         fail(f"--what: unknown export {what!r}; choose one of {', '.join(WHAT)}")
+    if out is not None:
+        writable_target(out)
     config, engine = study_database(study)
     try:
         with Session(engine) as db:
             frame = export_table(db, config, study, what)
     finally:
         engine.dispose()
-    write_csv(frame, out if out is not None else sys.stdout)
+    try:
+        write_csv(frame, out if out is not None else sys.stdout)
+    except OSError as err:
+        fail(f"--out: cannot write {out}: {err.strerror or err}")
     if out is not None:
         typer.echo(f"wrote {out} ({len(frame)} rows)", err=True)
+
+
+def writable_target(out: Path) -> None:
+    """Make `out`'s folder where missing; a one-line CLI error where it cannot be a file."""
+    if out.is_dir():
+        fail(f"--out: {out} is a folder; give a CSV file name")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        fail(f"--out: cannot make the folder {out.parent}: {err.strerror or err}")
 
 
 @cli.command()

@@ -238,3 +238,26 @@ def test_every_researcher_endpoint_needs_the_token(client, small_study):
     assert r.status_code == 422 and "what" in r.text
     r = client.get("/api/researcher/export/survey.csv?study_id=nope", headers=ADMIN)
     assert r.status_code == 404 and r.json()["detail"].startswith("study_id:")
+
+
+def test_tomstudy_export_makes_a_missing_folder_and_names_a_bad_target(client, small_study,
+                                                                       cli_env, tmp_path):
+    out = tmp_path / "not" / "yet" / "survey.csv"
+    made = cli_env.invoke(cli, ["export", "--study", small_study.study_id, "--what", "survey",
+                                "--out", str(out)])
+    assert made.exit_code == 0, made.output
+    assert len(read_export(out, "survey")) == len(export_rows(client, small_study, "survey"))
+    folder = cli_env.invoke(cli, ["export", "--study", small_study.study_id, "--out",
+                                  str(tmp_path)])
+    assert folder.exit_code == 2
+    assert folder.output.strip().splitlines() == [
+        f"error: --out: {tmp_path} is a folder; give a CSV file name"]
+    under_a_file = cli_env.invoke(cli, ["export", "--study", small_study.study_id, "--out",
+                                        str(out / "x.csv")])
+    assert under_a_file.exit_code == 2 and len(under_a_file.output.strip().splitlines()) == 1
+    assert under_a_file.output.startswith(f"error: --out: cannot make the folder {out}")
+
+
+def export_rows(client, small_study, what: str) -> pd.DataFrame:
+    """The served export `what`, read back."""
+    return read_export(io.StringIO(export(client, small_study.study_id, what)), what)
