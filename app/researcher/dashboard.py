@@ -195,15 +195,14 @@ def primary_verdicts(kept: pd.DataFrame, ctx: StudyContext) -> dict[str, str]:
     return {row["world"]: primary_sentence(row["world"], row) for row in plain_records(table)}
 
 
-def alignment(db: Session, ctx: StudyContext, rule_set: str) -> dict:
+def alignment(frame: pd.DataFrame, ctx: StudyContext, rule_set: str) -> dict:
     """Exclusions, the primary test's verdict per world in words, per-world error CIs of every
     predictor (with their colours and labels, one definition: analysis/contracts.py) and field
-    panels under one rule set."""
+    panels under one rule set, on the study's predictions export `frame`."""
     from analysis.contracts import model_style
 
     names = every_predictor(ctx)
     out = {"rules": rule_set, "predictors": names, "style": model_style(names)}
-    frame = predictions_frame(db, ctx.study_id, stored_predictors(ctx.config))
     if frame.empty:
         return out | {"exclusions": {}, "verdicts": {}, "worlds": {}, "fields": {}}
     kept, counts = kept_rows(frame, ctx, rule_set)
@@ -215,6 +214,24 @@ def dashboard(db: Session, ctx: StudyContext, rule_set: str = "kept",
               external_ids: bool = False) -> dict:
     """Everything the dashboard's live part shows, in one answer."""
     people = study_sessions(db, ctx.study_id)  # loaded once for both
-    return {"study_id": ctx.study_id, "progress": progress_counts(ctx, people),
+    frame = predictions_frame(db, ctx.study_id, stored_predictors(ctx.config))
+    return {"study_id": ctx.study_id,
+            "progress": progress_counts(ctx, people) | usable_counts(frame, ctx),
             "participants": participant_rows(db, ctx, people, external_ids),
-            "versions": versions(db, ctx), "alignment": alignment(db, ctx, rule_set)}
+            "versions": versions(db, ctx), "alignment": alignment(frame, ctx, rule_set)}
+
+
+def usable_counts(frame: pd.DataFrame, ctx: StudyContext) -> dict:
+    """The headline's count: the participants the analysis keeps under the study's own
+    exclusion rules (whatever rule set the panels show), and per rule how many finished
+    sessions it excludes."""
+    from analysis.metrics import apply_exclusions
+
+    if frame.empty:
+        return {"usable": 0, "excluded_by_rule": {}}
+    counts = apply_exclusions(frame, ctx.config.exclusions).counts()
+    never_data = ("pilot", "replaced", "incomplete")  # not finished sessions of the study
+    return {"usable": counts["participants_kept"],
+            "excluded_by_rule": {key.removeprefix("excluded_"): n for key, n in counts.items()
+                                 if key.startswith("excluded_") and n
+                                 and key.removeprefix("excluded_") not in never_data}}

@@ -90,3 +90,9 @@ def shown_verdicts(page, url: str) -> None:
         assert items.all_inner_texts() == ["Not yet: the test needs kept participants whose "
                                            "answers ran the loaded trial bank."]
     assert page.text_content("#verdicts-heading").startswith("The answer so far")
+    progress = board["progress"]
+    excluded = progress["completed"] - progress["usable"]
+    headline = " ".join(page.text_content("#progress-line").split())
+    assert headline.startswith(f"{progress['usable']} usable of {progress['target_sample_size']}")
+    assert f"{progress['completed']} finished" in headline
+    assert (f"{excluded} excluded" in headline) == (excluded > 0)

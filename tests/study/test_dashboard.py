@@ -219,3 +219,19 @@ def test_replay_refuses_a_clip_the_bank_does_not_hold(client, small_study):
     assert r.status_code == 409 and r.json()["detail"].startswith("clip_sha256:")
     r = client.get(f"{base}/nope", params={"study_id": small_study.study_id}, headers=ADMIN)
     assert r.status_code == 404
+
+
+def test_the_headline_counts_usable_participants_not_finished_sessions(client, small_study,
+                                                                       finished, tmp_path):
+    """The dashboard's headline is the analysis' kept count under the study's own rules, with
+    the finished sessions it excludes and why (not 'Completed 25 of 22')."""
+    progress = dashboard(client, small_study.study_id, rules="live")["progress"]
+    csv = client.get("/api/researcher/export.csv", params={"study_id": small_study.study_id},
+                     headers=ADMIN).text
+    (tmp_path / "export.csv").write_text(csv)
+    config = load_study_config(small_study.settings("sqlite://"), small_study.study_id)
+    counts = apply_exclusions(load_csv(tmp_path / "export.csv"), config.exclusions).counts()
+    assert progress["usable"] == counts["participants_kept"] > 0
+    assert progress["usable"] <= progress["completed"]
+    assert set(progress["excluded_by_rule"]) <= {"failed_attention_check", "too_fast"}
+    assert all(counts[f"excluded_{rule}"] == n for rule, n in progress["excluded_by_rule"].items())

@@ -81,15 +81,24 @@ function renderSummary(data, depth = 3) {
   return fragment;
 }
 
-/** "n of target completed" with a bar, when the summary carries progress counts. */
+/** The headline: usable participants (kept by the study's exclusion rules) against the
+ * target, with a bar, then how many finished and why the others are excluded. */
 function progressLine(progress) {
   const line = document.createElement("p");
   if (!progress?.target_sample_size) return line;
+  const usable = progress.usable ?? progress.completed;
   const bar = Object.assign(document.createElement("progress"), {
-    max: progress.target_sample_size, value: Math.min(progress.completed, progress.target_sample_size),
+    max: progress.target_sample_size, value: Math.min(usable, progress.target_sample_size),
   });
-  line.append(`Completed ${progress.completed} of ${progress.target_sample_size} participants `, bar);
+  line.append(`${usable} usable of ${progress.target_sample_size} `, bar, ` ${usableDetail(progress, usable)}`);
   return line;
+}
+
+/** "25 finished, 7 excluded: failed attention check 4, too fast 3" (nothing excluded: "25 finished"). */
+function usableDetail(progress, usable) {
+  const excluded = progress.completed - usable;
+  const rules = Object.entries(progress.excluded_by_rule ?? {}).map(([rule, n]) => `${title(rule)} ${n}`);
+  return `${progress.completed} finished` + (excluded > 0 ? `, ${excluded} excluded${rules.length ? `: ${rules.join(", ")}` : ""}` : "");
 }
 
 /** GET a researcher route with the bearer token; `params` become the query string. */
