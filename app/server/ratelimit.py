@@ -4,10 +4,13 @@ Session starts and every other participant API request have a limit each, per cl
 address, in a sliding window kept in this worker's memory (`limits`' MemoryStorage): with
 N workers a client gets up to N times the limit, which still bounds it. The client
 address is the TCP peer, or the one a trusted reverse proxy forwards (uvicorn's proxy
-headers, trusted from FORWARDED_ALLOW_IPS: 127.0.0.1 by default). Beyond a limit the
-answer is 429 with `Retry-After`; the browser retries such writes with the same body.
+headers, trusted from FORWARDED_ALLOW_IPS: 127.0.0.1 by default). An IPv6 client is keyed
+by its /64: one subscriber is routinely given a whole /64, so its single addresses would be
+unlimited keys. Beyond a limit the answer is 429 with `Retry-After`; the browser retries such
+writes with the same body.
 """
 
+import ipaddress
 import math
 import time
 
@@ -32,6 +35,20 @@ def parse_limit(setting: str, value: str) -> RateLimitItem | None:
                          "5/second") from None
 
 
+def client_key(host: str) -> str:
+    """The rate-limit key of a client address: an IPv6 address's /64 network, anything else
+    (IPv4, a test client's name) as it is."""
+    try:
+        address = ipaddress.ip_address(host)
+    except ValueError:
+        return host
+    if address.version == 4:
+        return str(address)
+    if address.ipv4_mapped is not None:  # an IPv4 client over an IPv6 socket
+        return str(address.ipv4_mapped)
+    return str(ipaddress.ip_network(f"{address}/64", strict=False))
+
+
 class RateLimit:
     """ASGI middleware: 429 once a client address exceeds its limit of session starts
     (`starts`) or of other participant API requests (`requests`); None is no limit."""
@@ -49,7 +66,7 @@ class RateLimit:
         is_start = scope["method"] == "POST" and scope["path"] == START_PATH
         limit, what = (self.starts, "session starts") if is_start else (self.requests,
                                                                          "requests")
-        client = (scope.get("client") or ("unknown",))[0]
+        client = client_key((scope.get("client") or ("unknown",))[0])
         if limit is None or self.limiter.hit(limit, what, client):
             return await self.app(scope, receive, send)
         reset_at = self.limiter.get_window_stats(limit, what, client).reset_time
