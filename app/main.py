@@ -234,12 +234,19 @@ def add_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def invalid(_: Request, err: RequestValidationError) -> JSONResponse:
         # FastAPI's default echoes the input, and a NaN in it cannot be written as JSON
-        items = [{"loc": list(e["loc"]), "msg": e["msg"], "type": e["type"]}
+        items = [{"loc": [_printable(p) for p in e["loc"]], "msg": e["msg"], "type": e["type"]}
                  for e in err.errors()]
         message = "; ".join(f"{'.'.join(str(p) for p in i['loc'][1:]) or 'body'}: {i['msg']}"
                             for i in items)
         return JSONResponse(jsonable_encoder({"detail": items, "message": message}),
                             status_code=422)
+
+
+def _printable(part: str | int) -> str | int:
+    """A location part as UTF-8 can carry it: a dict key may hold a lone surrogate."""
+    if isinstance(part, str):
+        return part.encode("utf-8", "backslashreplace").decode("utf-8")
+    return part
 
 
 class BodyLimit:
