@@ -510,8 +510,10 @@ def serve(
     docs = "off in production" if settings.production else "/docs"
     typer.echo(f"serving http://{host}:{port}/s/{study_ids[0]}  "
                f"(researcher dashboard: /researcher, API docs: {docs})")
+    # info: each worker's start, and the supervisor replacing one that died; no access log
+    # (as before: request lines and client addresses stay out of the log)
     uvicorn.run("app.main:app_from_env", factory=True, host=host, port=port,
-                workers=workers, log_level="warning")
+                workers=workers, log_level="info", access_log=False)
 
 
 db_cli = typer.Typer(no_args_is_help=True,

@@ -7,6 +7,7 @@ changes lives in the database, so several uvicorn workers can serve one study.
 
 import asyncio
 import gc
+import logging
 import os
 from collections.abc import Callable
 from contextlib import asynccontextmanager, suppress
@@ -17,6 +18,8 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
+from sqlalchemy.exc import InterfaceError, OperationalError
+from sqlalchemy.exc import TimeoutError as PoolTimeout
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.types import ASGIApp, Receive, Scope, Send
 
@@ -53,6 +56,8 @@ from app.study.errors import Refused
 MAX_BODY_BYTES = 64 * 1024
 FRONTEND_DIR = REPO_ROOT / "frontend"
 MIN_ADMIN_TOKEN_CHARS = 32
+DB_RETRY_AFTER_S = 5  # a restarting database or a dropped network is usually back by then
+logger = logging.getLogger(__name__)
 NEW_TOKEN_HINT = ("set one with TOMSTUDY_ADMIN_TOKEN=$(python -c 'import secrets;"
                   "print(secrets.token_urlsafe(32))')")
 
@@ -173,6 +178,7 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
                    health.router):
         app.include_router(router)
     add_error_handlers(app)
+    add_database_down_handler(app)
     declare_error_responses(app)
     app.add_middleware(BodyLimit, max_bytes=MAX_BODY_BYTES)
     app.add_middleware(RateLimit, **rate_limits(settings))
@@ -234,12 +240,34 @@ def add_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def invalid(_: Request, err: RequestValidationError) -> JSONResponse:
         # FastAPI's default echoes the input, and a NaN in it cannot be written as JSON
-        items = [{"loc": list(e["loc"]), "msg": e["msg"], "type": e["type"]}
+        items = [{"loc": [_printable(p) for p in e["loc"]], "msg": e["msg"], "type": e["type"]}
                  for e in err.errors()]
         message = "; ".join(f"{'.'.join(str(p) for p in i['loc'][1:]) or 'body'}: {i['msg']}"
                             for i in items)
         return JSONResponse(jsonable_encoder({"detail": items, "message": message}),
                             status_code=422)
+
+
+def _printable(part: str | int) -> str | int:
+    """A location part as UTF-8 can carry it: a dict key may hold a lone surrogate."""
+    if isinstance(part, str):
+        return part.encode("utf-8", "backslashreplace").decode("utf-8")
+    return part
+
+
+def add_database_down_handler(app: FastAPI) -> None:
+    """No connection to the database (down, unreachable, pool exhausted): 503 with
+    Retry-After, and one log line per request instead of a traceback."""
+
+    @app.exception_handler(OperationalError)
+    @app.exception_handler(InterfaceError)
+    @app.exception_handler(PoolTimeout)
+    async def unavailable(request: Request, err: Exception) -> JSONResponse:
+        cause = type(getattr(err, "orig", None) or err).__name__  # the driver's class, no host
+        logger.warning("database unavailable (%s): %s %s answered 503", cause, request.method,
+                       request.url.path)
+        return JSONResponse({"detail": "database: unavailable, try again shortly"},
+                            status_code=503, headers={"Retry-After": str(DB_RETRY_AFTER_S)})
 
 
 class BodyLimit:

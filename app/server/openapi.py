@@ -47,10 +47,12 @@ UNREADABLE = "body: not readable as JSON (e.g. not UTF-8); JSON that fails to pa
 TOO_LARGE = "body: larger than 64 KiB"
 INVALID = "a body or parameter fails validation; `detail` names the field"
 RATE_LIMITED = "rate: too many requests from this address; `Retry-After` says when to retry"
+DB_DOWN = "database: unavailable, try again shortly; `Retry-After` says when to retry"
 UNKNOWN_SESSION = "X-Session-Token: unknown session"
 GONE = ("X-Session-Token: the session cannot continue: a newer attempt of the same "
         "participant replaced it, or the study's trial bank changed under it")
-SESSION_STATUSES = {404: UNKNOWN_SESSION, 410: GONE, 422: INVALID, 429: RATE_LIMITED}
+SESSION_STATUSES = {404: UNKNOWN_SESSION, 410: GONE, 422: INVALID, 429: RATE_LIMITED,
+                    503: DB_DOWN}
 SESSION_WRITE_STATUSES = {
     400: UNREADABLE,
     404: f"{UNKNOWN_SESSION}; trial_id: not a trial of this session",
@@ -62,6 +64,7 @@ SESSION_WRITE_STATUSES = {
     422: f"{INVALID}, or breaks a study rule: clicks outside the scene or reach, survey "
          "answers, telemetry past its cap, a submission_id reused for a different request",
     429: RATE_LIMITED,
+    503: DB_DOWN,
 }
 START_STATUSES = {
     400: UNREADABLE,
@@ -75,13 +78,14 @@ START_STATUSES = {
     422: INVALID,
     429: RATE_LIMITED,
     503: "study: as many sessions are running as the study takes at once "
-         "(max_live_sessions_per_target x target_sample_size); `Retry-After` says when to retry",
+         "(max_live_sessions_per_target x target_sample_size); or " + DB_DOWN,
 }
 RESEARCHER_STATUSES = {
     401: "authorization: missing bearer token",
     403: "authorization: wrong researcher token",
     404: "study_id: unknown study",
     422: INVALID,
+    503: DB_DOWN,
 }
 WITHDRAWAL_STATUSES = RESEARCHER_STATUSES | {
     400: UNREADABLE,

@@ -1,13 +1,22 @@
 """Request and response bodies of the participant and researcher APIs (pydantic, no tables).
 
-Every body refuses unknown keys and NaN/inf with the field named; sizes are bounded here,
-so no write can grow a row past what these types allow.
+Every body refuses unknown keys, NaN/inf, text no UTF-8 encodes (a lone surrogate) and
+JSON values of another type (`true` or "1.5" for a number) with the field named; sizes are
+bounded here, so no write can grow a row past what these types allow.
 """
 
 import uuid
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import ConfigDict, ValidationInfo, field_validator
+from pydantic import (
+    AfterValidator,
+    ConfigDict,
+    StrictBool,
+    StrictFloat,
+    StrictInt,
+    ValidationInfo,
+    field_validator,
+)
 from pydantic import Field as PydField
 from sqlmodel import SQLModel
 
@@ -21,6 +30,21 @@ ClickInput = Literal["mouse", "keyboard", "touch"]  # the device a click was pla
 
 # ---------------------------------------------------------------- request bodies
 
+def _utf8(value: str) -> str:
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:  # JSON's "\ud800": a lone surrogate no database can store
+        raise ValueError("not valid text (a lone UTF-16 surrogate)") from None
+    return value
+
+
+# Every free text of a body; numbers and flags take JSON's own types (no `true` as 1,
+# no "1.5" as a number), though a whole number is still a float.
+Text = Annotated[str, AfterValidator(_utf8)]
+Num = StrictFloat
+Int = StrictInt
+Flag = StrictBool
+
 class _Body(SQLModel):
     """Request bodies: unknown keys and NaN/inf are refused with the field named."""
 
@@ -30,30 +54,30 @@ class _Body(SQLModel):
 class UrlParams(_Body):
     """URL parameters from Prolific or MTurk; which are required is the study's `platform`."""
 
-    PROLIFIC_PID: str | None = PydField(default=None, max_length=128)
-    STUDY_ID: str | None = PydField(default=None, max_length=128)
-    SESSION_ID: str | None = PydField(default=None, max_length=128)
-    workerId: str | None = PydField(default=None, max_length=128)
-    assignmentId: str | None = PydField(default=None, max_length=128)
-    hitId: str | None = PydField(default=None, max_length=128)
-    turkSubmitTo: str | None = PydField(default=None, max_length=256)
+    PROLIFIC_PID: Text | None = PydField(default=None, max_length=128)
+    STUDY_ID: Text | None = PydField(default=None, max_length=128)
+    SESSION_ID: Text | None = PydField(default=None, max_length=128)
+    workerId: Text | None = PydField(default=None, max_length=128)
+    assignmentId: Text | None = PydField(default=None, max_length=128)
+    hitId: Text | None = PydField(default=None, max_length=128)
+    turkSubmitTo: Text | None = PydField(default=None, max_length=256)
 
 
 class ClientInfo(_Body):
     """The participant's device: sent with consent, never stored before it."""
 
-    screen_w: int = PydField(default=0, ge=0, le=100_000)
-    screen_h: int = PydField(default=0, ge=0, le=100_000)
-    touch_only: bool = False
-    user_agent: str = PydField(default="", max_length=USER_AGENT_MAX_CHARS)
+    screen_w: Int = PydField(default=0, ge=0, le=100_000)
+    screen_h: Int = PydField(default=0, ge=0, le=100_000)
+    touch_only: Flag = False
+    user_agent: Text = PydField(default="", max_length=USER_AGENT_MAX_CHARS)
 
 
 class SessionCreate(_Body):
     """POST /api/sessions."""
 
-    study_id: str = PydField(max_length=64)
+    study_id: Text = PydField(max_length=64)
     recruitment: UrlParams = UrlParams()
-    preview: str | None = PydField(default=None, max_length=128)  # researcher preview key
+    preview: Text | None = PydField(default=None, max_length=128)  # researcher preview key
 
 
 class SubmissionBody(_Body):
@@ -69,27 +93,27 @@ class ConsentCreate(SubmissionBody):
     client: ClientInfo = ClientInfo()
 
 
-Point = tuple[float, float]
+Point = tuple[Num, Num]
 
 
 class HistoryEntry(_Body):
     """One undo or reset press: which start state, and when (ms after the trial was shown)."""
 
     action: Literal["undo", "reset"]
-    start_index: int = PydField(ge=0, le=100)
-    t_ms: float = PydField(ge=0, le=6 * 3600 * 1000)
+    start_index: Int = PydField(ge=0, le=100)
+    t_ms: Num = PydField(ge=0, le=6 * 3600 * 1000)
 
 
 class PredictionCreate(SubmissionBody):
     """POST .../predictions: per start state (the study's `start_states`), the clicked robot
     positions of each step to predict (scene metres)."""
 
-    trial_id: str = PydField(max_length=64)
+    trial_id: Text = PydField(max_length=64)
     points: list[list[Point]]
-    click_times_ms: list[list[float]]
-    shown_at_ms: float = PydField(ge=0)
-    submitted_at_ms: float = PydField(ge=0)
-    replays: int = PydField(default=0, ge=0, le=10_000)
+    click_times_ms: list[list[Num]]
+    shown_at_ms: Num = PydField(ge=0)
+    submitted_at_ms: Num = PydField(ge=0)
+    replays: Int = PydField(default=0, ge=0, le=10_000)
     history: list[HistoryEntry] = PydField(default=[], max_length=HISTORY_MAX_ENTRIES)
     # as click_times_ms; None (unknown) from a client older than the field, as history was
     click_inputs: list[list[ClickInput]] | None = None
@@ -98,31 +122,31 @@ class PredictionCreate(SubmissionBody):
 class DraftSave(_Body):
     """PUT .../draft: the current trial's clicks so far, saved after every change."""
 
-    trial_id: str = PydField(max_length=64)
-    seq: int = PydField(ge=0, le=10**9)  # grows with every change the page makes
-    index: int = PydField(ge=0, le=100)  # the start state being answered
+    trial_id: Text = PydField(max_length=64)
+    seq: Int = PydField(ge=0, le=10**9)  # grows with every change the page makes
+    index: Int = PydField(ge=0, le=100)  # the start state being answered
     points: list[list[Point]] = PydField(max_length=100)
-    click_times_ms: list[list[float]] = PydField(max_length=100)
+    click_times_ms: list[list[Num]] = PydField(max_length=100)
     click_inputs: list[list[ClickInput]] | None = PydField(default=None, max_length=100)
     history: list[HistoryEntry] = PydField(default=[], max_length=HISTORY_MAX_ENTRIES)
-    shown_at_ms: float = PydField(ge=0)  # when the trial was first shown (browser epoch ms)
-    replays: int = PydField(default=0, ge=0, le=10_000)
-    predicting: bool = True  # false while the clips are still being watched
+    shown_at_ms: Num = PydField(ge=0)  # when the trial was first shown (browser epoch ms)
+    replays: Int = PydField(default=0, ge=0, le=10_000)
+    predicting: Flag = True  # false while the clips are still being watched
 
 
 class TabClaim(_Body):
     """POST .../tab: this tab asks to be the session's live one (on load, then as a heartbeat)."""
 
-    tab_id: str = PydField(pattern=r"^[A-Za-z0-9_-]{8,64}$")
-    takeover: bool = False  # the person chose to continue here, closing the other tab's turn
-    opened: bool = False  # the page has just loaded (a first visit, reload or takeover)
-    t_client_ms: float = PydField(default=0, ge=0)
+    tab_id: Text = PydField(pattern=r"^[A-Za-z0-9_-]{8,64}$")
+    takeover: Flag = False  # the person chose to continue here, closing the other tab's turn
+    opened: Flag = False  # the page has just loaded (a first visit, reload or takeover)
+    t_client_ms: Num = PydField(default=0, ge=0)
 
 
 class TabRelease(_Body):
     """POST .../tab/release: the live tab is closing (sent as a beacon on pagehide)."""
 
-    tab_id: str = PydField(pattern=r"^[A-Za-z0-9_-]{8,64}$")
+    tab_id: Text = PydField(pattern=r"^[A-Za-z0-9_-]{8,64}$")
 
 
 class ContinueCreate(SubmissionBody):
@@ -144,21 +168,21 @@ class ScreenOutCreate(SubmissionBody):
 class SurveyCreate(SubmissionBody):
     """POST .../survey."""
 
-    answers: dict[str, str | int | float | None]
+    answers: dict[Text, Text | Int | Num | None]
 
 
 class WithdrawalByExternalId(_Body):
     """Withdraw a participant by their platform id (every session of that person)."""
 
-    study_id: str = PydField(max_length=64)
-    external_id: str = PydField(min_length=1, max_length=128)
+    study_id: Text = PydField(max_length=64)
+    external_id: Text = PydField(min_length=1, max_length=128)
 
 
 class WithdrawalByParticipantId(_Body):
     """Withdraw by a session's public id: open and pilot sessions have no platform id."""
 
-    study_id: str = PydField(max_length=64)
-    participant_id: str = PydField(min_length=1, max_length=32)
+    study_id: Text = PydField(max_length=64)
+    participant_id: Text = PydField(min_length=1, max_length=32)
 
 
 # POST /api/researcher/withdrawals: exactly one of the two ids
@@ -170,7 +194,7 @@ class EventIn(_Body):
 
     submission_id: uuid.UUID
     kind: EventKind
-    t_client_ms: float = PydField(ge=0)
+    t_client_ms: Num = PydField(ge=0)
     data: dict = {}
 
     @field_validator("data")
@@ -196,15 +220,15 @@ class NoEventData(_Body):
 class ResizeData(_Body):
     """resize: the window's new inner size (CSS pixels)."""
 
-    w: int = PydField(ge=0, le=100_000)
-    h: int = PydField(ge=0, le=100_000)
+    w: Int = PydField(ge=0, le=100_000)
+    h: Int = PydField(ge=0, le=100_000)
 
 
 class ClipData(_Body):
     """clip_finished / replay: the trial on screen and how often its clip was replayed."""
 
-    trial_id: str = PydField(max_length=64)
-    replays: int = PydField(ge=0, le=10_000)
+    trial_id: Text = PydField(max_length=64)
+    replays: Int = PydField(ge=0, le=10_000)
 
 
 # Events the server records itself (tabs.py): a page opened, or took over from another tab,

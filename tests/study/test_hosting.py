@@ -299,17 +299,17 @@ def test_schema_declares_the_error_statuses_and_bodies():
                 for path, ops in spec["paths"].items() for method, op in ops.items()}
     assert declared["POST /api/sessions"] == [200, 201, 400, 403, 404, 409, 413, 422, 429,
                                               503]
-    assert declared["GET /api/session/state"] == [200, 404, 410, 422, 429]
+    assert declared["GET /api/session/state"] == [200, 404, 410, 422, 429, 503]
     assert declared["POST /api/session/predictions"] == [
-        200, 201, 400, 404, 409, 410, 413, 422, 429]
-    assert declared["GET /api/researcher/export.csv"] == [200, 401, 403, 404, 422]
+        200, 201, 400, 404, 409, 410, 413, 422, 429, 503]
+    assert declared["GET /api/researcher/export.csv"] == [200, 401, 403, 404, 422, 503]
     assert declared["GET /healthz"] == [200, 503]
     responses = spec["paths"]["/api/session/events"]["post"]["responses"]
     body = {s: r["content"]["application/json"]["schema"]["$ref"].rsplit("/", 1)[1]
             for s, r in responses.items() if s != "202"}
     assert body == {"400": "ErrorDetail", "404": "ErrorDetail", "409": "ErrorDetail",
                     "410": "ErrorDetail", "413": "ErrorDetail", "422": "ValidationProblem",
-                    "429": "ErrorDetail"}
+                    "429": "ErrorDetail", "503": "ErrorDetail"}
     assert "HTTPValidationError" not in spec["components"]["schemas"]
 
 

@@ -2,6 +2,8 @@
 
 import asyncio
 import io
+import os
+import re
 import signal
 import threading
 import time
@@ -153,6 +155,34 @@ def test_two_workers_on_postgres_serve_concurrent_participants(small_study, post
         proc.terminate()
         proc.wait(timeout=15)
 
+
+
+def wait_for_log(log, pattern: str, count: int, timeout_s: float = 60) -> list[str]:
+    """The first `count` matches of `pattern` in the server's log, once it holds them."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        found = re.findall(pattern, log.read_text())
+        if len(found) >= count or time.monotonic() > deadline:
+            return found
+        time.sleep(0.2)
+
+
+@pytest.mark.postgres
+def test_worker_starts_and_replacements_are_logged(small_study, postgres_url, tmp_path):
+    log = tmp_path / "server.log"
+    proc = start_server(small_study, fresh_database(postgres_url, "worker_log"), free_port(),
+                        workers=2, log=log)
+    started = r"Started server process \[(\d+)\]"
+    try:
+        pids = wait_for_log(log, started, 2)
+        assert len(pids) == 2, log.read_text()
+        os.kill(int(pids[0]), signal.SIGKILL)
+        assert len(wait_for_log(log, started, 3)) == 3, log.read_text()
+        assert f"Child process [{pids[0]}] died" in log.read_text()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=15)
+    assert "GET /s/" not in log.read_text()  # no access log: client addresses stay out
 
 
 def test_many_concurrent_participants_on_one_sqlite_worker(small_study, live_server):
