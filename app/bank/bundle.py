@@ -29,10 +29,11 @@ missing, altered or unlisted file and a live config that shapes the bank otherwi
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from analysis.contracts import COARSE_OBSERVERS
 from app.configio import load_yaml_model
 from app.layout import Layout
 from app.observers.config import OBSERVERS_FILE, load_observers
-from app.observers.predictor import OBSERVER_PREDICTORS, ObserverPredictor
+from app.observers.predictor import ObserverPredictor
 from app.predictors.builtin import CheckpointPredictor
 from app.predictors.registry import load_predictor
 from app.study.config import StudyConfig
@@ -108,10 +109,10 @@ class Bundle:
         plug-in (UnknownPredictor when it is not installed)."""
         if name in MODELS:
             return CheckpointPredictor(self.model(world, name, seed))
-        if name in OBSERVER_PREDICTORS:
-            return ObserverPredictor(name, load_observers(self.root / "configs" / OBSERVERS_FILE))
-        if name not in self._plugins:
-            self._plugins[name] = load_predictor(name)
+        if name not in self._plugins:  # code: the same for every world
+            self._plugins[name] = (
+                ObserverPredictor(name, load_observers(self.root / "configs" / OBSERVERS_FILE))
+                if name in COARSE_OBSERVERS else load_predictor(name))
         return self._plugins[name]
 
     def model(self, world: str, model: str, seed: int):

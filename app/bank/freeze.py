@@ -17,6 +17,7 @@ import numpy as np
 
 import app
 from analysis.atomic import write_json
+from analysis.contracts import COARSE_OBSERVERS
 from app.bank.bundle import (
     BANK,
     BANK_META,
@@ -32,7 +33,6 @@ from app.bank.training_report import checkpoint_stopping, unconverged
 from app.bank.verify import open_bundle
 from app.fileio import sha256_bytes, sha256_file, write_gzip
 from app.layout import Layout
-from app.observers.predictor import OBSERVER_PREDICTORS
 from app.predictors.registry import distribution
 from app.study.config import StudyConfig
 from app.study.trials import TrialBank
@@ -127,7 +127,7 @@ def observer_entries(bank: TrialBank) -> dict[str, str]:
     """Each coarse observer the bank stores answers of: its content hash (the observer
     parameters' values it answered under; the bundle's observers.yaml holds them)."""
     first = next(iter(bank.by_id.values()))
-    return {name: first.predictions[name][0].content_hash for name in OBSERVER_PREDICTORS
+    return {name: first.predictions[name][0].content_hash for name in COARSE_OBSERVERS
             if name in first.predictions}
 
 
@@ -137,7 +137,7 @@ def plugin_entries(bank: TrialBank) -> dict:
     first = next(iter(bank.by_id.values()))
     return {name: {"content_hash": family[0].content_hash, **distribution(name)}
             for name, family in sorted(first.predictions.items())
-            if name not in MODELS and name not in OBSERVER_PREDICTORS}
+            if name not in MODELS and name not in COARSE_OBSERVERS}
 
 
 def build_environment(wall_time_s: float | None, phases: dict[str, float] | None = None) -> dict:

@@ -18,11 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.contracts import COARSE_OBSERVERS
 from app.observers.config import ObserversConfig
-from app.observers.family import COARSE_VARIANTS, coarse_options
+from app.observers.family import coarse_options
 from app.predictors.protocol import PredictorAnswer, code_hash
 
-OBSERVER_PREDICTORS = COARSE_VARIANTS  # the names their answers are stored and exported under
 VERSION = "1"
 
 
@@ -44,8 +44,8 @@ class ObserverPredictor:
     reads_scene = True
 
     def __post_init__(self) -> None:
-        if self.name not in OBSERVER_PREDICTORS:
-            raise ValueError(f"observer {self.name!r}: not one of {', '.join(COARSE_VARIANTS)}")
+        if self.name not in COARSE_OBSERVERS:
+            raise ValueError(f"observer {self.name!r}: not one of {', '.join(COARSE_OBSERVERS)}")
 
     @property
     def content_hash(self) -> str:
@@ -67,4 +67,4 @@ class ObserverPredictor:
 
 def observer_predictors(observers: ObserversConfig) -> list[ObserverPredictor]:
     """Every coarse observer variant under one observers config."""
-    return [ObserverPredictor(name, observers) for name in OBSERVER_PREDICTORS]
+    return [ObserverPredictor(name, observers) for name in COARSE_OBSERVERS]
