@@ -101,8 +101,15 @@ def _set_counted(db: Session, participant: Participant, counted: bool) -> bool:
     return flipped
 
 
+# Prolific has not confirmed these sessions' submissions (app/server/prolific_check.py)
+NOT_CONFIRMED = ("pending", "unknown")
+
+
 def hold(db: Session, participant: Participant) -> None:
-    """Add the session's order and trials to the counts (inside the caller's transaction)."""
+    """Add the session's order and trials to the counts (inside the caller's transaction);
+    a session Prolific has not confirmed never counts."""
+    if participant.prolific_check in NOT_CONFIRMED:
+        return
     if _set_counted(db, participant, True):
         _add(db, participant.study_id, plan_keys(participant.world_order, participant.plan), 1)
 
