@@ -46,7 +46,7 @@ from app.server.preflight import (
     serve_settings,
     with_generated_token,
 )
-from app.server.prolific import ProlificClient
+from app.server.prolific import client_from
 from app.server.prolific_check import recheck_loop
 from app.server.ratelimit import RateLimit, parse_limit
 from app.server.recruitment import preview_key
@@ -175,7 +175,7 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     app = FastAPI(title="tomstudy", lifespan=lifespan, **docs_urls(settings),
                   description="Online study of how people predict a robot (app/server/API.md).")
     app.state.settings = settings
-    app.state.prolific = prolific_client(settings)
+    app.state.prolific = client_from(settings)  # None: no token, Prolific is not asked
     app.state.default_study = studies[0]
     app.state.templates = Jinja2Templates(directory=FRONTEND_DIR / "templates")
     app.mount("/static", StaticFiles(directory=FRONTEND_DIR / "static"), name="static")
@@ -193,14 +193,6 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app),  # outermost: 413s too
                        framed_by=framing_origins(configs), form_targets=form_targets(configs))
     return app
-
-
-def prolific_client(settings: Settings) -> ProlificClient | None:
-    """The Prolific API client when a token is configured (sessions are then checked)."""
-    if not settings.prolific_token:
-        return None
-    return ProlificClient(settings.prolific_api_url, settings.prolific_token,
-                          settings.prolific_timeout_s)
 
 
 def prolific_loops(app: FastAPI, settings: Settings) -> list[asyncio.Task]:

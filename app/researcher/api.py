@@ -61,9 +61,7 @@ def read_withdrawals(study_id: str, request: Request, db: SessionDep, _: AdminDe
     return withdrawal.audit_lines(db, study_id)
 
 
-@router.post("/prolific/{action}", status_code=201,
-             responses={409: {"description": "no Prolific API token, a session not from "
-                                             "Prolific, or an approval of one not completed"}})
+@router.post("/prolific/{action}", status_code=201)
 async def create_payment_action(action: Literal[payments.ACTIONS], body: PaymentActionCreate,
                                 request: Request, _: AdminDep) -> list[dict]:
     """Approve (pay) or ask to return these sessions' Prolific submissions; answers one audit

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import httpx
 
+from app.settings import Settings
+
 CONFIRMED = "confirmed"  # Prolific lists the submission, of this study, by this participant
 UNKNOWN = "unknown"  # Prolific does not know it, or it is another study's or person's
 PENDING = "pending"  # Prolific could not be asked yet; re-checked until it answers
@@ -91,6 +93,14 @@ class ProlificClient:
                                   {"request_return_reasons": reasons})
         _require_ok(answer, "request-return")
         return answer.json()
+
+
+def client_from(settings: Settings) -> "ProlificClient | None":
+    """The client of the configured Prolific API, or None without a token (nothing is asked)."""
+    if not settings.prolific_token:
+        return None
+    return ProlificClient(settings.prolific_api_url, settings.prolific_token,
+                          settings.prolific_timeout_s)
 
 
 def _require_ok(answer: httpx.Response, what: str) -> None:

@@ -36,6 +36,7 @@ from app.server.recruitment import identify
 from app.server.schemas import SessionCreate
 from app.server.sessions import as_utc, has_ended, live_participant
 from app.server.tables import Participant
+from app.study.config import StudyConfig
 from app.study.errors import Refused
 
 logger = logging.getLogger(__name__)
@@ -73,18 +74,18 @@ async def ask(client: ProlificClient, session_id: str, study_id: str, pid: str) 
         return PENDING
 
 
-async def recheck_pending(engine: Engine, client: ProlificClient, ctx: StudyContext,
-                          limit: int = RECHECK_BATCH) -> dict[str, int]:
+async def recheck_pending(engine: Engine, client: ProlificClient, study_id: str,
+                          config: StudyConfig, limit: int = RECHECK_BATCH) -> dict[str, int]:
     """Ask Prolific again about up to `limit` pending sessions of the study; confirmed ones
     count from now (if they would count now), unknown ones never. Answers how many became
     confirmed, unknown, or stay pending."""
-    pending = await asyncio.to_thread(_pending, engine, ctx.study_id, limit)
+    pending = await asyncio.to_thread(_pending, engine, study_id, limit)
     tally = {CONFIRMED: 0, UNKNOWN: 0, PENDING: 0}
     for row_id, params in pending:
         verdict = await ask(client, params["SESSION_ID"], params["STUDY_ID"],
                             params["PROLIFIC_PID"])
         if verdict != PENDING:
-            await asyncio.to_thread(settle, engine, ctx, row_id, verdict)
+            await asyncio.to_thread(settle, engine, study_id, config, row_id, verdict)
         tally[verdict] += 1
     return tally
 
@@ -97,11 +98,12 @@ def _pending(engine: Engine, study_id: str, limit: int) -> list:
                           .order_by(Participant.id).limit(limit)).all()
 
 
-def settle(engine: Engine, ctx: StudyContext, row_id: int, verdict: str) -> None:
+def settle(engine: Engine, study_id: str, config: StudyConfig, row_id: int,
+           verdict: str) -> None:
     """Store Prolific's verdict on a pending session; a confirmed one counts if it would
     count now (the same rule as at start and completion), an unknown one never."""
     with Session(engine) as db:
-        balance.lock_study(db, ctx.study_id)
+        balance.lock_study(db, study_id)
         moved = db.execute(update(Participant.__table__)
                            .where(Participant.id == row_id,
                                   Participant.prolific_check == PENDING)
@@ -109,20 +111,20 @@ def settle(engine: Engine, ctx: StudyContext, row_id: int, verdict: str) -> None
         participant = db.get(Participant, row_id)
         if moved.rowcount == 1 and verdict == UNKNOWN:
             balance.release(db, participant)
-        elif moved.rowcount == 1 and _counts_now(db, ctx, participant):
+        elif moved.rowcount == 1 and _counts_now(db, config, participant):
             balance.hold(db, participant)
         db.commit()
 
 
-def _counts_now(db: Session, ctx: StudyContext, participant: Participant) -> bool:
+def _counts_now(db: Session, config: StudyConfig, participant: Participant) -> bool:
     """What counting a session would be had Prolific answered at its start: a live unfinished
     one or one completed validly (balance's rule)."""
     if participant.pilot or participant.replaced_at is not None:
         return False
     if participant.completed:
-        return not balance.is_excluded(db, ctx.config, participant)
+        return not balance.is_excluded(db, config, participant)
     return not has_ended(participant) and (
-        as_utc(participant.updated_at) >= balance.in_progress_cutoff(ctx.config))
+        as_utc(participant.updated_at) >= balance.in_progress_cutoff(config))
 
 
 async def recheck_loop(engine: Engine, client: ProlificClient, studies: list[StudyContext],
@@ -134,7 +136,7 @@ async def recheck_loop(engine: Engine, client: ProlificClient, studies: list[Stu
         await asyncio.sleep(interval_s)
         for ctx in prolific_studies:
             try:
-                await recheck_pending(engine, client, ctx)
+                await recheck_pending(engine, client, ctx.study_id, ctx.config)
             except Exception as err:  # a database hiccup must not end the loop
                 logger.warning("re-checking %s's pending sessions failed: %s", ctx.study_id,
                                err)
