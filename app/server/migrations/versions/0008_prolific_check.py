@@ -36,5 +36,6 @@ def downgrade() -> None:
     """Drop the paymentaudit table and participant.prolific_check."""
     op.drop_index("ix_paymentaudit_study_id", table_name="paymentaudit")
     op.drop_table("paymentaudit")
-    with op.batch_alter_table("participant") as batch:
-        batch.drop_column("prolific_check")
+    # not batch mode: on SQLite it rebuilds `participant`, which its child rows' foreign keys
+    # refuse; SQLite >= 3.35 drops a plain column in place, as PostgreSQL does
+    op.drop_column("participant", "prolific_check")
