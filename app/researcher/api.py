@@ -61,11 +61,24 @@ def read_withdrawals(study_id: str, request: Request, db: SessionDep, _: AdminDe
     return withdrawal.audit_lines(db, study_id)
 
 
-@router.post("/prolific/{action}", status_code=201)
-async def create_payment_action(action: Literal[payments.ACTIONS], body: PaymentActionCreate,
-                                request: Request, _: AdminDep) -> list[dict]:
-    """Approve (pay) or ask to return these sessions' Prolific submissions; answers one audit
-    line per session, saying whether Prolific accepted it."""
+@router.post("/prolific/approve", status_code=201)
+async def create_approvals(body: PaymentActionCreate, request: Request,
+                           _: AdminDep) -> list[dict]:
+    """Approve (pay) these completed sessions' Prolific submissions; answers one audit line
+    per session, saying whether Prolific accepted it."""
+    return await _payment_action(request, "approve", body)
+
+
+@router.post("/prolific/return", status_code=201)
+async def create_return_requests(body: PaymentActionCreate, request: Request,
+                                 _: AdminDep) -> list[dict]:
+    """Ask these sessions' participants to return their Prolific submissions, giving `reason`;
+    answers one audit line per session, saying whether Prolific accepted it."""
+    return await _payment_action(request, "return", body)
+
+
+async def _payment_action(request: Request, action: str, body: PaymentActionCreate
+                          ) -> list[dict]:
     study_context(request, body.study_id)
     return await payments.send_actions(request.app.state.engine, request.app.state.prolific,
                                        body.study_id, action, body.participant_ids,

@@ -96,8 +96,7 @@ WITHDRAWAL_STATUSES = RESEARCHER_STATUSES | {
 }
 PAYMENT_STATUSES = RESEARCHER_STATUSES | {
     400: UNREADABLE,
-    404: "study_id: unknown study; participant_ids: no session of this id in the study; "
-         "action: not approve or return",
+    404: "study_id: unknown study; participant_ids: no session of this id in the study",
     409: "prolific: no Prolific API token; participant_ids: a session not from Prolific, or "
          "an approval of a session that did not complete",
     413: TOO_LARGE,
@@ -109,7 +108,7 @@ def error_statuses(method: str, path: str) -> dict[int, str]:
     """The error statuses the route `method path` can answer, each with why."""
     if path == "/api/researcher/withdrawals" and method == "POST":
         return WITHDRAWAL_STATUSES
-    if path == "/api/researcher/prolific/{action}" and method == "POST":
+    if path in ("/api/researcher/prolific/approve", "/api/researcher/prolific/return"):
         return PAYMENT_STATUSES
     if path.startswith("/api/researcher/"):
         return RESEARCHER_STATUSES
