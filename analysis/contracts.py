@@ -24,7 +24,7 @@ RENAMED_COLUMNS = {"human_vx": "participant_vx", "human_vy": "participant_vy",
 STORED_NAMES = {new: old for old, new in RENAMED_COLUMNS.items()}  # export -> database name
 
 # Export contract, in order. Types: the reader casts to these, so CSV and DB agree.
-STRING_COLUMNS = ("study_id", "participant_id", "recruitment", "outcome", "world",
+STRING_COLUMNS = ("study_id", "participant_id", "recruitment", "outcome", "prolific_check", "world",
                   "trial_id", "arm", "clip_sha256", "start_kind", "ours_sha256", "vae_sha256",
                   "click_input", "submission_id", "submitted_at", "config_sha256", "bank_sha256")
 BOOL_COLUMNS = ("completed", "replaced", "attention_passed", "is_practice", "attention_check")
@@ -36,8 +36,9 @@ FLOAT_COLUMNS = ("start_x", "start_y", "human_x", "human_y", "participant_click_
                  "trial_duration_ms")
 EXPORT_COLUMNS = (
     "export_version", "study_id", "participant_id", "recruitment", "completed", "outcome",
-    "replaced", "attention_passed", "world", "world_position", "trial_id", "trial_index",
-    "is_practice", "attention_check", "arm", "clip_sha256", "start_index", "start_kind", "step",
+    "replaced", "prolific_check", "attention_passed", "world", "world_position", "trial_id",
+    "trial_index", "is_practice", "attention_check", "arm", "clip_sha256", "start_index",
+    "start_kind", "step",
     "start_x", "start_y", "human_x", "human_y", "participant_click_x", "participant_click_y",
     "participant_vx", "participant_vy", "ours_vx", "ours_vy", "vae_vx", "vae_vy", "cv_vx",
     "cv_vy", "policy_vx", "policy_vy", "ours_code", "vae_code", "ours_sha256", "vae_sha256",
@@ -63,7 +64,8 @@ def plugin_names(columns) -> list[str]:
 
 
 # columns added after the first export, with the value an older export's rows read as
-ADDED_COLUMNS = {"arm": "", "replaced": False, "click_input": "", "export_version": 1}
+ADDED_COLUMNS = {"arm": "", "replaced": False, "click_input": "", "export_version": 1,
+                 "prolific_check": ""}
 SORT_KEYS = ["participant_id", "trial_index", "trial_id", "start_index", "step"]
 
 # Every export except predictions (whose rows carry each model's hash already) names
@@ -88,7 +90,8 @@ PARTICIPANTS = {
     "status": "text", "started_at": "time", "ended_at": "time", "duration_min": "float",
     "last_seen": "time", "world_order": "text", "steps_done": "int", "steps_total": "int",
     "attention_checks": "int", "attention_failed": "int", "attention_verdict": "text",
-    "pilot": "bool", "replaced": "bool", "excluded": "bool", "exclusion_reasons": "text",
+    "pilot": "bool", "replaced": "bool", "prolific_check": "text", "excluded": "bool",
+    "exclusion_reasons": "text",
     "app_version": "text", **STUDY_VERSION,
 }
 SCHEMAS = {"survey": SURVEY, "events": EVENTS, "participants": PARTICIPANTS}
@@ -132,6 +135,9 @@ def model_style(names) -> dict[str, dict[str, str]]:
             "labels": {n: model_label(n) for n in names}}
 
 PILOT = "pilot"  # the recruitment of a researcher's preview session
+# a session's prolific_check values Prolific has not confirmed: it answered it does not know the
+# submission, or it could not be asked since the session started (app/server/prolific_check.py)
+PROLIFIC_UNCONFIRMED = ("unknown", "pending")
 
 # The study config's `smallest_effect_of_interest` unless it sets one, in alignment-error units:
 # an Ours - VAE difference in mean alignment error within +-0.005 is treated as no difference.

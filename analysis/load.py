@@ -172,6 +172,7 @@ def load_database(url: str, study_id: str) -> pd.DataFrame:
                 part.c.study_id, part.c.public_id.label("participant_id"), part.c.recruitment,
                 part.c.completed, part.c.outcome, part.c.config_sha256, part.c.bank_sha256,
                 part.c.replaced_at.is_not(None).label("replaced"),
+                *[part.c[c] for c in ("prolific_check",) if c in part.c],  # since 0008
                 (part.c.attention_failed == 0).label("attention_passed"),
                 trial.c.world, trial.c.world_position, trial.c.trial_id, trial.c.trial_index,
                 trial.c.is_practice, trial.c.attention_check, trial.c.clip_sha256,

@@ -17,6 +17,7 @@ from analysis.alignment import alignment_error, has_direction
 from analysis.contracts import (
     MODELS,
     PILOT,
+    PROLIFIC_UNCONFIRMED,
     ExclusionRules,
     plugin_names,
     too_fast_share_exceeds,
@@ -90,13 +91,16 @@ class Exclusions:
 
 def apply_exclusions(frame: pd.DataFrame, rules: ExclusionRules) -> Exclusions:
     """Apply each named rule explicitly; pilot sessions, replaced attempts (the person went
-    on in a newer one), practice and attention-check trials never count."""
+    on in a newer one), sessions Prolific did not confirm (prolific_unknown), practice and
+    attention-check trials never count."""
     participants = frame.groupby("participant_id", sort=True)
     excluded: dict[str, list[str]] = {}
     pilot = participants["recruitment"].first() == PILOT  # researcher previews: never data
     excluded["pilot"] = sorted(pilot[pilot].index)
     replaced = participants["replaced"].any()
     excluded["replaced"] = sorted(replaced[replaced].index)
+    unknown = participants["prolific_check"].first().isin(PROLIFIC_UNCONFIRMED)
+    excluded["prolific_unknown"] = sorted(unknown[unknown].index)
     if rules.failed_attention_check:
         failed = ~participants["attention_passed"].all()
         excluded["failed_attention_check"] = sorted(failed[failed].index)

@@ -642,6 +642,73 @@ def withdraw(
     typer.echo(json.dumps(line))
 
 
+prolific_cli = typer.Typer(no_args_is_help=True, help="Prolific's API for a study's sessions "
+                          "(reads DATABASE_URL and TOMSTUDY_PROLIFIC_TOKEN_FILE).")
+cli.add_typer(prolific_cli, name="prolific")
+StudyOption = Annotated[str, typer.Option(help="study id")]
+PublicIds = Annotated[list[str], typer.Argument(help="sessions' participant_id (the payment "
+                                                    "sheet's column)")]
+
+
+@prolific_cli.command("approve")
+def prolific_approve(participant_ids: PublicIds, study: StudyOption) -> None:
+    """Approve (pay) these completed sessions' Prolific submissions; print the audit lines."""
+    _payment_action(study, "approve", participant_ids, None)
+
+
+@prolific_cli.command("return")
+def prolific_return(
+    participant_ids: PublicIds, study: StudyOption,
+    reason: Annotated[str, typer.Option(help="what Prolific tells the participant, e.g. "
+                                             "\"Didn't finish the study\"")],
+) -> None:
+    """Ask these sessions' participants to return their submissions; print the audit lines."""
+    _payment_action(study, "return", participant_ids, reason)
+
+
+def _payment_action(study: str, action: str, participant_ids: list[str],
+                    reason: str | None) -> None:
+    import asyncio
+    import json
+
+    from app.researcher.payments import send_actions
+    from app.server.prolific import client_from
+    from app.study.errors import Refused
+
+    _, engine = study_database(study)
+    try:
+        lines = asyncio.run(send_actions(engine, client_from(get_settings()), study, action,
+                                         participant_ids, reason, via="cli"))
+    except Refused as err:
+        fail(err.detail.replace("participant_ids:", "PARTICIPANT_IDS:", 1)
+             .replace("reason:", "--reason:", 1), 1)
+    finally:
+        engine.dispose()
+    for line in lines:
+        typer.echo(json.dumps(line))
+    if not all(line["ok"] for line in lines):
+        raise typer.Exit(1)
+
+
+@prolific_cli.command("recheck")
+def prolific_recheck(study: StudyOption) -> None:
+    """Ask Prolific again about the sessions it could not be asked about at their start."""
+    import asyncio
+
+    from app.server.prolific import client_from
+    from app.server.prolific_check import recheck_pending
+
+    client = client_from(get_settings())
+    if client is None:
+        fail("TOMSTUDY_PROLIFIC_TOKEN_FILE: not set; without a token nothing is asked")
+    config, engine = study_database(study)
+    try:
+        tally = asyncio.run(recheck_pending(engine, client, study, config, limit=10_000))
+    finally:
+        engine.dispose()
+    typer.echo(", ".join(f"{n} {verdict}" for verdict, n in tally.items()))
+
+
 def study_database(study: str):
     """(study config, engine on DATABASE_URL) for a study's stored data; exit 2 naming the
     option or variable to fix."""

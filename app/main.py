@@ -46,6 +46,8 @@ from app.server.preflight import (
     serve_settings,
     with_generated_token,
 )
+from app.server.prolific import client_from
+from app.server.prolific_check import recheck_loop
 from app.server.ratelimit import RateLimit, parse_limit
 from app.server.recruitment import preview_key
 from app.server.routes import pages, participant
@@ -162,15 +164,18 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
         gc.freeze()
         sweep = asyncio.create_task(sweep_stale(app.state.engine, list(app.state.studies.values()),
                                                 settings.stale_sweep_s))
+        loops = [sweep, *prolific_loops(app, settings)]
         yield
-        sweep.cancel()
-        with suppress(asyncio.CancelledError):
-            await sweep
+        for loop in loops:
+            loop.cancel()
+            with suppress(asyncio.CancelledError):
+                await loop
         app.state.engine.dispose()
 
     app = FastAPI(title="tomstudy", lifespan=lifespan, **docs_urls(settings),
                   description="Online study of how people predict a robot (app/server/API.md).")
     app.state.settings = settings
+    app.state.prolific = client_from(settings)  # None: no token, Prolific is not asked
     app.state.default_study = studies[0]
     app.state.templates = Jinja2Templates(directory=FRONTEND_DIR / "templates")
     app.mount("/static", StaticFiles(directory=FRONTEND_DIR / "static"), name="static")
@@ -188,6 +193,15 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app),  # outermost: 413s too
                        framed_by=framing_origins(configs), form_targets=form_targets(configs))
     return app
+
+
+def prolific_loops(app: FastAPI, settings: Settings) -> list[asyncio.Task]:
+    """The task re-checking sessions Prolific could not be asked about (none without a token)."""
+    if app.state.prolific is None:
+        return []
+    return [asyncio.create_task(recheck_loop(app.state.engine, app.state.prolific,
+                                             list(app.state.studies.values()),
+                                             settings.prolific_recheck_s))]
 
 
 def rate_limits(settings: Settings) -> dict:

@@ -44,11 +44,22 @@ class Settings(BaseSettings):
     trust_client_clock: bool = False
     # serve a study although sessions ran another trial bank (app/server/bank_guard.py)
     allow_bank_change: bool = False
+    # Prolific's researcher API (app/server/prolific.py): with a token, a Prolific session counts
+    # only once Prolific confirms its SESSION_ID (app/server/prolific_check.py)
+    prolific_token: str = ""
+    prolific_token_file: Path | None = None
+    prolific_api_url: str = "https://api.prolific.com/api/v1/"
+    prolific_timeout_s: float = Field(default=5.0, gt=0)
+    # how often each worker asks Prolific again about sessions it could not check at start
+    prolific_recheck_s: float = Field(default=60.0, gt=0)
 
     @model_validator(mode="after")
     def _read_secret_files(self) -> "Settings":
         if self.admin_token_file is not None:
             self.admin_token = read_secret(self.admin_token_file, "TOMSTUDY_ADMIN_TOKEN_FILE")
+        if self.prolific_token_file is not None:
+            self.prolific_token = read_secret(self.prolific_token_file,
+                                              "TOMSTUDY_PROLIFIC_TOKEN_FILE")
         return self
 
     def resolved_database_url(self) -> str:

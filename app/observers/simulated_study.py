@@ -157,7 +157,7 @@ def export_frame(parts: list[dict[str, np.ndarray]], study_id: str, preset: str)
                  "outcome": "completed", "replaced": False, "config_sha256": "", "bank_sha256": "",
                  "attention_passed": True, "is_practice": False, "attention_check": False,
                  "trial_duration_ms": SIMULATED_TRIAL_MS, "replays": 0, "submitted_at": "",
-                 "click_input": ""}  # no device placed these clicks
+                 "click_input": "", "prolific_check": ""}  # no device placed these clicks
     for name, value in constants.items():
         frame[name] = np.full(size, value)
     frame["submission_id"] = frame["participant_id"] + "/" + frame["trial_id"] + f"/{preset}"

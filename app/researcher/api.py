@@ -1,13 +1,14 @@
-"""Researcher API behind the bearer token: dashboard summary, exports and withdrawals."""
+"""Researcher API behind the bearer token: dashboard summary, exports, withdrawals and Prolific
+approvals and return requests."""
 
 from typing import Literal
 
 from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
-from app.researcher import exports, progress, withdrawal
+from app.researcher import exports, payments, progress, withdrawal
 from app.server.deps import AdminDep, SessionDep, study_context
-from app.server.schemas import WithdrawalCreate
+from app.server.schemas import PaymentActionCreate, WithdrawalCreate
 
 router = APIRouter(prefix="/api/researcher", tags=["researcher"])
 
@@ -58,3 +59,35 @@ def read_withdrawals(study_id: str, request: Request, db: SessionDep, _: AdminDe
     """Every withdrawal of the study, oldest first."""
     study_context(request, study_id)
     return withdrawal.audit_lines(db, study_id)
+
+
+@router.post("/prolific/approve", status_code=201)
+async def create_approvals(body: PaymentActionCreate, request: Request,
+                           _: AdminDep) -> list[dict]:
+    """Approve (pay) these completed sessions' Prolific submissions; answers one audit line
+    per session, saying whether Prolific accepted it."""
+    return await _payment_action(request, "approve", body)
+
+
+@router.post("/prolific/return", status_code=201)
+async def create_return_requests(body: PaymentActionCreate, request: Request,
+                                 _: AdminDep) -> list[dict]:
+    """Ask these sessions' participants to return their Prolific submissions, giving `reason`;
+    answers one audit line per session, saying whether Prolific accepted it."""
+    return await _payment_action(request, "return", body)
+
+
+async def _payment_action(request: Request, action: str, body: PaymentActionCreate
+                          ) -> list[dict]:
+    study_context(request, body.study_id)
+    return await payments.send_actions(request.app.state.engine, request.app.state.prolific,
+                                       body.study_id, action, body.participant_ids,
+                                       body.reason, via="api")
+
+
+@router.get("/prolific/audit")
+def read_payment_actions(study_id: str, request: Request, db: SessionDep,
+                         _: AdminDep) -> list[dict]:
+    """Every approval and return request sent to Prolific for the study, oldest first."""
+    study_context(request, study_id)
+    return payments.audit_lines(db, study_id)

@@ -28,6 +28,7 @@ from analysis.contracts import (
     EXPORT_COLUMNS,
     EXPORT_VERSION,
     PARTICIPANTS,
+    PROLIFIC_UNCONFIRMED,
     SURVEY,
     WHAT,
     ExclusionRules,
@@ -72,7 +73,7 @@ def predictions_frame(db: Session, study_id: str, plugins: list[str] = ()) -> pd
     pred, trial, part = PredictionRow.__table__, TrialResponse.__table__, Participant.__table__
     query = (
         select(part.c.study_id, part.c.public_id.label("participant_id"), part.c.recruitment,
-               part.c.completed, part.c.outcome,
+               part.c.completed, part.c.outcome, part.c.prolific_check,
                part.c.replaced_at.is_not(None).label("replaced"),
                (part.c.attention_failed == 0).label("attention_passed"), trial.c.world,
                trial.c.world_position, trial.c.trial_index, trial.c.is_practice,
@@ -220,8 +221,9 @@ def _exclusion(rules: ExclusionRules, p: Participant, speeds: tuple[int, int]) -
     reasons = exclusion_reasons(rules, p.attention_failed, *speeds)
     if rules.incomplete and not p.completed:
         reasons.append("incomplete")
-    reasons += [why for why, applies in (("pilot", p.pilot),
-                                         ("replaced", p.replaced_at is not None)) if applies]
+    reasons += [why for why, applies in (
+        ("pilot", p.pilot), ("replaced", p.replaced_at is not None),
+        ("prolific_unknown", p.prolific_check in PROLIFIC_UNCONFIRMED)) if applies]
     return {"excluded": bool(reasons), "exclusion_reasons": ";".join(reasons)}
 
 
@@ -246,7 +248,7 @@ def _participant_row(p: Participant, version: dict, checks: int, cutoff: datetim
             "attention_failed": p.attention_failed,
             "attention_verdict": attention_verdict(checks, p.attention_failed),
             "pilot": p.pilot, "replaced": p.replaced_at is not None,
-            "app_version": p.app_version}
+            "prolific_check": p.prolific_check or "", "app_version": p.app_version}
 
 
 def attention_verdict(checks: int, failed: int) -> str:

@@ -20,7 +20,7 @@ from sqlalchemy import bindparam, case, func, select, text, update
 from sqlalchemy.engine import Engine
 from sqlmodel import Session
 
-from analysis.contracts import ExclusionRules, too_fast_share_exceeds
+from analysis.contracts import PROLIFIC_UNCONFIRMED, ExclusionRules, too_fast_share_exceeds
 from app.server.context import StudyContext
 from app.server.db import insert_skipping_duplicates
 from app.server.plan import TrialStep, Usage, parse_plan, world_orders
@@ -102,7 +102,10 @@ def _set_counted(db: Session, participant: Participant, counted: bool) -> bool:
 
 
 def hold(db: Session, participant: Participant) -> None:
-    """Add the session's order and trials to the counts (inside the caller's transaction)."""
+    """Add the session's order and trials to the counts (inside the caller's transaction);
+    a session Prolific has not confirmed never counts."""
+    if participant.prolific_check in PROLIFIC_UNCONFIRMED:  # app/server/prolific_check.py
+        return
     if _set_counted(db, participant, True):
         _add(db, participant.study_id, plan_keys(participant.world_order, participant.plan), 1)
 

@@ -49,6 +49,14 @@ def other_study(platform: str) -> Notice:
                   f"{_OPEN_AGAIN.get(platform, _LAB)} {_HELP.get(platform, '')}".strip())
 
 
+def not_on_prolific() -> Notice:
+    """Prolific has no submission of this study by this person under the link's session."""
+    return Notice("Prolific does not know this link",
+                  "We asked Prolific about the link that opened this page, and it has no "
+                  "place in this study for it, so the study cannot start from it. "
+                  f"{_OPEN_AGAIN['prolific']} {_HELP['prolific']}")
+
+
 def hit_preview() -> Notice:
     """An MTurk HIT preview tried to start the study."""
     return Notice("Accept the HIT first",

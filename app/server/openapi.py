@@ -69,7 +69,8 @@ SESSION_WRITE_STATUSES = {
 START_STATUSES = {
     400: UNREADABLE,
     403: "recruitment: missing or malformed parameters of the study's platform, or another "
-         "Prolific study; preview: a wrong preview key",
+         "Prolific study, or a SESSION_ID Prolific does not know (with a Prolific API token); "
+         "preview: a wrong preview key",
     404: "study_id: unknown study",
     409: "recruitment: this participant already took part under another attempt, started at "
          "the same moment, or has another attempt (SESSION_ID / assignmentId) in progress; "
@@ -93,12 +94,22 @@ WITHDRAWAL_STATUSES = RESEARCHER_STATUSES | {
          "the study",
     413: TOO_LARGE,
 }
+PAYMENT_STATUSES = RESEARCHER_STATUSES | {
+    400: UNREADABLE,
+    404: "study_id: unknown study; participant_ids: no session of this id in the study",
+    409: "prolific: no Prolific API token; participant_ids: a session not from Prolific, or "
+         "an approval of a session that did not complete",
+    413: TOO_LARGE,
+    422: f"{INVALID}; reason: a return request without one",
+}
 
 
 def error_statuses(method: str, path: str) -> dict[int, str]:
     """The error statuses the route `method path` can answer, each with why."""
     if path == "/api/researcher/withdrawals" and method == "POST":
         return WITHDRAWAL_STATUSES
+    if path in ("/api/researcher/prolific/approve", "/api/researcher/prolific/return"):
+        return PAYMENT_STATUSES
     if path.startswith("/api/researcher/"):
         return RESEARCHER_STATUSES
     if path == "/api/sessions" and method == "POST":

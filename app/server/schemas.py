@@ -189,6 +189,16 @@ class WithdrawalByParticipantId(_Body):
 WithdrawalCreate = WithdrawalByExternalId | WithdrawalByParticipantId
 
 
+class PaymentActionCreate(_Body):
+    """Approve, or ask to return, these sessions' Prolific submissions (by public id)."""
+
+    study_id: Text = PydField(max_length=64)
+    participant_ids: list[Annotated[Text, PydField(min_length=1, max_length=32)]] = PydField(
+        min_length=1, max_length=500)
+    # a return request's reason as Prolific shows it to the participant (returns need one)
+    reason: Text | None = PydField(default=None, min_length=1, max_length=300)
+
+
 class EventIn(_Body):
     """One telemetry event: a kind the browser sends, with that kind's `data` (EVENT_DATA)."""
 

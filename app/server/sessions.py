@@ -33,11 +33,14 @@ SESSION_PATH = "/api/session"
 
 
 def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
-                  rng: np.random.Generator | None = None) -> tuple[Participant, bool]:
-    """A new participant with a balanced plan, or (resumed=True) their live session."""
+                  rng: np.random.Generator | None = None,
+                  prolific_check: str | None = None) -> tuple[Participant, bool]:
+    """A new participant with a balanced plan, or (resumed=True) their live session;
+    `prolific_check` is what Prolific said of a new one (prolific_check.check_start)."""
     who = identify(ctx.config, body, ctx.preview_key)
     try:
-        return _start_locked(db, ctx, body, who, rng or np.random.default_rng())
+        return _start_locked(db, ctx, body, who, rng or np.random.default_rng(),
+                             prolific_check)
     except IntegrityError:  # the same external id started in another process at once
         db.rollback()
         existing = live_participant(db, ctx.study_id, who.external_id)
@@ -53,7 +56,8 @@ def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
 
 
 def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Identity,
-                  rng: np.random.Generator) -> tuple[Participant, bool]:
+                  rng: np.random.Generator, prolific_check: str | None
+                  ) -> tuple[Participant, bool]:
     balance.lock_study(db, ctx.study_id)
     existing = live_participant(db, ctx.study_id, who.external_id)
     if existing is not None:
@@ -70,7 +74,8 @@ def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Iden
         attempt_key=who.attempt_key, pilot=who.pilot, public_id=secrets.token_hex(8),
         session_token=secrets.token_urlsafe(24), recruitment_params=who.params,
         world_order=",".join(order), plan=dump_plan(steps),
-        config_sha256=ctx.config_sha256, bank_sha256=ctx.bank.sha256, app_version=__version__)
+        config_sha256=ctx.config_sha256, bank_sha256=ctx.bank.sha256, app_version=__version__,
+        prolific_check=prolific_check)
     db.add(participant)
     db.flush()
     if not who.pilot:

@@ -77,6 +77,10 @@ class Participant(ParticipantBase, table=True):
     # the one browser tab that may write (tabs.py), and when it was last heard from
     live_tab: str | None = Field(default=None, max_length=64)
     live_tab_seen_at: datetime | None = None
+    # Prolific's word on the link's SESSION_ID (app/server/prolific_check.py): confirmed,
+    # pending (not reachable yet: never counted until confirmed) or unknown (never counted,
+    # excluded as prolific_unknown); NULL when not asked (another platform, no API token)
+    prolific_check: str | None = Field(default=None, max_length=12)
 
 
 class BalanceCount(SQLModel, table=True):
@@ -209,3 +213,17 @@ class WithdrawalAudit(SQLModel, table=True):
     withdrawn_at: datetime = Field(default_factory=utcnow)
     via: str = Field(max_length=16)  # cli or api
     row_counts: dict = Field(default_factory=dict, sa_column=Column(JSON))
+
+
+class PaymentAudit(SQLModel, table=True):
+    """One approval or return request sent to Prolific from the payment sheet, and its result."""
+
+    id: int | None = Field(default=None, primary_key=True)
+    study_id: str = Field(index=True, max_length=64)
+    participant_id: str = Field(max_length=32)  # the session's public id, as in the exports
+    action: str = Field(max_length=16)  # approve or return
+    via: str = Field(max_length=16)  # cli or api
+    sent_at: datetime = Field(default_factory=utcnow)
+    ok: bool
+    # Prolific's submission status after the action, or why it failed (one line)
+    result: str = Field(max_length=300)

@@ -48,7 +48,8 @@ def _row(p, world, w, t, s, k, start, click, human, rng) -> list:
     values = {
         "export_version": EXPORT_VERSION, "study_id": "paper_study",
         "participant_id": f"p{p:02d}", "recruitment": "prolific",
-        "completed": True, "outcome": "completed", "replaced": False, "attention_passed": True,
+        "completed": True, "outcome": "completed", "replaced": False, "prolific_check": "",
+        "attention_passed": True,
         "world": world, "world_position": w, "trial_id": f"{world}-{t}", "trial_index": t,
         "is_practice": False, "attention_check": False, "arm": ("random", "models_disagree")[t % 2],
         "clip_sha256": "c" * 8,

@@ -156,7 +156,8 @@ def test_upgrading_keeps_every_row_and_value(db_url, tmp_path, small_study):
 
     assert (report.before, report.after, report.stamped) == ("0001", migrate.head(), None)
     assert report.rows_before == FIXTURE_ROWS
-    assert report.rows_after == FIXTURE_ROWS | {"withdrawalaudit": 0, "trialdraft": 0}
+    assert report.rows_after == FIXTURE_ROWS | {"withdrawalaudit": 0, "trialdraft": 0,
+                                                "paymentaudit": 0}
     old_columns = {name: list(migrate.revision_columns("0001")[name]) for name in before}
     assert snapshot(engine, old_columns) == before
     added = snapshot(engine, {"participant": ["config_sha256", "bank_sha256", "app_version",
@@ -234,6 +235,26 @@ def test_0007_leaves_the_input_of_clicks_stored_before_it_unknown(db_url, tmp_pa
     source.dispose()
 
 
+def test_0008_leaves_sessions_stored_before_it_unchecked_by_prolific(db_url, tmp_path):
+    source, engine = old_rows_at(db_url, tmp_path, "0007")
+    columns = {"participant": ["id", "external_id", "counted", "attempt_key"]}
+    before = snapshot(engine, columns)
+
+    migrate_to(engine, "0008")
+
+    assert snapshot(engine, columns) == before
+    checks = snapshot(engine, {"participant": ["prolific_check"]})["participant"]
+    assert checks == [(None,)] * FIXTURE_ROWS["participant"]  # never asked, so not excluded
+    with engine.begin() as conn:
+        command.downgrade(migrate.alembic_config(conn), "0007")
+        found = inspect(conn)
+        assert "prolific_check" not in [c["name"] for c in found.get_columns("participant")]
+        assert "paymentaudit" not in found.get_table_names()
+    assert snapshot(engine, columns) == before
+    engine.dispose()
+    source.dispose()
+
+
 def test_db_upgrade_on_the_database_9c39751_made(tmp_path):
     url = load_fixture(tmp_path / "study.db")
     engine = make_engine(url)
@@ -254,7 +275,7 @@ def test_db_upgrade_on_the_database_9c39751_made(tmp_path):
            f"{migrate.head()}" in lines[0]
     counted = {line.split()[0]: line.split()[1:] for line in lines[2:]}
     assert counted == {name: [str(n), str(n)] for name, n in FIXTURE_ROWS.items()} \
-        | {"withdrawalaudit": ["-", "0"], "trialdraft": ["-", "0"]}
+        | {"withdrawalaudit": ["-", "0"], "trialdraft": ["-", "0"], "paymentaudit": ["-", "0"]}
     create_tables(engine)  # the server accepts it now
     with engine.connect() as conn:
         assert conn.execute(text("SELECT plan FROM participant WHERE id = 1")).scalar_one() \

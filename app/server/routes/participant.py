@@ -6,7 +6,7 @@ URL: request lines end up in proxy access logs and browser history.
 
 from fastapi import APIRouter, Request, Response, status
 
-from app.server import crud, drafts, predictions, sessions, tabs, telemetry
+from app.server import crud, drafts, predictions, prolific_check, sessions, tabs, telemetry
 from app.server.deps import ContextDep, ParticipantDep, SessionDep, WriterDep, study_context
 from app.server.schemas import (
     ConsentCreate,
@@ -40,8 +40,9 @@ def state_response(ctx, participant, status_code: int = 200, draft: dict | None 
 @router.post("/api/sessions", response_model=ParticipantPublic,
              status_code=status.HTTP_201_CREATED,
              responses={200: {"description": "resumed an unfinished session"},
-                        403: {"description": "missing or malformed platform parameters, or "
-                                             "a wrong preview key"},
+                        403: {"description": "missing or malformed platform parameters, a "
+                                             "wrong preview key, or a submission Prolific "
+                                             "does not know"},
                         409: {"description": "this external id already completed the study, "
                                              "or its session in progress has another attempt "
                                              "key"}})
@@ -49,7 +50,8 @@ async def create_session(body: SessionCreate, request: Request, response: Respon
                          db: SessionDep) -> ParticipantPublic:
     """Start a session from the recruitment URL parameters, or resume the unfinished one."""
     ctx = study_context(request, body.study_id)
-    participant, resumed = sessions.start_session(db, ctx, body)
+    check = await prolific_check.check_start(request.app.state.prolific, db, ctx, body)
+    participant, resumed = sessions.start_session(db, ctx, body, prolific_check=check)
     if resumed:
         response.status_code = status.HTTP_200_OK
     return ParticipantPublic(session_token=participant.session_token,
