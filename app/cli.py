@@ -568,6 +568,29 @@ def preview_link_cmd(
     typer.echo(base_url.rstrip("/") + preview_path(study, key))
 
 
+@cli.command("codes")
+def codes_cmd(
+    study: Annotated[str, typer.Option(help="study_configs/<study>.yaml")] = "paper_study",
+) -> None:
+    """Print each ending's completion code and its Prolific action (generated ones are made
+    and kept in the data dir on first use)."""
+    from app.configio import ConfigError
+    from app.server.completion_codes import codes_table, served_config
+    from app.study.config import load_study_config
+
+    settings = get_settings()
+    try:
+        config = served_config(load_study_config(settings, study), settings.layout, study)
+    except (ConfigError, OSError, ValueError) as err:
+        fail(str(err))
+    source = ("generated, kept in " + str(settings.layout.completion_codes(study))
+              if config.recruitment.codes == "generated" else "pinned in the study config")
+    typer.echo(f"{study}: completion codes ({source})")
+    for row in codes_table(config):
+        typer.echo(f"  {row['ending']:<17} {row['completion_code'] or '(none)':<12} "
+                   f"Prolific: {row['prolific_action']}")
+
+
 @cli.command("export")
 def export_cmd(
     study: Annotated[str, typer.Option(help="study id")] = "paper_study",

@@ -32,6 +32,7 @@ from app.researcher import dashboard_api as dashboard
 from app.server import health
 from app.server.balance import ensure_rows, sweep_stale
 from app.server.bank_guard import check_bank_unchanged
+from app.server.completion_codes import PublicCode, refuse_public_codes, served_config
 from app.server.context import StudyContext
 from app.server.db import create_tables, make_engine
 from app.server.headers import MTURK_FRAMERS, SecurityHeaders
@@ -102,18 +103,21 @@ def load_study(settings: Settings, study_id: str) -> StudyContext:
     """Config, bundle (bank and every checkpoint, verified against its manifest and each other)
     of one study; BundleError or BankMismatch if it cannot be served as it is."""
     config = load_study_config(settings, study_id)
+    if settings.production:
+        refuse_public_codes(config, study_id)
     bundle = load_bundle(config, study_id, settings.configs_dir, settings.layout)
-    return StudyContext(study_id, config, bundle.bank, ModelAnswers(bundle),
-                        config_sha256=config_sha256(config),
+    return StudyContext(study_id, served_config(config, settings.layout, study_id), bundle.bank,
+                        ModelAnswers(bundle), config_sha256=config_sha256(config),
                         preview_key=preview_key(settings.admin_token, study_id),
                         trust_client_clock=settings.trust_client_clock)
 
 
 def servable_study(settings: Settings, study_id: str) -> StudyContext:
-    """`load_study`, refusing (NotServable) a study whose bundle or answers do not hold."""
+    """`load_study`, refusing (NotServable) a study whose bundle, answers or codes do not
+    hold."""
     try:
         return load_study(settings, study_id)
-    except (BundleError, BankMismatch) as err:
+    except (BundleError, BankMismatch, PublicCode) as err:
         raise NotServable(str(err)) from err
 
 
@@ -185,6 +189,12 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.trusted_hosts,
                        www_redirect=False)
     configs = [load_study_config(settings, sid) for sid in studies]
+    if settings.production:  # before any worker serves: one line, not a lifespan traceback
+        try:
+            for sid, config in zip(studies, configs, strict=True):
+                refuse_public_codes(config, sid)
+        except PublicCode as err:
+            raise UnsafeSettings(str(err)) from None
     app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app),  # outermost: 413s too
                        framed_by=framing_origins(configs), form_targets=form_targets(configs))
     return app

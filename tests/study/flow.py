@@ -253,6 +253,19 @@ def make_client(small_study, db_url: str, trust_client_clock: bool = True) -> Te
     return TestClient(create_app(settings, [small_study.study_id]))
 
 
+def served_codes(study, study_id: str | None = None) -> dict[str, str]:
+    """Each outcome's completion code a server of `study` gives (its generated codes, made in
+    its data dir on first use, or the config's pinned ones)."""
+    from app.configio import load_yaml_model
+    from app.server.completion_codes import OUTCOMES, served_config
+    from app.study.config import StudyConfig
+
+    study_id = study_id or study.study_id
+    config = load_yaml_model(study.configs_dir / f"{study_id}.yaml", StudyConfig)
+    recruitment = served_config(config, study.layout, study_id).recruitment
+    return {outcome: recruitment.ending(outcome).completion_code for outcome in OUTCOMES}
+
+
 def page_json(html: str, element_id: str):
     """What a page carries in its `<script type="application/json" id=element_id>`."""
     block = re.search(rf'<script type="application/json" id="{element_id}">(.*?)</script>',
