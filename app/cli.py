@@ -498,7 +498,7 @@ def serve(
     import uvicorn
 
     from app.main import ready_to_serve
-    from app.server.preflight import NotServable, hand_to_workers
+    from app.server.preflight import NotServable, forwarded_allow_ips, hand_to_workers
 
     study_ids = study.split(",")
     try:
@@ -508,12 +508,15 @@ def serve(
         fail(str(err))
     hand_to_workers(settings, study_ids)
     docs = "off in production" if settings.production else "/docs"
+    proxies = forwarded_allow_ips(settings)
     typer.echo(f"serving http://{host}:{port}/s/{study_ids[0]}  "
-               f"(researcher dashboard: /researcher, API docs: {docs})")
+               f"(researcher dashboard: /researcher, API docs: {docs}; client addresses "
+               f"from X-Forwarded-For of {proxies} only)")
     # info: each worker's start, and the supervisor replacing one that died; no access log
     # (as before: request lines and client addresses stay out of the log)
     uvicorn.run("app.main:app_from_env", factory=True, host=host, port=port,
-                workers=workers, log_level="info", access_log=False)
+                workers=workers, log_level="info", access_log=False,
+                proxy_headers=True, forwarded_allow_ips=proxies)
 
 
 db_cli = typer.Typer(no_args_is_help=True,

@@ -36,6 +36,7 @@ from app.server.completion_codes import PublicCode, refuse_public_codes, served_
 from app.server.context import StudyContext
 from app.server.db import create_tables, make_engine
 from app.server.headers import MTURK_FRAMERS, SecurityHeaders
+from app.server.lockout import TokenLockout
 from app.server.openapi import declare_error_responses
 from app.server.preflight import (
     STUDY_ENV,
@@ -43,6 +44,7 @@ from app.server.preflight import (
     check_data_dir_writable,
     check_database,
     check_workers,
+    forwarded_allow_ips,
     needs_generated_token,
     serve_settings,
     with_generated_token,
@@ -71,11 +73,12 @@ def check_production(settings: Settings) -> None:
     """Refuse a server without a researcher token (there is no default), and production mode
     with a weak token, client clocks trusted or rate limits off; unreadable limits too."""
     rate_limits(settings)
+    token_lockout(settings)
     token = settings.admin_token.strip()
     problem = weak_token_problem(token) if settings.production or not token else None
     if problem:
-        mode = (" in production mode (TOMSTUDY_PRODUCTION=1 or a --host other than loopback)"
-                if settings.production else "")
+        mode = (" in production mode (TOMSTUDY_PRODUCTION=1, a --host other than loopback or a "
+                "public name in TOMSTUDY_ALLOWED_HOSTS)" if settings.production else "")
         raise UnsafeSettings(f"refusing to start{mode}: TOMSTUDY_ADMIN_TOKEN {problem}; "
                              f"{NEW_TOKEN_HINT}")
     if not settings.production:
@@ -83,7 +86,7 @@ def check_production(settings: Settings) -> None:
     if settings.trust_client_clock:
         raise UnsafeSettings("TOMSTUDY_TRUST_CLIENT_CLOCK is for pilots with bots; a "
                              "production server times trials itself; refusing to start")
-    for name in ("rate_limit_starts", "rate_limit_requests"):
+    for name in ("rate_limit_starts", "rate_limit_requests", "researcher_lockout"):
         if not getattr(settings, name).strip():
             raise UnsafeSettings(f"TOMSTUDY_{name.upper()} is empty (no limit); a production "
                                  "server limits anonymous traffic; refusing to start")
@@ -132,6 +135,7 @@ def ready_to_serve(settings: Settings, host: str, workers: int, study_ids: list[
         say(f"researcher token for this run (TOMSTUDY_ADMIN_TOKEN is not set; set it to "
             f"keep one across restarts): {settings.admin_token}")
     check_production(settings)
+    forwarded_allow_ips(settings)
     check_workers(settings, workers)
     check_data_dir_writable(settings.layout)
     if prepare:
@@ -175,6 +179,7 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     app = FastAPI(title="tomstudy", lifespan=lifespan, **docs_urls(settings),
                   description="Online study of how people predict a robot (app/server/API.md).")
     app.state.settings = settings
+    app.state.token_lockout = token_lockout(settings)
     app.state.default_study = studies[0]
     app.state.templates = Jinja2Templates(directory=FRONTEND_DIR / "templates")
     app.mount("/static", StaticFiles(directory=FRONTEND_DIR / "static"), name="static")
@@ -206,6 +211,15 @@ def rate_limits(settings: Settings) -> dict:
         return {"starts": parse_limit("TOMSTUDY_RATE_LIMIT_STARTS", settings.rate_limit_starts),
                 "requests": parse_limit("TOMSTUDY_RATE_LIMIT_REQUESTS",
                                         settings.rate_limit_requests)}
+    except ValueError as err:
+        raise UnsafeSettings(f"refusing to start: {err}") from None
+
+
+def token_lockout(settings: Settings) -> TokenLockout:
+    """The researcher routes' lockout after wrong tokens; UnsafeSettings if unreadable."""
+    try:
+        return TokenLockout(parse_limit("TOMSTUDY_RESEARCHER_LOCKOUT",
+                                        settings.researcher_lockout))
     except ValueError as err:
         raise UnsafeSettings(f"refusing to start: {err}") from None
 

@@ -11,7 +11,6 @@ import subprocess
 
 import pytest
 import yaml
-from fastapi.testclient import TestClient
 
 from app.configio import ConfigError, load_yaml_model
 from app.layout import Layout
@@ -25,7 +24,7 @@ from app.server.completion_codes import (
 )
 from app.settings import REPO_ROOT
 from app.study.config import StudyConfig
-from tests.conftest import REPO, TOMSTUDY
+from tests.conftest import REPO, TOMSTUDY, local_client
 from tests.study.flow import ADMIN, Participant, new_id, served_codes
 
 CODE = re.compile(r"^[A-HJKMNP-TV-Z2-9]{10}$")
@@ -62,7 +61,7 @@ def test_a_served_session_ends_with_its_generated_code_the_same_after_a_restart(
     kept = study_codes(small_study.layout, sid)
     assert served_codes(small_study) == kept
     for _ in range(2):  # a restart reads the same file
-        with TestClient(create_app(settings, [sid])) as client:
+        with local_client(create_app(settings, [sid])) as client:
             p = Participant(client, sid)
             p.start()
             ended = p.post("decline", {"submission_id": new_id()}).json()["step"]
