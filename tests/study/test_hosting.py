@@ -301,7 +301,7 @@ def test_schema_declares_the_error_statuses_and_bodies():
     assert declared["GET /api/session/state"] == [200, 404, 410, 422, 429, 503]
     assert declared["POST /api/session/predictions"] == [
         200, 201, 400, 404, 409, 410, 413, 422, 429, 503]
-    assert declared["GET /api/researcher/export.csv"] == [200, 401, 403, 404, 422, 503]
+    assert declared["GET /api/researcher/export.csv"] == [200, 401, 403, 404, 422, 429, 503]
     assert declared["GET /healthz"] == [200, 503]
     responses = spec["paths"]["/api/session/events"]["post"]["responses"]
     body = {s: r["content"]["application/json"]["schema"]["$ref"].rsplit("/", 1)[1]
@@ -405,7 +405,8 @@ def test_secrets_can_come_from_files(small_study, tmp_path):
 # ---------------------------------------------------------------- Host header and caching
 
 def test_only_configured_and_loopback_host_names_are_answered(small_study, tmp_path):
-    settings = study_settings(small_study, tmp_path, allowed_hosts="study.example.org")
+    settings = study_settings(small_study, tmp_path, allowed_hosts="study.example.org",
+                              **PRODUCTION)  # a public name makes the server production
     with local_client(create_app(settings, [small_study.study_id])) as c:
         page = f"/s/{small_study.study_id}"
         answers = {host: c.get(page, headers={"host": host}).status_code
