@@ -23,6 +23,14 @@
 # and put a reverse proxy that terminates HTTPS in front of it (README, "Hosting on the
 # internet"); never publish it on a public address as is.
 #
+# Client addresses (rate limits, the researcher lockout) come from X-Forwarded-For only when
+# the peer is a proxy named in TOMSTUDY_TRUSTED_PROXIES (addresses or networks; default
+# 127.0.0.1, never `*`, which `tomstudy serve` refuses). A proxy on the host reaches the
+# container from the Docker network's gateway: put that address in the env file, e.g.
+#   echo "TOMSTUDY_TRUSTED_PROXIES=$(docker network inspect bridge \
+#     -f '{{(index .IPAM.Config 0).Gateway}}')" >> tomstudy.env
+# Without it every participant shares the gateway's address, and so one rate-limit key.
+#
 # compose.yaml runs this image with PostgreSQL (README, "Going live"). Without DATABASE_URL
 # the server uses SQLite in the mounted var/ (one worker only). With a PostgreSQL
 # DATABASE_URL (psycopg 3), e.g. a line
@@ -41,8 +49,7 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     PIP_NO_CACHE_DIR=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     TOMSTUDY_DATA_DIR=/app/var \
-    TOMSTUDY_PRODUCTION=1 \
-    FORWARDED_ALLOW_IPS=*
+    TOMSTUDY_PRODUCTION=1
 
 WORKDIR /app
 

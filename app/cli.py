@@ -498,7 +498,7 @@ def serve(
     import uvicorn
 
     from app.main import ready_to_serve
-    from app.server.preflight import NotServable, hand_to_workers
+    from app.server.preflight import NotServable, forwarded_allow_ips, hand_to_workers
 
     study_ids = study.split(",")
     try:
@@ -508,12 +508,15 @@ def serve(
         fail(str(err))
     hand_to_workers(settings, study_ids)
     docs = "off in production" if settings.production else "/docs"
+    proxies = forwarded_allow_ips(settings)
     typer.echo(f"serving http://{host}:{port}/s/{study_ids[0]}  "
-               f"(researcher dashboard: /researcher, API docs: {docs})")
+               f"(researcher dashboard: /researcher, API docs: {docs}; client addresses "
+               f"from X-Forwarded-For of {proxies} only)")
     # info: each worker's start, and the supervisor replacing one that died; no access log
     # (as before: request lines and client addresses stay out of the log)
     uvicorn.run("app.main:app_from_env", factory=True, host=host, port=port,
-                workers=workers, log_level="info", access_log=False)
+                workers=workers, log_level="info", access_log=False,
+                proxy_headers=True, forwarded_allow_ips=proxies)
 
 
 db_cli = typer.Typer(no_args_is_help=True,
@@ -566,6 +569,29 @@ def preview_link_cmd(
              "token of the running server (serve prints the one it made)")
     key = preview_key(token, study)
     typer.echo(base_url.rstrip("/") + preview_path(study, key))
+
+
+@cli.command("codes")
+def codes_cmd(
+    study: Annotated[str, typer.Option(help="study_configs/<study>.yaml")] = "paper_study",
+) -> None:
+    """Print each ending's completion code and its Prolific action (generated ones are made
+    and kept in the data dir on first use)."""
+    from app.configio import ConfigError
+    from app.server.completion_codes import codes_table, served_config
+    from app.study.config import load_study_config
+
+    settings = get_settings()
+    try:
+        config = served_config(load_study_config(settings, study), settings.layout, study)
+    except (ConfigError, OSError, ValueError) as err:
+        fail(str(err))
+    source = ("generated, kept in " + str(settings.layout.completion_codes(study))
+              if config.recruitment.codes == "generated" else "pinned in the study config")
+    typer.echo(f"{study}: completion codes ({source})")
+    for row in codes_table(config):
+        typer.echo(f"  {row['ending']:<17} {row['completion_code'] or '(none)':<12} "
+                   f"Prolific: {row['prolific_action']}")
 
 
 @cli.command("export")

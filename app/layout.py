@@ -13,6 +13,7 @@
       reports/<study>/, power-<study>-<bots>/, instrument-<study>/      analyze, power, instrument
       reports/interaction/<scenario>/                                   interaction
       study.db, pilot_<bots>.db                                         serve, make pilot
+      studies/<study>/completion_codes.json     a study's generated codes   serve, codes
       recordings/             a lab's recordings (TOMSTUDY_RECORDINGS_DIR)   import-recordings
 
 A study's model family (its config's `models.seeds`) lives at `checkpoint(world, model, seed)`;
@@ -132,6 +133,10 @@ class Layout:
         return Path(self.recordings_root) if self.recordings_root else self.root / "recordings"
 
     # -- databases
+    def completion_codes(self, study_id: str) -> Path:
+        """studies/<study>/completion_codes.json: the study's generated completion codes."""
+        return self.root / "studies" / study_id / "completion_codes.json"
+
     def study_database(self) -> Path:
         """study.db: the SQLite database `serve` uses when DATABASE_URL is unset."""
         return self.root / "study.db"

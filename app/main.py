@@ -32,9 +32,11 @@ from app.researcher import dashboard_api as dashboard
 from app.server import health
 from app.server.balance import ensure_rows, sweep_stale
 from app.server.bank_guard import check_bank_unchanged
+from app.server.completion_codes import PublicCode, refuse_public_codes, served_config
 from app.server.context import StudyContext
 from app.server.db import create_tables, make_engine
 from app.server.headers import MTURK_FRAMERS, SecurityHeaders
+from app.server.lockout import TokenLockout
 from app.server.openapi import declare_error_responses
 from app.server.preflight import (
     STUDY_ENV,
@@ -42,6 +44,7 @@ from app.server.preflight import (
     check_data_dir_writable,
     check_database,
     check_workers,
+    forwarded_allow_ips,
     needs_generated_token,
     serve_settings,
     with_generated_token,
@@ -72,11 +75,12 @@ def check_production(settings: Settings) -> None:
     """Refuse a server without a researcher token (there is no default), and production mode
     with a weak token, client clocks trusted or rate limits off; unreadable limits too."""
     rate_limits(settings)
+    token_lockout(settings)
     token = settings.admin_token.strip()
     problem = weak_token_problem(token) if settings.production or not token else None
     if problem:
-        mode = (" in production mode (TOMSTUDY_PRODUCTION=1 or a --host other than loopback)"
-                if settings.production else "")
+        mode = (" in production mode (TOMSTUDY_PRODUCTION=1, a --host other than loopback or a "
+                "public name in TOMSTUDY_ALLOWED_HOSTS)" if settings.production else "")
         raise UnsafeSettings(f"refusing to start{mode}: TOMSTUDY_ADMIN_TOKEN {problem}; "
                              f"{NEW_TOKEN_HINT}")
     if not settings.production:
@@ -84,7 +88,7 @@ def check_production(settings: Settings) -> None:
     if settings.trust_client_clock:
         raise UnsafeSettings("TOMSTUDY_TRUST_CLIENT_CLOCK is for pilots with bots; a "
                              "production server times trials itself; refusing to start")
-    for name in ("rate_limit_starts", "rate_limit_requests"):
+    for name in ("rate_limit_starts", "rate_limit_requests", "researcher_lockout"):
         if not getattr(settings, name).strip():
             raise UnsafeSettings(f"TOMSTUDY_{name.upper()} is empty (no limit); a production "
                                  "server limits anonymous traffic; refusing to start")
@@ -104,18 +108,21 @@ def load_study(settings: Settings, study_id: str) -> StudyContext:
     """Config, bundle (bank and every checkpoint, verified against its manifest and each other)
     of one study; BundleError or BankMismatch if it cannot be served as it is."""
     config = load_study_config(settings, study_id)
+    if settings.production:
+        refuse_public_codes(config, study_id)
     bundle = load_bundle(config, study_id, settings.configs_dir, settings.layout)
-    return StudyContext(study_id, config, bundle.bank, ModelAnswers(bundle),
-                        config_sha256=config_sha256(config),
+    return StudyContext(study_id, served_config(config, settings.layout, study_id), bundle.bank,
+                        ModelAnswers(bundle), config_sha256=config_sha256(config),
                         preview_key=preview_key(settings.admin_token, study_id),
                         trust_client_clock=settings.trust_client_clock)
 
 
 def servable_study(settings: Settings, study_id: str) -> StudyContext:
-    """`load_study`, refusing (NotServable) a study whose bundle or answers do not hold."""
+    """`load_study`, refusing (NotServable) a study whose bundle, answers or codes do not
+    hold."""
     try:
         return load_study(settings, study_id)
-    except (BundleError, BankMismatch) as err:
+    except (BundleError, BankMismatch, PublicCode) as err:
         raise NotServable(str(err)) from err
 
 
@@ -130,6 +137,7 @@ def ready_to_serve(settings: Settings, host: str, workers: int, study_ids: list[
         say(f"researcher token for this run (TOMSTUDY_ADMIN_TOKEN is not set; set it to "
             f"keep one across restarts): {settings.admin_token}")
     check_production(settings)
+    forwarded_allow_ips(settings)
     check_workers(settings, workers)
     check_data_dir_writable(settings.layout)
     if prepare:
@@ -176,6 +184,7 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
                   description="Online study of how people predict a robot (app/server/API.md).")
     app.state.settings = settings
     app.state.prolific = client_from(settings)  # None: no token, Prolific is not asked
+    app.state.token_lockout = token_lockout(settings)
     app.state.default_study = studies[0]
     app.state.templates = Jinja2Templates(directory=FRONTEND_DIR / "templates")
     app.mount("/static", StaticFiles(directory=FRONTEND_DIR / "static"), name="static")
@@ -190,6 +199,12 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.trusted_hosts,
                        www_redirect=False)
     configs = [load_study_config(settings, sid) for sid in studies]
+    if settings.production:  # before any worker serves: one line, not a lifespan traceback
+        try:
+            for sid, config in zip(studies, configs, strict=True):
+                refuse_public_codes(config, sid)
+        except PublicCode as err:
+            raise UnsafeSettings(str(err)) from None
     app.add_middleware(SecurityHeaders, docs_paths=docs_paths(app),  # outermost: 413s too
                        framed_by=framing_origins(configs), form_targets=form_targets(configs))
     return app
@@ -210,6 +225,15 @@ def rate_limits(settings: Settings) -> dict:
         return {"starts": parse_limit("TOMSTUDY_RATE_LIMIT_STARTS", settings.rate_limit_starts),
                 "requests": parse_limit("TOMSTUDY_RATE_LIMIT_REQUESTS",
                                         settings.rate_limit_requests)}
+    except ValueError as err:
+        raise UnsafeSettings(f"refusing to start: {err}") from None
+
+
+def token_lockout(settings: Settings) -> TokenLockout:
+    """The researcher routes' lockout after wrong tokens; UnsafeSettings if unreadable."""
+    try:
+        return TokenLockout(parse_limit("TOMSTUDY_RESEARCHER_LOCKOUT",
+                                        settings.researcher_lockout))
     except ValueError as err:
         raise UnsafeSettings(f"refusing to start: {err}") from None
 

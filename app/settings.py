@@ -36,9 +36,15 @@ class Settings(BaseSettings):
     # per client address and worker process; "" turns a limit off (refused in production)
     rate_limit_starts: str = "20/minute"
     rate_limit_requests: str = "300/minute"
+    # comma-separated addresses or networks of the reverse proxy whose X-Forwarded-For names
+    # the client; "" trusts only 127.0.0.1 (a proxy on this machine); "*" is refused
+    trusted_proxies: str = ""
+    # wrong researcher tokens per client address and worker before a lockout (429)
+    researcher_lockout: str = "10 per 10 minutes"
     # how often each worker releases stale sessions' balance counts (balance.sweep_stale)
     stale_sweep_s: float = Field(default=30.0, gt=0)
-    # production: researcher token must be strong, API docs off (app/main.py)
+    # production: researcher token must be strong, API docs off (app/main.py); implied by a
+    # non-loopback bind (for_host) or name in allowed_hosts
     production: bool = False
     # bots answer faster than people and report a simulated clock; only `make pilot` sets this
     trust_client_clock: bool = False
@@ -61,6 +67,18 @@ class Settings(BaseSettings):
             self.prolific_token = read_secret(self.prolific_token_file,
                                               "TOMSTUDY_PROLIFIC_TOKEN_FILE")
         return self
+
+    @model_validator(mode="after")
+    def _public_name_means_production(self) -> "Settings":
+        # a name others resolve is a public server, whatever address it binds (a proxy's)
+        if self.public_host_names:
+            self.production = True
+        return self
+
+    @property
+    def public_host_names(self) -> list[str]:
+        """The names in `allowed_hosts` that are not loopback: each makes this production."""
+        return [h for h in self.trusted_hosts if not is_loopback(h)]
 
     def resolved_database_url(self) -> str:
         """The configured URL (with the password file's password), or SQLite under the data dir."""

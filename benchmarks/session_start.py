@@ -91,7 +91,9 @@ def stale_release(study, stale: int) -> tuple[np.ndarray, np.ndarray]:
     with tempfile.TemporaryDirectory() as tmp:
         # the app's own background sweep stays off: this loop is the sweep, timed
         settings = study.settings(f"sqlite:///{tmp}/stale.db", stale_sweep_s=3600)
-        with TestClient(create_app(settings, [study.study_id])) as client:
+        # a loopback name: a public one in TOMSTUDY_ALLOWED_HOSTS makes the app production
+        with TestClient(create_app(settings, [study.study_id]),
+                        base_url="http://localhost") as client:
             return sweep_timed(client, study, stale)
 
 

@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parent.parent
 SMALL_STUDY = "small_study"
 PG_BIN = Path("/usr/lib/postgresql/15/bin")
 ADMIN_TOKEN = "test-token"  # the researcher token of every test server and app
-# test clients send many requests from one address (TestClient's host is "testserver"):
+# test clients send many requests from one address (TestClient's peer is "testclient"):
 # rate limits are off unless a test turns them on (tests/study/test_traffic.py)
 NO_RATE_LIMITS = {"rate_limit_starts": "", "rate_limit_requests": ""}
 TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")  # the installed CLI, for subprocesses
@@ -78,7 +78,15 @@ class SmallStudy:
 
         return Settings(**dict(data_dir=self.data_dir, configs_dir=self.configs_dir,
                                database_url=db_url, admin_token=ADMIN_TOKEN,
-                               allowed_hosts="testserver", **NO_RATE_LIMITS) | extra)
+                               **NO_RATE_LIMITS) | extra)
+
+
+def local_client(app, **kwargs):
+    """A TestClient that asks for the server by a loopback name (`localhost`): a public name
+    in TOMSTUDY_ALLOWED_HOSTS would make the app a production server (issue 32 item 5)."""
+    from fastapi.testclient import TestClient
+
+    return TestClient(app, base_url="http://localhost", **kwargs)
 
 
 def _sources_hash(roots: list[str] = PIPELINE_SOURCES) -> str:

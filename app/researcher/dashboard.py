@@ -22,6 +22,7 @@ from app.researcher.progress import (
     study_sessions,
 )
 from app.server.balance import in_progress_cutoff
+from app.server.completion_codes import codes_table
 from app.server.context import StudyContext
 from app.server.sessions import as_utc, session_status
 from app.server.state import progress_of
@@ -218,7 +219,8 @@ def dashboard(db: Session, ctx: StudyContext, rule_set: str = "kept",
     return {"study_id": ctx.study_id,
             "progress": progress_counts(ctx, people) | usable_counts(frame, ctx),
             "participants": participant_rows(db, ctx, people, external_ids),
-            "versions": versions(db, ctx), "alignment": alignment(frame, ctx, rule_set)}
+            "versions": versions(db, ctx), "alignment": alignment(frame, ctx, rule_set),
+            "completion_codes": codes_table(ctx.config)}
 
 
 def usable_counts(frame: pd.DataFrame, ctx: StudyContext) -> dict:

@@ -9,6 +9,7 @@ from sqlmodel import Session
 
 from app.researcher.exports import predictions_frame
 from app.server.balance import in_progress_cutoff
+from app.server.completion_codes import codes_table
 from app.server.context import StudyContext
 from app.server.recruitment import preview_path
 from app.server.sessions import session_status
@@ -109,4 +110,4 @@ def summary(db: Session, ctx: StudyContext) -> dict:
     return {"study_id": ctx.study_id, "title": ctx.config.title,
             "preview_link": preview_path(ctx.study_id, ctx.preview_key),
             "progress": progress(db, ctx), "alignment_error": alignment_summary(frame, ctx),
-            "rows": int(len(frame))}
+            "rows": int(len(frame)), "completion_codes": codes_table(ctx.config)}

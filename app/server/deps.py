@@ -16,6 +16,8 @@ from sqlmodel import Session
 
 from app.server import notices, tabs
 from app.server.context import StudyContext
+from app.server.lockout import TokenLockout
+from app.server.ratelimit import client_key
 from app.server.sessions import SESSION_HEADER, check_can_continue, participant_by_token
 from app.server.tables import Participant
 from app.settings import Settings
@@ -88,13 +90,18 @@ async def participant_context(request: Request, participant: ParticipantDep) -> 
 ContextDep = Annotated[StudyContext, Depends(participant_context)]
 
 
-async def require_admin(settings: SettingsDep,
-                  authorization: Annotated[str | None, Header()] = None) -> None:
-    """Bearer token check: 401 when missing, 403 when wrong."""
+async def require_admin(request: Request, settings: SettingsDep,
+                        authorization: Annotated[str | None, Header()] = None) -> None:
+    """Bearer token check: 401 when missing, 403 when wrong, 429 once this client sent too
+    many wrong ones (lockout.py)."""
+    lockout: TokenLockout = request.app.state.token_lockout
+    client = client_key(request.client.host if request.client else "unknown")
+    lockout.check(client)
     if not authorization or not authorization.lower().startswith("bearer "):
         raise Refused(401, "authorization: missing bearer token (Authorization: Bearer <token>)")
     token = authorization[7:].strip()
     if not secrets.compare_digest(token.encode(), settings.admin_token.encode()):
+        lockout.failed(client)
         raise Refused(403, "authorization: wrong researcher token")
 
 

@@ -13,6 +13,9 @@
 # Files are made with umask 077: the database, the trial bank and the models are readable by
 # the container's user only. The HEALTHCHECK reads the address to ask from /tmp/tomstudy-healthz.
 #
+# Forwarded client addresses are trusted only from TOMSTUDY_TRUSTED_PROXIES (default
+# 127.0.0.1; `tomstudy serve` refuses `*` and a FORWARDED_ALLOW_IPS it would not read).
+#
 # A data dir this user cannot write (a bind mount owned by someone else) is refused by
 # `tomstudy serve` with what to do, before anything is built.
 set -eu

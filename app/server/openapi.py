@@ -86,6 +86,8 @@ RESEARCHER_STATUSES = {
     403: "authorization: wrong researcher token",
     404: "study_id: unknown study",
     422: INVALID,
+    429: "authorization: too many wrong researcher tokens from this address (TOMSTUDY_"
+         "RESEARCHER_LOCKOUT, 10 per 10 minutes); `Retry-After` says when to retry",
     503: DB_DOWN,
 }
 WITHDRAWAL_STATUSES = RESEARCHER_STATUSES | {

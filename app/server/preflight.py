@@ -4,6 +4,7 @@ A refusal here names the setting or file to fix and comes before uvicorn forks, 
 unservable study fails once, clearly, instead of in every worker's traceback.
 """
 
+import ipaddress
 import os
 import secrets
 import tempfile
@@ -29,6 +30,26 @@ def serve_settings(settings: Settings, host: str, allow_bank_change: bool = Fals
     if allow_bank_change:
         settings = settings.model_copy(update={"allow_bank_change": True})
     return settings
+
+
+def forwarded_allow_ips(settings: Settings) -> str:
+    """The peers uvicorn takes a client address from (X-Forwarded-For): the configured
+    proxies, or 127.0.0.1; NotServable for `*` or an entry that is no address or network."""
+    if os.environ.get("FORWARDED_ALLOW_IPS"):
+        raise NotServable("FORWARDED_ALLOW_IPS: tomstudy serve does not read it; name your "
+                          "reverse proxy's address in TOMSTUDY_TRUSTED_PROXIES instead")
+    proxies = [p.strip() for p in settings.trusted_proxies.split(",") if p.strip()]
+    for proxy in proxies:
+        if proxy == "*":
+            raise NotServable("TOMSTUDY_TRUSTED_PROXIES: '*' lets any client name its own "
+                              "address (and so its own rate-limit key); give the proxy's "
+                              "address or network, e.g. 172.17.0.1 or 10.0.0.0/16")
+        try:
+            ipaddress.ip_network(proxy, strict=False)
+        except ValueError:
+            raise NotServable(f"TOMSTUDY_TRUSTED_PROXIES: {proxy!r} is not an IP address or "
+                              "network (host names are not resolved)") from None
+    return ",".join(proxies) or "127.0.0.1"
 
 
 def needs_generated_token(settings: Settings) -> bool:

@@ -4,7 +4,7 @@ Session starts and every other participant API request have a limit each, per cl
 address, in a sliding window kept in this worker's memory (`limits`' MemoryStorage): with
 N workers a client gets up to N times the limit, which still bounds it. The client
 address is the TCP peer, or the one a trusted reverse proxy forwards (uvicorn's proxy
-headers, trusted from FORWARDED_ALLOW_IPS: 127.0.0.1 by default). An IPv6 client is keyed
+headers, trusted from TOMSTUDY_TRUSTED_PROXIES: 127.0.0.1 by default). An IPv6 client is keyed
 by its /64: one subscriber is routinely given a whole /64, so its single addresses would be
 unlimited keys. Beyond a limit the answer is 429 with `Retry-After`; the browser retries such
 writes with the same body.

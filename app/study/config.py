@@ -120,6 +120,10 @@ class Endings(StrictModel):
 MTURK_SUBMIT_HOSTS = ("https://www.mturk.com", "https://workersandbox.mturk.com")
 Platform = Literal["prolific", "mturk", "open"]
 _REDIRECT_FIELDS = ("prolific_redirect_url", "mturk_redirect_url", "open_redirect_url")
+ENDING_NAMES = ("failed_checks", "excluded", "declined_consent", "screened_out")
+# `pinned`: the codes are the config's; `generated`: the server makes one random code per
+# ending and keeps it in the data dir (app/server/completion_codes.py)
+CodeSource = Literal["pinned", "generated"]
 
 
 class RecruitmentConfig(StrictModel):
@@ -134,20 +138,39 @@ class RecruitmentConfig(StrictModel):
 
     `closed` and `max_counted_sessions` stop new participants (they see a page that asks
     them to return the study); sessions already started go on, and lab previews still open.
+
+    `codes: generated` leaves every completion code out of the config (which is public in a
+    repository): the server makes one random code per ending on first use and keeps it in
+    the data dir; `pinned` (the default) uses the codes written here.
     """
 
     platform: Platform = "prolific"
+    codes: CodeSource = "pinned"
     closed: bool = False  # true: new participants are turned away (the study is closed)
     # the study is full once this many sessions count (in progress or completed validly)
     max_counted_sessions: int | None = Field(default=None, ge=1)
     prolific_study_id: str = Field(default="", pattern=r"^[0-9a-fA-F]{0,24}$")
-    completion_code: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")
+    completion_code: str = Field(default="", max_length=64, pattern=r"^[A-Za-z0-9_-]*$")
     prolific_redirect_url: str = "https://app.prolific.com/submissions/complete?cc={completion_code}"
     mturk_redirect_url: str = ""
     open_redirect_url: str = ""
     # where an MTurk completion may post its form (turkSubmitTo must be one of these)
     mturk_submit_hosts: list[str] = list(MTURK_SUBMIT_HOSTS)
     endings: Endings = Endings()
+
+    # a config that pins its codes dumps as before the key existed (same config hash)
+    _without_default_codes = omitted_when_default("codes")
+
+    @model_validator(mode="after")
+    def _codes_from_one_source(self) -> "RecruitmentConfig":
+        pinned = self.pinned_codes()
+        if self.codes == "pinned" and not self.completion_code:
+            raise ValueError("completion_code: required (or `codes: generated`: the server "
+                             "makes every ending's code)")
+        if self.codes == "generated" and pinned:
+            raise ValueError(f"{next(iter(pinned))}: leave it out: with `codes: generated` "
+                             "the server makes every ending's code (`tomstudy codes`)")
+        return self
 
     @model_validator(mode="after")
     def _redirects_render(self) -> "RecruitmentConfig":
@@ -158,6 +181,22 @@ class RecruitmentConfig(StrictModel):
                 raise ValueError("mturk_submit_hosts: each must be an origin such as "
                                  f"https://www.mturk.com (http only on 127.0.0.1), got {host!r}")
         return self
+
+    def pinned_codes(self) -> dict[str, str]:
+        """Every code written in this section, by its field path (recruitment.…)."""
+        found = {"recruitment.completion_code": self.completion_code}
+        for name in ENDING_NAMES:
+            found[f"recruitment.endings.{name}.completion_code"] = getattr(
+                self.endings, name).completion_code
+        return {path: code for path, code in found.items() if code}
+
+    def with_codes(self, codes: dict[str, str]) -> "RecruitmentConfig":
+        """This section with `codes` (outcome -> code) as its codes (generated ones)."""
+        endings = self.endings.model_copy(update={
+            name: getattr(self.endings, name).model_copy(update={"completion_code": codes[name]})
+            for name in ENDING_NAMES})
+        return self.model_copy(update={"completion_code": codes["completed"],
+                                       "endings": endings})
 
     def ending(self, outcome: str) -> Ending:
         """The code and message of `outcome` (one of app/server/endings.py's OUTCOMES)."""

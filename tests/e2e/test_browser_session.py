@@ -16,9 +16,7 @@ import httpx
 import pytest
 import yaml
 
-from app.configio import load_yaml_model
 from app.server.routes.pages import PAGE_RULES
-from app.study.config import StudyConfig
 from tests.conftest import ADMIN_TOKEN, REPO
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
@@ -40,6 +38,7 @@ from tests.e2e.pages import (
     wait_saved,
     watch_clips,
 )
+from tests.study.flow import served_codes
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -196,10 +195,8 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
     # the fake clock answers trials in seconds of server time: the too-fast rule (on the
     # smaller of both clocks) may exclude the session, which then gets the review code
     outcome = sheet[PID]["outcome"]
-    endings = load_yaml_model(browser_study.configs_dir / f"{BROWSER_STUDY}.yaml",
-                              StudyConfig).recruitment
     assert outcome in ("completed", "excluded")
-    assert sheet[PID]["completion_code"] == code == endings.ending(outcome).completion_code
+    assert sheet[PID]["completion_code"] == code == served_codes(browser_study)[outcome]
 
     mine = [r for r in rows if r["participant_id"] == public_id_of(browser_server.db_path, PID)]
     bank_ids = bank_ids_of_refs(browser_server.db_path, PID)  # the browser saw opaque ids

@@ -8,8 +8,10 @@ import pytest
 
 from app.pilot.bots import run_bots
 from tests.conftest import ADMIN_TOKEN, REPO
+from tests.e2e.axe import axe_violations
 from tests.e2e.conftest import BROWSER_STUDY
-from tests.e2e.pages import researcher_page
+from tests.e2e.pages import log_in, researcher_page
+from tests.study.flow import Participant, hex24, prolific, served_codes
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -72,6 +74,63 @@ def test_dashboard_lists_sessions_and_replays_a_trial(browser_server, bot_sessio
     page.screenshot(path=str(SCREENSHOTS / "dashboard_replay_e2e.png"), full_page=True)
     assert errors == []
     page.close()
+
+
+def test_withdrawal_from_the_dashboard_asks_first_and_shows_the_audit_line(
+        browser_server, browser_study, bot_sessions, chromium):
+    with httpx.Client(base_url=browser_server.url, timeout=30) as http:
+        Participant(http, BROWSER_STUDY).start(**prolific("withdraws-later"))
+    # bypass_csp: axe-core is injected as an inline script, which the page's CSP refuses
+    page = chromium.new_page(viewport={"width": 1300, "height": 900}, bypass_csp=True)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    log_in(page, browser_server.url)
+    session = public_id("withdraws-later", browser_server.url)
+    row = f'table.sessions tbody tr[data-public-id="{session}"]'
+    page.wait_for_selector(row)
+    codes = served_codes(browser_study)
+    shown_codes = page.locator("#completion-codes tbody tr").all_inner_texts()
+    assert [line.split("\t")[1] for line in shown_codes] == list(codes.values())
+    assert axe_violations(page) == []
+    page.select_option("#withdraw-kind", "external_id")
+    page.fill("#withdraw-id", hex24("withdraws-later").upper())  # any case matches
+    page.click("#withdraw-form button[type=submit]")
+    assert page.locator("#withdraw-dialog").evaluate("d => d.open")
+    assert "cannot be restored" in page.text_content("#withdraw-dialog-text")
+    assert axe_violations(page) == []  # the open dialog too
+    page.evaluate("window.scrollTo(0, 0)")
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SCREENSHOTS / "dashboard_withdrawal.png"))
+    page.click("#withdraw-cancel")  # nothing happens without the confirmation
+    assert not page.locator("#withdraw-dialog").evaluate("d => d.open")
+    assert audit(browser_server.url) == [] and page.locator(row).count() == 1
+    page.click("#withdraw-form button[type=submit]")
+    page.click("#withdraw-confirm")
+    page.wait_for_function("document.getElementById('withdraw-message').textContent"
+                           ".startsWith('Withdrawn: 1 session(s)')")
+    [line] = audit(browser_server.url)
+    assert (line["via"], line["id_kind"], line["row_counts"]["participant"]) == (
+        "api", "external_id", 1)
+    assert f"audit line {line['id']}" in page.text_content("#withdraw-message")
+    page.wait_for_selector(row, state="detached")  # the table was refreshed
+    assert page.locator("#withdraw-audit tbody tr").count() == 1
+    assert errors == []
+    page.close()
+
+
+def public_id(name: str, url: str) -> str:
+    """The public id of the session of Prolific participant `name` (from the dashboard API)."""
+    board = httpx.get(f"{url}/api/researcher/dashboard", params={
+        "study_id": BROWSER_STUDY, "external_ids": True},
+        headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}, timeout=30).json()
+    [found] = [r["public_id"] for r in board["participants"] if r.get("external_id") == hex24(name)]
+    return found
+
+
+def audit(url: str) -> list[dict]:
+    """The study's withdrawal audit lines."""
+    return httpx.get(f"{url}/api/researcher/withdrawals/audit", params={"study_id": BROWSER_STUDY},
+                     headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}, timeout=30).json()
 
 
 def shown_verdicts(page, url: str) -> None:

@@ -33,7 +33,7 @@ from tests.e2e.pages import (
     visible,
 )
 from tests.study.flow import Participant as ApiParticipant
-from tests.study.flow import fail_attention_checks
+from tests.study.flow import fail_attention_checks, served_codes
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -86,20 +86,24 @@ def page(chromium):
     context.close()
 
 
-def test_declining_consent_shows_its_code_and_stores_only_the_receipt(page, browser_server):
+def test_declining_consent_shows_its_code_and_stores_only_the_receipt(page, browser_server,
+                                                                      browser_study):
+    code = served_codes(browser_study)["declined_consent"]
     page.goto(f"{browser_server.url}/s/{BROWSER_STUDY}?{fresh_recruitment()}")
     visible(page, "consent")
     page.click("#consent-decline")
     shown = done_screen(page)
     assert shown["heading"] == "The study has ended" and "return" in shown["message"]
-    assert shown["code"] == "C3TOMNOCONSENT"
-    assert shown["redirect"].endswith("cc=C3TOMNOCONSENT")
+    assert shown["code"] == code
+    assert shown["redirect"].endswith(f"cc={code}")
     stored = receipt(browser_server.db_path, page_token(page, BROWSER_STUDY))
-    assert stored == {"outcome": "declined_consent", "code": "C3TOMNOCONSENT", "ended": True,
+    assert stored == {"outcome": "declined_consent", "code": code, "ended": True,
                       "client": {}, "writes": ["decline"], "events": 0}
 
 
-def test_a_device_that_cannot_run_the_study_is_screened_out(chromium, browser_server):
+def test_a_device_that_cannot_run_the_study_is_screened_out(chromium, browser_server,
+                                                             browser_study):
+    code = served_codes(browser_study)["screened_out"]
     context = chromium.new_context(viewport={"width": 800, "height": 560})
     page = context.new_page()
     page.clock.install()
@@ -107,10 +111,10 @@ def test_a_device_that_cannot_run_the_study_is_screened_out(chromium, browser_se
     visible(page, "unsupported")
     page.click("#screen-out")
     shown = done_screen(page)
-    assert shown["code"] == "C4TOMDEVICE" and shown["redirect"].endswith("cc=C4TOMDEVICE")
+    assert shown["code"] == code and shown["redirect"].endswith(f"cc={code}")
     stored = receipt(browser_server.db_path, page_token(page, BROWSER_STUDY))
     assert (stored["outcome"], stored["code"], stored["writes"]) == (
-        "screened_out", "C4TOMDEVICE", ["screen_out"])
+        "screened_out", code, ["screen_out"])
     context.close()
 
 
@@ -121,10 +125,11 @@ def test_failing_the_attention_checks_ends_for_review(page, browser_server, brow
     answer_survey(page)
     shown = done_screen(page)
     assert shown["heading"] == "Thank you!" and "reviewed" in shown["message"]
-    assert shown["code"] == "C2TOMREVIEW" and shown["redirect"].endswith("cc=C2TOMREVIEW")
+    code = served_codes(browser_study)["failed_checks"]
+    assert shown["code"] == code and shown["redirect"].endswith(f"cc={code}")
     stored = receipt(browser_server.db_path, token)
     assert (stored["outcome"], stored["code"], stored["writes"][-1]) == (
-        "failed_checks", "C2TOMREVIEW", "survey")
+        "failed_checks", code, "survey")
 
 
 class SubmitStandIn(BaseHTTPRequestHandler):
@@ -198,4 +203,4 @@ def test_mturk_preview_starts_nothing_and_the_hit_is_handed_in(page, mturk_serve
     assert "HIT submitted" in page.content()
     assert SubmitStandIn.received == [("/mturk/externalSubmit", {
         "assignmentId": assignment, "outcome": "failed_checks",
-        "completion_code": "C2TOMREVIEW"})]
+        "completion_code": served_codes(study)["failed_checks"]})]

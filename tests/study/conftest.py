@@ -33,6 +33,15 @@ def client(served_study, db_url):
         yield c
 
 
+@pytest.fixture
+def codes(client, served_study) -> dict[str, str]:
+    """Each outcome's completion code as `client`'s app gives it (the study's generated ones)."""
+    from app.server.completion_codes import OUTCOMES
+
+    recruitment = client.app.state.studies[served_study.study_id].config.recruitment
+    return {outcome: recruitment.ending(outcome).completion_code for outcome in OUTCOMES}
+
+
 @pytest.fixture(scope="module")
 def bank(served_study) -> dict:
     """Bank trials by id (the test reads the true moves for attention checks)."""

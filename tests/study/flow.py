@@ -14,7 +14,7 @@ from app.main import create_app
 from app.pilot.bots import segment_key
 from app.server.plan import PART_PHASES, TRIAL_PHASES
 from app.server.sessions import SESSION_HEADER, SESSION_PATH
-from tests.conftest import ADMIN_TOKEN
+from tests.conftest import ADMIN_TOKEN, local_client
 
 TOKEN = ADMIN_TOKEN
 ADMIN = {"Authorization": f"Bearer {TOKEN}"}
@@ -250,7 +250,20 @@ def make_client(small_study, db_url: str, trust_client_clock: bool = True) -> Te
     claiming human durations (test_public_server checks the server's own clock).
     """
     settings = small_study.settings(db_url, trust_client_clock=trust_client_clock)
-    return TestClient(create_app(settings, [small_study.study_id]))
+    return local_client(create_app(settings, [small_study.study_id]))
+
+
+def served_codes(study, study_id: str | None = None) -> dict[str, str]:
+    """Each outcome's completion code a server of `study` gives (its generated codes, made in
+    its data dir on first use, or the config's pinned ones)."""
+    from app.configio import load_yaml_model
+    from app.server.completion_codes import OUTCOMES, served_config
+    from app.study.config import StudyConfig
+
+    study_id = study_id or study.study_id
+    config = load_yaml_model(study.configs_dir / f"{study_id}.yaml", StudyConfig)
+    recruitment = served_config(config, study.layout, study_id).recruitment
+    return {outcome: recruitment.ending(outcome).completion_code for outcome in OUTCOMES}
 
 
 def page_json(html: str, element_id: str):

@@ -31,8 +31,8 @@ def per_trial(small_study) -> tuple[int, int]:
     return cfg.start_states, cfg.steps_to_predict
 
 
-def test_whole_session_stores_every_prediction_beside_the_models(client, small_study, bank,
-                                                                  per_trial):
+def test_whole_session_stores_every_prediction_beside_the_models(codes, client, small_study,
+                                                                  bank, per_trial):
     p = Participant(client, small_study.study_id)
     body = p.start(**prolific("alice"))
     assert p.status == 201 and body["resumed"] is False
@@ -49,8 +49,8 @@ def test_whole_session_stores_every_prediction_beside_the_models(client, small_s
     assert 5 <= len(trial["segment"]["positions"]) - 1 <= 7
     assert "predictions" not in trial and "policy_actions" not in trial
     done = p.finish(bank)
-    assert done["phase"] == Phase.DONE and done["step"]["completion_code"] == "C1TOMSTUDY"
-    assert done["step"]["redirect_url"].endswith("cc=C1TOMSTUDY")
+    assert done["phase"] == Phase.DONE and done["step"]["completion_code"] == codes["completed"]
+    assert done["step"]["redirect_url"].endswith(f"cc={codes['completed']}")
     total = done["progress"]["total"]
     assert total == 2 * (1 + 3 + 1)  # per world: 1 practice, 3 trials and 1 attention check
 

@@ -6,7 +6,6 @@ import subprocess
 
 import httpx
 import pytest
-from fastapi.testclient import TestClient
 
 from app.fileio import sha256_file
 from app.layout import Layout
@@ -14,7 +13,14 @@ from app.main import create_app
 from app.server.bank_guard import BankChanged, banks_run
 from app.server.db import make_engine
 from app.server.recruitment import preview_key
-from tests.conftest import TOMSTUDY, SmallStudy, free_port, freeze_bundle_of, start_server
+from tests.conftest import (
+    TOMSTUDY,
+    SmallStudy,
+    free_port,
+    freeze_bundle_of,
+    local_client,
+    start_server,
+)
 from tests.study.flow import TOKEN, Participant, make_client, new_id
 
 
@@ -47,7 +53,7 @@ def test_a_changed_bank_is_refused_naming_the_sessions_and_the_override(small_st
                                                                          db_url):
     old = run_sessions(small_study, db_url, n=2, pilots=1)
     app = create_app(rebuilt.settings(db_url), [rebuilt.study_id])
-    with pytest.raises(BankChanged) as refused, TestClient(app):
+    with pytest.raises(BankChanged) as refused, local_client(app):
         pass
     message = str(refused.value)
     new = json.loads(
@@ -65,7 +71,7 @@ def test_the_override_serves_the_changed_bank(small_study, rebuilt, db_url, monk
     monkeypatch.setenv("TOMSTUDY_ALLOW_BANK_CHANGE", "1")
     settings = rebuilt.settings(db_url)
     assert settings.allow_bank_change
-    with TestClient(create_app(settings, [rebuilt.study_id])) as client:
+    with local_client(create_app(settings, [rebuilt.study_id])) as client:
         Participant(client, rebuilt.study_id).start()
         new = client.app.state.studies[rebuilt.study_id].bank.sha256
     engine = make_engine(db_url)
@@ -111,7 +117,7 @@ def test_sessions_of_a_replaced_bank_are_told_plainly_and_finished_ones_keep_the
         done.pass_intro()
         code = done.finish(bank)["step"]["completion_code"]
     settings = rebuilt.settings(db_url, allow_bank_change=True)
-    with TestClient(create_app(settings, [rebuilt.study_id])) as client:
+    with local_client(create_app(settings, [rebuilt.study_id])) as client:
         running.client = done.client = client
         answers = [running.get("state"), running.post("events", {"events": [{
             "submission_id": new_id(), "kind": "resize", "t_client_ms": 1.0,

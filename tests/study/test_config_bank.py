@@ -11,7 +11,6 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
-from fastapi.testclient import TestClient
 from sqlalchemy.pool import StaticPool
 from sqlmodel import Session, create_engine, select
 
@@ -39,7 +38,7 @@ from app.study.config import (
     load_study_config,
 )
 from app.study.trials import TrialBank, clip_sha256
-from tests.conftest import REPO, TOMSTUDY, SmallStudy, build_bundle_of
+from tests.conftest import REPO, TOMSTUDY, SmallStudy, build_bundle_of, local_client
 from tests.study import flow
 from tests.study.flow import ADMIN, new_id, prediction_body, prolific
 
@@ -305,7 +304,7 @@ def test_start_states_config_sets_the_count_and_the_api_follows(three_starts, tm
             if t.kind != "attention":
                 assert [s.start_kind for s in t.start_states] == ["own", *DATA_KINDS[name]]
     settings = SmallStudy(data, configs).settings(f"sqlite:///{tmp_path / 'study.db'}")
-    with TestClient(create_app(settings, ["three_starts"])) as client:
+    with local_client(create_app(settings, ["three_starts"])) as client:
         p = flow.Participant(client, "three_starts")
         p.start()
         trial = p.pass_intro()["step"]
@@ -386,7 +385,7 @@ def test_in_memory_database_through_dependency_override(small_study, tmp_path):
     settings = small_study.settings(f"sqlite:///{tmp_path / 'unused.db'}")
     app = create_app(settings, [small_study.study_id])
     app.dependency_overrides[get_db] = memory_db
-    with TestClient(app) as client:
+    with local_client(app) as client:
         r = client.post("/api/sessions", json={"study_id": small_study.study_id,
                                                "recruitment": prolific("memory")})
         r = client.post("/api/session/consent", json={"submission_id": new_id(), "agree": True},

@@ -180,3 +180,12 @@ def test_the_healthcheck_asks_where_the_server_listens(run_entrypoint, args, ask
 def test_the_entrypoint_makes_private_files(run_entrypoint):
     run_entrypoint()
     assert run_entrypoint.healthz.stat().st_mode & 0o077 == 0  # umask 077
+
+
+def test_the_image_trusts_forwarded_addresses_only_from_a_named_proxy():
+    dockerfile = (REPO / "Dockerfile").read_text()
+    settings = [line for line in dockerfile.splitlines() if not line.startswith("#")]
+    assert not any("FORWARDED_ALLOW_IPS" in line for line in settings)  # it was `*`
+    assert "TOMSTUDY_TRUSTED_PROXIES" in dockerfile  # the comment says how to name the proxy
+    assert SERVER["environment"]["TOMSTUDY_TRUSTED_PROXIES"] == "${TOMSTUDY_TRUSTED_PROXIES:-}"
+    assert "TOMSTUDY_TRUSTED_PROXIES" in settings_env_names()

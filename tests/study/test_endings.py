@@ -34,23 +34,25 @@ def rows_of(client, table, participant_id: int) -> list:
         return db.exec(select(table).where(table.participant_id == participant_id)).all()
 
 
-def test_a_completed_session_stores_its_receipt_before_the_redirect(client, small_study, bank):
+def test_a_completed_session_stores_its_receipt_before_the_redirect(codes, client, small_study,
+                                                                   bank):
     p = Client(client, small_study.study_id)
     p.start()
     p.pass_intro()
     done = p.finish(bank)
     assert done["phase"] == Phase.DONE
     assert done["step"] | {"message": ""} == {
-        "outcome": "completed", "completion_code": "C1TOMSTUDY", "message": "",
-        "redirect_url": "https://app.prolific.com/submissions/complete?cc=C1TOMSTUDY",
+        "outcome": "completed", "completion_code": codes["completed"], "message": "",
+        "redirect_url": f"https://app.prolific.com/submissions/complete?cc={codes['completed']}",
         "mturk_submit": None}
     row = stored(client, p.token)
-    assert (row.outcome, row.completion_code, row.completed) == ("completed", "C1TOMSTUDY", True)
+    assert (row.outcome, row.completion_code, row.completed) == (
+        "completed", codes["completed"], True)
     assert row.ended_at is not None and row.completed_at is not None
 
 
-def test_failing_two_attention_checks_ends_for_review_with_its_own_code(client, small_study,
-                                                                         bank):
+def test_failing_two_attention_checks_ends_for_review_with_its_own_code(codes, client,
+                                                                         small_study, bank):
     sid = small_study.study_id
     p = Client(client, sid)
     p.start()
@@ -59,10 +61,11 @@ def test_failing_two_attention_checks_ends_for_review_with_its_own_code(client, 
     done = p.survey()["step"]
     row = stored(client, p.token)
     assert row.attention_failed == 2  # one check per world
-    assert (done["outcome"], done["completion_code"]) == ("failed_checks", "C2TOMREVIEW")
-    assert done["redirect_url"].endswith("cc=C2TOMREVIEW") and "reviewed" in done["message"]
-    assert (row.outcome, row.completion_code, row.completed) == ("failed_checks", "C2TOMREVIEW",
-                                                                 True)
+    assert (done["outcome"], done["completion_code"]) == ("failed_checks", codes["failed_checks"])
+    assert done["redirect_url"].endswith(f"cc={codes['failed_checks']}")
+    assert "reviewed" in done["message"]
+    assert (row.outcome, row.completion_code, row.completed) == (
+        "failed_checks", codes["failed_checks"], True)
     endings = client.app.state.studies[sid].config.recruitment.endings
     with_recruitment(client, sid, endings=endings.model_copy(update={"min_failed": 3}))
     q = Client(client, sid)
@@ -70,17 +73,18 @@ def test_failing_two_attention_checks_ends_for_review_with_its_own_code(client, 
     q.pass_intro()
     fail_attention_checks(q, bank)
     done = q.survey()["step"]  # 2 failed < min_failed 3, but the exclusion rule holds
-    assert (done["outcome"], done["completion_code"]) == ("excluded", "C2TOMREVIEW")
+    assert (done["outcome"], done["completion_code"]) == ("excluded", codes["excluded"])
 
 
-def test_a_session_the_rules_exclude_never_gets_the_approve_code(client, small_study, bank):
+def test_a_session_the_rules_exclude_never_gets_the_approve_code(codes, client, small_study,
+                                                                  bank):
     sid = small_study.study_id
     hasty = Client(client, sid)
     hasty.start()
     hasty.pass_intro()
     done = hasty.finish(bank, duration_ms=1000)["step"]  # every trial too fast
-    assert (done["outcome"], done["completion_code"]) == ("excluded", "C2TOMREVIEW")
-    assert "reviewed" in done["message"]
+    assert (done["outcome"], done["completion_code"]) == ("excluded", codes["excluded"])
+    assert codes["excluded"] != codes["completed"] and "reviewed" in done["message"]
     careful = Client(client, sid)
     careful.start()
     careful.pass_intro()
@@ -100,7 +104,8 @@ def test_a_session_the_rules_exclude_never_gets_the_approve_code(client, small_s
     assert sheet["excluded"].dtype == bool
 
 
-def test_declining_consent_ends_the_session_and_keeps_only_the_receipt(client, small_study):
+def test_declining_consent_ends_the_session_and_keeps_only_the_receipt(codes, client,
+                                                                       small_study):
     sid = small_study.study_id
     p = Client(client, sid)
     params = {"PROLIFIC_PID": "ab" * 12, "STUDY_ID": "cd" * 12, "SESSION_ID": "first"}
@@ -112,7 +117,7 @@ def test_declining_consent_ends_the_session_and_keeps_only_the_receipt(client, s
     assert r.status_code == 200, r.text
     done = r.json()
     assert done["phase"] == Phase.DONE and done["step"]["outcome"] == "declined_consent"
-    assert done["step"]["completion_code"] == "C3TOMNOCONSENT"
+    assert done["step"]["completion_code"] == codes["declined_consent"]
     assert "return" in done["step"]["message"]
     row = stored(client, p.token)
     assert (row.outcome, row.completed, row.counted, row.client) == (
@@ -133,7 +138,7 @@ def test_declining_consent_ends_the_session_and_keeps_only_the_receipt(client, s
         "world_orders": None}
 
 
-def test_screen_out_only_before_any_trial(client, small_study, bank):
+def test_screen_out_only_before_any_trial(codes, client, small_study, bank):
     sid = small_study.study_id
     p = Client(client, sid)
     p.start()
@@ -143,7 +148,7 @@ def test_screen_out_only_before_any_trial(client, small_study, bank):
     r = p.post("screen-out", {"submission_id": new_id(), "reason": "window_too_small"})
     assert r.status_code == 200, r.text
     assert (r.json()["step"]["outcome"], r.json()["step"]["completion_code"]) == (
-        "screened_out", "C4TOMDEVICE")
+        "screened_out", codes["screened_out"])
     row = stored(client, p.token)
     assert (row.outcome, row.counted) == ("screened_out", False)
     reason = [s.payload for s in rows_of(client, Submission, row.id) if s.kind == "screen_out"]
@@ -174,7 +179,7 @@ def test_undo_and_reset_history_is_stored_with_the_trial(client, small_study):
     assert [t.history for t in rows_of(client, TrialResponse, row.id)] == [history]
 
 
-def test_mturk_preview_starts_nothing_and_completion_posts_to_turk_submit_to(client,
+def test_mturk_preview_starts_nothing_and_completion_posts_to_turk_submit_to(codes, client,
                                                                               small_study,
                                                                               bank):
     sid = small_study.study_id
@@ -194,10 +199,10 @@ def test_mturk_preview_starts_nothing_and_completion_posts_to_turk_submit_to(cli
     assert done["mturk_submit"] == {
         "action": "https://workersandbox.mturk.com/mturk/externalSubmit",
         "fields": {"assignmentId": "3XYZ", "outcome": "completed",
-                   "completion_code": "C1TOMSTUDY"}}
+                   "completion_code": codes["completed"]}}
 
 
-def test_endings_and_history_reach_the_exports(client, small_study):
+def test_endings_and_history_reach_the_exports(codes, client, small_study):
     import io
 
     import pandas as pd
@@ -220,7 +225,7 @@ def test_endings_and_history_reach_the_exports(client, small_study):
 
     sheet = export("participants").set_index("participant_id")
     assert sheet.loc[public_id, ["outcome", "completion_code", "status"]].tolist() == [
-        "declined_consent", "C3TOMNOCONSENT", "ended"]
+        "declined_consent", codes["declined_consent"], "ended"]
     events = export("events")
     pressed = events[events["source"] == "trial_history"]
     assert pressed[["kind", "start_index", "t_trial_ms"]].values.tolist() == [["reset", 3, 900.0]]

@@ -8,7 +8,6 @@ from contextlib import contextmanager
 
 import httpx
 import pytest
-from fastapi.testclient import TestClient
 from sqlalchemy import event
 from sqlalchemy.engine import make_url
 
@@ -28,7 +27,7 @@ from app.server.preflight import (
     worker_environment,
 )
 from app.settings import Settings, get_settings, is_loopback
-from tests.conftest import ADMIN_TOKEN, REPO, TOMSTUDY, free_port
+from tests.conftest import ADMIN_TOKEN, REPO, TOMSTUDY, free_port, local_client
 from tests.study.flow import ADMIN, Participant
 
 STRONG_TOKEN = "x" * 40
@@ -139,7 +138,7 @@ def test_serve_refuses_several_workers_on_sqlite(small_study, tmp_path):
 def client(small_study, tmp_path_factory):
     """The small study's app (not production) on a fresh SQLite file."""
     settings = study_settings(small_study, tmp_path_factory.mktemp("hosting"))
-    with TestClient(create_app(settings, [small_study.study_id])) as c:
+    with local_client(create_app(settings, [small_study.study_id])) as c:
         yield c
 
 
@@ -213,7 +212,7 @@ DOCS = ("/docs", "/redoc", "/openapi.json")
 
 def test_api_docs_are_off_in_production(small_study, tmp_path):
     settings = study_settings(small_study, tmp_path, **PRODUCTION)
-    with TestClient(create_app(settings, [small_study.study_id])) as production:
+    with local_client(create_app(settings, [small_study.study_id])) as production:
         assert {path: production.get(path).status_code for path in DOCS} == dict.fromkeys(DOCS, 404)
         assert production.get(f"/s/{small_study.study_id}").status_code == 200
 
@@ -241,7 +240,7 @@ def test_healthz_is_200_when_the_database_answers(client):
 
 
 def test_healthz_is_503_with_a_short_reason_when_the_database_is_down(small_study, tmp_path):
-    with TestClient(create_app(study_settings(small_study, tmp_path),
+    with local_client(create_app(study_settings(small_study, tmp_path),
                                [small_study.study_id])) as c:
         c.app.state.engine = make_engine(f"postgresql://nobody@127.0.0.1:{free_port()}/gone")
         r = c.get("/healthz")
@@ -281,7 +280,7 @@ def test_postgres_engines_get_a_connect_timeout(tmp_path):
 
 
 def test_a_hung_postgres_fails_within_the_connect_timeout_not_forever(small_study, tmp_path):
-    with silent_port() as port, TestClient(create_app(study_settings(small_study, tmp_path),
+    with silent_port() as port, local_client(create_app(study_settings(small_study, tmp_path),
                                                       [small_study.study_id])) as c:
         c.app.state.engine = make_engine(f"postgresql://u@127.0.0.1:{port}/x",
                                          connect_timeout_s=2)  # psycopg's minimum
@@ -302,7 +301,7 @@ def test_schema_declares_the_error_statuses_and_bodies():
     assert declared["GET /api/session/state"] == [200, 404, 410, 422, 429, 503]
     assert declared["POST /api/session/predictions"] == [
         200, 201, 400, 404, 409, 410, 413, 422, 429, 503]
-    assert declared["GET /api/researcher/export.csv"] == [200, 401, 403, 404, 422, 503]
+    assert declared["GET /api/researcher/export.csv"] == [200, 401, 403, 404, 422, 429, 503]
     assert declared["GET /healthz"] == [200, 503]
     responses = spec["paths"]["/api/session/events"]["post"]["responses"]
     body = {s: r["content"]["application/json"]["schema"]["$ref"].rsplit("/", 1)[1]
@@ -406,8 +405,9 @@ def test_secrets_can_come_from_files(small_study, tmp_path):
 # ---------------------------------------------------------------- Host header and caching
 
 def test_only_configured_and_loopback_host_names_are_answered(small_study, tmp_path):
-    settings = study_settings(small_study, tmp_path, allowed_hosts="study.example.org")
-    with TestClient(create_app(settings, [small_study.study_id])) as c:
+    settings = study_settings(small_study, tmp_path, allowed_hosts="study.example.org",
+                              **PRODUCTION)  # a public name makes the server production
+    with local_client(create_app(settings, [small_study.study_id])) as c:
         page = f"/s/{small_study.study_id}"
         answers = {host: c.get(page, headers={"host": host}).status_code
                    for host in ("study.example.org", "127.0.0.1:8000", "localhost",

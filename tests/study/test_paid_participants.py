@@ -112,7 +112,7 @@ def test_a_released_tab_frees_the_session_and_a_write_without_a_tab_is_not_check
 
 # ---------------------------------------------------------------- endings and refusals
 
-def test_a_finished_link_resumes_its_ending_and_another_attempt_is_told(client, small_study,
+def test_a_finished_link_resumes_its_ending_and_another_attempt_is_told(codes, client, small_study,
                                                                        bank):
     me = prolific("finisher")
     p = at_first_trial(client, small_study.study_id, **me)
@@ -120,8 +120,8 @@ def test_a_finished_link_resumes_its_ending_and_another_attempt_is_told(client, 
     again = Participant(client, small_study.study_id)
     assert again.start(**me)["resumed"] is True and again.status == 200
     done = again.state()
-    assert done["phase"] == Phase.DONE and done["step"]["completion_code"] == "C1TOMSTUDY"
-    assert done["step"]["redirect_url"].endswith("cc=C1TOMSTUDY")
+    assert done["phase"] == Phase.DONE and done["step"]["completion_code"] == codes["completed"]
+    assert done["step"]["redirect_url"].endswith(f"cc={codes['completed']}")
     other = Participant(client, small_study.study_id)
     body = other.start(**(me | {"SESSION_ID": "another-attempt"}))
     assert other.status == 409 and body["detail"].startswith("recruitment:")

@@ -8,7 +8,6 @@ from datetime import timedelta
 
 import httpx
 import pytest
-from fastapi.testclient import TestClient
 from sqlalchemy import func, select, update
 from sqlmodel import Session
 
@@ -16,7 +15,7 @@ from app.main import create_app
 from app.server import balance
 from app.server.recruitment import preview_key
 from app.server.tables import Participant, utcnow
-from tests.conftest import free_port, start_server
+from tests.conftest import free_port, local_client, start_server
 from tests.study.flow import TOKEN, new_id, prolific
 from tests.study.flow import Participant as Client
 
@@ -32,7 +31,7 @@ def limited_app(small_study, tmp_path, starts: str = "", requests: str = ""):
 
 def test_session_starts_are_limited_per_client_address(small_study, tmp_path):
     app = limited_app(small_study, tmp_path, starts="3/minute")
-    with TestClient(app, client=("203.0.113.7", 5000)) as one:
+    with local_client(app, client=("203.0.113.7", 5000)) as one:
         statuses = [Client(one, small_study.study_id) for _ in range(4)]
         for p in statuses:
             p.start()
@@ -41,7 +40,7 @@ def test_session_starts_are_limited_per_client_address(small_study, tmp_path):
                                                   "recruitment": prolific("x")})
         assert refused.json()["detail"].startswith("rate: too many session starts")
         assert 1 <= int(refused.headers["retry-after"]) <= 60
-        other = TestClient(app, client=("198.51.100.9", 5000))  # same app, another address
+        other = local_client(app, client=("198.51.100.9", 5000))  # same app, another address
         p = Client(other, small_study.study_id)
         p.start()
         assert p.status == 201
@@ -50,7 +49,7 @@ def test_session_starts_are_limited_per_client_address(small_study, tmp_path):
 
 def test_writes_are_limited_per_client_address(small_study, tmp_path):
     app = limited_app(small_study, tmp_path, requests="5/minute")
-    with TestClient(app, client=("203.0.113.8", 5000)) as c:
+    with local_client(app, client=("203.0.113.8", 5000)) as c:
         p = Client(c, small_study.study_id)
         p.start()  # starts have their own limit
         statuses = [p.post("events", {"events": [{
@@ -144,7 +143,7 @@ def counted_sessions(engine) -> int:
 
 def test_stale_sessions_are_released_in_bounded_batches_not_by_a_start(small_study, db_url):
     settings = small_study.settings(db_url, stale_sweep_s=3600)  # no background sweep here
-    with TestClient(create_app(settings, [small_study.study_id])) as client:
+    with local_client(create_app(settings, [small_study.study_id])) as client:
         release_in_batches(client, small_study.study_id)
 
 

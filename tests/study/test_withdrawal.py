@@ -174,9 +174,11 @@ def test_the_schema_declares_what_the_new_routes_answer():
     declared = {f"{method.upper()} {path}": sorted(int(s) for s in op["responses"])
                 for path, ops in spec["paths"].items() for method, op in ops.items()}
     assert declared["POST /api/researcher/withdrawals"] == [
-        201, 400, 401, 403, 404, 413, 422, 503]
-    assert declared["GET /api/researcher/withdrawals/audit"] == [200, 401, 403, 404, 422, 503]
-    assert declared["GET /api/researcher/export/{what}.csv"] == [200, 401, 403, 404, 422, 503]
+        201, 400, 401, 403, 404, 413, 422, 429, 503]
+    assert declared["GET /api/researcher/withdrawals/audit"] == [
+        200, 401, 403, 404, 422, 429, 503]
+    assert declared["GET /api/researcher/export/{what}.csv"] == [
+        200, 401, 403, 404, 422, 429, 503]
 
 
 def test_open_and_pilot_sessions_are_withdrawn_by_their_public_id(client, small_study, study):

@@ -192,6 +192,15 @@ export class ResearcherApi {
     return requestJson("GET", `/api/researcher/summary${query}`, undefined, this.auth());
   }
 
+  /** Withdraw one participant (`kind`: external_id or participant_id); the audit line. */
+  withdraw(studyId, kind, id) {
+    return requestJson("POST", "/api/researcher/withdrawals", { study_id: studyId, [kind]: id }, this.auth());
+  }
+
+  withdrawals(studyId) {
+    return requestJson("GET", `/api/researcher/withdrawals/audit?study_id=${enc(studyId)}`, undefined, this.auth());
+  }
+
   /** One export (`what`: predictions, survey, events or participants) as a Blob. */
   async exportCsv(studyId, what = "predictions") {
     const query = studyId ? `?study_id=${enc(studyId)}` : "";

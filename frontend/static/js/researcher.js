@@ -101,6 +101,30 @@ function usableDetail(progress, usable) {
   return `${progress.completed} finished` + (excluded > 0 ? `, ${excluded} excluded${rules.length ? `: ${rules.join(", ")}` : ""}` : "");
 }
 
+/** Each ending's completion code with what to do with it on Prolific. */
+function codesTable(codes) {
+  return rowsTable((codes ?? []).map((c) => ({
+    ending: title(c.ending), completion_code: c.completion_code || "(none)", "on Prolific": c.prolific_action,
+  })));
+}
+
+/** The withdrawal audit: when, how, which kind of id and what was deleted (no id in it). */
+function auditTable(lines) {
+  if (!lines.length) return note("No withdrawals.");
+  return rowsTable(lines.map((line) => ({
+    audit_line: line.id, withdrawn_at: new Date(line.withdrawn_at).toLocaleString(), via: line.via,
+    by: title(line.id_kind), sessions: line.row_counts.participant ?? 0,
+    rows_deleted: Object.values(line.row_counts).reduce((a, b) => a + b, 0),
+    salted_id_hash: `${line.id_sha256.slice(0, 16)}…`,
+  })));
+}
+
+function withdrawalText(line) {
+  const rows = Object.values(line.row_counts).reduce((a, b) => a + b, 0);
+  return `Withdrawn: ${line.row_counts.participant} session(s) and ${rows} rows deleted `
+    + `(audit line ${line.id}, ${new Date(line.withdrawn_at).toLocaleString()}). ${line.storage}.`;
+}
+
 /** GET a researcher route with the bearer token; `params` become the query string. */
 function researcherGet(api, path, params) {
   return requestJson("GET", `/api/researcher/${path}?${new URLSearchParams(params)}`, undefined, api.auth());
@@ -141,6 +165,13 @@ class Dashboard {
     $("rules-select").onchange = () => this.refresh();
     $("show-external-ids").onchange = () => this.refresh();
     $("summary-box").ontoggle = () => this.refresh();
+    $("withdraw-form").addEventListener("submit", (event) => {
+      event.preventDefault();
+      this.askToWithdraw();
+    });
+    $("withdraw-dialog").addEventListener("close", () => {
+      if ($("withdraw-dialog").returnValue === "confirm") this.withdraw();
+    });
     const saved = sessionStorage.getItem(TOKEN_KEY);
     if (saved) this.login(saved);
   }
@@ -189,6 +220,8 @@ class Dashboard {
 
   render([summary, board]) {
     $("progress-line").replaceChildren(progressLine(board.progress));
+    $("completion-codes").replaceChildren(codesTable(board.completion_codes));
+    this.showAudit();
     if (summary) $("summary").replaceChildren(renderSummary(summary));
     this.show(board);
     $("dashboard-message").textContent = `Updated ${new Date().toLocaleTimeString()}.`;
@@ -218,6 +251,47 @@ class Dashboard {
     const key = JSON.stringify(alignment.fields); // redraw the canvases only when they change
     if (key !== this.fieldsKey) renderFields($("fields"), alignment.fields);
     this.fieldsKey = key;
+  }
+
+  /** Open the confirmation dialog for the id in the withdrawal form. */
+  askToWithdraw() {
+    const kind = $("withdraw-kind").value;
+    const id = $("withdraw-id").value.trim();
+    if (!id) return;
+    this.pendingWithdrawal = { kind, id, studyId: this.studyId() };
+    const who = kind === "external_id" ? `platform id ${id}` : `session ${id}`;
+    $("withdraw-dialog-text").textContent = `Every session of ${who} in study `
+      + `${this.pendingWithdrawal.studyId}, with all its answers, survey and telemetry, is deleted `
+      + "now and cannot be restored. The audit keeps only when, how and a salted hash of the id. "
+      + "Pay or approve this person first: the participants sheet loses the row.";
+    $("withdraw-dialog").returnValue = "";
+    $("withdraw-dialog").showModal();
+  }
+
+  async withdraw() {
+    const { kind, id, studyId } = this.pendingWithdrawal;
+    this.pendingWithdrawal = null;
+    const message = $("withdraw-message");
+    message.className = "message";
+    message.textContent = "Withdrawing…";
+    try {
+      const line = await this.api.withdraw(studyId, kind, id);
+      message.className = "message ok";
+      message.textContent = withdrawalText(line);
+      $("withdraw-id").value = "";
+      await this.refresh();
+    } catch (error) {
+      message.className = "message error";
+      message.textContent = `Not withdrawn: ${error.message}`;
+    }
+  }
+
+  async showAudit() {
+    try {
+      $("withdraw-audit").replaceChildren(auditTable(await this.api.withdrawals(this.studyId())));
+    } catch (error) {
+      $("withdraw-audit").replaceChildren(note(`Could not load the audit: ${error.message}`));
+    }
   }
 
   async download() {
