@@ -22,7 +22,7 @@ from app.server import balance
 from app.server.prolific import CONFIRMED, PENDING, UNKNOWN, ProlificClient
 from app.server.prolific_check import recheck_pending
 from app.server.tables import Participant, PaymentAudit
-from tests.conftest import free_port
+from tests.conftest import free_port, local_client
 from tests.prolific_standin import ProlificStandIn, serve
 from tests.study.flow import ADMIN, prolific
 from tests.study.flow import Participant as Browser
@@ -39,13 +39,11 @@ def standin():
 
 def checked_client(study, db_url: str, api_url: str, token: str = "standin-token"):
     """The app with a Prolific API token, asking `api_url`."""
-    from fastapi.testclient import TestClient
-
     from app.main import create_app
 
     settings = study.settings(db_url, trust_client_clock=True, prolific_token=token,
                               prolific_api_url=api_url)
-    return TestClient(create_app(settings, [study.study_id]))
+    return local_client(create_app(settings, [study.study_id]))
 
 
 def known(standin: ProlificStandIn, name: str) -> dict:
