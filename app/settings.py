@@ -33,9 +33,12 @@ class Settings(BaseSettings):
     database_password_file: Path | None = None
     # comma-separated public host names of the study (e.g. study.example.org)
     allowed_hosts: str = ""
-    # per client address and worker process; "" turns a limit off (refused in production)
-    rate_limit_starts: str = "20/minute"
-    rate_limit_requests: str = "300/minute"
+    # per worker process; "" turns a limit off (refused in production). Session starts per
+    # client address: a classroom of 30 behind one NAT starts at once, reloads included
+    rate_limit_starts: str = "60/minute"
+    # requests of one started session (/api/session/...), per session token: a participant
+    # makes about 31 a minute (README), its page's retries included
+    rate_limit_requests: str = "120/minute"
     # how often each worker releases stale sessions' balance counts (balance.sweep_stale)
     stale_sweep_s: float = Field(default=30.0, gt=0)
     # production: researcher token must be strong, API docs off (app/main.py)

@@ -48,15 +48,24 @@ def test_session_starts_are_limited_per_client_address(small_study, tmp_path):
         assert one.get(f"/s/{small_study.study_id}").status_code == 200  # pages: no limit
 
 
-def test_writes_are_limited_per_client_address(small_study, tmp_path):
+def test_session_requests_are_limited_per_session_not_per_address(small_study, tmp_path):
     app = limited_app(small_study, tmp_path, requests="5/minute")
     with TestClient(app, client=("203.0.113.8", 5000)) as c:
-        p = Client(c, small_study.study_id)
-        p.start()  # starts have their own limit
-        statuses = [p.post("events", {"events": [{
-            "submission_id": new_id(), "kind": "visibility_hidden", "t_client_ms": 1.0,
-            "data": {}}]}).status_code for _ in range(6)]
-        assert statuses == [202] * 5 + [429]
+        first, second = Client(c, small_study.study_id), Client(c, small_study.study_id)
+        first.start()  # starts have their own limit
+        second.start()
+
+        def events(p: Client) -> int:
+            return p.post("events", {"events": [{
+                "submission_id": new_id(), "kind": "visibility_hidden", "t_client_ms": 1.0,
+                "data": {}}]}).status_code
+
+        assert [events(first) for _ in range(6)] == [202] * 5 + [429]
+        refused = first.post("events", {"events": []})
+        assert refused.json()["detail"].startswith("rate: too many requests from this session")
+        assert [events(second) for _ in range(5)] == [202] * 5  # same address, own budget
+        tokenless = [c.get("/api/session/state").status_code for _ in range(6)]
+        assert tokenless == [422] * 5 + [429]  # without a session: keyed by the address
 
 
 def test_the_limit_follows_the_address_a_local_proxy_forwards(small_study, tmp_path):
