@@ -33,9 +33,12 @@ class Settings(BaseSettings):
     database_password_file: Path | None = None
     # comma-separated public host names of the study (e.g. study.example.org)
     allowed_hosts: str = ""
-    # per client address and worker process; "" turns a limit off (refused in production)
-    rate_limit_starts: str = "20/minute"
-    rate_limit_requests: str = "300/minute"
+    # per worker process; "" turns a limit off (refused in production). Session starts per
+    # client address: a classroom of 30 behind one NAT starts at once, reloads included
+    rate_limit_starts: str = "60/minute"
+    # requests of one started session (/api/session/...), per session token: a participant
+    # makes about 31 a minute (README), its page's retries included
+    rate_limit_requests: str = "120/minute"
     # comma-separated addresses or networks of the reverse proxy whose X-Forwarded-For names
     # the client; "" trusts only 127.0.0.1 (a proxy on this machine); "*" is refused
     trusted_proxies: str = ""

@@ -21,9 +21,9 @@ from app.researcher.progress import (
     progress_counts,
     study_sessions,
 )
-from app.server.balance import in_progress_cutoff
 from app.server.completion_codes import codes_table
 from app.server.context import StudyContext
+from app.server.places import Cutoffs, status_cutoffs
 from app.server.sessions import as_utc, session_status
 from app.server.state import progress_of
 from app.server.tables import Participant
@@ -43,13 +43,13 @@ def _finite(value: float) -> float | None:
 
 # ---------------------------------------------------------------- sessions
 
-def participant_row(p: Participant, ctx: StudyContext, cutoff: datetime, checks_seen: int,
+def participant_row(p: Participant, ctx: StudyContext, cutoffs: Cutoffs, checks_seen: int,
                     external_ids: bool) -> dict:
     """One session as the table shows it (the external id only when asked for)."""
     end = p.ended_at or p.updated_at
     row = {
         "public_id": p.public_id, "platform": p.recruitment, "pilot": p.pilot,
-        "status": session_status(p, cutoff),
+        "status": session_status(p, cutoffs),
         "outcome": p.outcome,
         "started_at": _iso(p.created_at), "last_seen": _iso(p.updated_at),
         "ended_at": _iso(p.ended_at), "world_order": p.world_order,
@@ -68,9 +68,9 @@ def participant_rows(db: Session, ctx: StudyContext, people: list[Participant],
                      external_ids: bool = False) -> list[dict]:
     """Every session of the study (progress.study_sessions: pilots and replaced ones
     included, in order of start) as the table shows it."""
-    cutoff = in_progress_cutoff(ctx.config)
+    cutoffs = status_cutoffs(ctx.config)
     seen = checks_answered(db, ctx.study_id)
-    return [participant_row(p, ctx, cutoff, seen.get(p.id, 0), external_ids) for p in people]
+    return [participant_row(p, ctx, cutoffs, seen.get(p.id, 0), external_ids) for p in people]
 
 
 # ---------------------------------------------------------------- versions

@@ -36,7 +36,8 @@ from analysis.contracts import (
 from analysis.csvsafe import write_csv
 from analysis.exports import typed
 from analysis.load import expand_plugins, normalise, stored_columns
-from app.server.balance import exclusion_reasons, in_progress_cutoff, trial_speeds
+from app.server.balance import exclusion_reasons, trial_speeds
+from app.server.places import Cutoffs, status_cutoffs
 from app.server.plan import trial_steps
 from app.server.schemas import SERVER_EVENTS
 from app.server.sessions import as_utc, session_status
@@ -209,9 +210,9 @@ def participants_frame(db: Session, config: StudyConfig, study_id: str) -> pd.Da
     sessions = _sessions(db, study_id)
     versions = _versions(sessions, _models(db, study_id))
     checks = checks_answered(db, study_id)
-    cutoff = in_progress_cutoff(config)
+    cutoffs = status_cutoffs(config)
     speeds = trial_speeds(db, config.exclusions, Participant.study_id == study_id)
-    rows = [_participant_row(p, versions[p.id], checks.get(p.id, 0), cutoff)
+    rows = [_participant_row(p, versions[p.id], checks.get(p.id, 0), cutoffs)
             | _exclusion(config.exclusions, p, speeds.get(p.id, (0, 0))) for p in sessions]
     return typed(pd.DataFrame(rows), PARTICIPANTS)
 
@@ -236,12 +237,12 @@ def checks_answered(db: Session, study_id: str) -> dict[int, int]:
     return dict(rows.all())
 
 
-def _participant_row(p: Participant, version: dict, checks: int, cutoff: datetime) -> dict:
+def _participant_row(p: Participant, version: dict, checks: int, cutoffs: Cutoffs) -> dict:
     started, last_seen = as_utc(p.created_at), as_utc(p.updated_at)
     ended = _utc(p.ended_at)
     return {**version, "external_id": p.external_id, "recruitment": p.recruitment,
             "outcome": p.outcome, "completion_code": p.completion_code,
-            "status": session_status(p, cutoff), "started_at": started, "ended_at": ended,
+            "status": session_status(p, cutoffs), "started_at": started, "ended_at": ended,
             "duration_min": None if ended is None else (ended - started).total_seconds() / 60,
             "last_seen": last_seen, "world_order": p.world_order,
             "steps_done": p.position, "steps_total": len(p.plan), "attention_checks": checks,

@@ -8,9 +8,9 @@ from sqlalchemy import select
 from sqlmodel import Session
 
 from app.researcher.exports import predictions_frame
-from app.server.balance import in_progress_cutoff
 from app.server.completion_codes import codes_table
 from app.server.context import StudyContext
+from app.server.places import status_cutoffs
 from app.server.recruitment import preview_path
 from app.server.sessions import session_status
 from app.server.tables import Participant
@@ -32,12 +32,14 @@ def progress_counts(ctx: StudyContext, everyone: list[Participant]) -> dict:
     """Session counts: started, completed, in progress, ended early (declined, screened
     out), stale, by outcome and per world order.
 
-    Pilot (preview) sessions and sessions replaced by a new attempt are counted apart
-    and never in the study's progress.
+    A session is in progress, and in its world order's counts, only from consent on (as it
+    counts for the study, places.py); before, it is `awaiting_consent`. Pilot (preview)
+    sessions and sessions replaced by a new attempt are counted apart and never in the
+    study's progress.
     """
-    cutoff = in_progress_cutoff(ctx.config)
+    cutoffs = status_cutoffs(ctx.config)
     people = [p for p in everyone if not p.pilot and p.replaced_at is None]
-    status = {p.id: session_status(p, cutoff) for p in people}  # ended, in_progress, stale
+    status = {p.id: session_status(p, cutoffs) for p in people}
     completed = [p for p in people if p.completed]
     orders: dict[str, dict[str, int]] = {}
     for p in people:
@@ -49,6 +51,7 @@ def progress_counts(ctx: StudyContext, everyone: list[Participant]) -> dict:
     counts = Counter(status.values())
     return {"target_sample_size": ctx.config.target_sample_size, "started": len(people),
             "completed": len(completed), "in_progress": counts["in_progress"],
+            "awaiting_consent": counts["awaiting_consent"],
             "ended_early": counts["ended"] - len(completed), "stale": counts["stale"],
             "outcomes": dict(Counter(p.outcome for p in people if p.outcome)),
             "failed_attention_check": sum(p.attention_failed > 0 for p in completed),

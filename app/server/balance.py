@@ -1,11 +1,12 @@
 """Balance counts kept in the database, so assigning a plan costs the same at any study size.
 
 BalanceCount holds, per study, how many counted sessions use each world order
-(`order:a,b`) and each trial (`trial:<id>`). A session is counted from its start while
-it runs; it stops counting when it goes stale (unfinished past `in_progress_timeout_min`,
-released in bounded batches by each worker's `sweep_stale`, off the request path) or
-completes excluded (failed attention check, too many too-fast trials); a stale session
-that comes back and completes validly counts again. Pilot sessions never count. On
+(`order:a,b`) and each trial (`trial:<id>`). A session is counted from its consent
+(places.take_place) while it runs; it stops counting when it goes stale (unfinished past
+`in_progress_timeout_min`, released in bounded batches by each worker's `sweep_stale`, off
+the request path) or completes excluded (failed attention check, too many too-fast
+trials); a stale session that comes back and completes validly counts again. Pilot
+sessions never count. On
 PostgreSQL a transaction-scoped advisory lock makes read-choose-increment atomic across
 workers; SQLite serialises writers itself and the server refuses several workers on it.
 """

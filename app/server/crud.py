@@ -16,7 +16,7 @@ from sqlalchemy import delete, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlmodel import Session
 
-from app.server import balance, endings
+from app.server import balance, endings, places
 from app.server.context import StudyContext
 from app.server.plan import BEFORE_TRIALS, Phase, expect_phase
 from app.server.schemas import (
@@ -119,12 +119,17 @@ def _mirror(participant: Participant, values: dict) -> None:
         participant.attention_failed += 1
 
 
-def record_consent(db: Session, participant: Participant, body: ConsentCreate) -> None:
-    """The participant agreed to take part; their device info is stored from now on."""
+def record_consent(db: Session, ctx: StudyContext, participant: Participant,
+                   body: ConsentCreate) -> None:
+    """The participant agreed to take part: the session takes its place in the study
+    (places.take_place) and their device info is stored from now on."""
     with replay_if_stored(db, participant, body, "consent") as fresh:
         expect_phase(participant, Phase.CONSENT)
+        # the study's lock before the session's row, the order a session start takes them in
+        balance.lock_study(db, ctx.study_id)
         fresh.stored = advance(db, participant, body, "consent", {"agree": True},
-                               updates={"client": body.client.model_dump()})
+                               updates={"client": body.client.model_dump()},
+                               before_commit=lambda: places.take_place(db, ctx, participant))
 
 
 def record_instructions(db: Session, participant: Participant, body: SubmissionBody) -> None:

@@ -46,7 +46,8 @@ class ValidationProblem(BaseModel):
 UNREADABLE = "body: not readable as JSON (e.g. not UTF-8); JSON that fails to parse is a 422"
 TOO_LARGE = "body: larger than 64 KiB"
 INVALID = "a body or parameter fails validation; `detail` names the field"
-RATE_LIMITED = "rate: too many requests from this address; `Retry-After` says when to retry"
+RATE_LIMITED = ("rate: too many session starts from this address, or requests of this session; "
+                "`Retry-After` says when to retry")
 DB_DOWN = "database: unavailable, try again shortly; `Retry-After` says when to retry"
 UNKNOWN_SESSION = "X-Session-Token: unknown session"
 GONE = ("X-Session-Token: the session cannot continue: a newer attempt of the same "
@@ -58,13 +59,15 @@ SESSION_WRITE_STATUSES = {
     404: f"{UNKNOWN_SESSION}; trial_id: not a trial of this session",
     409: "phase: the session is at another step or trial, moved on in another request, or "
          "done (telemetry); submission_id: used by another session; tab: another tab of "
-         "this session is the live one",
+         "this session is the live one; study_id: (consent) the study closed or became full "
+         "since this session started",
     410: GONE,
     413: TOO_LARGE,
     422: f"{INVALID}, or breaks a study rule: clicks outside the scene or reach, survey "
          "answers, telemetry past its cap, a submission_id reused for a different request",
     429: RATE_LIMITED,
-    503: DB_DOWN,
+    503: "study: (consent) as many sessions are running as the study takes at once; or "
+         + DB_DOWN,
 }
 START_STATUSES = {
     400: UNREADABLE,

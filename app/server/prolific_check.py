@@ -24,6 +24,7 @@ from sqlmodel import Session
 
 from app.server import balance, notices
 from app.server.context import StudyContext
+from app.server.places import has_consented
 from app.server.prolific import (
     CONFIRMED,
     PENDING,
@@ -117,9 +118,11 @@ def settle(engine: Engine, study_id: str, config: StudyConfig, row_id: int,
 
 
 def _counts_now(db: Session, config: StudyConfig, participant: Participant) -> bool:
-    """What counting a session would be had Prolific answered at its start: a live unfinished
-    one or one completed validly (balance's rule)."""
+    """What counting a session would be had Prolific answered at its start: a consented live
+    unfinished one or one completed validly (balance's and places' rule)."""
     if participant.pilot or participant.replaced_at is not None:
+        return False
+    if not has_consented(participant):
         return False
     if participant.completed:
         return not balance.is_excluded(db, config, participant)

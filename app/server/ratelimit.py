@@ -1,17 +1,21 @@
-"""Per-client rate limits on the participant API, with the `limits` library.
+"""Rate limits on the participant API, with the `limits` library.
 
-Session starts and every other participant API request have a limit each, per client
-address, in a sliding window kept in this worker's memory (`limits`' MemoryStorage): with
-N workers a client gets up to N times the limit, which still bounds it. The client
-address is the TCP peer, or the one a trusted reverse proxy forwards (uvicorn's proxy
-headers, trusted from TOMSTUDY_TRUSTED_PROXIES: 127.0.0.1 by default). An IPv6 client is keyed
-by its /64: one subscriber is routinely given a whole /64, so its single addresses would be
-unlimited keys. Beyond a limit the answer is 429 with `Retry-After`; the browser retries such
-writes with the same body.
+Session starts are limited per client address; every request of a started session
+(/api/session/...) per session token, so a classroom or a lab behind one address (one NAT)
+is not throttled as one client: each participant has their own budget, and the address's
+budget is spent only on starts. Each is a sliding window kept in this worker's memory
+(`limits`' MemoryStorage): with N workers a client gets up to N times the limit, which still
+bounds it. The client address is the TCP peer, or the one a trusted reverse proxy forwards
+(uvicorn's proxy headers, trusted from TOMSTUDY_TRUSTED_PROXIES: 127.0.0.1 by default). An IPv6
+client is keyed by its /64: one subscriber is routinely given a whole /64, so its single
+addresses would be unlimited keys. A session request without a token of a session's shape
+is keyed by its address. Beyond a limit the answer is 429 with `Retry-After`; the browser
+retries such writes with the same body.
 """
 
 import ipaddress
 import math
+import re
 import time
 
 from fastapi.responses import JSONResponse
@@ -22,6 +26,9 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 PARTICIPANT_PREFIX = "/api/session"  # /api/sessions (starts) and /api/session/... (a session)
 START_PATH = "/api/sessions"
+TOKEN_HEADER = b"x-session-token"  # sessions.SESSION_HEADER, as ASGI spells header names
+# what sessions.start_session hands out (secrets.token_urlsafe(24)), with room to change it
+TOKEN_SHAPE = re.compile(rb"[A-Za-z0-9_-]{16,64}")
 
 
 def parse_limit(setting: str, value: str) -> RateLimitItem | None:
@@ -49,9 +56,18 @@ def client_key(host: str) -> str:
     return str(ipaddress.ip_network(f"{address}/64", strict=False))
 
 
+def session_key(scope: Scope) -> str | None:
+    """The rate-limit key of a session request: its session token, if it has one of the
+    shape the server hands out."""
+    for name, value in scope.get("headers", ()):
+        if name == TOKEN_HEADER:
+            return "session:" + value.decode("ascii") if TOKEN_SHAPE.fullmatch(value) else None
+    return None
+
+
 class RateLimit:
     """ASGI middleware: 429 once a client address exceeds its limit of session starts
-    (`starts`) or of other participant API requests (`requests`); None is no limit."""
+    (`starts`), or a session its limit of requests (`requests`); None is no limit."""
 
     def __init__(self, app: ASGIApp, starts: RateLimitItem | None,
                  requests: RateLimitItem | None) -> None:
@@ -64,14 +80,18 @@ class RateLimit:
         if scope["type"] != "http" or not scope["path"].startswith(PARTICIPANT_PREFIX):
             return await self.app(scope, receive, send)
         is_start = scope["method"] == "POST" and scope["path"] == START_PATH
-        limit, what = (self.starts, "session starts") if is_start else (self.requests,
-                                                                         "requests")
-        client = client_key((scope.get("client") or ("unknown",))[0])
-        if limit is None or self.limiter.hit(limit, what, client):
+        limit = self.starts if is_start else self.requests
+        if limit is None:
             return await self.app(scope, receive, send)
-        reset_at = self.limiter.get_window_stats(limit, what, client).reset_time
+        address = client_key((scope.get("client") or ("unknown",))[0])
+        token = None if is_start else session_key(scope)
+        key = token or address
+        what = ("session starts from this address" if is_start
+                else "requests from this session" if token else "requests from this address")
+        if self.limiter.hit(limit, what, key):
+            return await self.app(scope, receive, send)
+        reset_at = self.limiter.get_window_stats(limit, what, key).reset_time
         wait_s = max(1, math.ceil(reset_at - time.time()))
-        response = JSONResponse(
-            {"detail": f"rate: too many {what} from this address; try again in {wait_s} s"},
-            status_code=429, headers={"Retry-After": str(wait_s)})
+        response = JSONResponse({"detail": f"rate: too many {what}; try again in {wait_s} s"},
+                                status_code=429, headers={"Retry-After": str(wait_s)})
         await response(scope, receive, send)

@@ -4,9 +4,11 @@ A session start is checked against the study's platform (recruitment.py), then, 
 the study's lock, either resumes the live session of that external id (same attempt
 key), replaces it (a new attempt after it went stale), or creates a new one whose plan
 takes the least-used world order and the least-exposed trials (plan.py, from the counts
-balance.py keeps), unless the study already runs `live_session_cap` unfinished sessions.
-Its cost does not grow with the number of stored participants; stale sessions are
-released elsewhere (balance.release_stale_batch, off the request path).
+balance.py keeps), unless the study is closed, full or already runs `live_session_cap`
+unfinished sessions. A start takes no place: a session counts from consent on (places.py),
+and one that never consents frees its external id after `consent_timeout_min`. Its cost
+does not grow with the number of stored participants; stale sessions are released
+elsewhere (balance.release_stale_batch, off the request path).
 """
 
 import secrets
@@ -18,13 +20,12 @@ from sqlalchemy.exc import IntegrityError
 from sqlmodel import Session
 
 from app import __version__
-from app.server import balance, notices
+from app.server import balance, notices, places
 from app.server.context import StudyContext
-from app.server.plan import Usage, assign_plan, dump_plan
+from app.server.plan import assign_plan, dump_plan
 from app.server.recruitment import ATTEMPT_KEYS, Identity, identify
 from app.server.schemas import SessionCreate
 from app.server.tables import Participant, utcnow
-from app.study.config import live_session_cap
 from app.study.errors import Refused
 
 # a started session's routes are SESSION_PATH/...; its token travels in this header
@@ -66,8 +67,8 @@ def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Iden
             return existing, True
         _replace(db, existing)
     usage = balance.read_usage(db, ctx.study_id)
-    if not who.pilot:
-        _admit(db, ctx, usage)
+    if not who.pilot:  # no place is taken yet (places.take_place, at consent)
+        places.admit(db, ctx, usage)
     order, steps = assign_plan(ctx.config, ctx.bank, usage, rng)
     participant = Participant(
         study_id=ctx.study_id, recruitment=who.recruitment, external_id=who.external_id,
@@ -77,23 +78,8 @@ def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Iden
         config_sha256=ctx.config_sha256, bank_sha256=ctx.bank.sha256, app_version=__version__,
         prolific_check=prolific_check)
     db.add(participant)
-    db.flush()
-    if not who.pilot:
-        balance.hold(db, participant)
     db.commit()
     return participant, False
-
-
-ROOM_RETRY_S = 60
-
-
-def check_room(db: Session, ctx: StudyContext) -> None:
-    """503 while the study runs as many unfinished counted sessions as it takes at once."""
-    cap = live_session_cap(ctx.config)
-    if balance.live_sessions(db, ctx, cap) >= cap:
-        raise Refused(503, f"study: {cap} sessions are running, the most this study takes at "
-                           "once; please try again in a few minutes",
-                      notices.busy(), headers={"Retry-After": str(ROOM_RETRY_S)})
 
 
 def live_participant(db: Session, study_id: str, external_id: str | None) -> Participant | None:
@@ -104,20 +90,6 @@ def live_participant(db: Session, study_id: str, external_id: str | None) -> Par
                                       Participant.external_id == external_id,
                                       Participant.replaced_at.is_(None))
     return db.execute(query).scalars().first()
-
-
-def _admit(db: Session, ctx: StudyContext, usage: Usage) -> None:
-    """Refuse a new participant while the study runs its cap of unfinished sessions (503),
-    or is closed or full (409), each with a notice."""
-    check_room(db, ctx)
-    recruitment = ctx.config.recruitment
-    if recruitment.closed:
-        raise Refused(409, "study_id: the study is closed to new participants "
-                           "(recruitment.closed)", notices.closed(recruitment.platform))
-    counted = sum(usage.orders.values())
-    if recruitment.max_counted_sessions is not None and counted >= recruitment.max_counted_sessions:
-        raise Refused(409, f"study_id: the study is full ({counted} counted sessions, "
-                           "recruitment.max_counted_sessions)", notices.full(recruitment.platform))
 
 
 def _resumable(existing: Participant, who: Identity, ctx: StudyContext) -> bool:
@@ -139,6 +111,9 @@ def _resumable(existing: Participant, who: Identity, ctx: StudyContext) -> bool:
 
 
 def _is_stale(participant: Participant, ctx: StudyContext) -> bool:
+    """Unfinished and past its timeout: consent's from the start, then the session's."""
+    if not places.has_consented(participant):
+        return as_utc(participant.created_at) < places.consent_cutoff(ctx.config)
     return as_utc(participant.updated_at) < balance.in_progress_cutoff(ctx.config)
 
 
@@ -187,15 +162,14 @@ def has_ended(participant: Participant) -> bool:
     return participant.completed or participant.ended_at is not None
 
 
-def session_status(participant: Participant, cutoff: datetime) -> str:
-    """replaced (a new attempt took over), ended, in_progress (written since `cutoff`), stale."""
+def session_status(participant: Participant, cutoffs: places.Cutoffs) -> str:
+    """replaced (a new attempt took over), ended, awaiting_consent (started since the consent
+    cutoff), in_progress (consented, written since the in-progress cutoff), stale."""
     if participant.replaced_at is not None:
         return "replaced"
     if has_ended(participant):
         return "ended"
-    return "in_progress" if is_in_progress(participant, cutoff) else "stale"
-
-
-def is_in_progress(participant: Participant, cutoff: datetime) -> bool:
-    """Not ended and updated since `cutoff`."""
-    return not has_ended(participant) and as_utc(participant.updated_at) >= cutoff
+    if not places.has_consented(participant):
+        fresh = as_utc(participant.created_at) >= cutoffs.consent
+        return "awaiting_consent" if fresh else "stale"
+    return "in_progress" if as_utc(participant.updated_at) >= cutoffs.in_progress else "stale"

@@ -347,6 +347,9 @@ class StudyConfig(StrictModel):
     target_sample_size: int = Field(ge=1)
     exclusions: ExclusionRules = ExclusionRules()
     in_progress_timeout_min: float = Field(default=90.0, gt=0)
+    # a session that has not consented this long after its start holds nothing: its external
+    # id may start again (it never counted: a session counts from consent on, places.py)
+    consent_timeout_min: float = Field(default=10.0, gt=0)
     # at most this x target_sample_size unfinished sessions run at once (pilots aside): a
     # bound on what anonymous traffic can make the server hold (sessions.py)
     max_live_sessions_per_target: float = Field(default=10.0, ge=1)
@@ -371,7 +374,8 @@ class StudyConfig(StrictModel):
     # dumps as before the keys existed: same config hash, so sessions that ran it before an
     # upgrade still show as running the loaded config
     _without_new_keys = omitted_when(empty=("predictors", "exploratory_worlds"),
-                                     default=("smallest_effect_of_interest",))
+                                     default=("smallest_effect_of_interest",
+                                              "consent_timeout_min"))
 
     @model_validator(mode="after")
     def _consistent(self) -> "StudyConfig":

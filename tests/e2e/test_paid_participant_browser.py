@@ -230,7 +230,9 @@ def refusing_server(browser_study, tmp_path_factory):
                         args=("--study", f"{CLOSED},{FULL}"))
     url = f"http://127.0.0.1:{port}"
     with httpx.Client(base_url=url) as http:  # the one counted session the full study holds
-        assert Participant(http, FULL).start(**prolific("first-in"))["resumed"] is False
+        first = Participant(http, FULL)
+        assert first.start(**prolific("first-in"))["resumed"] is False
+        assert first.consent().status_code == 200  # a session counts from its consent
     yield url
     proc.terminate()
     proc.wait(timeout=10)

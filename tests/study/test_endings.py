@@ -133,7 +133,7 @@ def test_declining_consent_ends_the_session_and_keeps_only_the_receipt(codes, cl
     target = client.app.state.studies[sid].config.target_sample_size  # the study's own
     assert progress["progress"] | {"world_orders": None} == {
         "target_sample_size": target, "started": 1, "completed": 0, "in_progress": 0,
-        "ended_early": 1, "stale": 0, "outcomes": {"declined_consent": 1},
+        "awaiting_consent": 0, "ended_early": 1, "stale": 0, "outcomes": {"declined_consent": 1},
         "failed_attention_check": 0, "pilot_sessions": 0, "replaced_sessions": 0,
         "world_orders": None}
 

@@ -115,6 +115,7 @@ def test_a_new_attempt_replaces_a_stale_session_and_keeps_its_rows(client, small
     new = Client(client, sid)
     body = new.start(**dict(params, SESSION_ID="second-attempt"))
     assert new.status == 201 and not body["resumed"] and new.token != old.token
+    assert new.consent().status_code == 200  # the new attempt counts from its consent
     again = Client(client, sid)
     again.start(**params)  # the old attempt's key no longer opens anything
     assert again.status == 409

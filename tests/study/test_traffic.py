@@ -47,15 +47,24 @@ def test_session_starts_are_limited_per_client_address(small_study, tmp_path):
         assert one.get(f"/s/{small_study.study_id}").status_code == 200  # pages: no limit
 
 
-def test_writes_are_limited_per_client_address(small_study, tmp_path):
+def test_session_requests_are_limited_per_session_not_per_address(small_study, tmp_path):
     app = limited_app(small_study, tmp_path, requests="5/minute")
     with local_client(app, client=("203.0.113.8", 5000)) as c:
-        p = Client(c, small_study.study_id)
-        p.start()  # starts have their own limit
-        statuses = [p.post("events", {"events": [{
-            "submission_id": new_id(), "kind": "visibility_hidden", "t_client_ms": 1.0,
-            "data": {}}]}).status_code for _ in range(6)]
-        assert statuses == [202] * 5 + [429]
+        first, second = Client(c, small_study.study_id), Client(c, small_study.study_id)
+        first.start()  # starts have their own limit
+        second.start()
+
+        def events(p: Client) -> int:
+            return p.post("events", {"events": [{
+                "submission_id": new_id(), "kind": "visibility_hidden", "t_client_ms": 1.0,
+                "data": {}}]}).status_code
+
+        assert [events(first) for _ in range(6)] == [202] * 5 + [429]
+        refused = first.post("events", {"events": []})
+        assert refused.json()["detail"].startswith("rate: too many requests from this session")
+        assert [events(second) for _ in range(5)] == [202] * 5  # same address, own budget
+        tokenless = [c.get("/api/session/state").status_code for _ in range(6)]
+        assert tokenless == [422] * 5 + [429]  # without a session: keyed by the address
 
 
 def test_the_limit_follows_the_address_a_local_proxy_forwards(small_study, tmp_path):
@@ -116,22 +125,26 @@ def test_a_study_runs_at_most_its_cap_of_unfinished_sessions(client, small_study
     people = [Client(client, sid) for _ in range(4)]
     for p in people:
         p.start()
-    assert [p.status for p in people] == [201, 201, 201, 503]
+    assert [p.status for p in people] == [201] * 4  # a start takes no place: consent does
+    assert [p.consent().status_code for p in people] == [200, 200, 200, 503]
+    busy = people[3].consent()
+    assert busy.json()["detail"].startswith("study: 3 sessions are running")
+    assert busy.headers["retry-after"] == "60"
     full = client.post("/api/sessions", json={"study_id": sid, "recruitment": prolific("late")})
-    assert full.json()["detail"].startswith("study: 3 sessions are running")
-    assert full.headers["retry-after"] == "60"
+    assert full.status_code == 503 and full.json()["detail"].startswith("study: 3 sessions")
     lab = Client(client, sid)
     lab.start(preview=preview_key(TOKEN, sid))
-    assert lab.status == 201  # a researcher's preview is never refused
-    people[0].pass_intro()  # the running ones keep going
-    people[0].finish(bank)  # a completion makes room
+    assert lab.status == 201 and lab.consent().status_code == 200  # a preview is never refused
+    assert client.post(people[0].url("instructions"), headers=people[0].headers,
+                       json={"submission_id": new_id()}).status_code == 200
+    people[0].finish(bank)  # the running ones keep going; a completion makes room
+    assert people[3].consent().status_code == 200  # the page's retry gets in
     late = Client(client, sid)
     late.start()
-    assert late.status == 201
-    age(client, people[1].token)  # so does a session gone stale, before any sweep
-    again = Client(client, sid)
-    again.start()
-    assert again.status == 201
+    assert late.status == 503  # the cap is full again
+    age(client, people[1].token)  # a session gone stale makes room, before any sweep
+    late.start()
+    assert late.status == 201 and late.consent().status_code == 200
 
 
 # ---------------------------------------------------------------- stale sessions
@@ -155,11 +168,14 @@ def release_in_batches(client, sid: str) -> None:
     for _ in range(2 * balance.STALE_BATCH + 50):
         p = Client(client, sid)
         p.start()
+        assert p.consent().status_code == 200  # counted from consent on
         tokens.append(p.token)
     with Session(engine) as db:
         db.exec(update(Participant).values(updated_at=utcnow() - timedelta(days=1)))
         db.commit()
-    Client(client, sid).start()  # a start does no release work
+    late = Client(client, sid)
+    late.start()  # neither a start nor a consent does release work
+    assert late.consent().status_code == 200
     assert counted_sessions(engine) == len(tokens) + 1
     batches = [balance.release_stale_batch(engine, ctx) for _ in range(4)]
     assert batches == [balance.STALE_BATCH, balance.STALE_BATCH, 50, 0]
@@ -175,6 +191,7 @@ def test_each_worker_sweeps_stale_sessions_in_the_background(client, small_study
     engine = client.app.state.engine
     p = Client(client, sid)
     p.start()
+    p.consent()
     age(client, p.token)
 
     async def sweep_a_little() -> None:

@@ -89,8 +89,9 @@ async def release_tab(body: TabRelease, participant: ParticipantDep, db: Session
 @router.post(f"{SESSION_PATH}/consent")
 async def submit_consent(body: ConsentCreate, participant: WriterDep, ctx: ContextDep,
                          db: SessionDep) -> Response:
-    """Record consent; answers the next state."""
-    crud.record_consent(db, participant, body)
+    """Record consent, from which the session counts (409 if the study closed or filled up
+    since its start, 503 while it runs its cap of sessions); answers the next state."""
+    crud.record_consent(db, ctx, participant, body)
     return state_response(ctx, participant)
 
 

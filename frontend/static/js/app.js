@@ -195,6 +195,12 @@ function recruitmentFromUrl(names) {
   return recruitment;
 }
 
+/** Say in `element` why a write is being retried: the server's notice, else the connection. */
+function waitingFor(element, error) {
+  element.hidden = false;
+  element.textContent = error.notice?.text ?? "Connecting to the study server\u2026";
+}
+
 /** The researcher preview key of a lab member's test link, or null. */
 function previewFromUrl() {
   return new URLSearchParams(location.search).get("preview");
@@ -450,7 +456,10 @@ class ParticipantApp {
       button.onclick = () => {
         button.disabled = true;
         decline.disabled = true;
-        this.api.consent(clientInfo(this.rules.user_agent_max_chars)).then(resolve, reject);
+        // a consent takes a place: while the study runs its cap the server answers 503 and
+        // the write is retried, so say why nothing happens yet
+        const waiting = { onRetry: (error) => waitingFor($("consent-status"), error) };
+        this.api.consent(clientInfo(this.rules.user_agent_max_chars), waiting).then(resolve, reject);
       };
       decline.onclick = () => {
         button.disabled = true;

@@ -49,7 +49,7 @@ function attentionText({ failed, seen }) {
   return `${failed} of ${seen}${failed ? ": review" : ""}`;
 }
 
-const STATUS_TEXT = { in_progress: "in progress", stale: "stale", ended: "ended", replaced: "replaced" };
+const STATUS_TEXT = { awaiting_consent: "at consent", in_progress: "in progress", stale: "stale", ended: "ended", replaced: "replaced" };
 
 // Each column: header, how it reads a row for sorting, and the cell text (short enough for
 // the table to fit a 1280 px window; a preview session's platform reads "pilot"; the full

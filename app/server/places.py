@@ -1,0 +1,98 @@
+"""Which sessions take a place in a study: count toward the live cap, "full", balance and
+progress.
+
+A session takes a place from consent on, never at its start. A start proves nothing (any
+script can send a Prolific-shaped id), so counting it let one address fill the live cap and
+`max_counted_sessions` with made-up ids. `take_place` is the one function that makes a
+session count, in its consent's transaction: a check that must pass before a session counts
+(the platform confirming the submission, say) belongs there. A session that has not consented
+holds nothing, and `consent_timeout_min` after its start its external id may start again
+(sessions.py replaces it).
+"""
+
+from dataclasses import dataclass
+from datetime import datetime, timedelta
+
+import numpy as np
+from sqlalchemy import update
+from sqlmodel import Session
+
+from app.server import balance, notices
+from app.server.context import StudyContext
+from app.server.plan import Phase, Usage, assign_plan, dump_plan
+from app.server.tables import Participant, utcnow
+from app.study.config import StudyConfig, live_session_cap
+from app.study.errors import Refused
+
+ROOM_RETRY_S = 60
+CONSENT_POSITION = 0  # every plan opens with the consent step (plan.layout_plan)
+
+
+def has_consented(participant: Participant) -> bool:
+    """The session is past its consent step (a decline ends it there)."""
+    return (participant.position > CONSENT_POSITION
+            and participant.plan[CONSENT_POSITION]["phase"] == Phase.CONSENT)
+
+
+def consent_cutoff(config: StudyConfig) -> datetime:
+    """A session started before this that has not consented holds nothing any more."""
+    return utcnow() - timedelta(minutes=config.consent_timeout_min)
+
+
+@dataclass(frozen=True)
+class Cutoffs:
+    """The moments a session's status is judged by (status_cutoffs)."""
+
+    in_progress: datetime  # a consented session written to since is in progress
+    consent: datetime  # an unconsented session started since awaits consent
+
+
+def status_cutoffs(config: StudyConfig) -> Cutoffs:
+    """The study's cutoffs as of now."""
+    return Cutoffs(balance.in_progress_cutoff(config), consent_cutoff(config))
+
+
+def take_place(db: Session, ctx: StudyContext, participant: Participant,
+               rng: np.random.Generator | None = None) -> None:
+    """Make a consenting session count (pilots never do), inside the consent's transaction:
+    admit it (503 while the study runs its cap, 409 closed or full), give it the plan the
+    balance now asks for (nothing of the start's plan was shown yet) and hold its counts."""
+    if participant.pilot:
+        return
+    balance.lock_study(db, ctx.study_id)  # re-entrant: the consent took it first
+    usage = balance.read_usage(db, ctx.study_id)
+    admit(db, ctx, usage)
+    _reassign_plan(db, ctx, participant, usage, rng or np.random.default_rng())
+    balance.hold(db, participant)
+
+
+def _reassign_plan(db: Session, ctx: StudyContext, participant: Participant, usage: Usage,
+                   rng: np.random.Generator) -> None:
+    order, steps = assign_plan(ctx.config, ctx.bank, usage, rng)
+    values = {"world_order": ",".join(order), "plan": dump_plan(steps)}
+    db.execute(update(Participant.__table__).where(Participant.id == participant.id)
+               .values(**values))
+    participant.world_order, participant.plan = values["world_order"], values["plan"]
+
+
+def admit(db: Session, ctx: StudyContext, usage: Usage) -> None:
+    """Refuse a new place while the study runs its cap of unfinished sessions (503), or is
+    closed or full (409), each with a notice."""
+    check_room(db, ctx)
+    recruitment = ctx.config.recruitment
+    if recruitment.closed:
+        raise Refused(409, "study_id: the study is closed to new participants "
+                           "(recruitment.closed)", notices.closed(recruitment.platform))
+    counted = sum(usage.orders.values())
+    if recruitment.max_counted_sessions is not None and counted >= recruitment.max_counted_sessions:
+        raise Refused(409, f"study_id: the study is full ({counted} counted sessions, "
+                           "recruitment.max_counted_sessions)", notices.full(recruitment.platform))
+
+
+def check_room(db: Session, ctx: StudyContext) -> None:
+    """503 while the study runs as many unfinished counted sessions as it takes at once."""
+    cap = live_session_cap(ctx.config)
+    if balance.live_sessions(db, ctx, cap) >= cap:
+        raise Refused(503, f"study: {cap} sessions are running, the most this study takes at "
+                           "once; please try again in a few minutes",
+                      notices.busy(), headers={"Retry-After": str(ROOM_RETRY_S)})
