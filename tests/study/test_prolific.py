@@ -99,6 +99,9 @@ def test_a_submission_prolific_confirms_counts_and_is_asked_about_once(small_stu
         p.start(**params)  # a reload resumes without asking Prolific again
         assert p.status == 200
         [row] = rows(client)
+        assert (row.prolific_check, row.counted) == (CONFIRMED, False)  # a place from consent
+        assert p.consent().status_code == 200
+        [row] = rows(client)
         assert (row.prolific_check, row.counted) == (CONFIRMED, True)
         assert counted_total(client, small_study.study_id) > 0
     assert len(state.requests) == 1
@@ -166,7 +169,7 @@ def test_without_a_token_nothing_is_asked(small_study, tmp_path):
     with plain_client(small_study, f"sqlite:///{tmp_path / 'db.sqlite'}") as client:
         p = Browser(client, small_study.study_id)
         public_id = p.start(**prolific("unchecked"))["participant_id"]
-        assert p.status == 201
+        assert p.status == 201 and p.consent().status_code == 200
         assert [(r.prolific_check, r.counted) for r in rows(client)] == [(None, True)]
         r = client.post("/api/researcher/prolific/approve", headers=ADMIN,
                         json={"study_id": small_study.study_id, "participant_ids": [public_id]})
