@@ -24,6 +24,7 @@ from sqlalchemy import func, select
 from sqlmodel import Session
 
 from analysis.contracts import (
+    DEVICE,
     EVENTS,
     EXPORT_COLUMNS,
     EXPORT_VERSION,
@@ -246,7 +247,13 @@ def _participant_row(p: Participant, version: dict, checks: int, cutoff: datetim
             "attention_failed": p.attention_failed,
             "attention_verdict": attention_verdict(checks, p.attention_failed),
             "pilot": p.pilot, "replaced": p.replaced_at is not None,
-            "app_version": p.app_version}
+            "app_version": p.app_version, **device_columns(p.client)}
+
+
+def device_columns(client: dict) -> dict:
+    """The consented device (schemas.ClientInfo) as DEVICE columns; -1 and '' without one."""
+    return {key: client.get(key, -1 if kind == "int" else "" if kind == "text" else False)
+            for key, kind in DEVICE.items()}
 
 
 def attention_verdict(checks: int, failed: int) -> str:
