@@ -57,8 +57,8 @@ SESSION_WRITE_STATUSES = {
     400: UNREADABLE,
     404: f"{UNKNOWN_SESSION}; trial_id: not a trial of this session",
     409: "phase: the session is at another step or trial, moved on in another request, or "
-         "done (telemetry); submission_id: used by another session; tab: another tab of "
-         "this session is the live one",
+         "done or not yet consented (telemetry); submission_id: used by another session; "
+         "tab: another tab of this session is the live one",
     410: GONE,
     413: TOO_LARGE,
     422: f"{INVALID}, or breaks a study rule: clicks outside the scene or reach, survey "
