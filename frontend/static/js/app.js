@@ -23,10 +23,11 @@ const $ = (id) => document.getElementById(id);
 /**
  * One handler per phase the server sends (app/server/plan.py `Phase`; the page lists them in
  * its rules). `show` resolves with the next state once the participant's answer is
- * stored (or with null: read the state again); `ends` marks the phase that ends the session.
+ * stored (or with null: read the state again); `ends` marks the phase that ends the session,
+ * `beforeConsent` the one before which nothing is recorded.
  */
 const PHASE_HANDLERS = {
-  consent: { show: (app, state) => app.showConsent(state.step) },
+  consent: { show: (app, state) => app.showConsent(state.step), beforeConsent: true },
   instructions: { show: (app, state) => app.showInstructions(state.step) },
   world_intro: { show: (app, state) => app.showWorld(state) },
   practice: { show: (app, state) => app.showTrial(state), trial: true },
@@ -267,7 +268,7 @@ class ParticipantApp {
       this.recheckWindow();
     }
     while (!this.handler(state.phase).ends) {
-      if (state.phase !== "consent") this.telemetry.consented();
+      if (!this.handler(state.phase).beforeConsent) this.telemetry.consented();
       const next = await this.showPhase(state);
       if (this.lost) return;
       if (this.pauseBetween(state, next)) {
