@@ -65,7 +65,9 @@ def plugin_names(columns) -> list[str]:
 
 # columns added after the first export, with the value an older export's rows read as
 ADDED_COLUMNS = {"arm": "", "replaced": False, "click_input": "", "export_version": 1,
-                 "prolific_check": ""}
+                 "prolific_check": "",
+                 "screen_w": -1, "screen_h": -1, "touch_only": False, "reduced_motion": False,
+                 "user_agent": ""}
 SORT_KEYS = ["participant_id", "trial_index", "trial_id", "start_index", "step"]
 
 # Every export except predictions (whose rows carry each model's hash already) names
@@ -84,6 +86,11 @@ EVENTS = {
     "h": "int",
     **STUDY_VERSION,
 }
+# The device a session consented from (stored with consent, never before): the window's
+# inner size in CSS px (-1 and empty text when no consent was given), the browser's user agent
+# and its reduced-motion preference.
+DEVICE = {"screen_w": "int", "screen_h": "int", "touch_only": "bool", "reduced_motion": "bool",
+          "user_agent": "text"}
 PARTICIPANTS = {
     **VERSIONED, "study_id": "text", "external_id": "text", "recruitment": "text",
     "participant_id": "text", "outcome": "text", "completion_code": "text",
@@ -92,7 +99,7 @@ PARTICIPANTS = {
     "attention_checks": "int", "attention_failed": "int", "attention_verdict": "text",
     "pilot": "bool", "replaced": "bool", "prolific_check": "text", "excluded": "bool",
     "exclusion_reasons": "text",
-    "app_version": "text", **STUDY_VERSION,
+    "app_version": "text", **DEVICE, **STUDY_VERSION,
 }
 SCHEMAS = {"survey": SURVEY, "events": EVENTS, "participants": PARTICIPANTS}
 WHAT = ("predictions", *SCHEMAS)

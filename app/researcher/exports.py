@@ -24,6 +24,7 @@ from sqlalchemy import func, select
 from sqlmodel import Session
 
 from analysis.contracts import (
+    DEVICE,
     EVENTS,
     EXPORT_COLUMNS,
     EXPORT_VERSION,
@@ -249,7 +250,14 @@ def _participant_row(p: Participant, version: dict, checks: int, cutoffs: Cutoff
             "attention_failed": p.attention_failed,
             "attention_verdict": attention_verdict(checks, p.attention_failed),
             "pilot": p.pilot, "replaced": p.replaced_at is not None,
-            "prolific_check": p.prolific_check or "", "app_version": p.app_version}
+            "prolific_check": p.prolific_check or "", "app_version": p.app_version,
+            **device_columns(p.client)}
+
+
+def device_columns(client: dict) -> dict:
+    """The consented device (schemas.ClientInfo) as DEVICE columns; -1 and '' without one."""
+    return {key: client.get(key, -1 if kind == "int" else "" if kind == "text" else False)
+            for key, kind in DEVICE.items()}
 
 
 def attention_verdict(checks: int, failed: int) -> str:

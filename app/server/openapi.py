@@ -58,9 +58,9 @@ SESSION_WRITE_STATUSES = {
     400: UNREADABLE,
     404: f"{UNKNOWN_SESSION}; trial_id: not a trial of this session",
     409: "phase: the session is at another step or trial, moved on in another request, or "
-         "done (telemetry); submission_id: used by another session; tab: another tab of "
-         "this session is the live one; study_id: (consent) the study closed or became full "
-         "since this session started",
+         "done or not yet consented (telemetry); submission_id: used by another session; tab: "
+         "another tab of this session is the live one; study_id: (consent) the study closed "
+         "or became full since this session started",
     410: GONE,
     413: TOO_LARGE,
     422: f"{INVALID}, or breaks a study rule: clicks outside the scene or reach, survey "

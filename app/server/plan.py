@@ -112,6 +112,11 @@ def current_step(participant: Participant) -> Step:
     return parse_step(participant.plan[min(participant.position, len(participant.plan) - 1)])
 
 
+def has_consented(participant: Participant) -> bool:
+    """True once the session is past its consent step (the plan's first, layout_plan)."""
+    return participant.position > 0
+
+
 def trial_steps(participant: Participant) -> list[tuple[int, TrialStep]]:
     """(position, step) of every trial of the plan, practice included."""
     steps = enumerate(parse_plan(participant.plan))

@@ -58,6 +58,7 @@ def trial_response(ctx: StudyContext, participant: Participant, step: TrialStep,
         "submitted_at_ms": body.submitted_at_ms, "replays": body.replays,
         "clip_sha256": trial.clip_sha256, "arm": trial.arm, "received_at": utcnow(),
         "history": [entry.model_dump() for entry in body.history],
+        "reduced_motion": body.reduced_motion,
         **trial_durations(ctx, participant, body),
     }
 

@@ -69,6 +69,7 @@ class ClientInfo(_Body):
     screen_w: Int = PydField(default=0, ge=0, le=100_000)
     screen_h: Int = PydField(default=0, ge=0, le=100_000)
     touch_only: Flag = False
+    reduced_motion: Flag = False  # the browser's prefers-reduced-motion: reduce
     user_agent: Text = PydField(default="", max_length=USER_AGENT_MAX_CHARS)
 
 
@@ -117,6 +118,8 @@ class PredictionCreate(SubmissionBody):
     history: list[HistoryEntry] = PydField(default=[], max_length=HISTORY_MAX_ENTRIES)
     # as click_times_ms; None (unknown) from a client older than the field, as history was
     click_inputs: list[list[ClickInput]] | None = None
+    # whether the clips played as reduced motion's stepped animation; None: not said
+    reduced_motion: Flag | None = None
 
 
 class DraftSave(_Body):

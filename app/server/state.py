@@ -19,7 +19,7 @@ from app.server.plan import (
     trial_steps,
 )
 from app.server.tables import Participant
-from app.study.trial_payload import trial_payload
+from app.study.trial_payload import practice_feedback, trial_payload
 
 
 def progress_of(participant: Participant) -> dict:
@@ -78,7 +78,10 @@ def step_fields(participant: Participant, step: TrialStep) -> dict:
 def static_trial(ctx: StudyContext, trial_id: str) -> dict:
     """The parts of a trial payload that are the same for everyone, with the prediction view."""
     trial = ctx.bank.by_id[trial_id]
-    return {**trial_payload(ctx.bank, trial), "view": ctx.view(trial.world).payload()}
+    payload = {**trial_payload(ctx.bank, trial), "view": ctx.view(trial.world).payload()}
+    if trial.kind == "practice":
+        payload["feedback"] = practice_feedback(ctx.bank.world(trial.world), trial)
+    return payload
 
 
 def state_json(ctx: StudyContext, participant: Participant, draft: dict | None = None) -> str:

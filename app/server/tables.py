@@ -130,6 +130,9 @@ class TrialResponse(SQLModel, table=True):
     # the participant's undo and reset presses on this trial, in order (HistoryEntry)
     history: list = Field(default_factory=list,
                           sa_column=Column(JSON, server_default=text("'[]'")))
+    # the clips played as reduced motion's stepped animation (the browser's preference);
+    # NULL: unknown, as in rows stored before 0009 or sent by a client without it
+    reduced_motion: bool | None = None
     received_at: datetime = Field(default_factory=utcnow)
 
 

@@ -5,8 +5,8 @@ While another tab was heard from within TAB_ALIVE_S, a claim is refused (409 wit
 that offers to continue here) unless the person chose to take over. Writes that name their
 tab (header X-Tab-Id) are refused once another tab is live, so the tab left behind learns
 why its answers are not taken instead of racing the other one; API clients and bots name
-no tab and are not checked. Each page that opens is an event (`page_opened`, or
-`tab_takeover` when it took the session from a live tab) with the trial it opened on and
+no tab and are not checked. Each page that opens after consent is an event (`page_opened`,
+or `tab_takeover` when it took the session from a live tab) with the trial it opened on and
 the clicks its draft restored, so the events export shows every reload and resume.
 """
 

@@ -14,6 +14,7 @@ from sqlalchemy.engine import Connection
 from sqlmodel import Session
 
 from app.server.db import insert_skipping_duplicates
+from app.server.plan import has_consented
 from app.server.schemas import EventsCreate
 from app.server.sessions import has_ended
 from app.server.tables import Event, Participant, utcnow
@@ -21,16 +22,19 @@ from app.study.errors import Refused
 
 MAX_EVENTS_PER_SESSION = 1000  # the browser sends about 3 per trial; 1000 is far above that
 SESSION_COMPLETE = "phase: the session is complete; no more events"
+BEFORE_CONSENT = "phase: no events are taken before consent; nothing was stored"
 
 
 def record_events(db: Session, participant: Participant, body: EventsCreate) -> int:
     """Store a batch of events, skipping UUIDs already stored; returns how many were new.
 
-    Refused with 409 once the session is complete, and whole (422, nothing stored) when it
-    would take the session past MAX_EVENTS_PER_SESSION.
+    Refused with 409 before consent and once the session is complete, and whole (422,
+    nothing stored) when it would take the session past MAX_EVENTS_PER_SESSION.
     """
     if has_ended(participant):
         raise Refused(409, SESSION_COMPLETE)
+    if not has_consented(participant):
+        raise Refused(409, BEFORE_CONSENT)
     conn = db.connection()
     stored = conn.execute(_insert_new_events(conn, participant, body)).rowcount
     if stored and not _count_stored(conn, participant.id, stored):
@@ -43,7 +47,10 @@ def record_events(db: Session, participant: Participant, body: EventsCreate) -> 
 def record_server_event(db: Session, participant: Participant, kind: str,
                         t_client_ms: float, data: dict) -> bool:
     """Store an event the server itself saw (e.g. a page opened), within the same cap as
-    telemetry; False (nothing stored) once the session has reached it. Does not commit."""
+    telemetry; False (nothing stored) before consent or once the session has reached the
+    cap. Does not commit."""
+    if not has_consented(participant):
+        return False
     conn = db.connection()
     if not _count_stored(conn, participant.id, 1):
         return False

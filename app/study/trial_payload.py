@@ -6,7 +6,9 @@ participant's step fields (a random `trial_id` ref, numbering) and the predictio
 simulated study adds the bank's trial id and world.
 """
 
-from app.study.trials import TrialBank, TrialRecord, WorldBank
+import numpy as np
+
+from app.study.trials import POS_DECIMALS, TrialBank, TrialRecord, WorldBank
 
 
 def trial_payload(bank: TrialBank, trial: TrialRecord) -> dict:
@@ -28,3 +30,14 @@ def predictor_inputs(world: WorldBank, steps_to_predict: int, trial: TrialRecord
     headings = [s.robot_heading for s in trial.start_states]
     return (trial.model_input, starts, headings, world.dt_s, steps_to_predict,
             world_trial_payload(world, steps_to_predict, trial))
+
+
+def practice_feedback(world: WorldBank, trial: TrialRecord) -> dict:
+    """Where the robot goes from each start state of a practice trial: the positions [K, n, 2]
+    (m) its own policy's moves (the bank's `policy_actions`) reach, shown once the practice is
+    answered. Only practice trials have it: a scored trial's answer never leaves the server."""
+    if trial.kind != "practice":
+        raise ValueError(f"{trial.trial_id}: only a practice trial's robot moves are shown")
+    starts = np.array([s.robot for s in trial.start_states])[:, None, :]
+    reached = starts + np.cumsum(np.asarray(trial.policy_actions) * world.dt_s, axis=1)
+    return {"robot": np.round(reached, POS_DECIMALS).tolist()}

@@ -230,8 +230,24 @@ def answer_trial(page, study_id: str = BROWSER_STUDY) -> dict:
         last = page.inner_text("#next").startswith("Submit")
         page.click("#next")
         if last:
+            through_feedback(page)
             page.wait_for_function("() => document.querySelector('#screen-trial').hidden")
     return trial
+
+
+FEEDBACK_OR_GONE = """() => document.querySelector('#screen-trial').hidden
+    || !document.querySelector('#feedback-legend').hidden"""
+
+
+def through_feedback(page) -> int:
+    """After submitting a trial: press on through a practice trial's feedback (a screen per
+    start position); how many screens it showed (0 after a scored trial)."""
+    page.wait_for_function(FEEDBACK_OR_GONE, timeout=15000)
+    shown = 0
+    while page.is_visible("#screen-trial") and page.is_visible("#feedback-legend"):
+        shown += 1
+        page.click("#next")
+    return shown
 
 
 def wait_saved(page) -> None:

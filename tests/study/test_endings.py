@@ -112,7 +112,7 @@ def test_declining_consent_ends_the_session_and_keeps_only_the_receipt(codes, cl
     p.start(**params)
     event = {"submission_id": new_id(), "kind": "resize", "t_client_ms": 5, "data": {"w": 1,
                                                                                      "h": 2}}
-    assert p.post("events", {"events": [event]}).status_code == 202
+    assert p.post("events", {"events": [event]}).status_code == 409  # nothing before consent
     r = p.post("decline", {"submission_id": new_id()})
     assert r.status_code == 200, r.text
     done = r.json()

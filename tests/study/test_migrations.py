@@ -387,3 +387,22 @@ def test_export_refuses_a_database_that_needs_an_upgrade(tmp_path):
               db_url=load_fixture(tmp_path / "study.db"))
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "`tomstudy db upgrade`" in run.stderr
+
+
+def test_0009_leaves_how_earlier_trials_were_played_unknown(db_url, tmp_path):
+    source, engine = old_rows_at(db_url, tmp_path, "0008")
+    columns = {"trialresponse": ["id", "trial_id", "replays", "history"]}
+    before = snapshot(engine, columns)
+
+    migrate_to(engine, "0009")
+
+    assert snapshot(engine, columns) == before
+    played = snapshot(engine, {"trialresponse": ["reduced_motion"]})["trialresponse"]
+    assert played == [(None,)] * FIXTURE_ROWS["trialresponse"]
+    with engine.begin() as conn:
+        command.downgrade(migrate.alembic_config(conn), "0008")
+        columns_0008 = [c["name"] for c in inspect(conn).get_columns("trialresponse")]
+    assert "reduced_motion" not in columns_0008 and "history" in columns_0008
+    assert snapshot(engine, columns) == before
+    engine.dispose()
+    source.dispose()

@@ -8,11 +8,12 @@ import pandas as pd
 import pytest
 
 from app.prediction_view import TARGET_STEP_PX, click_resolution_deg, prediction_view
-from app.server.plan import Phase
+from app.server.plan import TRIAL_PHASES, Phase
 from tests.study.flow import (
     ADMIN,
     Participant,
     at_first_trial,
+    bank_trial,
     draft_body,
     new_id,
     prediction_body,
@@ -249,3 +250,20 @@ def test_every_trial_payload_carries_its_worlds_view(client, small_study, bank):
     world = {"dt_s": trial["dt_s"], "trials": [t for t in bank.values()
                                               if t["world"] == trial["world"]]}
     assert trial["view"] == prediction_view(world).payload()
+
+
+def test_only_practice_trials_carry_where_the_robot_goes(client, small_study, bank):
+    p = at_first_trial(client, small_study.study_id)
+    kinds = []
+    while (state := p.pass_screens())["phase"] in TRIAL_PHASES:
+        trial = state["step"]
+        record = bank_trial(bank, trial)
+        kinds.append(record["kind"])
+        if record["kind"] != "practice":
+            assert "feedback" not in trial  # a scored trial's answer never leaves the server
+        else:
+            starts = np.array([s["robot"] for s in record["start_states"]])[:, None]
+            moves = np.cumsum(np.array(record["policy_actions"]) * trial["dt_s"], axis=1)
+            assert np.allclose(trial["feedback"]["robot"], starts + moves, atol=1e-3)
+        p.answer_trial(bank)
+    assert {"practice", "main", "attention"} <= set(kinds)

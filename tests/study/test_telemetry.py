@@ -1,5 +1,6 @@
 """Telemetry is bounded: known kinds with small data, a cap per session, nothing after done."""
 
+import io
 import re
 from concurrent.futures import ThreadPoolExecutor
 
@@ -7,6 +8,7 @@ import pytest
 from sqlalchemy import func, select
 from sqlmodel import Session
 
+from analysis.exports import read_export
 from app.server import telemetry
 from app.server.plan import Phase
 from app.server.schemas import EVENT_DATA, EventsCreate
@@ -15,7 +17,7 @@ from app.server.tables import Event
 from app.server.tables import Participant as ParticipantRow
 from app.study.errors import Refused
 from tests.conftest import REPO
-from tests.study.flow import Participant, at_first_trial, new_id
+from tests.study.flow import ADMIN, DEVICE, Participant, at_first_trial, new_id
 
 CAP = telemetry.MAX_EVENTS_PER_SESSION
 
@@ -150,3 +152,41 @@ def test_events_after_the_session_is_done_are_refused(client, small_study):
     assert (r.status_code, r.json()["detail"]) == (
         409, "phase: the session is complete; no more events")
     assert stored_counts(client, p) == (2, 2)
+
+
+def test_nothing_is_stored_before_consent(client, small_study):
+    p = Participant(client, small_study.study_id)
+    p.start()
+    r = p.post("events", {"events": [event(), event("visibility_hidden", {})]})
+    assert (r.status_code, r.json()["detail"]) == (409, telemetry.BEFORE_CONSENT)
+    opened = p.post("tab", {"tab_id": "tab-aaaaaaaa", "opened": True, "t_client_ms": 1.0})
+    assert opened.status_code == 200  # the page may open; the server keeps no event of it
+    assert stored_counts(client, p) == (0, 0)
+    assert participant_row(client, p).client == {}
+    assert p.consent().status_code == 200
+    assert p.post("events", batch(1)).status_code == 202
+    assert p.post("tab", {"tab_id": "tab-aaaaaaaa", "opened": True,
+                          "t_client_ms": 2.0}).status_code == 200  # a reload after consent
+    assert stored_counts(client, p) == (2, 2)
+
+
+def test_the_consented_device_is_in_the_participants_export(client, small_study):
+    consented = Participant(client, small_study.study_id)
+    consented.start()
+    device = DEVICE | {"reduced_motion": True}
+    assert consented.post("consent", {"submission_id": new_id(), "agree": True,
+                                      "client": device}).status_code == 200
+    Participant(client, small_study.study_id).start()  # opened the link, never consented
+    r = client.get(f"/api/researcher/export/participants.csv?study_id={small_study.study_id}",
+                   headers=ADMIN)
+    sheet = read_export(io.StringIO(r.text), "participants").set_index("participant_id")
+    rows = sheet[list(DEVICE) + ["reduced_motion"]].to_dict("records")
+    assert rows[0] == device
+    assert rows[1] == {"screen_w": -1, "screen_h": -1, "touch_only": False,
+                       "user_agent": "", "reduced_motion": False}
+
+
+def participant_row(client, p: Participant) -> ParticipantRow:
+    """The session's database row."""
+    with Session(client.app.state.engine) as db:
+        return participant_by_token(db, p.token)

@@ -146,7 +146,8 @@ async def submit_survey(body: SurveyCreate, participant: WriterDep, ctx: Context
 
 
 @router.post(f"{SESSION_PATH}/events", status_code=status.HTTP_202_ACCEPTED,
-             responses={409: {"description": "the session is complete; no more events"}})
+             responses={409: {"description": "the session has not consented yet, or is "
+                                             "complete: no events are stored"}})
 async def submit_events(body: EventsCreate, participant: ParticipantDep,
                         db: SessionDep) -> dict:
     """Store telemetry events (at most 100 a request, MAX_EVENTS_PER_SESSION a session);

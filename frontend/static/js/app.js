@@ -1,13 +1,15 @@
 // The participant app: one page driven by GET /api/session/state (token in X-Session-Token).
 import { ApiError, StudyApi, newUuid } from "./api.js";
 import { InstructionsDemo } from "./demo.js";
-import { ClipPlayer, trialClips } from "./player.js";
+import { ClipPlayer, prefersReducedMotion, trialClips } from "./player.js";
 import { PredictionInput } from "./predict.js";
 import { drawBackground, label, prepareCanvas } from "./scene.js";
 
 const REDIRECT_DELAY_MS = 5000;
 const SCREENS = ["loading", "unsupported", "consent", "instructions", "world", "practice-over", "trial", "pause",
   "survey", "done", "notice", "error"];
+// the screens of a running study: a window made too small covers them until it is enlarged
+const STUDY_SCREENS = ["consent", "instructions", "world", "practice-over", "trial", "pause", "survey"];
 // This tab's id survives its reloads; the flag tells a duplicated tab (which copies
 // sessionStorage while the original is open) to take its own. The takeover flag carries the
 // person's choice "continue here" across the reload that follows it.
@@ -21,10 +23,11 @@ const $ = (id) => document.getElementById(id);
 /**
  * One handler per phase the server sends (app/server/plan.py `Phase`; the page lists them in
  * its rules). `show` resolves with the next state once the participant's answer is
- * stored (or with null: read the state again); `ends` marks the phase that ends the session.
+ * stored (or with null: read the state again); `ends` marks the phase that ends the session,
+ * `beforeConsent` the one before which nothing is recorded.
  */
 const PHASE_HANDLERS = {
-  consent: { show: (app, state) => app.showConsent(state.step) },
+  consent: { show: (app, state) => app.showConsent(state.step), beforeConsent: true },
   instructions: { show: (app, state) => app.showInstructions(state.step) },
   world_intro: { show: (app, state) => app.showWorld(state) },
   practice: { show: (app, state) => app.showTrial(state), trial: true },
@@ -116,6 +119,7 @@ class DraftSaver {
   save(draft) {
     this.seq += 1;
     this.latest = { ...draft, seq: this.seq };
+    if (!this.failures) this.onStatus("Saving your clicks…", "ok"); // "saved" only once the server says so
     this.flush();
   }
 
@@ -157,7 +161,8 @@ class DraftSaver {
 
 /**
  * Batches telemetry events and posts them, at most `perRequest` at a time; kept in memory
- * until the server takes them. `kinds` are the event kinds the server takes.
+ * until the server takes them. `kinds` are the event kinds the server takes. Nothing is
+ * recorded before consent (`consented()`): the server refuses such events too.
  */
 class Telemetry {
   constructor(api, { kinds, perRequest }) {
@@ -166,17 +171,24 @@ class Telemetry {
     this.perRequest = perRequest;
     this.queue = [];
     this.timer = null;
+    this.allowed = false;
+  }
+
+  /** The session has consented: events are recorded from now on. */
+  consented() {
+    this.allowed = true;
   }
 
   log(kind, data = {}) {
     if (!this.kinds.has(kind)) throw new Error(`the server takes no event ${kind}`);
+    if (!this.allowed) return;
     this.queue.push({ submission_id: newUuid(), kind, t_client_ms: Date.now(), data });
     clearTimeout(this.timer);
     this.timer = setTimeout(() => this.flush(), 1000);
   }
 
   async flush({ keepalive = false } = {}) {
-    if (!this.api.token || !this.queue.length) return;
+    if (!this.allowed || !this.api.token || !this.queue.length) return;
     const batch = this.queue.splice(0, this.perRequest);
     try {
       const response = await this.api.events(batch, { keepalive });
@@ -195,10 +207,20 @@ function recruitmentFromUrl(names) {
   return recruitment;
 }
 
-/** Say in `element` why a write is being retried: the server's notice, else the connection. */
-function waitingFor(element, error) {
-  element.hidden = false;
-  element.textContent = error.notice?.text ?? "Connecting to the study server\u2026";
+/**
+ * Options for a press's write: while it is retried, `status` says why (offline, the server's
+ * notice such as the study running its cap, or no answer); cleared now, so an earlier note does
+ * not linger.
+ */
+function pressRetries(status) {
+  status.textContent = "";
+  const say = (error) => {
+    status.textContent = navigator.onLine === false
+      ? "You are offline. Your answer is kept and sent as soon as the connection returns; the study then continues by itself."
+      : error?.notice?.text ?? "The study server cannot be reached right now. Trying again\u2026";
+  };
+  if (navigator.onLine === false) say();
+  return { onRetry: say };
 }
 
 /** The researcher preview key of a lab member's test link, or null. */
@@ -216,6 +238,7 @@ function clientInfo(userAgentMaxChars) {
     screen_w: innerWidth,
     screen_h: innerHeight,
     touch_only: false,
+    reduced_motion: prefersReducedMotion(),
     user_agent: navigator.userAgent.slice(0, userAgentMaxChars),
   };
 }
@@ -243,8 +266,10 @@ class ParticipantApp {
     if (!this.handler(state.phase).ends) {
       if (!(await this.claimTab())) return;
       state = await this.checkDevice(state);
+      this.recheckWindow();
     }
     while (!this.handler(state.phase).ends) {
+      if (!this.handler(state.phase).beforeConsent) this.telemetry.consented();
       const next = await this.showPhase(state);
       if (this.lost) return;
       if (this.pauseBetween(state, next)) {
@@ -374,6 +399,35 @@ class ParticipantApp {
     });
   }
 
+  /**
+   * Once the study runs, a window made smaller than the display check allows covers the
+   * screen with the reason until it is large enough again, then the same screen comes back
+   * as it was (this listener runs before the canvases' own, which then redraw at full size).
+   */
+  recheckWindow() {
+    const check = this.deviceChecks.get("window_too_small");
+    if (!check) return;
+    let covered = null;
+    addEventListener("resize", () => {
+      const text = check(this.rules.min_window);
+      if (text) {
+        covered ??= SCREENS.find((name) => !$(`screen-${name}`).hidden);
+        if (!STUDY_SCREENS.includes(covered)) {
+          covered = null;
+          return;
+        }
+        $("unsupported-title").textContent = "Please make the window larger";
+        $("unsupported-help").textContent = "Your answers so far are saved. When the window is large enough again, the study continues where you were.";
+        $("unsupported-reason").textContent = text;
+        $("screen-out-block").hidden = true;
+        show("unsupported");
+      } else if (covered) {
+        if (!$("screen-unsupported").hidden) show(covered);
+        covered = null;
+      }
+    });
+  }
+
   /** Resume the token kept in sessionStorage (same recruitment), else start or resume on the server. */
   async ensureSession() {
     const recruitment = recruitmentFromUrl(this.rules.recruitment_params);
@@ -456,15 +510,12 @@ class ParticipantApp {
       button.onclick = () => {
         button.disabled = true;
         decline.disabled = true;
-        // a consent takes a place: while the study runs its cap the server answers 503 and
-        // the write is retried, so say why nothing happens yet
-        const waiting = { onRetry: (error) => waitingFor($("consent-status"), error) };
-        this.api.consent(clientInfo(this.rules.user_agent_max_chars), waiting).then(resolve, reject);
+        this.api.consent(clientInfo(this.rules.user_agent_max_chars), pressRetries($("consent-status"))).then(resolve, reject);
       };
       decline.onclick = () => {
         button.disabled = true;
         decline.disabled = true;
-        this.api.decline().then(resolve, reject);
+        this.api.decline(pressRetries($("consent-status"))).then(resolve, reject);
       };
     });
   }
@@ -484,7 +535,7 @@ class ParticipantApp {
       button.onclick = () => {
         button.disabled = true;
         player.stop();
-        this.api.instructionsDone().then(resolve, reject);
+        this.api.instructionsDone(pressRetries($("instructions-status"))).then(resolve, reject);
       };
     });
   }
@@ -515,14 +566,17 @@ class ParticipantApp {
     return this.continueFrom(state.phase, $("practice-over-done"));
   }
 
-  /** Resolve with the next state once `button` is pressed and the server has moved on. */
+  /** Resolve with the next state once `button` is pressed and the server has moved on (its
+   * screen's status line says so while it cannot be reached). */
   continueFrom(phase, button) {
     button.disabled = false;
     button.focus();
+    const status = button.closest("section").querySelector(".press-status");
+    status.textContent = "";
     return new Promise((resolve, reject) => {
       button.onclick = () => {
         button.disabled = true;
-        this.api.continueFrom(phase).then(resolve, reject);
+        this.api.continueFrom(phase, pressRetries(status)).then(resolve, reject);
       };
     });
   }
@@ -550,7 +604,8 @@ class ParticipantApp {
         $("survey-message").textContent = "";
         form.querySelector("button[type=submit]").disabled = true;
         // the server refuses events once the session is done: send what is queued first
-        this.telemetry.flush().then(() => this.api.survey(answers)).then(resolve, (error) => {
+        const retries = pressRetries($("survey-message"));
+        this.telemetry.flush().then(() => this.api.survey(answers, retries)).then(resolve, (error) => {
           form.querySelector("button[type=submit]").disabled = false;
           if (error instanceof ApiError && error.status < 500) $("survey-message").textContent = error.detail;
           else reject(error);
@@ -659,6 +714,7 @@ class TrialScreen {
   }
 
   run() {
+    addEventListener("beforeunload", askBeforeLeaving);
     return new Promise((resolve, reject) => {
       this.resolve = resolve;
       this.reject = reject;
@@ -681,8 +737,9 @@ class TrialScreen {
       : "Welcome back: continue with your predictions.");
   }
 
-  /** Stop drawing and saving (the session went to another tab). */
+  /** Stop drawing and saving (the trial is stored, or the session went to another tab). */
   stop() {
+    removeEventListener("beforeunload", askBeforeLeaving);
     this.saver.stop();
     this.input?.destroy();
     this.player.stop();
@@ -782,7 +839,7 @@ class TrialScreen {
     this.saver.stop(); // the submission carries every click; a late draft would only be refused
     $("next").disabled = true;
     $("replay").disabled = true;
-    this.body ??= { submission_id: newUuid(), ...this.input.body(this.replays) };
+    this.body ??= { submission_id: newUuid(), ...this.input.body(this.replays), reduced_motion: this.player.reducedMotion };
     this.setMessage("Saving your predictions…");
     try {
       const state = await this.api.predictions(this.body, {
@@ -790,12 +847,45 @@ class TrialScreen {
       });
       this.stop();
       this.setMessage("");
+      if (this.trial.feedback) await this.showFeedback();
       this.resolve(state);
     } catch (error) {
       this.submitting = false;
       if (error instanceof ApiError && error.status < 500) this.refused(error, "These predictions were not saved.");
       else this.reject(error);
     }
+  }
+
+  /**
+   * After a practice trial (whose payload alone says where the robot goes): each start
+   * position with the person's clicks beside the robot's moves; resolves on Continue.
+   */
+  showFeedback() {
+    const states = this.trial.start_states.length;
+    const next = $("next");
+    $("undo").hidden = true;
+    $("reset").hidden = true;
+    $("feedback-legend").hidden = false;
+    $("legend-predict").hidden = true;
+    return new Promise((resolve) => {
+      const showAt = (index) => {
+        this.input.review(this.trial.feedback.robot, index);
+        $("trial-caption").textContent = `Practice feedback, start position ${index + 1} of ${states}`;
+        this.setMessage("Compare your clicks (black rings) with where the robot went from there (blue dots).");
+        const last = index === states - 1;
+        next.textContent = last ? "Continue" : `Next start position (${index + 2} of ${states})`;
+        next.disabled = false;
+        next.onclick = () => (last ? done() : showAt(index + 1));
+        next.focus();
+      };
+      const done = () => {
+        $("undo").hidden = false;
+        $("reset").hidden = false;
+        $("feedback-legend").hidden = true;
+        resolve();
+      };
+      showAt(0);
+    });
   }
 
   /**
@@ -822,6 +912,12 @@ class TrialScreen {
     });
     this.resolve(null);
   }
+}
+
+/** Leaving mid-trial asks first (the browser's own question; clicks are saved as drafts too). */
+function askBeforeLeaving(event) {
+  event.preventDefault();
+  event.returnValue = "";
 }
 
 function setProse(element, text) {

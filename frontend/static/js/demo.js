@@ -1,10 +1,17 @@
-// The instructions' animated demo: a neutral illustration (not study data) of a clip
-// and of placing three predicted positions, drawn with the same code as the real trials.
+// The instructions' animated demo: a neutral illustration (not study data) of a clip and of
+// placing three predicted positions from several start positions (the robot's own, then
+// moved elsewhere), drawn with the same code as the real trials.
 import { ClipPlayer, prefersReducedMotion } from "./player.js";
 import { PredictionInput } from "./predict.js";
 
 const DEMO_STEPS = 8;
+const SEGMENT_STEPS = 5; // the clip's first steps are the segment predicted from
 const CLICK_INTERVAL_MS = 900;
+const NEXT_START_MS = 1400;
+const CLICK_STEP_M = 1.0;
+const GOAL = [11, 1]; // goal A: the demo's clicks head there from every start
+// where the robot is moved to after its own start (clear of the obstacle and the person)
+const MOVED_STARTS = [[3, 1.2], [8.8, 3.9]];
 
 const DEMO_SCENE = {
   world: "demo",
@@ -45,7 +52,31 @@ function wait(ms) {
   return new Promise((resolve) => setTimeout(resolve, ms));
 }
 
-/** Plays the illustration once: a clip, then three clicks from a start state (`rules` as PredictionInput takes them). */
+/** Three clicks from `start` straight towards goal A, CLICK_STEP_M apart. */
+function clicksTowardsGoal(start) {
+  const d = Math.hypot(GOAL[0] - start[0], GOAL[1] - start[1]);
+  const unit = [(GOAL[0] - start[0]) / d, (GOAL[1] - start[1]) / d];
+  return [1, 2, 3].map((k) => [start[0] + k * CLICK_STEP_M * unit[0], start[1] + k * CLICK_STEP_M * unit[1]]);
+}
+
+/** The demo's trial: the clip's first steps as the segment, its own end and MOVED_STARTS. */
+function demoTrial(clip) {
+  const segment = {
+    positions: clip.positions.slice(0, SEGMENT_STEPS + 1),
+    headings: clip.headings.slice(0, SEGMENT_STEPS + 1),
+  };
+  const [robot, human] = segment.positions[SEGMENT_STEPS];
+  const [robotHeading, humanHeading] = segment.headings[SEGMENT_STEPS];
+  const state = (at) => ({ robot: at, human, robot_heading: robotHeading, human_heading: humanHeading });
+  return {
+    trial_id: "demo", scene: DEMO_SCENE, segment, steps_to_predict: 3,
+    start_states: [state(robot), ...MOVED_STARTS.map(state)],
+    max_step_m: 1.6, min_step_m: 0.2,
+  };
+}
+
+/** Plays the illustration once: a clip, then three clicks from each start position (`rules` as
+ * PredictionInput takes them). */
 export class InstructionsDemo {
   constructor(canvas, { rules, onCaption = () => {} }) {
     this.canvas = canvas;
@@ -65,24 +96,29 @@ export class InstructionsDemo {
 
   async play() {
     const run = ++this.run;
+    delete this.canvas.dataset.demoStarts;
     if (!(await this.player.play()) || run !== this.run) return;
-    const end = this.clip.positions[DEMO_STEPS];
-    const trial = {
-      trial_id: "demo", scene: DEMO_SCENE, segment: this.clip, steps_to_predict: 3,
-      start_states: [{ robot: this.clip.positions[5][0], human: end[1] }],
-      max_step_m: 1.6, min_step_m: 0.2,
-    };
+    const trial = demoTrial(this.clip);
     const input = new PredictionInput(this.canvas, trial, { rules: this.rules, onMessage: () => {} });
     input.shownAtPerf = performance.now();
-    this.onCaption("Then you click where the robot will be after each of the next steps, inside the shaded circle");
-    input.render();
-    const start = trial.start_states[0].robot;
-    const clicks = [[start[0] + 1.2, start[1] - 0.6], [start[0] + 2.4, start[1] - 1.0], [start[0] + 3.6, start[1] - 1.2]];
-    for (const point of clicks) {
-      await wait(prefersReducedMotion() ? 300 : CLICK_INTERVAL_MS);
-      if (run !== this.run) return;
-      input.place(point);
+    const starts = trial.start_states.length;
+    for (let k = 0; k < starts; k += 1) {
+      if (k) {
+        await wait(prefersReducedMotion() ? 600 : NEXT_START_MS);
+        if (run !== this.run) return;
+        input.next();
+      }
+      this.onCaption(k
+        ? `Start position ${k + 1} of ${starts}: the robot is moved elsewhere (its path in the clip is grey); predict from there`
+        : `Start position 1 of ${starts}: where the clip ended. Click where the robot will be after each of the next steps, inside the shaded circle`);
+      input.render();
+      for (const point of clicksTowardsGoal(trial.start_states[k].robot)) {
+        await wait(prefersReducedMotion() ? 300 : CLICK_INTERVAL_MS);
+        if (run !== this.run) return;
+        input.place(point, "mouse");
+      }
     }
-    this.onCaption("Positions placed: in the study you then press Next (or Submit after the last start position)");
+    this.canvas.dataset.demoStarts = String(starts); // how many start positions it showed
+    this.onCaption("In the study you press Next after each start position, and Submit after the last");
   }
 }

@@ -7,7 +7,6 @@ import {
   drawBackground,
   drawPointer,
   drawTrace,
-  fitView,
   prepareCanvas,
   publishView,
   viewAt,
@@ -15,7 +14,6 @@ import {
 
 export const STEP_SECONDS = 0.35;
 const PAUSE_BETWEEN_CLIPS_MS = 700;
-const REDUCED_MOTION_HOLD_MS = 1800;
 
 /** True when the participant's system asks for less motion. */
 export function prefersReducedMotion() {
@@ -65,24 +63,6 @@ function followView(scene, width, height, point) {
   return viewAt(scale, centre, width, height);
 }
 
-/**
- * A reduced-motion still of a clip that follows the robot: the clip's own positions (both
- * agents) and a car length around them, fitted, but never closer than the moving view.
- */
-function stillView(scene, clip, width, height) {
-  const margin = Math.max(...(scene.agents || []).map((a) => a.length_m), 1);
-  const points = clip.positions.flat();
-  const xs = points.map((p) => p[0]);
-  const ys = points.map((p) => p[1]);
-  const box = {
-    x_min_m: Math.min(...xs) - margin, x_max_m: Math.max(...xs) + margin,
-    y_min_m: Math.min(...ys) - margin, y_max_m: Math.max(...ys) + margin,
-  };
-  const fitted = fitView(box, width, height);
-  const scale = Math.min(fitted.scale, followScale(scene, width, height));
-  return viewAt(scale, fitted.toM([width / 2, height / 2]), width, height);
-}
-
 /** Draw a clip frame at fractional step `t` (`poses`: the agents' poseAt then), with each
  * agent's trace so far. */
 export function drawClipFrame(ctx, view, scene, clip, t, poses = poseAt(clip, t)) {
@@ -129,7 +109,7 @@ export class ClipPlayer {
     for (const { clip, caption } of this.clips) {
       if (run !== this.run) return false;
       this.onCaption(caption);
-      const finished = this.reducedMotion ? await this.showStill(clip, run) : await this.animate(clip, run);
+      const finished = await this.animate(clip, run);
       if (!finished) return false;
       await this.wait(PAUSE_BETWEEN_CLIPS_MS);
     }
@@ -144,24 +124,18 @@ export class ClipPlayer {
     return new Promise((resolve) => setTimeout(resolve, ms));
   }
 
-  /** Reduced motion: the final frame with the whole path, held still. */
-  async showStill(clip, run) {
-    let { ctx, view, cssWidth, cssHeight } = prepareCanvas(this.canvas, this.scene);
-    if (followsRobot(this.scene)) {
-      view = stillView(this.scene, clip, cssWidth, cssHeight);
-      publishView(this.canvas, view);
-    }
-    drawClipFrame(ctx, view, this.scene, clip, clip.positions.length - 1);
-    await this.wait(REDUCED_MOTION_HOLD_MS);
-    return run === this.run;
-  }
-
   /** A frame's view: the whole scene (`fitted`), or the surroundings of the robot at `robot`. */
   frameView(fitted, robot) {
     if (!followsRobot(this.scene)) return fitted;
     const view = followView(this.scene, fitted.width, fitted.height, robot);
     publishView(this.canvas, view);
     return view;
+  }
+
+  /** The clip's fractional step after `elapsed` steps' time; with reduced motion the whole
+   * step, so each position is shown still for its step's time: the same pace, no gliding. */
+  clipStep(steps, elapsed) {
+    return Math.min(steps, this.reducedMotion ? Math.floor(elapsed) : elapsed);
   }
 
   animate(clip, run) {
@@ -174,7 +148,7 @@ export class ClipPlayer {
         if (this.canvas.parentElement.clientWidth !== cssWidth) {
           ({ ctx, view, cssWidth } = prepareCanvas(this.canvas, this.scene)); // window resized
         }
-        const t = Math.min(steps, (now - start) / 1000 / STEP_SECONDS);
+        const t = this.clipStep(steps, (now - start) / 1000 / STEP_SECONDS);
         const poses = poseAt(clip, t);
         drawClipFrame(ctx, this.frameView(view, poses[0].position), this.scene, clip, t, poses);
         if (t >= steps) return resolve(true);

@@ -4,6 +4,7 @@ import {
   LabelLayout,
   ROBOT_COLOR,
   agentStyle,
+  boxAround,
   centreOnAxis,
   clipToScene,
   placeTag,
@@ -33,6 +34,13 @@ const POINTER_INPUTS = {
 };
 const KEYBOARD_INPUT = "keyboard";
 const CURSOR_NOT_MOVED = "Move the cross with the arrow keys first: it starts at the robot's current position.";
+// A start state farther than this from the segment's end is a relocated robot (positions are
+// stored to the millimetre)
+const RELOCATED_M = 0.01;
+// The segment's robot trail where it is not this start's own past (a relocated start, the
+// practice feedback), and the person's clicks in the feedback: neither in the robot's colour
+const OTHER_PATH_COLOR = "#6b6b6b";
+const YOUR_PATH_COLOR = "#111111";
 
 function distance(a, b) {
   return Math.hypot(b[0] - a[0], b[1] - a[1]);
@@ -170,6 +178,25 @@ export class PredictionInput {
     return this.startState.robot_heading ?? lastHeading(this.trial.segment, 0);
   }
 
+  /** True when this start state puts the robot away from where the segment left it. */
+  relocated() {
+    const end = this.trial.segment.positions.at(-1)[0];
+    return distance(end, this.startState.robot) > RELOCATED_M;
+  }
+
+  /**
+   * The heading the robot is drawn with. At its own segment end, the segment's. Relocated:
+   * on a road with lanes the road's direction of travel (the way the segment went along it);
+   * on a recorded map the start state's (chosen there within a tolerance of the heading
+   * recorded at that spot, app/worlds/recorded.py); a disc none, as the bank keeps no heading
+   * of its own for that spot.
+   */
+  get drawnHeading() {
+    if (!this.relocated() || this.scene.recorded) return this.robotHeading;
+    if (this.scene.lanes?.length) return Math.cos(this.robotHeading) >= 0 ? 0 : Math.PI;
+    return null;
+  }
+
   get humanHeading() {
     return this.startState.human_heading ?? lastHeading(this.trial.segment, 1);
   }
@@ -266,11 +293,22 @@ export class PredictionInput {
   next() {
     if (!this.stateDone() || this.isLast()) return false;
     this.index += 1;
-    this.onMessage(`Start state ${this.index + 1} of ${this.trial.start_states.length}.`, "ok");
+    const where = `Start position ${this.index + 1} of ${this.trial.start_states.length}`;
+    this.onMessage(this.relocated()
+      ? `${where}: the robot is placed somewhere else; the grey dots show its path in the clip, not its way here.`
+      : `${where}.`, "ok");
     this.resetCursor();
     this.render();
     this.onChange(this);
     return true;
+  }
+
+  /** After the trial is answered: show start state `index` with its clicks beside `robot[index]`,
+   * the positions the robot reaches from there (the practice payload's `feedback.robot`). */
+  review(robot, index) {
+    this.truth = robot;
+    this.index = index;
+    this.render();
   }
 
   setHover(point) {
@@ -350,12 +388,16 @@ export class PredictionInput {
     const start = this.startState.robot;
     const lead = this.steps * (this.trial.view.median_step_m ?? 0) / 2;
     const want = [start[0] + lead * Math.cos(this.robotHeading), start[1] + lead * Math.sin(this.robotHeading)];
-    const [ax, ay] = this.anchor();
     const r = this.trial.max_step_m;
-    const keep = (axis, a) => [Math.min(start[axis], a - r), Math.max(start[axis], a + r)];
+    const shown = this.truth ? [...this.current, ...this.truth[this.index]] : [];
+    const keep = (axis) => {
+      const a = this.anchor()[axis];
+      const all = [start[axis], a - r, a + r, ...shown.map((p) => p[axis])];
+      return [Math.min(...all), Math.max(...all)];
+    };
     const centre = [
-      centreOnAxis(bounds.x_min_m, bounds.x_max_m, width, scale, want[0], keep(0, ax)),
-      centreOnAxis(bounds.y_min_m, bounds.y_max_m, height, scale, want[1], keep(1, ay)),
+      centreOnAxis(bounds.x_min_m, bounds.x_max_m, width, scale, want[0], keep(0)),
+      centreOnAxis(bounds.y_min_m, bounds.y_max_m, height, scale, want[1], keep(1)),
     ];
     return { width, height, view: viewAt(scale, centre, width, height) };
   }
@@ -371,17 +413,22 @@ export class PredictionInput {
     const layout = new LabelLayout(ctx, width, height);
     drawBackground(ctx, view, scene);
     const segment = this.trial.segment.positions;
-    drawTrace(ctx, view, robot, segment.map((s) => s[0]), { width: 2, past: true });
+    const ownTrail = !this.relocated() && !this.truth;
+    const trail = ownTrail ? robot : { ...robot, color: OTHER_PATH_COLOR };
+    drawTrace(ctx, view, trail, segment.map((s) => s[0]), { width: 2, past: true });
     drawTrace(ctx, view, human, segment.map((s) => s[1]), { width: 2 });
     this.drawReach(ctx, view);
+    const heading = this.drawnHeading;
     const agents = [
       drawAgent(ctx, view, human, this.startState.human, this.humanHeading, { tag: false }),
-      drawAgent(ctx, view, robot, this.startState.robot, this.robotHeading, { tag: false, seeThrough: true }),
+      drawAgent(ctx, view, robot, this.startState.robot, heading, { tag: false, seeThrough: true }),
     ];
     agents.forEach((box) => layout.block(box));
-    drawTrace(ctx, view, robot, [this.startState.robot, ...this.current], { width: 3 });
-    const rings = this.current.map((point) => drawRing(ctx, view, point));
+    const yours = this.truth ? YOUR_PATH_COLOR : ROBOT_COLOR;
+    drawTrace(ctx, view, { ...robot, color: yours }, [this.startState.robot, ...this.current], { width: 3 });
+    const rings = this.current.map((point) => drawRing(ctx, view, point, { color: yours }));
     rings.forEach((box) => layout.block(box));
+    if (this.truth) this.drawRobotMoves(ctx, view, layout);
     const outOfView = (box) => box.x1 < 0 || box.y1 < 0 || box.x0 > width || box.y0 > height;
     [human, robot].forEach((style, i) => {
       if (!outOfView(agents[i])) placeTag(layout, style, agents[i]); // else an edge arrow points to it
@@ -389,8 +436,27 @@ export class PredictionInput {
     this.drawNumbers(layout, view);
     this.drawPreview(ctx, view);
     this.drawPointers(ctx, view, layout, outOfView(agents[0]));
-    this.canvas.layoutBoxes = { agents, rings, labels: layout.boxes };
+    this.canvas.layoutBoxes = { agents, rings, labels: layout.boxes, ownTrail, heading };
     this.drawOverview(view);
+  }
+
+  /** The feedback: where the robot goes from this start state, a solid line with a dot per step. */
+  drawRobotMoves(ctx, view, layout) {
+    const path = [this.startState.robot, ...this.truth[this.index]];
+    drawTrace(ctx, view, agentStyle(this.scene, 0), path, { width: 3 });
+    ctx.save();
+    ctx.fillStyle = ROBOT_COLOR;
+    ctx.strokeStyle = "#ffffff";
+    ctx.lineWidth = 1.5;
+    for (const point of path.slice(1)) {
+      const [x, y] = view.toPx(point);
+      ctx.beginPath();
+      ctx.arc(x, y, 5, 0, 2 * Math.PI);
+      ctx.fill();
+      ctx.stroke();
+      layout.block(boxAround([x, y], 6));
+    }
+    ctx.restore();
   }
 
   /** The reach of one step around the last position, cut at the scene's edge. */
