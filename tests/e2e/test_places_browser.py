@@ -6,6 +6,7 @@ import shutil
 import httpx
 import pytest
 import yaml
+from playwright.sync_api import expect
 
 from app.layout import Layout
 from tests.conftest import SmallStudy, free_port, freeze_bundle_of, start_server
@@ -47,8 +48,8 @@ def test_a_consent_waiting_for_room_says_so_then_goes_on(chromium, capped_server
         assert first.consent().status_code == 200  # the study's one place, taken meanwhile
         page.check("#consent-check")
         page.click("#consent-agree")
-        page.wait_for_function("document.querySelector('#consent-status').textContent"
-                               ".includes('Many people are taking this study')")
+        expect(page.locator("#consent-status")).to_contain_text(
+            "Many people are taking this study")
         assert page.is_visible("#screen-consent")
         ended = first.post("screen-out", {"submission_id": new_id(),
                                           "reason": "window_too_small"})
