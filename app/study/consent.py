@@ -19,6 +19,8 @@ class Advert:
     minutes: int
     pay: str  # e.g. "GBP 5.85", or "" when the study sets no hourly pay
     hourly: str  # e.g. "GBP 9.00 per hour", or ""
+    pay_amount: float = 0.0  # the pay as a number (0 without an hourly pay)
+    currency: str = ""
 
     def duration(self) -> str:
         """The time as a participant reads it."""

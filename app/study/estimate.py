@@ -176,8 +176,9 @@ def advert_for(config: StudyConfig, minutes: int) -> Advert:
     rate = config.recruitment.hourly_pay
     if rate is None:
         return Advert(minutes, "", "")
-    return Advert(minutes, money(pay_for(minutes, rate.amount), rate.currency),
-                  f"{money(rate.amount, rate.currency)} per hour")
+    pay = pay_for(minutes, rate.amount)
+    return Advert(minutes, money(pay, rate.currency), f"{money(rate.amount, rate.currency)} per "
+                  "hour", pay, rate.currency)
 
 
 def study_estimate(config: StudyConfig, bank: TrialBank, timing: PlayerTiming | None = None,
@@ -207,9 +208,9 @@ def estimate_lines(study_id: str, found: StudyEstimate, timing: PlayerTiming) ->
     lines.append(f"advertised: {advert.minutes} min (the median participant's, rounded up to "
                  f"whole minutes); rendered as {{duration}} in the description and consent")
     if advert.pay:
-        slow_rate = float(advert.pay.split()[1]) / (found.slow.total_min / 60)
+        slow_rate = advert.pay_amount / (found.slow.total_min / 60)
         lines.append(f"pay: {advert.pay} at {advert.hourly}; a slow participant earns "
-                     f"{money(slow_rate, advert.pay.split()[0])} per hour")
+                     f"{money(slow_rate, advert.currency)} per hour")
     else:
         lines.append("pay: recruitment.hourly_pay is not set (no pay stated)")
     return lines
