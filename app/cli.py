@@ -485,6 +485,7 @@ def estimate(
     from app.bank.bundle import BundleError
     from app.bank.served import served_bundle
     from app.study.config import load_study_config
+    from app.study.consent import consent_problem
     from app.study.estimate import (
         MEDIAN_PACE,
         SLOW_PACE,
@@ -503,6 +504,9 @@ def estimate(
     median = replace(MEDIAN_PACE, words_per_minute=wpm, seconds_per_click=click_s)
     slow = replace(SLOW_PACE, words_per_minute=slow_wpm, seconds_per_click=slow_click_s)
     echo_lines(estimate_lines(study, study_estimate(config, bank, timing, median, slow), timing))
+    problem = consent_problem(config, production=True)
+    if problem:
+        warn(f"a production server refuses this study: {problem}")
 
 
 @cli.command("build-trials")

@@ -116,6 +116,8 @@ def test_the_cli_prints_both_paces_the_advertised_time_and_the_pay(paper):
     assert "slow participant (180 words/min, 4 s per click" in out
     assert f"advertised: {found.advert.minutes} min" in out
     assert f"pay: {found.advert.pay} at GBP 9.00 per hour" in out
+    assert run.stderr == ("warning: a production server refuses this study: consent.institution: "
+                          "still holds the placeholder [YOUR INSTITUTION]; write your own\n")
 
 
 def test_the_cli_names_a_missing_study_in_one_line():
