@@ -466,6 +466,49 @@ def bundle_verify(
         raise typer.Exit(1)
 
 
+@cli.command()
+def estimate(
+    study: Annotated[str, typer.Option(help="study_configs/<study>.yaml")] = "paper_study",
+    wpm: Annotated[float, typer.Option(help="median participant's reading speed, words/min",
+                                       min=1)] = 230.0,
+    click_s: Annotated[float, typer.Option(help="median participant's seconds per click",
+                                           min=0)] = 2.5,
+    slow_wpm: Annotated[float, typer.Option(help="slow participant's words/min", min=1)] = 180.0,
+    slow_click_s: Annotated[float, typer.Option(help="slow participant's seconds per click",
+                                                min=0)] = 4.0,
+) -> None:
+    """How long the study takes (clips from its bank at the page's playback time, reading,
+    clicking, the survey) for a median and a slow participant, the time it advertises and the
+    pay at recruitment.hourly_pay."""
+    from dataclasses import replace
+
+    from app.bank.bundle import BundleError
+    from app.bank.served import served_bundle
+    from app.study.config import load_study_config
+    from app.study.consent import consent_problem
+    from app.study.estimate import (
+        MEDIAN_PACE,
+        SLOW_PACE,
+        estimate_lines,
+        player_timing,
+        study_estimate,
+    )
+
+    settings = get_settings()
+    config = load_study_config(settings, study)
+    try:
+        bank = served_bundle(settings, study).bank
+    except BundleError as err:
+        fail(str(err))
+    timing = player_timing()
+    median = replace(MEDIAN_PACE, words_per_minute=wpm, seconds_per_click=click_s)
+    slow = replace(SLOW_PACE, words_per_minute=slow_wpm, seconds_per_click=slow_click_s)
+    echo_lines(estimate_lines(study, study_estimate(config, bank, timing, median, slow), timing))
+    problem = consent_problem(config, production=True)
+    if problem:
+        warn(f"a production server refuses this study: {problem}")
+
+
 @cli.command("build-trials")
 def build_trials_cmd(
     study: Annotated[str, typer.Option(help="study_configs/<study>.yaml")] = "paper_study",

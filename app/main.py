@@ -56,6 +56,7 @@ from app.server.recruitment import preview_key
 from app.server.routes import pages, participant
 from app.settings import REPO_ROOT, Settings, get_settings
 from app.study.config import StudyConfig, config_sha256, load_study_config
+from app.study.consent import consent_problem
 from app.study.errors import Refused
 
 MAX_BODY_BYTES = 64 * 1024
@@ -106,15 +107,22 @@ def weak_token_problem(token: str) -> str | None:
 
 def load_study(settings: Settings, study_id: str) -> StudyContext:
     """Config, bundle (bank and every checkpoint, verified against its manifest and each other)
-    of one study; BundleError or BankMismatch if it cannot be served as it is."""
+    of one study; BundleError or BankMismatch if it cannot be served as it is, UnsafeSettings
+    if its consent cannot be shown (in production: a [PLACEHOLDER] or a hand-typed time)."""
     config = load_study_config(settings, study_id)
     if settings.production:
         refuse_public_codes(config, study_id)
+    problem = consent_problem(config, settings.production)
+    if problem:
+        mode = " in production mode" if settings.production else ""
+        raise UnsafeSettings(f"refusing to serve study {study_id}{mode}: {problem}")
     bundle = load_bundle(config, study_id, settings.configs_dir, settings.layout)
-    return StudyContext(study_id, served_config(config, settings.layout, study_id), bundle.bank,
-                        ModelAnswers(bundle), config_sha256=config_sha256(config),
-                        preview_key=preview_key(settings.admin_token, study_id),
-                        trust_client_clock=settings.trust_client_clock)
+    ctx = StudyContext(study_id, served_config(config, settings.layout, study_id), bundle.bank,
+                       ModelAnswers(bundle), config_sha256=config_sha256(config),
+                       preview_key=preview_key(settings.admin_token, study_id),
+                       trust_client_clock=settings.trust_client_clock)
+    ctx.estimate()  # the time and pay the pages state, computed before the first request
+    return ctx
 
 
 def servable_study(settings: Settings, study_id: str) -> StudyContext:

@@ -24,6 +24,25 @@ ADMIN_TOKEN = "test-token"  # the researcher token of every test server and app
 NO_RATE_LIMITS = {"rate_limit_starts": "", "rate_limit_requests": ""}
 TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")  # the installed CLI, for subprocesses
 
+# A consent form as a lab fills it in (no [PLACEHOLDER] left): the shipped studies' placeholders
+# keep a production server from serving them, so the small study carries this one.
+FILLED_CONSENT = {
+    "institution": "University of Examplestadt, Department of Informatics",
+    "investigators": [{"name": "Dr. Ada Example", "role": "principal investigator",
+                       "email": "ada.example@uni-examplestadt.de"},
+                      {"name": "Ben Sample", "role": "doctoral researcher",
+                       "email": "ben.sample@uni-examplestadt.de"}],
+    "ethics_approval": "The Ethics Committee of the Faculty of Informatics approved this study "
+                       "(approval EK-2026-041).",
+    "purpose": "A study of how people predict the motion of a robot.",
+    "recorded": "Your clicks, their timing, your survey answers and your screen size.",
+    "retention": "Anonymised data are kept for ten years on university servers and may be "
+                 "shared in an open repository.",
+    "voluntary": "Taking part is voluntary; you may stop at any time.",
+    "withdrawal": "Write to us with your platform ID within 30 days to have your data removed.",
+    "risks": "No risks beyond everyday computer use.",
+}
+
 # The paper's study, shrunk: the same trial shape (4 examples, 5-7 step segment, 5 start
 # states x 3 steps) and both selection arms, fewer trials and a family of two seeds, built into
 # its own bundle, so the whole pipeline runs in well under a minute.
@@ -31,6 +50,7 @@ SMALL_SEEDS = [0, 1]
 SMALL_STUDY_OVERRIDES = {
     "trials_per_world": 3, "bank_trials_per_world": 5, "practice_trials": 1,
     "in_progress_timeout_min": 90, "models": {"seeds": SMALL_SEEDS}, "bundle": "built",
+    "consent": FILLED_CONSENT,
     "main_trial_selection": {"rule": "models_disagree", "candidates_per_trial": 2,
                              "random_arm_trials": 2},
 }

@@ -15,6 +15,7 @@ from sqlmodel import Session
 
 from app import __version__
 from app.researcher.exports import checks_answered, predictions_frame
+from app.researcher.pay import time_and_pay
 from app.researcher.progress import (
     every_predictor,
     exclusion_rules,
@@ -218,6 +219,7 @@ def dashboard(db: Session, ctx: StudyContext, rule_set: str = "kept",
     frame = predictions_frame(db, ctx.study_id, stored_predictors(ctx.config))
     return {"study_id": ctx.study_id,
             "progress": progress_counts(ctx, people) | usable_counts(frame, ctx),
+            "time_and_pay": time_and_pay(ctx, people),
             "participants": participant_rows(db, ctx, people, external_ids),
             "versions": versions(db, ctx), "alignment": alignment(frame, ctx, rule_set),
             "completion_codes": codes_table(ctx.config)}

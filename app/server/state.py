@@ -19,6 +19,7 @@ from app.server.plan import (
     trial_steps,
 )
 from app.server.tables import Participant
+from app.study.consent import consent_sections, render
 from app.study.trial_payload import practice_feedback, trial_payload
 
 
@@ -33,7 +34,9 @@ def step_payload(ctx: StudyContext, participant: Participant, step: Step) -> dic
     """What a non-trial phase needs: texts, the survey or the completion code."""
     cfg = ctx.config
     if step.phase == Phase.CONSENT:
-        return {"title": cfg.title, "text": cfg.consent_text}
+        advert = ctx.estimate().advert
+        return {"title": cfg.title, "text": render(cfg.consent_text, advert),
+                "sections": consent_sections(cfg, advert)}
     if step.phase == Phase.INSTRUCTIONS:
         return {"title": cfg.title, "text": cfg.instructions_text,
                 "world_order": participant.world_order.split(",")}

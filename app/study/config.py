@@ -117,6 +117,14 @@ class Endings(StrictModel):
                                           "study on the recruiting platform.")
 
 
+class HourlyPay(StrictModel):
+    """What the study pays per hour; the advertised pay is this times the estimated time
+    (app/study/estimate.py)."""
+
+    amount: float = Field(gt=0, le=1000)
+    currency: str = Field(pattern=r"^[A-Z]{3}$")  # ISO 4217, e.g. GBP, USD, EUR
+
+
 MTURK_SUBMIT_HOSTS = ("https://www.mturk.com", "https://workersandbox.mturk.com")
 Platform = Literal["prolific", "mturk", "open"]
 _REDIRECT_FIELDS = ("prolific_redirect_url", "mturk_redirect_url", "open_redirect_url")
@@ -157,6 +165,10 @@ class RecruitmentConfig(StrictModel):
     # where an MTurk completion may post its form (turkSubmitTo must be one of these)
     mturk_submit_hosts: list[str] = list(MTURK_SUBMIT_HOSTS)
     endings: Endings = Endings()
+    hourly_pay: HourlyPay | None = None  # None: the pay is stated on the platform only
+
+    # a recruitment without a pay rate dumps as before the key existed (same config hash)
+    _without_unset_pay = omitted_when_empty("hourly_pay")
 
     # a config that pins its codes dumps as before the key existed (same config hash)
     _without_default_codes = omitted_when_default("codes")
@@ -313,6 +325,34 @@ class MainTrialSelection(StrictModel):
                 self.rule: bank_trials - self.random_arm_trials}
 
 
+# a marked placeholder a lab must replace before going live, e.g. "[YOUR INSTITUTION]"
+PLACEHOLDER = r"\[[A-Z][A-Z0-9 ,.'/&()-]*\]"
+_EMAIL_OR_PLACEHOLDER = rf"^({PLACEHOLDER}|[^@\s]+@[^@\s]+\.[^@\s]+)$"
+
+
+class Investigator(StrictModel):
+    """A researcher the participant can contact."""
+
+    name: str = Field(min_length=1, max_length=120)
+    role: str = Field(default="", max_length=120)  # e.g. "principal investigator"
+    email: str = Field(pattern=_EMAIL_OR_PLACEHOLDER, max_length=200)
+
+
+class ConsentForm(StrictModel):
+    """The consent page's typed sections (app/study/consent.py renders them, with the time and
+    pay from the estimate). Production refuses a form that still holds a [PLACEHOLDER]."""
+
+    institution: str = Field(min_length=1)
+    investigators: list[Investigator] = Field(min_length=1)
+    ethics_approval: str = Field(min_length=1)  # the review board and its approval id
+    purpose: str = Field(min_length=1)  # what the study is about and what the participant does
+    recorded: str = Field(min_length=1)  # what is recorded, and what is not
+    retention: str = Field(min_length=1)  # how long data are kept, where, and who they go to
+    voluntary: str = Field(min_length=1)
+    withdrawal: str = Field(min_length=1)  # how to stop, and to have one's data removed
+    risks: str = Field(min_length=1)
+
+
 class WorldIntro(StrictModel):
     """The screen before a world's practice: its name for participants and what is in it."""
 
@@ -324,8 +364,11 @@ class StudyConfig(StrictModel):
     """Everything that defines one online study."""
 
     title: str
-    description: str = ""  # what the MTurk HIT preview shows (default: the title only)
-    consent_text: str
+    # what the MTurk HIT preview shows (default: the title only); {duration} and {pay} are
+    # rendered from the estimate (app/study/estimate.py), so no time is typed by hand
+    description: str = ""
+    consent: ConsentForm | None = None  # the consent page's typed sections
+    consent_text: str = ""  # before the typed form: free text, shown only without `consent`
     instructions_text: str
     # per world: the screen that opens its part (what goals, obstacles or lanes mean)
     world_intros: dict[WorldName, WorldIntro]
@@ -373,12 +416,14 @@ class StudyConfig(StrictModel):
     # a study without plug-ins (or exploratory worlds, or with the default smallest effect)
     # dumps as before the keys existed: same config hash, so sessions that ran it before an
     # upgrade still show as running the loaded config
-    _without_new_keys = omitted_when(empty=("predictors", "exploratory_worlds"),
+    _without_new_keys = omitted_when(empty=("predictors", "exploratory_worlds", "consent"),
                                      default=("smallest_effect_of_interest",
                                               "consent_timeout_min"))
 
     @model_validator(mode="after")
     def _consistent(self) -> "StudyConfig":
+        if self.consent is None and not self.consent_text.strip():
+            raise ValueError("consent: the consent form's sections are required")
         unexplained = [w for w in self.worlds if w not in self.world_intros]
         if unexplained:
             raise ValueError(f"world_intros: no introduction for world(s) {', '.join(unexplained)}")

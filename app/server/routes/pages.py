@@ -23,6 +23,7 @@ from app.server.schemas import (
 )
 from app.study.clicks import MAX_STEP_TOLERANCE
 from app.study.config import SurveyQuestion
+from app.study.consent import render
 from app.study.errors import Notice
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
@@ -52,7 +53,7 @@ def _render(request: Request, name: str, study_id: str, **extra) -> HTMLResponse
     ctx = study_context(request, study_id)
     return request.app.state.templates.TemplateResponse(
         request, name, {"study_id": study_id, "title": ctx.config.title,
-                        "description": ctx.config.description,
+                        "description": render(ctx.config.description, ctx.estimate().advert),
                         "static_url": "/static", "studies": sorted(request.app.state.studies),
                         "scene_palette": BROWSER_PALETTE, **extra})
 

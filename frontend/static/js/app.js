@@ -497,7 +497,7 @@ class ParticipantApp {
   }
 
   showConsent(step) {
-    setProse($("consent-text"), step?.text ?? step?.consent_text ?? "");
+    showConsentForm($("consent-text"), step);
     show("consent");
     const check = $("consent-check");
     const button = $("consent-agree");
@@ -918,6 +918,37 @@ class TrialScreen {
 function askBeforeLeaving(event) {
   event.preventDefault();
   event.returnValue = "";
+}
+
+/** The consent page: its typed sections (app/study/consent.py), each a heading and prose
+ * with e-mail addresses as links, or a study's older free text. */
+function showConsentForm(element, step) {
+  const sections = step?.sections ?? [];
+  if (!sections.length) {
+    setProse(element, step?.text ?? step?.consent_text ?? "");
+    return;
+  }
+  element.replaceChildren(...sections.flatMap(({ heading, text }) => {
+    const title = document.createElement("h3");
+    title.textContent = heading;
+    const body = document.createElement("div");
+    setProse(body, text);
+    body.querySelectorAll("p").forEach(linkEmails);
+    return [title, ...body.children];
+  }));
+}
+
+/** Turn the e-mail addresses in a paragraph's text into mailto links. */
+function linkEmails(paragraph) {
+  const parts = paragraph.textContent.split(/([^\s@,;()]+@[^\s@,;()]+\.[A-Za-z]{2,})/);
+  if (parts.length === 1) return;
+  paragraph.replaceChildren(...parts.map((part, i) => {
+    if (i % 2 === 0) return document.createTextNode(part);
+    const link = document.createElement("a");
+    link.href = `mailto:${part}`;
+    link.textContent = part;
+    return link;
+  }));
 }
 
 function setProse(element, text) {

@@ -94,6 +94,28 @@ function progressLine(progress) {
   return line;
 }
 
+/** The advertised time and pay beside the finished sessions' median and what it really pays
+ * per hour (app/researcher/pay.py), and a warning when the median overruns the advertised time. */
+function timeAndPayLines(time) {
+  if (!time) return [];
+  const line = document.createElement("p");
+  line.id = "time-and-pay";
+  const pay = time.pay ? `, pay ${time.pay} (${time.hourly})` : "";
+  const median = time.median_min === null
+    ? "no finished sessions yet"
+    : `median of ${time.sessions} finished ${time.who}: ${time.median_min} min`
+      + (time.effective_hourly ? `, effectively ${time.effective_hourly} per hour` : "");
+  line.textContent = `Advertised ${time.advertised_min} min${pay} (estimate: median `
+    + `${time.estimate_min} min, slow ${time.slow_estimate_min} min); ${median}.`;
+  if (!time.overrun) return [line];
+  const flag = document.createElement("p");
+  flag.className = "warning";
+  flag.id = "time-overrun";
+  flag.setAttribute("role", "alert");
+  flag.textContent = time.flag;
+  return [line, flag];
+}
+
 /** "25 finished, 7 excluded: failed attention check 4, too fast 3" (nothing excluded: "25 finished"). */
 function usableDetail(progress, usable) {
   const excluded = progress.completed - usable;
@@ -219,7 +241,7 @@ class Dashboard {
   }
 
   render([summary, board]) {
-    $("progress-line").replaceChildren(progressLine(board.progress));
+    $("progress-line").replaceChildren(progressLine(board.progress), ...timeAndPayLines(board.time_and_pay));
     $("completion-codes").replaceChildren(codesTable(board.completion_codes));
     this.showAudit();
     if (summary) $("summary").replaceChildren(renderSummary(summary));
