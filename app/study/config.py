@@ -167,11 +167,9 @@ class RecruitmentConfig(StrictModel):
     endings: Endings = Endings()
     hourly_pay: HourlyPay | None = None  # None: the pay is stated on the platform only
 
-    # a recruitment without a pay rate dumps as before the key existed (same config hash)
-    _without_unset_pay = omitted_when_empty("hourly_pay")
-
-    # a config that pins its codes dumps as before the key existed (same config hash)
-    _without_default_codes = omitted_when_default("codes")
+    # a recruitment without a pay rate, or that pins its codes, dumps as before the keys
+    # existed (same config hash); one serializer, as a model has one
+    _without_new_keys = omitted_when(empty=("hourly_pay",), default=("codes",))
 
     @model_validator(mode="after")
     def _codes_from_one_source(self) -> "RecruitmentConfig":

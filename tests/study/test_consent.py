@@ -4,14 +4,13 @@ or a hand-typed time; the shipped bundle's older config still validates and dump
 
 import pytest
 import yaml
-from fastapi.testclient import TestClient
 
 from app.configio import load_yaml_model
 from app.main import NotServable, create_app, servable_study
 from app.settings import Settings
 from app.study.config import ConsentForm, StudyConfig, load_study_config
 from app.study.consent import Advert, consent_problem, consent_sections
-from tests.conftest import FILLED_CONSENT, REPO
+from tests.conftest import FILLED_CONSENT, REPO, local_client
 from tests.study.flow import Participant
 
 STRONG = "s" * 40
@@ -111,7 +110,7 @@ def test_the_server_sends_the_sections_and_refuses_placeholders_in_production(sm
                                                                              tmp_path):
     configs = small_study.configs_dir
     settings = small_study.settings(f"sqlite:///{tmp_path / 'c.db'}", **PRODUCTION)
-    with TestClient(create_app(settings, [small_study.study_id])) as client:
+    with local_client(create_app(settings, [small_study.study_id])) as client:
         p = Participant(client, small_study.study_id)
         p.start()
         step = p.state()["step"]
