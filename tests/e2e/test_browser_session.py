@@ -17,9 +17,10 @@ import pytest
 import yaml
 
 from app.server.routes.pages import PAGE_RULES
-from tests.conftest import ADMIN_TOKEN, REPO
+from tests.conftest import ADMIN_TOKEN
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
+    SCREENSHOTS,
     THINK_MS,
     VIEWPORT,
     answer_survey,
@@ -43,7 +44,6 @@ from tests.study.flow import served_codes
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
-SCREENSHOTS = REPO / "var" / "screenshots"
 RESIZED = {"width": 1300, "height": 880}
 PID = "e2e0000000000000000000a1"  # 24 hex characters, as Prolific sends
 RECRUITMENT = f"PROLIFIC_PID={PID}&STUDY_ID={'5' * 24}&SESSION_ID=e2e-session"

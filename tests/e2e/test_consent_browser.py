@@ -14,9 +14,8 @@ import yaml
 from app.study.consent import PLATFORM_NAMES
 from tests.conftest import FILLED_CONSENT, REPO, TOMSTUDY, SmallStudy, free_port, start_server
 from tests.e2e.conftest import BROWSER_STUDY
-from tests.e2e.pages import VIEWPORT, fresh_recruitment, visible
+from tests.e2e.pages import SCREENSHOTS, VIEWPORT, fresh_recruitment, visible
 
-SHOTS = Path("/tmp/i32/shots")
 PRODUCTION_ENV = {"TOMSTUDY_PRODUCTION": "1", "TOMSTUDY_ADMIN_TOKEN": "p" * 40,
                   "TOMSTUDY_RATE_LIMIT_STARTS": "100/minute",
                   "TOMSTUDY_RATE_LIMIT_REQUESTS": "10000/minute"}
@@ -64,8 +63,8 @@ def test_the_consent_page_shows_every_section_of_the_form(chromium, filled_serve
     assert re.search(r"The study takes about \d+ minutes .* You will be paid GBP \d+\.\d\d "
                      rf"\(GBP 9\.00 per hour\) through {PLATFORM_NAMES['prolific']}", text)
     assert "[" not in text  # no placeholder left
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    page.screenshot(path=str(SHOTS / "consent.png"), full_page=True)
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SCREENSHOTS / "consent.png"), full_page=True)
     assert errors == []
     page.close()
 

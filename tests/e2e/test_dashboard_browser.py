@@ -7,16 +7,15 @@ import httpx
 import pytest
 
 from app.pilot.bots import run_bots
-from tests.conftest import ADMIN_TOKEN, REPO
+from tests.conftest import ADMIN_TOKEN
 from tests.e2e.axe import axe_violations
 from tests.e2e.conftest import BROWSER_STUDY
-from tests.e2e.pages import log_in, researcher_page
+from tests.e2e.pages import SCREENSHOTS, log_in, researcher_page
 from tests.study.flow import Participant, hex24, prolific, served_codes
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 BOTS = 3
-SCREENSHOTS = REPO / "var" / "screenshots"
 
 # Distinct colours among a grid of pixels: a blank or single-colour canvas has one or two.
 CANVAS_COLOURS = """c => {

@@ -10,12 +10,11 @@ import pytest
 
 from app.pilot.bots import run_bots
 from tests.e2e.conftest import BROWSER_STUDY, serve_study
-from tests.e2e.pages import researcher_page
+from tests.e2e.pages import SCREENSHOTS, researcher_page
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 BOTS = 3
-SHOTS = "/tmp/i32/shots"
 
 
 @pytest.fixture(scope="module")
@@ -51,6 +50,7 @@ def test_the_dashboard_flags_a_median_over_the_advertised_time(own_server, long_
     assert "effectively GBP " in line  # the advertised pay over 60 minutes
     flag = page.inner_text("#time-overrun")
     assert "over the advertised" in flag and "underpaid" in flag
-    page.screenshot(path=f"{SHOTS}/dashboard_time_and_pay.png", full_page=False)
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SCREENSHOTS / "dashboard_time_and_pay.png"), full_page=False)
     assert errors == []
     page.close()

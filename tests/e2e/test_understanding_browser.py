@@ -3,7 +3,7 @@ understood (the demo's several start positions, a relocated start, the practice'
 reduced motion stepped at the clips' pace, honest save and connection states, a window shrunk
 mid-study, leaving mid-trial asks first), with axe-core finding nothing.
 
-Screenshots go to /tmp/i32/shots/ (demo.png, relocated_start.png, practice_feedback.png).
+Screenshots go to var/screenshots/ (demo.png, relocated_start.png, practice_feedback.png).
 """
 
 import json
@@ -20,6 +20,7 @@ from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
     PIXEL,
     ROBOT_RGB,
+    SCREENSHOTS,
     VIEWPORT,
     canvas_px,
     consent_and_instructions,
@@ -38,7 +39,6 @@ from tests.e2e.pages import (
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
-SHOTS = Path("/tmp/i32/shots")
 SMALL = {"width": 800, "height": 500}
 
 
@@ -82,8 +82,8 @@ def stored_events(db_path: Path, session: int) -> list[str]:
 
 
 def shoot(page, name: str) -> None:
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    page.screenshot(path=str(SHOTS / name))
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SCREENSHOTS / name))
 
 
 def layout(page) -> dict:
