@@ -8,6 +8,11 @@ all from one address (127.0.0.1), against a real `tomstudy serve` of the small s
 (b) With the rate limits off and the paper's live cap of 220 (10 x 22), 220 forged starts,
     then a real participant: their start and their consent.
 (c) With `recruitment.max_counted_sessions: 22`, 22 forged starts, then a real participant.
+(d) With a Prolific API token and the local stand-in of Prolific's API as Prolific
+    (tests/prolific_standin.py; the live Prolific cannot be reached from here), 220 forged
+    starts whose SESSION_ID Prolific does not know, then a participant whose submission it
+    knows: how many forged sessions were stored or count, and the real one's start, consent and
+    counted flag.
 
     PYTHONPATH=. .venv/bin/python benchmarks/forged_ids.py [--seconds 600] [--server-code DIR]
 
@@ -21,6 +26,7 @@ import shutil
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 import httpx
@@ -33,6 +39,7 @@ from app.server.sessions import SESSION_HEADER  # noqa: E402
 from app.server.tables import Participant  # noqa: E402
 from app.settings import Settings  # noqa: E402
 from tests.conftest import SmallStudy, cached_small_study, free_port, start_server  # noqa: E402
+from tests.prolific_standin import ProlificStandIn, serve  # noqa: E402
 from tests.study.flow import DEVICE, new_id  # noqa: E402
 
 FORGED_STUDY_ID = "f" * 24
@@ -45,19 +52,26 @@ def forged_start(client: httpx.Client, study_id: str) -> httpx.Response:
         "PROLIFIC_PID": pid, "STUDY_ID": FORGED_STUDY_ID, "SESSION_ID": pid[:8]}})
 
 
-def counted(db_path: Path) -> int:
-    """Sessions the server counts (toward the cap, "full" and balance)."""
+def counted(db_path: Path, only_counted: bool = True) -> int:
+    """Sessions the server counts (toward the cap, "full" and balance); all stored ones with
+    `only_counted` False."""
+    query = select(func.count()).select_from(Participant)
+    if only_counted:
+        query = query.where(Participant.counted.is_(True))
     engine = create_engine(f"sqlite:///{db_path}")
     with engine.connect() as conn:
-        n = conn.execute(select(func.count()).select_from(Participant)
-                         .where(Participant.counted.is_(True))).scalar_one()
+        n = conn.execute(query).scalar_one()
     engine.dispose()
     return n
 
 
-def real_participant(client: httpx.Client, study_id: str) -> tuple[int, int | None]:
-    """A real participant's start and consent statuses (None: no session to consent in)."""
+def real_participant(client: httpx.Client, study_id: str,
+                     standin: ProlificStandIn | None = None) -> tuple[int, int | None]:
+    """A real participant's start and consent statuses (None: no session to consent in); with
+    `standin`, their submission is one Prolific knows."""
     pid = secrets.token_hex(12)
+    if standin is not None:
+        standin.add("real", FORGED_STUDY_ID, pid)
     r = client.post("/api/sessions", json={"study_id": study_id, "recruitment": {
         "PROLIFIC_PID": pid, "STUDY_ID": FORGED_STUDY_ID, "SESSION_ID": "real"}})
     if r.status_code not in (200, 201):
@@ -153,6 +167,25 @@ def main() -> None:
         print(f"(c) max_counted_sessions 22: 22 forged starts ({statuses.count(201)} accepted), "
               f"{counted(server.db)} counting; a real participant then: start {real[0]}, "
               f"consent {real[1]}")
+        checked_by_standin(small, root, code)
+
+
+def checked_by_standin(small: SmallStudy, root: Path, code: Path | None) -> None:
+    """(d): forged SESSION_IDs against a server that asks the Prolific stand-in."""
+    standin = ProlificStandIn()
+    (root / "prolific_token").write_text(standin.token)
+    with serve(standin, free_port()) as api_url:
+        server = Server(small, root, "d", code, TOMSTUDY_RATE_LIMIT_STARTS="",
+                        TOMSTUDY_PROLIFIC_TOKEN_FILE=str(root / "prolific_token"),
+                        TOMSTUDY_PROLIFIC_API_URL=api_url)
+        with server as client:
+            statuses = [forged_start(client, small.study_id).status_code for _ in range(220)]
+            real = real_participant(client, small.study_id, standin)
+        forged_stored = counted(server.db, only_counted=False) - (real[0] in (200, 201))
+        print(f"(d) Prolific stand-in: 220 forged SESSION_IDs answered "
+              f"{dict(sorted(Counter(statuses).items()))}, "
+              f"{forged_stored} forged sessions stored; the known "
+              f"participant: start {real[0]}, consent {real[1]}, {counted(server.db)} counting")
 
 
 if __name__ == "__main__":
