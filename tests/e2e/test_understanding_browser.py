@@ -264,6 +264,23 @@ def test_the_save_status_says_saving_until_the_server_answers(context, browser_s
     wait_saved(page)
 
 
+def test_watching_again_can_be_stopped_at_any_time(context, browser_server):
+    page = open_study(context, browser_server.url)
+    through_instructions(page)
+    trial = current_state(page)["step"]
+    start_predicting(page)  # the first viewing plays to its end
+    place(page, trial, 0, [0])
+    page.click("#replay")
+    stop = page.locator("#start-predicting")
+    assert stop.is_enabled() and "Stop" in stop.inner_text()
+    assert page.inner_text("#trial-caption").startswith("Example 1 of")
+    stop.click()
+    assert page.is_visible("#predict-controls")
+    page.clock.run_for(60_000)  # the stopped clips do not come back
+    caption = page.inner_text("#trial-caption")
+    assert caption.startswith("Start position 1 of") and "1 of 3 positions placed" in caption
+
+
 def test_an_offline_press_says_so_and_goes_on_when_back(context, browser_server):
     page = open_study(context, browser_server.url)
     consent_and_instructions(page)

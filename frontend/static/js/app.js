@@ -757,15 +757,20 @@ class TrialScreen {
     status.className = `save-status ${kind}`;
   }
 
-  async watch() {
+  /** Play the clips: the first time to the end; a replay (`again`) can be left at any time. */
+  async watch(again = false) {
     this.input?.pause();
     $("predict-controls").hidden = true;
     $("legend-predict").hidden = true;
     $("trial-side").hidden = true;
     $("replay").disabled = true;
-    $("start-predicting").disabled = true;
-    $("start-predicting").hidden = false;
-    this.setMessage("Watch the clips closely.");
+    const leave = $("start-predicting");
+    leave.disabled = !again;
+    leave.hidden = false;
+    if (again) leave.textContent = this.input ? "Stop and go back to predictions" : "Stop and make predictions";
+    this.setMessage(again
+      ? "Watching the clips again. You can stop at any time with the button."
+      : "Watch the clips closely.");
     const finished = await this.player.play();
     if (!finished) return;
     this.telemetry.log("clip_finished", { trial_id: this.trial.trial_id, replays: this.replays });
@@ -781,7 +786,7 @@ class TrialScreen {
     this.replays += 1;
     this.telemetry.log("replay", { trial_id: this.trial.trial_id, replays: this.replays });
     if (this.input) this.saveDraft();
-    this.watch();
+    this.watch(true);
   }
 
   predict(draft = null) {
