@@ -96,6 +96,10 @@ class Walker:
                     time.sleep(self.pace.seconds_per_click)
                 place(self.page, state, start, [step], think_ms=0)
             self.click("#next")
+        if state.get("feedback"):  # a practice trial ends with one screen per start position
+            self.page.wait_for_selector("#trial-caption:has-text('Practice feedback')")
+            for _ in state["start_states"]:
+                self.click("#next")
         self.page.wait_for_function("() => document.querySelector('#screen-trial').hidden")
         return state, watched
 

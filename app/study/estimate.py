@@ -21,6 +21,9 @@ PLAYER_JS = REPO_ROOT / "frontend" / "static" / "js" / "player.js"
 # what the trial screen asks, read once per part (app.js `watch` and `predict`)
 TRIAL_PROMPTS = ("Watch the clips closely. Press the button to make your predictions, or watch "
                  "the clips again. Click where the robot will be after each of the next steps.")
+# what a practice trial's feedback asks, read once per practice trial (app.js `showFeedback`)
+FEEDBACK_PROMPT = ("Compare your clicks (black rings) with where the robot went from there "
+                   "(blue dots).")
 # presses outside the trials: consent's box and Continue, instructions' Continue
 FLOW_PRESSES = 3
 PART_PRESSES = 2  # per part: "Start the practice", "Start trial 1"
@@ -119,7 +122,8 @@ def texts_read(config: StudyConfig, advert_words: int) -> int:
     intros = sum(words(i.title) + words(i.text) for w, i in config.world_intros.items()
                  if w in config.worlds)
     survey = sum(words(q.text) + sum(words(o) for o in q.options) for q in config.survey)
-    prompts = len(config.worlds) * words(TRIAL_PROMPTS)
+    prompts = len(config.worlds) * (words(TRIAL_PROMPTS)
+                                    + config.practice_trials * words(FEEDBACK_PROMPT))
     ending = words(config.recruitment.ending("completed").message)
     return (advert_words + words(config.instructions_text) + intros + survey + prompts + ending)
 
@@ -135,8 +139,10 @@ def workload(config: StudyConfig, bank: TrialBank, advert_words: int,
     trials = len(config.worlds) * sum(per_kind.values())
     # per trial: "Make predictions", per start state each position and its Next, the break
     per_trial = 1 + config.start_states * (config.steps_to_predict + 1) + 1
+    # a practice trial's feedback: one press per start position (Next ..., then Continue)
+    feedback = len(config.worlds) * config.practice_trials * config.start_states
     survey_clicks = sum(q.kind != "text" for q in config.survey) + 1  # answers and Finish
-    clicks = (FLOW_PRESSES + PART_PRESSES * len(config.worlds) + trials * per_trial
+    clicks = (FLOW_PRESSES + PART_PRESSES * len(config.worlds) + trials * per_trial + feedback
               + survey_clicks)
     text_answers = sum(q.kind == "text" for q in config.survey)
     return Workload(clip_s, texts_read(config, advert_words), clicks, text_answers, trials)

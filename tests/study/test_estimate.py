@@ -62,7 +62,8 @@ def test_clicks_are_every_position_next_and_screen_press(paper):
     work = study_estimate(config, bank).work
     per_trial = 1 + 5 * (3 + 1) + 1  # Make predictions; 5 starts x (3 positions + Next); break
     survey = 3 + 1  # likert, likert, choice; Finish (the strategy answer is written)
-    assert work.clicks == 3 + 2 * 2 + 24 * per_trial + survey
+    feedback = 2 * 1 * 5  # each world's practice trial: one press per start position reviewed
+    assert work.clicks == 3 + 2 * 2 + 24 * per_trial + feedback + survey
     assert work.text_answers == 1
 
 
