@@ -9,7 +9,9 @@ bounds it. The client address is the TCP peer, or the one a trusted reverse prox
 (uvicorn's proxy headers, trusted from TOMSTUDY_TRUSTED_PROXIES: 127.0.0.1 by default). An IPv6
 client is keyed by its /64: one subscriber is routinely given a whole /64, so its single
 addresses would be unlimited keys. A session request without a token of a session's shape
-is keyed by its address. Beyond a limit the answer is 429 with `Retry-After`; the browser
+is keyed by its address, and one address's session requests together stop at
+SESSIONS_PER_ADDRESS sessions' worth: made-up tokens of the right shape would otherwise each
+get a budget of their own. Beyond a limit the answer is 429 with `Retry-After`; the browser
 retries such writes with the same body.
 """
 
@@ -29,6 +31,10 @@ START_PATH = "/api/sessions"
 TOKEN_HEADER = b"x-session-token"  # sessions.SESSION_HEADER, as ASGI spells header names
 # what sessions.start_session hands out (secrets.token_urlsafe(24)), with room to change it
 TOKEN_SHAPE = re.compile(rb"[A-Za-z0-9_-]{16,64}")
+# the sessions' worth of requests one address may send together: a classroom of 30 behind one
+# NAT, with room to spare
+SESSIONS_PER_ADDRESS = 40
+ALL_SESSIONS = "session requests of one address"  # the ceiling's window name
 
 
 def parse_limit(setting: str, value: str) -> RateLimitItem | None:
@@ -74,6 +80,9 @@ class RateLimit:
         self.app = app
         self.starts = starts
         self.requests = requests
+        self.address_ceiling = None if requests is None else type(requests)(
+            requests.amount * SESSIONS_PER_ADDRESS, requests.multiples,
+            namespace=requests.namespace)
         self.limiter = SlidingWindowCounterRateLimiter(MemoryStorage())
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
@@ -88,9 +97,17 @@ class RateLimit:
         key = token or address
         what = ("session starts from this address" if is_start
                 else "requests from this session" if token else "requests from this address")
+        if token and not self.limiter.hit(self.address_ceiling, ALL_SESSIONS, address):
+            return await self.refuse(self.address_ceiling, (ALL_SESSIONS, address),
+                                     "requests from this address", scope, receive, send)
         if self.limiter.hit(limit, what, key):
             return await self.app(scope, receive, send)
-        reset_at = self.limiter.get_window_stats(limit, what, key).reset_time
+        await self.refuse(limit, (what, key), what, scope, receive, send)
+
+    async def refuse(self, limit: RateLimitItem, identifiers: tuple[str, str], what: str,
+                     scope: Scope, receive: Receive, send: Send) -> None:
+        """429 with Retry-After: when the window of `limit` under `identifiers` has room."""
+        reset_at = self.limiter.get_window_stats(limit, *identifiers).reset_time
         wait_s = max(1, math.ceil(reset_at - time.time()))
         response = JSONResponse({"detail": f"rate: too many {what}; try again in {wait_s} s"},
                                 status_code=429, headers={"Retry-After": str(wait_s)})

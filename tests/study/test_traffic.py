@@ -3,6 +3,7 @@ and stale sessions released in bounded set-based batches off the request path.""
 
 import asyncio
 import dataclasses
+import secrets
 import time
 from datetime import timedelta
 
@@ -13,7 +14,9 @@ from sqlmodel import Session
 
 from app.main import create_app
 from app.server import balance
+from app.server.ratelimit import SESSIONS_PER_ADDRESS
 from app.server.recruitment import preview_key
+from app.server.sessions import SESSION_HEADER
 from app.server.tables import Participant, utcnow
 from tests.conftest import free_port, local_client, start_server
 from tests.study.flow import TOKEN, new_id, prolific
@@ -66,6 +69,18 @@ def test_session_requests_are_limited_per_session_not_per_address(small_study, t
         assert [events(second) for _ in range(4)] == [202] * 4  # same address, own budget
         tokenless = [c.get("/api/session/state").status_code for _ in range(6)]
         assert tokenless == [422] * 5 + [429]  # without a session: keyed by the address
+
+
+def test_made_up_session_tokens_share_one_ceiling_per_address(small_study, tmp_path):
+    app = limited_app(small_study, tmp_path, requests="1/minute")
+    with local_client(app, client=("203.0.113.9", 5000)) as c:
+        made_up = [c.get("/api/session/state", headers={SESSION_HEADER: secrets.token_urlsafe(24)})
+                   for _ in range(SESSIONS_PER_ADDRESS + 1)]
+    assert [r.status_code for r in made_up] == [404] * SESSIONS_PER_ADDRESS + [429]
+    assert made_up[-1].json()["detail"].startswith("rate: too many requests from this address")
+    with local_client(app, client=("203.0.113.10", 5000)) as other:  # another address: its own
+        assert other.get("/api/session/state", headers={
+            SESSION_HEADER: secrets.token_urlsafe(24)}).status_code == 404
 
 
 def test_the_limit_follows_the_address_a_local_proxy_forwards(small_study, tmp_path):
