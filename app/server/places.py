@@ -19,21 +19,12 @@ from sqlmodel import Session
 
 from app.server import balance, notices
 from app.server.context import StudyContext
-from app.server.plan import Phase, Usage, assign_plan, dump_plan
+from app.server.plan import Usage, assign_plan, dump_plan
 from app.server.tables import Participant, utcnow
 from app.study.config import StudyConfig, live_session_cap
 from app.study.errors import Refused
 
 ROOM_RETRY_S = 60
-CONSENT_POSITION = 0  # every plan opens with the consent step (plan.layout_plan)
-
-
-def has_consented(participant: Participant) -> bool:
-    """The session is past its consent step (a decline ends it there)."""
-    return (participant.position > CONSENT_POSITION
-            and participant.plan[CONSENT_POSITION]["phase"] == Phase.CONSENT)
-
-
 def consent_cutoff(config: StudyConfig) -> datetime:
     """A session started before this that has not consented holds nothing any more."""
     return utcnow() - timedelta(minutes=config.consent_timeout_min)

@@ -24,7 +24,7 @@ from sqlmodel import Session
 
 from app.server import balance, notices
 from app.server.context import StudyContext
-from app.server.places import has_consented
+from app.server.plan import has_consented
 from app.server.prolific import (
     CONFIRMED,
     PENDING,

@@ -22,7 +22,7 @@ from sqlmodel import Session
 from app import __version__
 from app.server import balance, notices, places
 from app.server.context import StudyContext
-from app.server.plan import assign_plan, dump_plan
+from app.server.plan import assign_plan, dump_plan, has_consented
 from app.server.recruitment import ATTEMPT_KEYS, Identity, identify
 from app.server.schemas import SessionCreate
 from app.server.tables import Participant, utcnow
@@ -112,7 +112,7 @@ def _resumable(existing: Participant, who: Identity, ctx: StudyContext) -> bool:
 
 def _is_stale(participant: Participant, ctx: StudyContext) -> bool:
     """Unfinished and past its timeout: consent's from the start, then the session's."""
-    if not places.has_consented(participant):
+    if not has_consented(participant):
         return as_utc(participant.created_at) < places.consent_cutoff(ctx.config)
     return as_utc(participant.updated_at) < balance.in_progress_cutoff(ctx.config)
 
@@ -169,7 +169,7 @@ def session_status(participant: Participant, cutoffs: places.Cutoffs) -> str:
         return "replaced"
     if has_ended(participant):
         return "ended"
-    if not places.has_consented(participant):
+    if not has_consented(participant):
         fresh = as_utc(participant.created_at) >= cutoffs.consent
         return "awaiting_consent" if fresh else "stale"
     return "in_progress" if as_utc(participant.updated_at) >= cutoffs.in_progress else "stale"
