@@ -152,22 +152,21 @@ def main() -> None:
               f"{tally['accepted']} forged starts "
               f"accepted, {tally['429']} answered 429, {tally['other']} other; "
               f"{counted(server.db)} sessions counting")
-        server = Server(paper_cap, root, "b", code, TOMSTUDY_RATE_LIMIT_STARTS="")
-        with server as client:
-            statuses = [forged_start(client, sid).status_code for _ in range(220)]
-            real = real_participant(client, sid)
-        print(f"(b) live cap 220 (10 x 22): 220 forged starts ({statuses.count(201)} accepted), "
-              f"{counted(server.db)} counting; a real participant then: start {real[0]}, "
-              f"consent {real[1]}")
+        forged_then_real(paper_cap, root, "b", code, 220, "live cap 220 (10 x 22)")
         full = study_copy(small, root / "full", recruitment={"max_counted_sessions": 22})
-        server = Server(full, root, "c", code, TOMSTUDY_RATE_LIMIT_STARTS="")
-        with server as client:
-            statuses = [forged_start(client, sid).status_code for _ in range(22)]
-            real = real_participant(client, sid)
-        print(f"(c) max_counted_sessions 22: 22 forged starts ({statuses.count(201)} accepted), "
-              f"{counted(server.db)} counting; a real participant then: start {real[0]}, "
-              f"consent {real[1]}")
+        forged_then_real(full, root, "c", code, 22, "max_counted_sessions 22")
         checked_by_standin(small, root, code)
+
+
+def forged_then_real(study: SmallStudy, root: Path, name: str, code: Path | None, n: int,
+                     label: str) -> None:
+    """(b), (c): `n` forged starts without rate limits, then a real participant; prints both."""
+    with Server(study, root, name, code, TOMSTUDY_RATE_LIMIT_STARTS="") as client:
+        statuses = [forged_start(client, study.study_id).status_code for _ in range(n)]
+        real = real_participant(client, study.study_id)
+    print(f"({name}) {label}: {n} forged starts ({statuses.count(201)} accepted), "
+          f"{counted(root / f'{name}.db')} counting; a real participant then: start {real[0]}, "
+          f"consent {real[1]}")
 
 
 def checked_by_standin(small: SmallStudy, root: Path, code: Path | None) -> None:
