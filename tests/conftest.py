@@ -34,7 +34,7 @@ FILLED_CONSENT = {
                        "email": "ben.sample@uni-examplestadt.de"}],
     "ethics_approval": "The Ethics Committee of the Faculty of Informatics approved this study "
                        "(approval EK-2026-041).",
-    "purpose": "A study of how people predict the motion of a robot.",
+    "purpose": "A study of how people predict motion (a lab's own words, for every world).",
     "recorded": "Your clicks, their timing, your survey answers and your screen size.",
     "retention": "Anonymised data are kept for ten years on university servers and may be "
                  "shared in an open repository.",

@@ -20,6 +20,7 @@ from app.configio import (
 )
 from app.predictors.registry import check_names
 from app.settings import Settings
+from app.study.words import DEFAULT_DEMO, DemoName, ParticipantWords
 
 # a simulated world (highway, obstacle) or a recorded one: study_configs/worlds/<name>.yaml
 WorldName = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]{0,31}$")]
@@ -370,6 +371,10 @@ class StudyConfig(StrictModel):
     instructions_text: str
     # per world: the screen that opens its part (what goals, obstacles or lanes mean)
     world_intros: dict[WorldName, WorldIntro]
+    # what every page calls the two agents (app/study/words.py): the study's, as its
+    # instructions page is shared by its worlds; default the paper study's robot and person
+    words: ParticipantWords = ParticipantWords()
+    demo: DemoName = DEFAULT_DEMO  # the instructions' illustration: `obstacle` or `road`
     worlds: list[WorldName] = Field(min_length=1)
     counterbalance_world_order: bool = True
     trials_per_world: int = Field(ge=1)
@@ -411,12 +416,12 @@ class StudyConfig(StrictModel):
     def _registered(cls, names: list[str]) -> list[str]:
         return check_names(names)
 
-    # a study without plug-ins (or exploratory worlds, or with the default smallest effect)
-    # dumps as before the keys existed: same config hash, so sessions that ran it before an
-    # upgrade still show as running the loaded config
+    # a study without plug-ins (or exploratory worlds, or with the default smallest effect,
+    # words or demo) dumps as before the keys existed: same config hash, so sessions that ran
+    # it before an upgrade still show as running the loaded config
     _without_new_keys = omitted_when(empty=("predictors", "exploratory_worlds", "consent"),
                                      default=("smallest_effect_of_interest",
-                                              "consent_timeout_min"))
+                                              "consent_timeout_min", "words", "demo"))
 
     @model_validator(mode="after")
     def _consistent(self) -> "StudyConfig":

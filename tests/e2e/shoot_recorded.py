@@ -2,7 +2,8 @@
 
 `python -m tests.e2e.shoot_recorded`: builds (or reuses) the tests' small interaction study on
 GENERATED, NOT REAL recordings (tests/conftest.py `cached_interaction_study`), serves it on a
-fresh SQLite file, walks it in Debian's chromium and writes var/screens/recorded_*.png: per
+fresh SQLite file, walks it in Debian's chromium and writes var/screens/recorded_*.png: the
+instructions with the study's road demo (mid-clip, an own start, a moved start), then per
 world its introduction, an example clip mid-animation and the prediction screen with two
 clicks made; then the researcher dashboard and its replay of the roundabout's first main trial
 (every start state, then one).
@@ -23,7 +24,6 @@ from tests.e2e.pages import (
     VIEWPORT,
     answer_survey,
     answer_trial,
-    consent_and_instructions,
     current_state,
     fresh_recruitment,
     open_dashboard,
@@ -33,6 +33,7 @@ from tests.e2e.pages import (
     start_predicting,
     visible,
 )
+from tests.e2e.shoot_instructions import shoot_instructions
 
 OUT = REPO / "var" / "screens"
 MID_CLIP_MS = 1600  # into the first example: about half of its 9 steps of 0.35 s
@@ -40,8 +41,10 @@ REPLAYED_WORLD = "roundabout"
 
 
 def shoot_participant(page, study_id: str) -> None:
-    """Consent to the survey, by clicking; per world its introduction, a clip and two clicks."""
-    consent_and_instructions(page)
+    """Consent to the survey, by clicking; the instructions' demo, then per world its
+    introduction, a clip and two clicks."""
+    shoot_instructions(page, "recorded_instructions")
+    page.click("#instructions-done")
     screen = shown_screen(page)
     while screen != "survey":
         if screen == "world":

@@ -7,6 +7,7 @@ its lines are drawn in their styles.
 
 import json
 import math
+import re
 import sqlite3
 import time
 from contextlib import closing
@@ -228,3 +229,38 @@ def test_the_driven_area_has_no_seams_and_each_line_its_style(chromium, interact
     # a border line is thinner than a pixel row's full cover: its darkest pixel only tends
     # to the palette colour; the virtual line's dots are fainter still
     assert sum(darkest("border")) < sum(field) and sum(darkest("virtual")) < sum(field)
+
+
+# what a participant of the recorded-traffic study must never read (another world's nouns)
+ROBOT_WORDS = re.compile(r"\b(robots?|persons?|humans?|goals?|obstacles?)\b", re.I)
+
+
+def test_the_instructions_legend_and_prompt_read_cars(chromium, interaction_server):
+    from playwright.sync_api import expect
+
+    context = chromium.new_context(viewport=VIEWPORT)
+    context.clock.install()
+    page = context.new_page()
+    page.goto(f"{interaction_server.url}/s/{INTERACTION_STUDY}?{fresh_recruitment()}")
+    visible(page, "consent")
+    page.check("#consent-check")
+    page.click("#consent-agree")
+    visible(page, "instructions")
+    expect(page.locator("#demo-caption")).to_contain_text("the blue car (B) and the orange car (O)")
+    page.clock.run_for(6500)  # the demo predicts from the blue car's own start
+    expect(page.locator("#demo-caption")).to_contain_text("Click where the blue car will be")
+    expect(page.locator("#demo-canvas")).to_have_attribute(
+        "aria-label", "Demonstration clip of the blue car and the orange car moving")
+    instructions = page.inner_text("#screen-instructions")
+    assert "B the blue car (solid)" in " ".join(instructions.split())
+    assert ROBOT_WORDS.findall(instructions) == []
+    page.click("#instructions-done")
+    press_on(page, shown_screen(page))  # the first part's introduction
+    visible(page, "trial")
+    start_predicting(page)
+    expect(page.locator("#trial-message")).to_have_text(
+        "Click where the blue car will be after each of the next 3 steps.")
+    legend = " ".join(page.inner_text("#screen-trial .legend").split())
+    assert legend.startswith("B blue car O orange car"), legend
+    assert ROBOT_WORDS.findall(page.inner_text("#screen-trial")) == []
+    context.close()

@@ -25,6 +25,7 @@ from app.study.clicks import MAX_STEP_TOLERANCE
 from app.study.config import SurveyQuestion
 from app.study.consent import render
 from app.study.errors import Notice
+from app.study.words import page_words
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
 # Every rule the participant page applies, from the server's one definition of it (study.html
@@ -51,11 +52,13 @@ MODEL_STYLE = {"colors": MODEL_COLORS, "labels": MODEL_LABELS}
 
 def _render(request: Request, name: str, study_id: str, **extra) -> HTMLResponse:
     ctx = study_context(request, study_id)
+    config = ctx.config  # its words name the agents in the page and in its scripts' texts
     return request.app.state.templates.TemplateResponse(
-        request, name, {"study_id": study_id, "title": ctx.config.title,
-                        "description": render(ctx.config.description, ctx.estimate().advert),
+        request, name, {"study_id": study_id, "title": config.title,
+                        "description": render(config.description, ctx.estimate().advert),
                         "static_url": "/static", "studies": sorted(request.app.state.studies),
-                        "scene_palette": BROWSER_PALETTE, **extra})
+                        "scene_palette": BROWSER_PALETTE, "words": config.words,
+                        "study_words": page_words(config.words, config.demo), **extra})
 
 
 @router.get("/palette.css")

@@ -4,6 +4,7 @@ import { InstructionsDemo } from "./demo.js";
 import { ClipPlayer, prefersReducedMotion, trialClips } from "./player.js";
 import { PredictionInput } from "./predict.js";
 import { drawBackground, label, prepareCanvas } from "./scene.js";
+import { DEMO, say } from "./words.js";
 
 const REDIRECT_DELAY_MS = 5000;
 const SCREENS = ["loading", "unsupported", "consent", "instructions", "world", "practice-over", "trial", "pause",
@@ -523,7 +524,7 @@ class ParticipantApp {
   showInstructions(step) {
     setProse($("instructions-text"), step?.text ?? step?.instructions_text ?? "");
     show("instructions");
-    const player = new InstructionsDemo($("demo-canvas"), {
+    const player = new InstructionsDemo($("demo-canvas"), DEMO, {
       rules: this.rules.predictions,
       onCaption: (text) => { $("demo-caption").textContent = text; },
     });
@@ -808,7 +809,7 @@ class TrialScreen {
     }
     this.input.start();
     this.changed(this.input);
-    this.setMessage(`Click where the robot will be after each of the next ${this.trial.steps_to_predict} steps.`);
+    this.setMessage(say("predict_prompt", { steps: this.trial.steps_to_predict }));
     this.canvas.focus({ preventScroll: true });
   }
 
@@ -876,7 +877,7 @@ class TrialScreen {
       const showAt = (index) => {
         this.input.review(this.trial.feedback.robot, index);
         $("trial-caption").textContent = `Practice feedback, start position ${index + 1} of ${states}`;
-        this.setMessage("Compare your clicks (black rings) with where the robot went from there (blue dots).");
+        this.setMessage(say("practice_feedback"));
         const last = index === states - 1;
         next.textContent = last ? "Continue" : `Next start position (${index + 2} of ${states})`;
         next.disabled = false;

@@ -19,6 +19,7 @@ import {
   sizeCanvas,
   viewAt,
 } from "./scene.js";
+import { say } from "./words.js";
 
 const KEY_STEP_FRACTION = 0.1; // arrow key moves the cursor by this share of max_step_m
 const FINE_FACTOR = 0.25; // with Shift held
@@ -33,7 +34,6 @@ const POINTER_INPUTS = {
   pen: "touch",
 };
 const KEYBOARD_INPUT = "keyboard";
-const CURSOR_NOT_MOVED = "Move the cross with the arrow keys first: it starts at the robot's current position.";
 // A start state farther than this from the segment's end is a relocated robot (positions are
 // stored to the millimetre)
 const RELOCATED_M = 0.01;
@@ -295,7 +295,7 @@ export class PredictionInput {
     this.index += 1;
     const where = `Start position ${this.index + 1} of ${this.trial.start_states.length}`;
     this.onMessage(this.relocated()
-      ? `${where}: the robot is placed somewhere else; the grey dots show its path in the clip, not its way here.`
+      ? say("relocated_start", { where })
       : `${where}.`, "ok");
     this.resetCursor();
     this.render();
@@ -352,7 +352,7 @@ export class PredictionInput {
   }
 
   refuseUnmovedCursor() {
-    this.onMessage(CURSOR_NOT_MOVED, "error");
+    this.onMessage(say("cursor_not_moved"), "error");
     this.render(); // the cross, at the robot
   }
 
@@ -494,11 +494,11 @@ export class PredictionInput {
     });
   }
 
-  /** Arrows at the canvas edge towards the person (when none of it is in view: a part in view
+  /** Arrows at the canvas edge towards the other agent, by its tag (when none of it is in view: a part in view
    * carries its own tag) and the goals the zoomed view leaves out. */
   drawPointers(ctx, view, layout, humanOutOfView) {
     const human = agentStyle(this.scene, 1);
-    if (humanOutOfView) drawPointer(ctx, view, this.startState.human, "H", human.color, layout);
+    if (humanOutOfView) drawPointer(ctx, view, this.startState.human, human.tag, human.color, layout);
     (this.scene.goals || []).forEach((goal, k) => {
       drawPointer(ctx, view, [goal.x_m, goal.y_m], goal.label || `goal ${k + 1}`, GOAL_COLORS[k % GOAL_COLORS.length], layout);
     });

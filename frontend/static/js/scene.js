@@ -1,5 +1,6 @@
 // Draw a world from its scene JSON (app/data/scene.py) on a canvas.
 // Scene metres map to CSS pixels with one uniform scale; y grows downward in both.
+import { WORDS } from "./words.js";
 
 // The colours are the server's (app/data/scene.py BROWSER_PALETTE, where their contrast
 // rule is explained), which every page that draws a scene carries as #scene-palette.
@@ -365,14 +366,15 @@ function ringSpots(anchor, distance, angles) {
     [anchor[0] + f * distance * Math.cos(a), anchor[1] + f * distance * Math.sin(a)])));
 }
 
-/** Role of agent i: 0 is the robot, 1 the human (DESIGN.md section 3). */
+/** Role of agent i: 0 is the robot, 1 the human (DESIGN.md section 3); its tag is the study's
+ * key for it (app/study/words.py). */
 export function agentStyle(scene, i) {
   const shape = scene.agents?.[i] || { kind: "disc", length_m: 1, width_m: 1 };
   const isRobot = i === 0;
   return {
     ...shape,
     color: isRobot ? ROBOT_COLOR : HUMAN_COLOR,
-    tag: isRobot ? "R" : "H",
+    tag: isRobot ? WORDS.agent_key : WORDS.other_key,
     name: isRobot ? "robot" : "human",
     hatched: !isRobot,
   };
