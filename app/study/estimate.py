@@ -16,14 +16,13 @@ from app.settings import REPO_ROOT
 from app.study.config import StudyConfig
 from app.study.consent import Advert, consent_words, money, render
 from app.study.trials import TrialBank
+from app.study.words import participant_texts
 
 PLAYER_JS = REPO_ROOT / "frontend" / "static" / "js" / "player.js"
-# what the trial screen asks, read once per part (app.js `watch` and `predict`)
-TRIAL_PROMPTS = ("Watch the clips closely. Press the button to make your predictions, or watch "
-                 "the clips again. Click where the robot will be after each of the next steps.")
-# what a practice trial's feedback asks, read once per practice trial (app.js `showFeedback`)
-FEEDBACK_PROMPT = ("Compare your clicks (black rings) with where the robot went from there "
-                   "(blue dots).")
+# what the trial screen asks before the prediction prompt, read once per part (app.js `watch`);
+# the prompts that name an agent are the study's own (app/study/words.py participant_texts)
+WATCH_PROMPTS = ("Watch the clips closely. Press the button to make your predictions, or watch "
+                 "the clips again.")
 # presses outside the trials: consent's box and Continue, instructions' Continue
 FLOW_PRESSES = 3
 PART_PRESSES = 2  # per part: "Start the practice", "Start trial 1"
@@ -122,8 +121,9 @@ def texts_read(config: StudyConfig, advert_words: int) -> int:
     intros = sum(words(i.title) + words(i.text) for w, i in config.world_intros.items()
                  if w in config.worlds)
     survey = sum(words(q.text) + sum(words(o) for o in q.options) for q in config.survey)
-    prompts = len(config.worlds) * (words(TRIAL_PROMPTS)
-                                    + config.practice_trials * words(FEEDBACK_PROMPT))
+    texts = participant_texts(config.words)
+    prompts = len(config.worlds) * (words(WATCH_PROMPTS) + words(texts["predict_prompt"])
+                                    + config.practice_trials * words(texts["practice_feedback"]))
     ending = words(config.recruitment.ending("completed").message)
     return (advert_words + words(config.instructions_text) + intros + survey + prompts + ending)
 
