@@ -846,3 +846,8 @@ def main() -> None:
         problems = "; ".join(e["msg"].removeprefix("Value error, ") for e in err.errors())
         typer.echo(f"error: {problems}", err=True)
         sys.exit(2)
+
+
+# `python -m app.cli` runs this checkout's code (the console script runs the installed one)
+if __name__ == "__main__":
+    main()
