@@ -207,20 +207,23 @@ def kind_figures(errors: list[float], lengths: list[float], min_click_m: float) 
 
 
 def start_state_table(result: dict) -> list[str]:
-    """Markdown rows, one per world and start kind, of the start-state figures."""
+    """Markdown rows of the start-state figures: one per world and start kind, then one per
+    world of what the start rule dropped."""
     lines = ["| world | start kind | heading error median (deg) | heading error > 20 deg "
-             "| reference steps < min click | < 5 cm | data states dropped (short moves) |",
-             "|---|---|---|---|---|---|---|"]
+             "| reference steps < min click | < 5 cm |", "|---|---|---|---|---|---|"]
     for name, f in result.items():
-        figures = f["start_states"]
-        dropped = figures["candidates_dropped"]
-        dropped_text = "not counted" if dropped is None else ", ".join(
-            f"{k} {v}" for k, v in dropped.items())
-        for kind, k in figures["kinds"].items():
-            median = k["heading_error_median_deg"]
-            over = k["heading_error_over_20"]
+        for kind, k in f["start_states"]["kinds"].items():
+            median, over = k["heading_error_median_deg"], k["heading_error_over_20"]
             lines.append(f"| {name} | {kind} | {'-' if median is None else f'{median:.1f}'} "
                          f"| {'-' if over is None else f'{over:.1%}'} "
-                         f"| {k['steps_below_min_click']:.1%} | {k['steps_below_5cm']:.1%} "
-                         f"| {dropped_text} |")
+                         f"| {k['steps_below_min_click']:.1%} | {k['steps_below_5cm']:.1%} |")
+    lines += ["", "| world | data states without n moves after | data states with a move "
+                  "< min click | segment ends with a move < min click |", "|---|---|---|---|"]
+    for name, f in result.items():
+        dropped = f["start_states"]["candidates_dropped"]
+        counts = ["not counted"] * 3 if dropped is None else [
+            dropped.get(key, "-") for key in ("data_states_without_n_moves",
+                                              "data_states_short_moves",
+                                              "segment_ends_short_moves")]
+        lines.append(f"| {name} | " + " | ".join(str(c) for c in counts) + " |")
     return lines
