@@ -221,7 +221,7 @@ def start_state_table(result: dict) -> list[str]:
                   "< min click | segment ends with a move < min click |", "|---|---|---|---|"]
     for name, f in result.items():
         dropped = f["start_states"]["candidates_dropped"]
-        counts = ["not counted"] * 3 if dropped is None else [
+        counts = ["not applied"] * 3 if dropped is None else [
             dropped.get(key, "-") for key in ("data_states_without_n_moves",
                                               "data_states_short_moves",
                                               "segment_ends_short_moves")]
