@@ -7,8 +7,9 @@ the config's `main_trial_selection` in two arms (the first usable ones; and of f
 those the rule ranks first, robot labels taking turns: where the Ours and VAE families disagree
 most, or where the observer hypotheses differ most); `start_states` start states on the data
 near the robot; every seed of both models, a constant-velocity baseline and the world's own
-policy (`World.robot_policy_actions`, its expected move: the mean of POLICY_ROLLOUTS runs)
-answered for every start state, and every plug-in predictor the config names
+policy (`World.robot_policy_actions`, its expected move: the mean of POLICY_ROLLOUTS runs; where
+the world's starts are recorded states, `World.starts_as_recorded`, what the robot recorded at
+each did next) answered for every start state, and every plug-in predictor the config names
 (app/predictors/), each a family of one answer. Everything is computed from the rounded numbers
 the participant is shown. Nothing here depends on which world it is.
 Start states are chosen by start_states.py; attention checks by attention.py.
@@ -16,7 +17,7 @@ Start states are chosen by start_states.py; attention checks by attention.py.
 
 import platform
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +27,13 @@ import app
 from analysis.alignment import alignment_error
 from analysis.atomic import write_json
 from app.bank.attention import choose_checks
-from app.bank.start_states import NoStartStates, covered_states, start_states
+from app.bank.start_states import (
+    NoStartStates,
+    clickable_ends,
+    clickable_states,
+    covered_states,
+    start_states,
+)
 from app.data.trajectory import HUMAN, ROBOT, Covered, TrajectorySet
 from app.fileio import sha256_file
 from app.layout import Layout
@@ -120,7 +127,8 @@ def load_inputs(config: StudyConfig, name: str, layout: Layout) -> WorldInputs:
     world = build_world(name)
     world.prepare(layout)  # e.g. a recorded world indexes its recordings' futures
     return WorldInputs(world, trajs, models, held_out, npz_path,
-                       covered_states(trajs, learned), len(learned), list(config.models.seeds),
+                       covered_states(trajs, learned, config.steps_to_predict), len(learned),
+                       list(config.models.seeds),
                        layout.root, [load_predictor(p) for p in config.predictors])
 
 
@@ -131,8 +139,13 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
     label_name = world.robot_label
     max_step = config.prediction_input.max_step_factor * robot_step_percentile(
         trajs, inputs.held_out)
-    candidates = segment_candidates(config, world, trajs, inputs.held_out,
-                                    model_history(inputs), rng)
+    min_step = min_click(config, max_step)
+    dropped = {}
+    if world.starts_as_recorded:
+        covered, dropped = clickable_states(inputs.covered, min_step, trajs.dt_s)
+        inputs = replace(inputs, covered=covered)
+    candidates, dropped_ends = segment_candidates(config, world, trajs, inputs.held_out,
+                                                  model_history(inputs), rng, min_step)
     selection = config.main_trial_selection
     arms = selection.arm_sizes(config.bank_trials_per_world)
     rule_arm = sum(size for arm, size in arms.items() if arm != "random")
@@ -159,15 +172,20 @@ def build_world_bank(config: StudyConfig, inputs: WorldInputs,
               for i, t in enumerate(t for t, k in zip(built, kinds, strict=True) if k == kind)]
     bank = WorldBank(world=world.name, dt_s=trajs.dt_s, scene=scene,
                      robot_label_name=label_name, label_names=trajs.label_names[label_name],
-                     max_step_m=round(max_step, 4),
-                     min_step_m=round(config.prediction_input.min_step_fraction * max_step, 4),
-                     trials=trials)
+                     max_step_m=round(max_step, 4), min_step_m=min_step, trials=trials)
     bank = with_code_answers(bank, config.steps_to_predict,
                              [*observer_predictors(default_observers()), *inputs.plugins])
     meta = world_meta(inputs, trials, attention)
     meta["segments_skipped_no_data_starts"] = used - len(practice) - len(pool)
+    if world.starts_as_recorded:
+        meta["start_candidates_dropped"] = dropped | {"segment_ends_short_moves": dropped_ends}
     meta["main_trial_selection"] = selection_meta(selection, arms, pool, main, scores)
     return bank, meta
+
+
+def min_click(config: StudyConfig, max_step: float) -> float:
+    """The shortest click the study accepts (m): the bank's `min_step_m`."""
+    return round(config.prediction_input.min_step_fraction * max_step, 4)
 
 
 def model_history(inputs: WorldInputs) -> int:
@@ -208,8 +226,7 @@ def provisional_world(inputs: WorldInputs, candidates: list[TrialRecord], max_st
     return WorldBank(world=inputs.world.name, dt_s=inputs.trajs.dt_s, scene=scene,
                      robot_label_name=inputs.world.robot_label,
                      label_names=inputs.trajs.label_names[inputs.world.robot_label],
-                     max_step_m=round(max_step, 4),
-                     min_step_m=round(config.prediction_input.min_step_fraction * max_step, 4),
+                     max_step_m=round(max_step, 4), min_step_m=min_click(config, max_step),
                      trials=[t.model_copy(update={"kind": "main"}) for t in candidates])
 
 
@@ -312,19 +329,26 @@ def robot_step_percentile(trajs: TrajectorySet, index: np.ndarray) -> float:
 # ---------------------------------------------------------------- segments
 
 def segment_candidates(config: StudyConfig, world: World, trajs: TrajectorySet,
-                       held_out: np.ndarray, need_segment: int,
-                       rng: np.random.Generator) -> list[tuple[int, int, int]]:
-    """(trajectory, segment start, segment end) per usable trajectory, labels interleaved."""
+                       held_out: np.ndarray, need_segment: int, rng: np.random.Generator,
+                       min_step: float) -> tuple[list[tuple[int, int, int]], int]:
+    """(trajectory, segment start, segment end) per usable trajectory, labels interleaved;
+    and how many ends were dropped because a recorded next move is shorter than `min_step`
+    (only where the world's starts are recorded states: start_states.py)."""
     by_label: dict[int, list] = {}
+    dropped = 0
     for i in rng.permutation(held_out):
         length = int(rng.integers(config.segment_steps.min, config.segment_steps.max + 1))
         ends = segment_ends(world, trajs, int(i), max(length, need_segment),
                             config.steps_to_predict)
+        if world.starts_as_recorded:
+            clickable = clickable_ends(trajs, int(i), ends, config.steps_to_predict, min_step)
+            dropped += len(ends) - len(clickable)
+            ends = clickable
         if len(ends):
             end = int(rng.choice(ends))
             by_label.setdefault(int(trajs.labels[world.robot_label][i]), []).append(
                 (int(i), end - length, end))
-    return interleave(by_label)
+    return interleave(by_label), dropped
 
 
 def interleave(groups: dict[int, list]) -> list:
@@ -358,8 +382,9 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
     shown = clip_of(trajs, src, start, end, label_name)
     model_input = clip_of(trajs, src, end - model_history(inputs), end, label_name).positions
     segment = np.asarray(shown.positions)
-    states = start_states(inputs.world, inputs.trajs, inputs.covered, (src, end), segment,
+    starts = start_states(inputs.world, inputs.trajs, inputs.covered, (src, end), segment,
                           config.start_states, config.steps_to_predict, max_step, rng)
+    states = starts.states
     examples = [clip_of(trajs, e, 0, int(trajs.lengths[e]), label_name)
                 for e in pick_examples(trajs, inputs.held_out, src, label_name,
                                        config.examples_per_trial, rng)]
@@ -371,8 +396,9 @@ def make_trial(config: StudyConfig, inputs: WorldInputs, src: int, start: int, e
                    for kind, family in inputs.models.items()}
     labels = {k: int(v[src]) for k, v in trajs.labels.items()}
     human_v = (segment[-1, HUMAN] - segment[-2, HUMAN]) / dt
-    policy = [expected_policy(inputs.world, s, human_v, labels, config.steps_to_predict, rng)
-              for s in states]
+    policy = starts.recorded_moves if starts.recorded_moves is not None else [
+        expected_policy(inputs.world, s, human_v, labels, config.steps_to_predict, rng)
+        for s in states]
     record = TrialRecord(
         trial_id="", world=inputs.world.name, kind="", source_index=src, segment_start=start,
         robot_label=labels[label_name], examples=examples, segment=shown, start_states=states,

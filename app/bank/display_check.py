@@ -1,5 +1,5 @@
 """`tomstudy check-display`: can a person give the robot's true moves as clicks, and do they
-point one way per behaviour? Three figures per world, on the built data and the trial bank.
+point one way per behaviour? Figures per world, on the built data and the trial bank.
 
 - short_steps: share of the robot's true steps (all 2000 trajectories) shorter than the
   smallest click the study accepts (the bank's `min_step_m`): a person cannot answer those.
@@ -15,6 +15,11 @@ point one way per behaviour? Three figures per world, on the built data and the 
 - click resolution: the prediction view's scale (app/prediction_view.py), the median true
   step on screen at that scale, and the degrees one pixel of click error turns a move of
   that length: the angular resolution of the measurement.
+- start states (main trials, per start kind): the angle between the robot heading drawn at a
+  start and the direction of its first reference move (`policy_actions`), its median and the
+  share above 20 degrees; the share of reference steps below the smallest click and below
+  5 cm; and the data states the start rule dropped because their next moves are too short
+  to click (the bank meta's `start_candidates_dropped`, app/bank/start_states.py).
 """
 
 import json
@@ -23,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.atomic import write_json
+from app.bank.bundle import BANK_META
 from app.data.trajectory import ROBOT, TrajectorySet
 from app.fileio import read_bytes
 from app.layout import Layout
@@ -121,8 +127,17 @@ def check_display(layout: Layout, study_id: str, bank_path: Path) -> dict:
                                     f"`tomstudy simulate {name}` (the figures need the data)")
         trajs = TrajectorySet.load(layout.trajectories(name))
         result[name] = world_figures(trajs, world_bank)
+        result[name]["start_states"] = start_state_figures(world_bank, meta_of(bank_path, name))
     write_json(layout.display_check(study_id), result)
     return result
+
+
+def meta_of(bank_path: Path, world: str) -> dict | None:
+    """The world's entry of the bank's meta beside `bank_path` (None without one)."""
+    path = Path(bank_path).parent / BANK_META
+    if not path.is_file():
+        return None
+    return json.loads(read_bytes(path)).get("worlds", {}).get(world)
 
 
 def format_table(result: dict) -> str:
@@ -142,4 +157,73 @@ def format_table(result: dict) -> str:
         r = f["click_resolution"]
         lines.append(f"| {name} | {r['px_per_m']:.1f} | {r['median_step_m']:.3f} "
                      f"| {r['median_step_px']:.1f} | {r['reach_px']:.1f} | {r['deg_per_px']:.3f} |")
+    lines += ["", *start_state_table(result)]
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------- start states
+
+STOPPED_STEP_M = 0.05  # a reference step shorter than this is a car standing still
+HEADING_ERROR_DEG = 20.0  # a drawn heading this far off the first true move looks wrong
+
+
+def start_state_figures(world_bank: dict, world_meta: dict | None) -> dict:
+    """Per start kind of the main trials: how far the drawn robot heading is from the
+    direction of the start's first reference move (median, share > HEADING_ERROR_DEG), the
+    share of reference steps below the smallest click and below STOPPED_STEP_M; and how many
+    data states the start rule dropped for short moves (bank meta; None before it counted)."""
+    by_kind: dict[str, dict[str, list]] = {}
+    for trial in (t for t in world_bank["trials"] if t["kind"] == "main"):
+        steps = np.asarray(trial["policy_actions"], dtype=np.float64) * world_bank["dt_s"]
+        for state, moves in zip(trial["start_states"], steps, strict=True):
+            kind = by_kind.setdefault(state["start_kind"], {"error": [], "length": []})
+            kind["length"].extend(np.linalg.norm(moves, axis=1))
+            if np.linalg.norm(moves[0]) > MOVING_M:
+                kind["error"].append(heading_error_deg(state["robot_heading"], moves[0]))
+    dropped = (world_meta or {}).get("start_candidates_dropped")
+    return {"kinds": {kind: kind_figures(v["error"], v["length"], world_bank["min_step_m"])
+                      for kind, v in by_kind.items()},
+            "candidates_dropped": dropped}
+
+
+def heading_error_deg(heading: float, move: np.ndarray) -> float:
+    """Angle [deg] between a heading [rad] and a move's direction."""
+    gap = np.arctan2(move[1], move[0]) - heading
+    return float(np.degrees(np.abs(np.arctan2(np.sin(gap), np.cos(gap)))))
+
+
+def kind_figures(errors: list[float], lengths: list[float], min_click_m: float) -> dict:
+    """One start kind's heading error and short reference steps."""
+    lengths = np.asarray(lengths)
+    errors = np.asarray(errors)
+    return {"starts_moving": len(errors),
+            "heading_error_median_deg": round(float(np.median(errors)), 2) if len(errors)
+            else None,
+            "heading_error_over_20": round(float((errors > HEADING_ERROR_DEG).mean()), 4)
+            if len(errors) else None,
+            "steps": len(lengths),
+            "steps_below_min_click": round(float((lengths < min_click_m).mean()), 4),
+            "steps_below_5cm": round(float((lengths < STOPPED_STEP_M).mean()), 4)}
+
+
+def start_state_table(result: dict) -> list[str]:
+    """Markdown rows of the start-state figures: one per world and start kind, then one per
+    world of what the start rule dropped."""
+    lines = ["| world | start kind | heading error median (deg) | heading error > 20 deg "
+             "| reference steps < min click | < 5 cm |", "|---|---|---|---|---|---|"]
+    for name, f in result.items():
+        for kind, k in f["start_states"]["kinds"].items():
+            median, over = k["heading_error_median_deg"], k["heading_error_over_20"]
+            lines.append(f"| {name} | {kind} | {'-' if median is None else f'{median:.1f}'} "
+                         f"| {'-' if over is None else f'{over:.1%}'} "
+                         f"| {k['steps_below_min_click']:.1%} | {k['steps_below_5cm']:.1%} |")
+    lines += ["", "| world | data states without n moves after | data states with a move "
+                  "< min click | segment ends with a move < min click |", "|---|---|---|---|"]
+    for name, f in result.items():
+        dropped = f["start_states"]["candidates_dropped"]
+        counts = ["not applied"] * 3 if dropped is None else [
+            dropped.get(key, "-") for key in ("data_states_without_n_moves",
+                                              "data_states_short_moves",
+                                              "segment_ends_short_moves")]
+        lines.append(f"| {name} | " + " | ".join(str(c) for c in counts) + " |")
+    return lines

@@ -46,10 +46,14 @@ class Episode:
 @dataclass(frozen=True)
 class Covered:
     """Robot states a trial's start states are drawn from: positions [M, 2] (m) and headings
-    [M] (rad), every valid step of the trajectories the models learned from."""
+    [M] (rad), every valid step of the trajectories the models learned from; speeds [M] (m/s)
+    and next_moves [M, n, 2] (m/s, what the robot did over the n steps after the state, NaN
+    past its trajectory's end) where a start may keep the state it was drawn from."""
 
     positions: np.ndarray
     headings: np.ndarray
+    speeds: np.ndarray | None = None
+    next_moves: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.positions)

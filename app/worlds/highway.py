@@ -144,6 +144,7 @@ class HighwayWorld:
 
     name = "highway"
     robot_label = "robot_intent"
+    starts_as_recorded = False
 
     def __init__(self, config: HighwayConfig) -> None:
         self.config = config
@@ -505,10 +506,10 @@ class HighwayWorld:
 
     def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: Covered,
                               reach: float) -> dict[str, np.ndarray]:
-        """`same_lane` and `adjacent_lane` points (lanes by nearest centre) within `reach`
-        along the road, with `reach` of road ahead (the way the robot's last segment move goes
-        along x) inside the view; not within two car lengths along and half a lane across of
-        the human."""
+        """`same_lane` and `adjacent_lane` states (indices into `covered`; lanes by nearest
+        centre) within `reach` along the road, with `reach` of road ahead (the way the robot's
+        last segment move goes along x) inside the view; not within two car lengths along and
+        half a lane across of the human."""
         robot, human, pts = segment[-1, ROBOT], segment[-1, HUMAN], covered.positions
         travel = 1.0 if segment[-1, ROBOT, 0] >= segment[-2, ROBOT, 0] else -1.0
         centres = np.array([lane.y_center_m for lane in scene.lanes])
@@ -524,4 +525,5 @@ class HighwayWorld:
         keep = (clear & (np.abs(pts[:, 0] - robot[0]) <= reach)
                 & (ahead > b.x_min_m) & (ahead < b.x_max_m))
         gap = np.abs(lane_of - robot_lane)
-        return {"same_lane": pts[keep & (gap == 0)], "adjacent_lane": pts[keep & (gap == 1)]}
+        return {"same_lane": np.flatnonzero(keep & (gap == 0)),
+                "adjacent_lane": np.flatnonzero(keep & (gap == 1))}

@@ -150,6 +150,7 @@ class ObstacleWorld:
 
     name = "obstacle"
     robot_label = "robot_goal"
+    starts_as_recorded = False
 
     def __init__(self, config: ObstacleConfig, agent_policy: AgentPolicy | None = None):
         self.config = config
@@ -434,17 +435,19 @@ class ObstacleWorld:
 
     def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: Covered,
                               reach: float) -> dict[str, np.ndarray]:
-        """`near` (within `reach` of the robot) and `mid` (`reach` to 2 `reach`) points, more
-        than one agent width clear of every obstacle and goal disc and two from the human (the
-        whole walled plane is in view, so there is always room for n steps)."""
+        """`near` (within `reach` of the robot) and `mid` (`reach` to 2 `reach`) states
+        (indices into `covered`), more than one agent width clear of every obstacle and goal
+        disc and two from the human (the whole walled plane is in view, so there is always
+        room for n steps)."""
         robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
         dist = np.linalg.norm(covered.positions - robot, axis=1)
-        pts, dist = covered.positions[dist <= 2 * reach], dist[dist <= 2 * reach]
+        index = np.flatnonzero(dist <= 2 * reach)
+        pts, dist = covered.positions[index], dist[index]
         agent = max(a.width_m for a in scene.agents)
         clear = np.linalg.norm(pts - human, axis=1) > 2 * agent
         for c in [*scene.obstacles, *scene.goals]:
             clear &= np.hypot(pts[:, 0] - c.x_m, pts[:, 1] - c.y_m) > c.radius_m + agent
-        return {"near": pts[clear & (dist <= reach)], "mid": pts[clear & (dist > reach)]}
+        return {"near": index[clear & (dist <= reach)], "mid": index[clear & (dist > reach)]}
 
 
 def norm2(vectors: np.ndarray) -> np.ndarray:

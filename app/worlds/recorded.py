@@ -3,12 +3,13 @@
 The same `World` the bank, the observers and the display check read, from a recording set
 (app/recordings/: the config, the import, the scene). What the simulated worlds get from a
 model of their agents, a recorded world takes from the data:
-- the robot's own next moves from a start state (`robot_policy_actions`: the bank's
-  `policy_actions`, the precise observers' answer) are what a recorded robot did from there:
-  the recorded robot state nearest the start within `policy_radius_m` whose heading is within
-  `start_heading_tolerance_deg` of the start's, and its next moves. From the robot's own
-  segment end that is the recording itself, i.e. what really happened next. Elsewhere it is
-  a recorded robot at that spot going that way; with none, the start's heading and speed held;
+- its starts are recorded states (`starts_as_recorded`): a start drawn from the data keeps
+  that recorded car's heading and speed, and the bank's `policy_actions` there (the precise
+  observers' answer) are that car's recorded next moves; from the robot's own segment end,
+  what really happened next (app/bank/start_states.py);
+- `robot_policy_actions` answers any other state: the recorded robot state nearest it within
+  `policy_radius_m` whose heading is within `start_heading_tolerance_deg` of its own, and
+  that state's next moves; with none, the state's heading and speed held;
 - a segment may end where the robot is under way: moving at least `min_moving_speed_mps`
   over the step into the end and the next ones (a standing car's move cannot be clicked);
 - start states lie where recorded robots drove the way this robot is heading (`near`: within
@@ -44,6 +45,7 @@ class RecordedWorld:
 
     label_names = LABEL_NAMES
     robot_label = ROBOT_LABEL
+    starts_as_recorded = True
 
     def __init__(self, name: str, config: RecordedConfig) -> None:
         self.name = name
@@ -92,8 +94,9 @@ class RecordedWorld:
 
     def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: Covered,
                               reach: float) -> dict[str, np.ndarray]:
-        """`near` (within `reach`) and `far` (`reach` to 2 `reach`) recorded robot positions
-        heading the robot's way, clear of the human, with `reach` of scene around them."""
+        """`near` (within `reach`) and `far` (`reach` to 2 `reach`) recorded robot states
+        (indices into `covered`) heading the robot's way, clear of the human, with `reach` of
+        scene around them."""
         robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
         move = segment[-1, ROBOT] - segment[-2, ROBOT]
         heading = float(np.arctan2(move[1], move[0]))
@@ -107,7 +110,8 @@ class RecordedWorld:
                 & (np.linalg.norm(pts - human, axis=1) > 2 * car)
                 & (pts[:, 0] - reach > b.x_min_m) & (pts[:, 0] + reach < b.x_max_m)
                 & (pts[:, 1] - reach > b.y_min_m) & (pts[:, 1] + reach < b.y_max_m))
-        return {"near": pts[keep & (dist <= reach)], "far": pts[keep & (dist > reach)]}
+        return {"near": np.flatnonzero(keep & (dist <= reach)),
+                "far": np.flatnonzero(keep & (dist > reach))}
 
 
 class _RecordedFutures:

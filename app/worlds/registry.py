@@ -40,6 +40,9 @@ class World(Protocol):
     label_names: dict[str, list[str]]
     robot_label: str  # the label plots colour by and latent metrics score against
     config: StrictModel
+    # True: a start drawn from the data is that data state (its heading, speed and recorded
+    # next moves as the answer); False: the segment end's robot moved there (start_states.py)
+    starts_as_recorded: bool
 
     def prepare(self, layout: Layout) -> None:
         """Per-world set-up before the world rolls out or answers (train a learnt policy, read
@@ -60,8 +63,9 @@ class World(Protocol):
 
     def data_start_candidates(self, scene: Scene, segment: np.ndarray, covered: Covered,
                               reach: float) -> dict[str, np.ndarray]:
-        """Robot positions from the data `covered` [M, 2] that may start a prediction after
-        `segment`, by start kind (the first kind draws first); `reach` = n steps x max step."""
+        """Indices into the data `covered` of the robot states that may start a prediction
+        after `segment`, by start kind (the first kind draws first); `reach` = n steps x max
+        step."""
         ...
 
 

@@ -207,8 +207,8 @@ def test_starts_lie_where_recorded_robots_drove_the_robots_way(world):
     covered = Covered(np.array([[4.0, 0.0], [4.0, 1.0], [7.0, 0.0], [9.0, 0.0], [30.0, 0.0]]),
                       np.array([0.1, np.pi, -0.2, 0.0, 0.0]))
     pools = world.data_start_candidates(scene, segment, covered, reach=3.0)
-    assert pools["near"].tolist() == [[4.0, 0.0]]  # [4, 1] heads the other way
-    assert pools["far"].tolist() == [[7.0, 0.0]]  # [9, 0] is beyond twice the reach
+    assert pools["near"].tolist() == [0]  # [4, 1] heads the other way
+    assert pools["far"].tolist() == [2]  # [9, 0] is beyond twice the reach
 
 
 def world_scene() -> Scene:

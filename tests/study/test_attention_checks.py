@@ -9,6 +9,7 @@ from app.bank.attention import choose_checks
 from app.bank.build import (
     load_inputs,
     make_trial,
+    min_click,
     model_history,
     provisional_world,
     robot_step_percentile,
@@ -58,8 +59,8 @@ def test_the_segments_chosen_as_checks_get_start_states_like_any_other(small_stu
         rng = np.random.default_rng([7, index])
         max_step = config.prediction_input.max_step_factor * robot_step_percentile(
             inputs.trajs, inputs.held_out)
-        segments = segment_candidates(config, inputs.world, inputs.trajs, inputs.held_out,
-                                      model_history(inputs), rng)
+        segments, _ = segment_candidates(config, inputs.world, inputs.trajs, inputs.held_out,
+                                         model_history(inputs), rng, min_click(config, max_step))
         scene = inputs.trajs.scene.model_dump()
         pool = []
         for src, start, end in segments[:24]:

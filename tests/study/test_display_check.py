@@ -3,7 +3,12 @@
 import numpy as np
 import pytest
 
-from app.bank.display_check import against_share, same_label_spread, world_figures
+from app.bank.display_check import (
+    against_share,
+    same_label_spread,
+    start_state_figures,
+    world_figures,
+)
 from app.data.scene import AgentShape, Bounds, Scene
 from app.data.trajectory import TrajectorySet
 
@@ -66,3 +71,23 @@ def test_in_the_heading_frame_one_turn_is_one_direction_whichever_way_the_road_r
             "trials": [_trial(0, [(1, 1)], [east]), _trial(0, [(-1, 1)], [north])]}
     assert same_label_spread(turn)["mean"] == pytest.approx(1.0)  # 90 deg apart on screen
     assert same_label_spread(turn, heading_frame=True)["mean"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_start_state_figures_per_kind():
+    # dt 0.5: a 2 m/s action is a 1 m step; min click 0.5 m
+    trial = {"kind": "main", "robot_label": 0,
+             "policy_actions": [[[2, 0], [2, 0]],  # own: along its heading
+                                [[0, 2], [0.5, 0]],  # near: 90 deg off, then a 0.25 m step
+                                [[2, 0], [0.05, 0]]],  # near: on heading, then 2.5 cm
+             "start_states": [{"start_kind": "own", "robot_heading": 0.0},
+                              {"start_kind": "near", "robot_heading": 0.0},
+                              {"start_kind": "near", "robot_heading": 0.1}]}
+    bank = {"dt_s": 0.5, "min_step_m": 0.5, "trials": [trial]}
+    figures = start_state_figures(bank, {"start_candidates_dropped": {"short": 3}})
+    own, near = figures["kinds"]["own"], figures["kinds"]["near"]
+    assert own["heading_error_median_deg"] == 0.0 and own["steps_below_min_click"] == 0.0
+    assert near["heading_error_median_deg"] == pytest.approx((90 + 5.73) / 2, abs=0.01)
+    assert near["heading_error_over_20"] == 0.5
+    assert near["steps_below_min_click"] == 0.5 and near["steps_below_5cm"] == 0.25
+    assert figures["candidates_dropped"] == {"short": 3}
+    assert start_state_figures(bank, None)["candidates_dropped"] is None

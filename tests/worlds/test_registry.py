@@ -44,8 +44,8 @@ def test_data_start_kinds_are_the_worlds_own(worlds):
     highway = worlds["highway"]
     pools = highway.data_start_candidates(highway.scene(), segment, covered, 9.0)
     assert list(pools) == ["same_lane", "adjacent_lane"]
-    assert pools["same_lane"].tolist() == [[4.0, 4.0]]
-    assert sorted(pools["adjacent_lane"].tolist()) == [[5.0, 0.0], [6.0, 8.0]]
+    assert pools["same_lane"].tolist() == [0]
+    assert sorted(pools["adjacent_lane"].tolist()) == [1, 2]
     obstacle = worlds["obstacle"]
     assert list(obstacle.data_start_candidates(obstacle.scene(), segment + 5, covered,
                                                1.0)) == ["near", "mid"]
