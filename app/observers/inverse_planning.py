@@ -235,7 +235,7 @@ def intent_course(payload: dict, intents: Intents, intent: int, factor: float,
                   momentum: float | None) -> Move:
     """How an observer acting on `intent` moves from each start (momentum: blended with the
     motion seen, `momentum` the intent's weight)."""
-    move = intents.course(intent, start_positions(payload), factor)
+    move = intents.course(intent, start_positions(payload), factor, start_headings(payload))
     return move if momentum is None else momentum_course(move, start_headings(payload), momentum)
 
 

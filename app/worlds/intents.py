@@ -29,7 +29,7 @@ Everything is read from what the browser is shown: the scene as JSON (bank.json'
 `scene`), dt and robot tracks [T+1, 2].
 """
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Literal, Protocol
@@ -80,8 +80,11 @@ class Intents(Protocol):
         every alternative move the likelihood normalises over [T, J, C]."""
         ...
 
-    def course(self, label: int, starts: np.ndarray, speed_factor: float) -> Move:
-        """How a coarse observer acting on intent `label` moves from each start state."""
+    def course(self, label: int, starts: np.ndarray, speed_factor: float,
+               headings: Sequence[float] = ()) -> Move:
+        """How a coarse observer acting on intent `label` moves from each start state
+        (`headings`: the robot's heading drawn at each start, rad, for intents that turn from
+        it; lanes and goals set the direction themselves)."""
         ...
 
 
@@ -162,7 +165,8 @@ class LaneIntents:
         targets, feasible = self.relative_targets(self.nearest_lane(start[1]))
         return float(targets[label + 1] if feasible[label + 1] else targets[1])
 
-    def course(self, label: int, starts: np.ndarray, speed_factor: float) -> Move:
+    def course(self, label: int, starts: np.ndarray, speed_factor: float,
+               headings: Sequence[float] = ()) -> Move:
         """Forward at the segment's forward speed, sideways towards the target lane centre."""
         forward = forward_speed(self.track, self.dt_s) * speed_factor * self.dt_s
         lateral = self.step_m
@@ -207,7 +211,8 @@ class GoalIntents:
         scale = length[:, None]
         return progress / scale, candidates / scale[..., None]
 
-    def course(self, label: int, starts: np.ndarray, speed_factor: float) -> Move:
+    def course(self, label: int, starts: np.ndarray, speed_factor: float,
+               headings: Sequence[float] = ()) -> Move:
         """Straight at the goal at the segment's speed, stopping on it."""
         goal = self.goals[label]
         reach = segment_speed(self.track, self.dt_s) * speed_factor * self.dt_s
@@ -309,20 +314,24 @@ class TurnIntents:
         candidates = -np.abs(others[None, None, :] - nominal[None, :, None]) / self.step_rad
         return progress, np.broadcast_to(candidates, (len(changes), *candidates.shape[1:]))
 
-    def course(self, label: int, starts: np.ndarray, speed_factor: float) -> Move:
-        """On from the robot's heading, turning `label` nominal turns per step."""
+    def course(self, label: int, starts: np.ndarray, speed_factor: float,
+               headings: Sequence[float] = ()) -> Move:
+        """On from the robot's heading drawn at each start (a recorded start is drawn as the
+        recorded car stood there; without `headings`, the segment's last move), turning
+        `label` nominal turns per step."""
         angles = move_headings(self.track)
-        start = float(angles[-1]) if len(angles) else 0.0
-        headings = dict.fromkeys(range(len(starts)), start)
+        last = float(angles[-1]) if len(angles) else 0.0
+        drawn = list(headings) or [last] * len(starts)
+        facing = dict(enumerate(float(h) for h in drawn))
         length = segment_speed(self.track, self.dt_s) * speed_factor * self.dt_s
 
         road = self.road
 
         def move(i: int, position: np.ndarray) -> tuple[np.ndarray, float]:
-            headings[i] += label * self.step_rad
+            facing[i] += label * self.step_rad
             if road is not None:
-                headings[i] = road.keep_on(position, headings[i], length, label)
-            return np.array([np.cos(headings[i]), np.sin(headings[i])]), length
+                facing[i] = road.keep_on(position, facing[i], length, label)
+            return np.array([np.cos(facing[i]), np.sin(facing[i])]), length
 
         return move
 

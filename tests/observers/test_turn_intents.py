@@ -75,6 +75,17 @@ def test_the_coarse_move_keeps_turning_at_the_intents_rate_and_the_segments_spee
     assert np.degrees(np.arctan2(*direction[::-1]) - last) == pytest.approx(60 * DT, abs=0.5)
 
 
+def test_the_coarse_move_turns_from_the_heading_drawn_at_each_start():
+    """A relocated recorded start is drawn as the recorded car stood there: the coarse
+    observer turns from that heading, not from the segment's last move."""
+    intents = TurnIntents(DT, arc(0, 6), EXAMPLES)
+    drawn = [0.0, np.radians(90)]
+    move = intents.course(0, np.zeros((2, 2)), 1.0, drawn)
+    for i, heading in enumerate(drawn):
+        direction, _ = move(i, np.zeros(2))
+        assert np.arctan2(*direction[::-1]) == pytest.approx(heading, abs=1e-9)
+
+
 @pytest.mark.parametrize("preset", ["coarse", "precise", "random"])
 def test_every_preset_clicks_what_the_server_accepts(preset):
     p = payload(arc(20, 6), EXAMPLES)
