@@ -41,6 +41,7 @@ from app.study.trials import (
     HEADING_DECIMALS,
     NO_SEED,
     POS_DECIMALS,
+    SIZE_DECIMALS,
     BankFile,
     Clip,
     ModelAnswer,
@@ -422,7 +423,8 @@ def clip_of(trajs: TrajectorySet, i: int, start: int, end: int, label_name: str)
     return Clip(
         positions=np.round(trajs.positions[i, start:end + 1], POS_DECIMALS).tolist(),
         headings=np.round(trajs.headings[i, start:end + 1], HEADING_DECIMALS).tolist(),
-        robot_label=int(trajs.labels[label_name][i]), source_index=i)
+        robot_label=int(trajs.labels[label_name][i]), source_index=i,
+        sizes=None if trajs.sizes is None else np.round(trajs.sizes[i], SIZE_DECIMALS).tolist())
 
 
 def pick_examples(trajs: TrajectorySet, held_out: np.ndarray, src: int, label_name: str,
