@@ -210,10 +210,10 @@ function drawDriven(ctx, view, driven) {
 }
 
 // How a map's lines are drawn, faintest first: width in metres, held within [min, max] CSS px
-// so a line stays visible on the small overview map and does not swamp the close-up;
-// `dots`: a dotted line (round dots `gap` px apart).
+// so a line stays visible on the small overview map and does not swamp the close-up. A kind
+// not listed is not drawn: `virtual` lanelet borders (no paint), which banks built before
+// app/recordings/scene.py left them out still carry.
 const MAP_LINES = [
-  ["virtual", { widthM: 0.12, minPx: 1.2, maxPx: 1.5, dots: true, gapPx: 5 }],
   ["border", { widthM: 0.12, minPx: 1, maxPx: 2 }],
   ["kerb", { widthM: 0.3, minPx: 1.5, maxPx: 4 }],
   ["stop", { widthM: 0.5, minPx: 2, maxPx: 6 }],
@@ -236,11 +236,9 @@ function drawMapLines(ctx, view, recorded) {
   for (const [kind, style] of MAP_LINES) {
     ctx.strokeStyle = MAP[kind];
     ctx.lineWidth = Math.min(style.maxPx, Math.max(style.minPx, style.widthM * view.scale));
-    ctx.lineCap = style.dots ? "round" : "butt";
     ctx.lineJoin = "round";
     for (const line of groups.get(kind)) {
-      if (style.dots) ctx.setLineDash([0, style.gapPx]);
-      else ctx.setLineDash(line.dashed ? DASH_M.map((m) => m * view.scale) : []);
+      ctx.setLineDash(line.dashed ? DASH_M.map((m) => m * view.scale) : []);
       ctx.beginPath();
       line.points.forEach((p, i) => {
         const [px, py] = view.toPx(p);
@@ -251,7 +249,6 @@ function drawMapLines(ctx, view, recorded) {
     }
   }
   ctx.setLineDash([]);
-  ctx.lineCap = "butt";
 }
 
 function drawObstacle(ctx, view, obstacle) {
