@@ -362,12 +362,17 @@ function ringSpots(anchor, distance, angles) {
     [anchor[0] + f * distance * Math.cos(a), anchor[1] + f * distance * Math.sin(a)])));
 }
 
-/** Role of agent i: 0 is the robot, 1 the human (DESIGN.md section 3). */
-export function agentStyle(scene, i) {
+/**
+ * Role of agent i: 0 is the robot, 1 the human (DESIGN.md section 3). `sizes`, a clip's
+ * [length, width] (m) per agent as recorded (app/study/trials.py Clip), replace the scene's.
+ */
+export function agentStyle(scene, i, sizes = null) {
   const shape = scene.agents?.[i] || { kind: "disc", length_m: 1, width_m: 1 };
+  const size = sizes?.[i];
   const isRobot = i === 0;
   return {
     ...shape,
+    ...(size ? { length_m: size[0], width_m: size[1] } : {}),
     color: isRobot ? ROBOT_COLOR : HUMAN_COLOR,
     tag: isRobot ? "R" : "H",
     name: isRobot ? "robot" : "human",
