@@ -178,9 +178,15 @@ def test_the_prediction_screen_and_its_small_map_draw_the_recorded_road(chromium
     start_predicting(page)
     assert page.evaluate(ROAD_SHARE, "#trial-canvas") > 0.05
     assert page.evaluate(ROAD_SHARE, "#overview-canvas") > 0.02
-    drawn = robot_outline(page, current_state(page, INTERACTION_STUDY)["step"])
+    trial = current_state(page, INTERACTION_STUDY)["step"]
+    drawn = robot_outline(page, trial)
     ratio = contrast(drawn["outline"], drawn["ground"])
     assert ratio >= 3, drawn  # on the road, under the reach disc's tint
+    # the robot at its recorded width, times the view's outline_scale (app/prediction_view.py)
+    view = trial["view"]
+    assert 0 < view["outline_scale"] < 1
+    width_px = trial["segment"]["sizes"][0][1] * view["outline_scale"] * view["px_per_m"]
+    assert drawn["width"] == pytest.approx(max(width_px, 10), abs=3), (drawn, width_px)
     print(json.dumps({"robot outline on the recorded road under the reach tint": round(ratio, 2)}))
     context.close()
 
