@@ -117,8 +117,11 @@ def test_a_log_without_sizes_draws_the_configs_agent():
 
 def test_sizes_reach_the_trial_payload_and_a_simulated_clip_has_none(imported):
     trajs = imported["intersection"]
+    def as_stored(i: int) -> list[list[float]]:  # centimetres, no float32 digits
+        return [[round(float(v), 2) for v in agent] for agent in trajs.sizes[i]]
+
     sized = clip_of(trajs, 0, 0, 4, "robot_turn")
-    assert sized.sizes == np.round(trajs.sizes[0], 2).tolist()
+    assert sized.sizes == as_stored(0)
     assert sized.shown()["sizes"] == sized.sizes and "sizes" in sized.model_dump()
     plain = clip_of(dataclasses.replace(trajs, sizes=None), 0, 0, 4, "robot_turn")
     assert set(plain.shown()) == {"positions", "headings"}  # as before sizes existed
@@ -129,7 +132,7 @@ def test_sizes_reach_the_trial_payload_and_a_simulated_clip_has_none(imported):
                         start_states=[], model_input=[], predictions={}, cv_actions=[],
                         policy_actions=[], clip_sha256="")
     shown = trial.browser_payload()
-    assert shown["segment"]["sizes"] == np.round(trajs.sizes[1], 2).tolist()
+    assert shown["segment"]["sizes"] == as_stored(1)
     assert shown["examples"][0]["sizes"] == sized.sizes
 
 
