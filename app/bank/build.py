@@ -48,6 +48,7 @@ from app.study.trials import (
     HEADING_DECIMALS,
     NO_SEED,
     POS_DECIMALS,
+    SIZE_DECIMALS,
     BankFile,
     Clip,
     ModelAnswer,
@@ -448,7 +449,14 @@ def clip_of(trajs: TrajectorySet, i: int, start: int, end: int, label_name: str)
     return Clip(
         positions=np.round(trajs.positions[i, start:end + 1], POS_DECIMALS).tolist(),
         headings=np.round(trajs.headings[i, start:end + 1], HEADING_DECIMALS).tolist(),
-        robot_label=int(trajs.labels[label_name][i]), source_index=i)
+        robot_label=int(trajs.labels[label_name][i]), source_index=i,
+        sizes=None if trajs.sizes is None else clip_sizes(trajs.sizes[i]))
+
+
+def clip_sizes(sizes: np.ndarray) -> list[list[float]]:
+    """Both agents' (length, width) [2, 2] m as a clip stores them: 4.09, not float32's
+    4.090000152587891."""
+    return np.round(sizes.astype(np.float64), SIZE_DECIMALS).tolist()
 
 
 def pick_examples(trajs: TrajectorySet, held_out: np.ndarray, src: int, label_name: str,

@@ -20,6 +20,15 @@ point one way per behaviour? Figures per world, on the built data and the trial 
   share above 20 degrees; the share of reference steps below the smallest click and below
   5 cm; and the data states the start rule dropped because their next moves are too short
   to click (the bank meta's `start_candidates_dropped`, app/bank/start_states.py).
+- robot outline: the robot's half-length and half-width (its median over the main trials, at
+  each one's recorded size where the bank has sizes) in m and in px as the prediction view
+  draws it (`outline_scale` of its size), the reach radius in m and px, drawn half-length /
+  reach radius, median true step / drawn half-length, and the share of the reference first
+  moves (the main trials' policy_actions[:, 0] from every start) whose end lies inside the
+  robot's outline at its start (the rectangle turned to the start's robot_heading; a disc's
+  circle), at its real size and as drawn. `passes`: the rule of app/prediction_view.py (the
+  drawn half-length at most OUTLINE_STEP_SHARE median steps and OUTLINE_REACH_SHARE reach
+  radii); a world that fails it is flagged in the table.
 """
 
 import json
@@ -32,7 +41,13 @@ from app.bank.bundle import BANK_META
 from app.data.trajectory import ROBOT, TrajectorySet
 from app.fileio import read_bytes
 from app.layout import Layout
-from app.prediction_view import prediction_view
+from app.prediction_view import (
+    OUTLINE_REACH_SHARE,
+    OUTLINE_STEP_SHARE,
+    SCORED_KIND,
+    main_robot_sizes_m,
+    prediction_view,
+)
 
 MOVING_M = 1e-3  # a step shorter than this has no direction
 
@@ -104,6 +119,7 @@ def world_figures(trajs: TrajectorySet, world_bank: dict) -> dict:
         "same_label_spread": same_label_spread(world_bank),
         "same_label_spread_heading": same_label_spread(world_bank, heading_frame=True),
         "click_resolution": click_resolution(world_bank),
+        "outline": robot_outline(world_bank),
     }
 
 
@@ -114,6 +130,51 @@ def click_resolution(world_bank: dict) -> dict:
             "median_step_px": round(view.median_step_px, 1),
             "reach_px": round(world_bank["max_step_m"] * view.px_per_m, 1),
             "deg_per_px": round(view.resolution_deg, 3)}
+
+
+def first_move_ends(world_bank: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Each main trial's reference first moves, ended in the robot's heading frame at its start
+    [S, 2] m (x along the heading), and the robot's (length, width) [S, 2] m at each start."""
+    ends, sizes = [], []
+    for trial, size in zip((t for t in world_bank["trials"] if t["kind"] == SCORED_KIND),
+                           main_robot_sizes_m(world_bank), strict=True):
+        ends.append(first_moves(trial, heading_frame=True) * float(world_bank["dt_s"]))
+        sizes.append(np.broadcast_to(size, ends[-1].shape))
+    return np.concatenate(ends), np.concatenate(sizes)
+
+
+def inside_share(ends: np.ndarray, sizes: np.ndarray, disc: bool, scale: float) -> float:
+    """Share of move ends [S, 2] (heading frame) inside the robot's outline at `scale` of its
+    size: the rectangle of its (length, width) [S, 2], or for a disc the circle of its length."""
+    half = sizes * scale / 2
+    if disc:
+        inside = np.linalg.norm(ends, axis=1) <= half[:, 0]
+    else:
+        inside = (np.abs(ends[:, 0]) <= half[:, 0]) & (np.abs(ends[:, 1]) <= half[:, 1])
+    return float(inside.mean())
+
+
+def robot_outline(world_bank: dict) -> dict:
+    """The robot's outline at its start against its reach and its first moves (docstring)."""
+    view = prediction_view(world_bank)
+    disc = world_bank["scene"]["agents"][0]["kind"] == "disc"
+    half = np.median(main_robot_sizes_m(world_bank), axis=0) / 2
+    drawn_m = half * view.outline_scale
+    reach = world_bank["max_step_m"]
+    ends, sizes = first_move_ends(world_bank)
+    passes = bool(drawn_m[0] <= OUTLINE_STEP_SHARE * view.median_step_m + 1e-9
+                  and drawn_m[0] <= OUTLINE_REACH_SHARE * reach)
+    return {"outline_scale": view.outline_scale,
+            "half_length_m": round(float(half[0]), 3), "half_width_m": round(float(half[1]), 3),
+            "half_length_px": round(float(drawn_m[0] * view.px_per_m), 1),
+            "half_width_px": round(float(drawn_m[1] * view.px_per_m), 1),
+            "reach_m": reach, "reach_px": round(reach * view.px_per_m, 1),
+            "half_length_over_reach": round(float(drawn_m[0] / reach), 3),
+            "step_over_half_length": round(float(view.median_step_m / drawn_m[0]), 3),
+            "first_moves_inside": round(inside_share(ends, sizes, disc, 1.0), 4),
+            "first_moves_inside_drawn": round(
+                inside_share(ends, sizes, disc, view.outline_scale), 4),
+            "passes": passes}
 
 
 def check_display(layout: Layout, study_id: str, bank_path: Path) -> dict:
@@ -141,7 +202,8 @@ def meta_of(bank_path: Path, world: str) -> dict | None:
 
 
 def format_table(result: dict) -> str:
-    """Two markdown tables, one row per world: the display figures, then click resolution."""
+    """Markdown tables, one row per world (and start kind): the display figures, click
+    resolution, start states and the robot outline."""
     lines = ["| world | min click (m) | true steps shorter | against mean direction "
              "| against own displacement | same-label policy 1-cos (screen / heading frame) |",
              "|---|---|---|---|---|---|"]
@@ -158,6 +220,25 @@ def format_table(result: dict) -> str:
         lines.append(f"| {name} | {r['px_per_m']:.1f} | {r['median_step_m']:.3f} "
                      f"| {r['median_step_px']:.1f} | {r['reach_px']:.1f} | {r['deg_per_px']:.3f} |")
     lines += ["", *start_state_table(result)]
+    lines += ["", outline_table(result)]
+    return "\n".join(lines)
+
+
+def outline_table(result: dict) -> str:
+    """The robot-outline figures, one row per world; a world failing the rule is flagged."""
+    lines = ["| world | drawn at | half-length m (px) | half-width m (px) | reach m (px) "
+             "| half-length / reach | median step / half-length "
+             "| first moves ending inside: real size / drawn | rule |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for name, f in result.items():
+        o = f["outline"]
+        lines.append(f"| {name} | {o['outline_scale']:.3f} "
+                     f"| {o['half_length_m']:.2f} ({o['half_length_px']:.0f}) "
+                     f"| {o['half_width_m']:.2f} ({o['half_width_px']:.0f}) "
+                     f"| {o['reach_m']:.2f} ({o['reach_px']:.0f}) "
+                     f"| {o['half_length_over_reach']:.2f} | {o['step_over_half_length']:.2f} "
+                     f"| {o['first_moves_inside']:.1%} / {o['first_moves_inside_drawn']:.1%} "
+                     f"| {'ok' if o['passes'] else 'FAILS'} |")
     return "\n".join(lines)
 
 

@@ -112,7 +112,8 @@ def start_states(world: World, trajs: TrajectorySet, covered: Covered,
     `clickable_states`."""
     src, end = segment_end
     robot, human = segment[-1, ROBOT], segment[-1, HUMAN]
-    pools = world.data_start_candidates(trajs.scene, segment, covered, steps_to_predict * max_step)
+    pools = world.data_start_candidates(trajs.scene_of(src), segment, covered,
+                                        steps_to_predict * max_step)
     picks, kinds = take_turns(robot, covered.positions, pools, count - 1, max_step, rng)
     heading = trajs.headings[src, end]
     own = (robot, float(heading[ROBOT]), float(trajs.speeds[src, end, ROBOT]))

@@ -45,7 +45,9 @@ class AgentShape(StrictModel):
 
 
 class Polyline(StrictModel):
-    """A line drawn under the agents (a map's lane border, kerb or stop line), scene frame."""
+    """A line drawn under the agents (a map's lane border, kerb or stop line), scene frame.
+    `virtual` (an unpainted lanelet border) is only in banks built before such lines were
+    left out of the scene; the page does not draw it."""
 
     kind: str = Field(pattern="^(border|kerb|virtual|stop)$")
     dashed: bool = False
@@ -113,8 +115,8 @@ HUMAN_COLOR = "#E69F00"
 #   is light enough for both agents (robot 4.0:1, person 3.6:1; under the reach disc's tint
 #   the robot's anti-aliased outline still 3.2:1, where #d8dadd left it at 2.9:1); kerbs a
 #   dark slate (8.1:1 on the road, drawn thick), painted lane borders a mid grey (3.6:1,
-#   thin), virtual lanes (no paint) faint on purpose (2.0:1, dotted), stop lines a dark red
-#   no agent or model is drawn in (5.7:1, a thick bar).
+#   thin), stop lines a dark red no agent or model is drawn in (5.7:1, a thick bar); a
+#   virtual lanelet border (no paint) is not drawn.
 BROWSER_PALETTE = {
     "robot": ROBOT_COLOR,
     "human": "#B35C00",
@@ -123,5 +125,5 @@ BROWSER_PALETTE = {
     "lane_mark": "#5f6368",
     "goals": ["#007A5A", "#6A3D9A", "#A0306A", "#333333"],
     "map": {"field": "#edf2e4", "road": "#e0e2e5", "kerb": "#3c4043", "border": "#70757a",
-            "virtual": "#9aa0a6", "stop": "#9e2a2b"},
+            "stop": "#9e2a2b"},
 }

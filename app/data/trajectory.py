@@ -9,6 +9,8 @@ Shape legend: N trajectories, T = max steps, A = 2 agents (0 = robot, 1 = human)
 - held_out  [N] bool or None: recorded worlds mark the trajectories cut from held-out
             recordings, which every checkpoint keeps as its test split; None lets the trainer
             draw the split (simulated worlds)
+- sizes     [N, A, 2] m (length, width) or None: a recorded world's vehicles as recorded;
+            None: every agent has the scene's `agents` size (simulated worlds)
 """
 
 import json
@@ -36,6 +38,7 @@ class Episode:
     headings: np.ndarray
     speeds: np.ndarray
     labels: dict[str, int] = field(default_factory=dict)
+    sizes: np.ndarray | None = None  # [A, 2] m (length, width) as recorded
 
     @property
     def length(self) -> int:
@@ -77,6 +80,7 @@ class TrajectorySet:
     label_names: dict[str, list[str]]
     scene: Scene
     held_out: np.ndarray | None = None
+    sizes: np.ndarray | None = None
 
     @property
     def actions(self) -> np.ndarray:
@@ -115,7 +119,18 @@ class TrajectorySet:
             label_names=label_names,
             scene=scene,
             held_out=None if held_out is None else np.asarray(held_out, dtype=bool),
+            sizes=(np.stack([ep.sizes for ep in episodes]).astype(np.float32)
+                   if all(ep.sizes is not None for ep in episodes) else None),
         )
+
+    def scene_of(self, i: int) -> Scene:
+        """The scene with its agents at trajectory i's recorded sizes (the scene itself
+        when the trajectories carry none)."""
+        if self.sizes is None:
+            return self.scene
+        agents = [a.model_copy(update={"length_m": float(size[0]), "width_m": float(size[1])})
+                  for a, size in zip(self.scene.agents, self.sizes[i], strict=True)]
+        return self.scene.model_copy(update={"agents": agents})
 
     def subset(self, index: np.ndarray) -> "TrajectorySet":
         """The trajectories at `index`, same world and scene."""
@@ -126,6 +141,7 @@ class TrajectorySet:
             labels={k: v[index] for k, v in self.labels.items()},
             label_names=self.label_names, scene=self.scene,
             held_out=None if self.held_out is None else self.held_out[index],
+            sizes=None if self.sizes is None else self.sizes[index],
         )
 
     def save(self, path: Path) -> None:
@@ -140,6 +156,8 @@ class TrajectorySet:
         arrays.update({f"label__{k}": v for k, v in self.labels.items()})
         if self.held_out is not None:
             arrays["held_out"] = self.held_out.astype(bool)
+        if self.sizes is not None:
+            arrays["sizes"] = self.sizes
         write_npz(path, arrays)
 
     @classmethod
@@ -155,4 +173,5 @@ class TrajectorySet:
                 lengths=npz["lengths"], labels=labels, label_names=header["label_names"],
                 scene=Scene.model_validate(header["scene"]),
                 held_out=npz["held_out"] if "held_out" in npz.files else None,
+                sizes=npz["sizes"] if "sizes" in npz.files else None,
             )

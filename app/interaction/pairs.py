@@ -45,11 +45,12 @@ class Pair:
     positions: np.ndarray  # [W, 2 agents, 2] m
     headings: np.ndarray  # [W, 2] rad
     speeds: np.ndarray  # [W, 2] m/s, from the recorded vx, vy
+    sizes: np.ndarray  # [2 agents, 2] m (length, width) as recorded; NaN where not given
 
     def episode(self, step: int, labels: dict[str, int] | None = None) -> Episode:
         """This pair as an Episode sampled every `step` frames."""
         return Episode(self.positions[::step].copy(), self.headings[::step].copy(),
-                       self.speeds[::step].copy(), labels or {})
+                       self.speeds[::step].copy(), labels or {}, self.sizes.copy())
 
 
 def _window_states(track: Track, first: int, size: int) -> tuple[np.ndarray, ...] | None:
@@ -110,7 +111,9 @@ def pairs_in_window(recording: Recording, first: int, size: int, max_distance_m:
             first_frame=first,
             positions=np.stack([r_states[0], h_states[0]], axis=1),
             headings=np.stack([r_states[1], h_states[1]], axis=1),
-            speeds=np.stack([r_states[2], h_states[2]], axis=1)))
+            speeds=np.stack([r_states[2], h_states[2]], axis=1),
+            sizes=np.array([[robot.length_m, robot.width_m], [human.length_m, human.width_m]],
+                           dtype=np.float64)))
     return pairs
 
 

@@ -4,11 +4,14 @@ Geometry: a four-arm roundabout (ring radius 18 m, counter-clockwise, right-hand
 or a four-arm intersection, both centred at ORIGIN_M. Cars arrive on each arm at random,
 follow a route (roundabout: exit after 1, 2 or 3 quarter turns; intersection: right,
 straight or left), slow down for curvature and for any car just ahead of them, and leave.
-A few pedestrians cross the arms. Every car's manoeuvre per frame goes to a sidecar CSV
-(generator_labels/), since the dataset's own columns have no place for it: the arm it
-entered from and the arm it leaves by (east/north/west/south), its turn (left / straight /
-right: roundabout exit after 3 / 2 / 1 quarter turns) and, on a roundabout, its phase
-(enter / circle / exit; empty at the intersection).
+A few pedestrians cross the arms. Vehicles come in recorded traffic's spread of sizes
+(VEHICLE_SIZES: mostly cars of 4-5 m, some vans, a few buses and trucks up to 12.2 m),
+drawn from a stream of their own, so a seed's arrivals and routes stay as they were; a car
+keeps its distance to the car ahead bumper to bumper. Every car's manoeuvre per frame goes
+to a sidecar CSV (generator_labels/), since the dataset's own columns have no place for it:
+the arm it entered from and the arm it leaves by (east/north/west/south), its turn (left /
+straight / right: roundabout exit after 3 / 2 / 1 quarter turns) and, on a roundabout, its
+phase (enter / circle / exit; empty at the intersection).
 
 Output layouts: v1.2 (train/<s>_train.csv, val/<s>_val.csv cut into 4 s cases) or v1.0
 (recorded_trackfiles/<s>/vehicle_tracks_000.csv + pedestrian_tracks_000.csv), plus a
@@ -33,7 +36,11 @@ ARM_LENGTH_M = 60.0
 LANE_OFFSET_M = 1.75
 INTERSECTION_BOX_M = 12.0
 CASE_FRAMES = 40
-CAR_LENGTH_M, CAR_WIDTH_M = 4.6, 1.9
+CAR_LENGTH_M, CAR_WIDTH_M = 4.6, 1.9  # the size the dataset's devkit assumes
+# (share of vehicles, (length min, max), (width min, max)) in m: cars, vans, buses and trucks
+VEHICLE_SIZES = ((0.85, (4.0, 5.0), (1.7, 2.0)), (0.11, (5.0, 6.5), (1.9, 2.2)),
+                 (0.04, (9.0, 12.2), (2.4, 2.6)))
+SIZE_STREAM = 104729  # added to a stream's seed for its vehicles' sizes
 ARM_ANGLES = (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)
 ARM_NAMES = ("east", "north", "west", "south")
 TURNS = ("left", "straight", "right")
@@ -170,6 +177,8 @@ class _Car:
     v: float
     v_des: float
     granted: bool = False  # may enter the intersection box
+    length_m: float = CAR_LENGTH_M
+    width_m: float = CAR_WIDTH_M
     log: list = field(default_factory=list)  # (frame, x, y, vx, vy, psi, manoeuvre)
 
 
@@ -179,8 +188,16 @@ def _pick_route(kind: str, rng: np.random.Generator, arm: int) -> Route:
     return intersection_route(arm, int(rng.choice([0, 1, 2], p=[0.4, 0.3, 0.3])))
 
 
+def vehicle_size(rng: np.random.Generator) -> tuple[float, float]:
+    """A (length, width) in m drawn from VEHICLE_SIZES."""
+    shares = np.array([share for share, _, _ in VEHICLE_SIZES])
+    _, length, width = VEHICLE_SIZES[int(rng.choice(len(shares), p=shares / shares.sum()))]
+    return round(float(rng.uniform(*length)), 2), round(float(rng.uniform(*width)), 2)
+
+
 def _gap_ahead(car: _Car, pos: np.ndarray, heading: float, others: list) -> float:
-    """Distance to the nearest other car in a 35-degree cone ahead (inf if none)."""
+    """Bumper-to-bumper distance to the nearest other car whose centre lies in a 35-degree
+    cone ahead (inf if none)."""
     best = math.inf
     forward = np.array([math.cos(heading), math.sin(heading)])
     for other, other_pos, other_heading in others:
@@ -195,7 +212,7 @@ def _gap_ahead(car: _Car, pos: np.ndarray, heading: float, others: list) -> floa
         # symmetric conflicts resolve by priority: the older car (lower id) goes first
         if other.track_id > car.track_id and dist > 7:
             continue
-        best = min(best, dist)
+        best = min(best, dist - (car.length_m + other.length_m) / 2)
     return best
 
 
@@ -211,18 +228,18 @@ def _box_gap(car: _Car, occupied_arms: set[int]) -> float:
         car.granted = True
         occupied_arms.add(car.route.arm)
         return math.inf
-    return to_line + CAR_LENGTH_M + 1.0  # stop 1 m before the line
+    return to_line + 1.0  # as a bumper gap: the centre stops 1 m before the line
 
 
 def _in_box(car: _Car) -> bool:
     box = car.route.box_m
-    return box is not None and car.granted and car.s < box[1] + CAR_LENGTH_M
+    return box is not None and car.granted and car.s < box[1] + car.length_m
 
 
 def _step_car(car: _Car, pos, heading, curvature, others, occupied_arms: set[int]) -> None:
     gap = min(_gap_ahead(car, pos, heading, others), _box_gap(car, occupied_arms))
     target = min(car.v_des, math.sqrt(2.2 / max(curvature, 1e-3)),
-                 max(0.0, (gap - CAR_LENGTH_M - 2.0) / 1.2))
+                 max(0.0, (gap - 2.0) / 1.2))
     accel = float(np.clip((target - car.v) / 0.8, -6.0, 2.0))
     car.v = max(0.0, car.v + accel * DT_S)
     car.s += car.v * DT_S
@@ -232,6 +249,7 @@ def simulate_stream(kind: str, duration_s: float, seed: int,
                     ) -> tuple[list[_Car], list[dict]]:
     """Cars and pedestrians over `duration_s` at 10 Hz; logs are in local metres."""
     rng = np.random.default_rng(seed)
+    size_rng = np.random.default_rng(seed + SIZE_STREAM)
     arrival_s = 4.0 if kind == "roundabout" else 6.0  # mean gap between arrivals per arm
     frames = int(round(duration_s / DT_S))
     cars: list[_Car] = []
@@ -247,7 +265,9 @@ def simulate_stream(kind: str, duration_s: float, seed: int,
             route = _pick_route(kind, rng, arm)
             if any(np.linalg.norm(c.route.at(c.s)[0] - route.points[0]) < 12 for c in active):
                 continue
-            car = _Car(next_id, route, 0.0, float(rng.uniform(7, 10)), float(rng.uniform(8, 11)))
+            length, width = vehicle_size(size_rng)
+            car = _Car(next_id, route, 0.0, float(rng.uniform(7, 10)), float(rng.uniform(8, 11)),
+                       length_m=length, width_m=width)
             next_id += 1
             cars.append(car)
             active.append(car)
@@ -288,7 +308,8 @@ def _fmt(value: float) -> str:
 def _car_rows(car: _Car, rng: np.random.Generator, offset: np.ndarray):
     for frame, x, y, vx, vy, psi, phase in car.log:
         noise = rng.normal(0, 0.02, size=2)
-        yield frame, [x + offset[0] + noise[0], y + offset[1] + noise[1], vx, vy, psi], phase
+        yield frame, [x + offset[0] + noise[0], y + offset[1] + noise[1], vx, vy, psi,
+                      car.length_m, car.width_m], phase
 
 
 def _manoeuvre(car: _Car, phase: int) -> tuple[str, str, str, str]:
@@ -299,7 +320,8 @@ def _manoeuvre(car: _Car, phase: int) -> tuple[str, str, str, str]:
 
 
 def _collect(cars: list[_Car], walkers: list[dict], seed: int):
-    """Per frame: list of (track_id, type, [x, y, vx, vy, psi|None], manoeuvre|None)."""
+    """Per frame: list of (track_id, type, values, manoeuvre|None); values [x, y, vx, vy, psi,
+    length, width] of a car, [x, y, vx, vy, None] of a pedestrian."""
     rng = np.random.default_rng(seed + 7919)
     by_frame: dict[int, list] = {}
     for car in cars:
@@ -316,14 +338,14 @@ def _collect(cars: list[_Car], walkers: list[dict], seed: int):
 
 def _row(track_id: int, frame: int, stamp_frame: int, agent_type: str, values: list,
          with_shape: bool = True) -> list[str]:
-    x, y, vx, vy, psi = values
+    x, y, vx, vy, psi, *size = values  # a car's values end with its length and width
     row = [str(track_id), str(frame), str(stamp_frame * FRAME_MS), agent_type,
            _fmt(x), _fmt(y), _fmt(vx), _fmt(vy)]
     if with_shape:
         if psi is None:
             row += ["", "", ""]
         else:
-            row += [_fmt(psi), _fmt(CAR_LENGTH_M), _fmt(CAR_WIDTH_M)]
+            row += [_fmt(psi), *(_fmt(v) for v in size)]
     return row
 
 

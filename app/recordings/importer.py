@@ -2,10 +2,11 @@
 
 The recorded world's counterpart of `simulate`: read and validate every recording of the
 config's source (a format error names file, line and column), cut robot/human pairs over
-fixed windows (app/interaction/pairs.py), drop the pairs whose two agents ever come closer
-than an agent's width (tracking errors, or the generator's cars passing through each other:
-no clip may show two cars on top of each other; meta.json counts them), sample them every
-`dt_s`, label each pair with the
+fixed windows (app/interaction/pairs.py), drop the pairs whose two agents' centres ever come
+closer than the mean of their two widths (side by side, touching: tracking errors, or the
+generator's cars passing through each other: no clip may show two cars on top of each other;
+meta.json counts them), sample them every `dt_s`, keep each agent's recorded length and width
+(the config's `agent:` where a recording gives none), label each pair with the
 robot's and the human's turn over the window, mark the pairs of held-out recordings (every
 checkpoint's test split, so the bank's trials come from recordings no model trained on),
 and write data/<world>/trajectories.npz and meta.json. Everything is read and checked before
@@ -173,7 +174,8 @@ def split_pairs(rec: Recordings, config: RecordedConfig) -> tuple[dict[str, list
         chosen = [r for r in rec.recordings if r.name in rec.ranges[split]]
         found = px.extract_pairs(chosen, size, stride, config.pair_max_distance_m,
                                  rec.ranges[split], rec.rule)
-        pairs = [p for p in found if closest_m(p) >= config.agent.width_m]
+        pairs = [p for p in found
+                 if closest_m(p) >= agent_sizes(p, config)[:, 1].mean()]
         dropped[split] = len(found) - len(pairs)
         if 0 < config.max_pairs < len(pairs):
             keep = np.linspace(0, len(pairs) - 1, config.max_pairs).round().astype(int)
@@ -194,12 +196,22 @@ def closest_m(pair: px.Pair) -> float:
     return float(np.hypot(gaps[:, 0], gaps[:, 1]).min())
 
 
-def pair_episode(pair: px.Pair, step: int, frame: SceneFrame, threshold_deg: float) -> Episode:
-    """A pair sampled every `step` frames, labelled, in the scene frame."""
+def agent_sizes(pair: px.Pair, config: RecordedConfig) -> np.ndarray:
+    """The pair's two (length, width) [2, 2] m as recorded, the config's `agent:` where a
+    recording gives none (a lab's logs without the size columns)."""
+    fallback = np.array([config.agent.length_m, config.agent.width_m])
+    return np.where(np.isfinite(pair.sizes), pair.sizes, fallback)
+
+
+def pair_episode(pair: px.Pair, step: int, frame: SceneFrame,
+                 config: RecordedConfig) -> Episode:
+    """A pair sampled every `step` frames, labelled, sized, in the scene frame."""
+    threshold_deg = config.turn_threshold_deg
     labels = {"robot_turn": turn_label(pair.positions[:, 0], threshold_deg),
               "human_turn": turn_label(pair.positions[:, 1], threshold_deg)}
     return Episode(frame.points(pair.positions[::step]),
-                   frame.headings(pair.headings[::step]), pair.speeds[::step].copy(), labels)
+                   frame.headings(pair.headings[::step]), pair.speeds[::step].copy(), labels,
+                   agent_sizes(pair, config))
 
 
 def driven_points(rec: Recordings) -> np.ndarray:
@@ -218,7 +230,7 @@ def build_trajectories(world: str, config: RecordedConfig,
     pairs, overlapping = split_pairs(rec, config)
     every = pairs["train"] + pairs["val"]
     frame = frame_around(np.concatenate([p.positions.reshape(-1, 2) for p in every]))
-    episodes = [pair_episode(p, step, frame, config.turn_threshold_deg)
+    episodes = [pair_episode(p, step, frame, config)
                 for p in tqdm(every, desc=f"pairs {world}", unit="pair", leave=False)]
     scene = recorded_scene(world, config, rec.source, frame,
                            np.concatenate([e.positions.reshape(-1, 2) for e in episodes]),

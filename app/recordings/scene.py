@@ -25,10 +25,13 @@ from app.recordings.config import RecordedConfig
 
 LINE_DECIMALS = 2  # lines are drawn, never scored: centimetres are plenty
 SIMPLIFY_M = 0.15  # a line point this close to the straight line through its neighbours goes
-# lanelet2 line types -> how the browser draws them (other types, e.g. traffic signs, are left out)
+# lanelet2 line types -> how the browser draws them (other types, e.g. traffic signs, are left
+# out). A `virtual` way is a lanelet's border where nothing is painted (across a junction, at a
+# lane's start): it is read but never drawn, so every line on screen is paint or a kerb, as
+# the world intros say; a crossing's markings are paint.
 LINE_KINDS = {"curbstone": "kerb", "road_border": "kerb", "guard_rail": "kerb", "fence": "kerb",
               "wall": "kerb", "line_thin": "border", "line_thick": "border",
-              "virtual": "virtual", "pedestrian_marking": "virtual", "zebra_marking": "virtual",
+              "virtual": None, "pedestrian_marking": "border", "zebra_marking": "border",
               "stop_line": "stop"}
 
 

@@ -21,23 +21,33 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
-from app.configio import StrictModel
+from app.configio import StrictModel, omitted_when_empty
 from app.fileio import read_bytes, sha256_bytes
 from app.layout import Layout
 
 # what the participant is shown, and so what every model and baseline answers from
 POS_DECIMALS = 3  # positions in m
 HEADING_DECIMALS = 4  # headings in rad
+SIZE_DECIMALS = 2  # agents' lengths and widths in m
 NO_SEED = -1  # the seed of a plug-in predictor's answer: code, not a trained checkpoint
 
 
 class Clip(StrictModel):
-    """An animation: positions [steps+1, 2, 2] and headings [steps+1, 2]."""
+    """An animation: positions [steps+1, 2, 2] and headings [steps+1, 2]; `sizes` [2, 2] m,
+    each agent's (length, width) as recorded (a recorded world's; left out of the bank and
+    the page where absent, so a simulated world's clips keep their bytes and hashes)."""
 
     positions: list[list[list[float]]]
     headings: list[list[float]]
     robot_label: int | None = None
     source_index: int | None = None
+    sizes: list[list[float]] | None = None
+
+    _without_unset_sizes = omitted_when_empty("sizes")
+
+    def shown(self) -> dict:
+        """What the page draws of the clip: positions, headings and (when known) sizes."""
+        return self.model_dump(include={"positions", "headings", "sizes"})
 
 
 class StartState(StrictModel):
@@ -98,9 +108,8 @@ class TrialRecord(StrictModel):
     def browser_payload(self) -> dict:
         """What the participant's browser needs to play and ask this trial."""
         return {
-            "examples": [{"positions": c.positions, "headings": c.headings}
-                         for c in self.examples],
-            "segment": {"positions": self.segment.positions, "headings": self.segment.headings},
+            "examples": [c.shown() for c in self.examples],
+            "segment": self.segment.shown(),
             "start_states": [s.model_dump(exclude={"robot_speed", "start_kind"})
                              for s in self.start_states],
         }

@@ -13,7 +13,8 @@ model of their agents, a recorded world takes from the data:
 - a segment may end where the robot is under way: moving at least `min_moving_speed_mps`
   over the step into the end and the next ones (a standing car's move cannot be clicked);
 - start states lie where recorded robots drove the way this robot is heading (`near`: within
-  the reach of the n steps, `far`: up to twice that), clear of the human by two car lengths.
+  the reach of the n steps, `far`: up to twice that), clear of the human by the two cars'
+  lengths (the scene's `agents`, at this segment's recorded sizes: TrajectorySet.scene_of).
 """
 
 from pathlib import Path
@@ -102,12 +103,12 @@ class RecordedWorld:
         heading = float(np.arctan2(move[1], move[0]))
         pts = covered.positions
         dist = np.linalg.norm(pts - robot, axis=1)
-        car = max(a.length_m for a in scene.agents)
+        clearance = sum(a.length_m for a in scene.agents)  # the robot's and the human's
         b = scene.bounds
         keep = ((dist <= 2 * reach)
                 & (angle_gap(covered.headings, heading)
                    <= np.radians(self.config.start_heading_tolerance_deg))
-                & (np.linalg.norm(pts - human, axis=1) > 2 * car)
+                & (np.linalg.norm(pts - human, axis=1) > clearance)
                 & (pts[:, 0] - reach > b.x_min_m) & (pts[:, 0] + reach < b.x_max_m)
                 & (pts[:, 1] - reach > b.y_min_m) & (pts[:, 1] + reach < b.y_max_m))
         return {"near": np.flatnonzero(keep & (dist <= reach)),

@@ -274,10 +274,11 @@ def robot_outline(page, trial: dict) -> dict:
     scale, origin_x, origin_y = canvas_view(page)
     start = trial["start_states"][0]
     agent = trial["scene"]["agents"][0]
+    width_m = trial["segment"].get("sizes", [[0, agent["width_m"]]])[0][1]  # as recorded
     centre = [origin_x + start["robot"][0] * scale, origin_y + start["robot"][1] * scale]
     heading = start["robot_heading"] if agent["kind"] == "car" else 0.0
     across = [-math.sin(heading), math.cos(heading)]
-    extent = page.evaluate(ROBOT_EXTENT, [*centre, *across, agent["width_m"] * scale / 2 + 4,
+    extent = page.evaluate(ROBOT_EXTENT, [*centre, *across, width_m * scale / 2 + 4,
                                           list(ROBOT_RGB)])
     at = lambda d: [centre[0] + d * across[0], centre[1] + d * across[1]]  # noqa: E731
     return {"width": extent[1] - extent[0], "outline": page.evaluate(PIXEL, at(extent[1] - 1)),

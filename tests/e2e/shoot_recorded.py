@@ -4,9 +4,10 @@
 GENERATED, NOT REAL recordings (tests/conftest.py `cached_interaction_study`), serves it on a
 fresh SQLite file, walks it in Debian's chromium and writes var/screens/recorded_*.png: the
 instructions with the study's road demo (mid-clip, an own start, a moved start), then per
-world its introduction, an example clip mid-animation and the prediction screen with two
-clicks made; then the researcher dashboard and its replay of the roundabout's first main trial
-(every start state, then one).
+world its introduction, an example clip mid-animation, the prediction screen with two clicks
+made from the robot's own start and with one click from a relocated start; then the
+researcher dashboard and its replay of the roundabout's first main trial (every start state,
+then one).
 
 The walk runs on the page's fake clock, seconds of server time for minutes of a person's: the
 server trusts the page's clock (as pilots with bots do), so the too-fast rule keeps the session
@@ -64,7 +65,8 @@ def shoot_participant(page, study_id: str) -> None:
 
 
 def shoot_trial(page, study_id: str) -> None:
-    """A practice trial: mid-clip, then two clicks of the first start state; then the rest."""
+    """A practice trial: mid-clip, two clicks of the first start state (the robot's own), the
+    first click of the second (a relocated start); then the rest."""
     trial = current_state(page, study_id)["step"]
     page.clock.fast_forward(MID_CLIP_MS)
     page.screenshot(path=str(OUT / f"recorded_{trial['world']}_clip.png"))
@@ -72,6 +74,11 @@ def shoot_trial(page, study_id: str) -> None:
     place(page, trial, 0, [0, 1])
     page.mouse.move(0, 0)  # no hover preview in the picture
     page.screenshot(path=str(OUT / f"recorded_{trial['world']}_predict.png"))
+    place(page, trial, 0, list(range(2, trial["steps_to_predict"])))
+    page.click("#next")
+    place(page, trial, 1, [0])
+    page.mouse.move(0, 0)
+    page.screenshot(path=str(OUT / f"recorded_{trial['world']}_predict_relocated.png"))
     answer_trial(page, study_id)
 
 

@@ -1,17 +1,22 @@
 """Recorded worlds: importing INTERACTION recordings (both layouts), the scene, the held-out
 split, malformed recordings, and the World protocol's rules taken from the data."""
 
+import csv
+import dataclasses
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from app.bank.build import clip_of
 from app.configio import ConfigError
 from app.data.scene import Bounds, Scene
 from app.data.trajectory import ROBOT, Covered, TrajectorySet
 from app.data.windows import split_by_trajectory
 from app.interaction.dataset import turn_label
+from app.interaction.lanelet_map import LaneLine
+from app.interaction.pairs import Pair
 from app.interaction.tracks import TrackFileError
 from app.layout import Layout
 from app.recordings.config import RecordedConfig
@@ -19,9 +24,11 @@ from app.recordings.generated import generate_study_recordings
 from app.recordings.importer import (
     LABEL_NAMES,
     UnusableRecordings,
+    agent_sizes,
     import_recordings,
 )
-from app.recordings.scene import SceneFrame, row_runs, simplify
+from app.recordings.scene import SceneFrame, row_runs, scene_lines, simplify
+from app.study.trials import TrialRecord
 from app.worlds.recorded import RecordedWorld
 from app.worlds.registry import World, build_world
 
@@ -72,9 +79,72 @@ def test_no_pair_shows_its_two_cars_on_top_of_each_other(imported):
     for world in ("roundabout", "intersection"):
         trajs, meta = imported[world], imported[f"{world}_meta"]
         gaps = np.linalg.norm(trajs.positions[:, :, 0] - trajs.positions[:, :, 1], axis=-1)
-        assert gaps.min() >= 1.9  # the car's width
+        side_by_side = trajs.sizes[:, :, 1].mean(axis=1)  # the mean of the two cars' widths
+        assert (gaps.min(axis=1) >= side_by_side - 1e-6).all()
         dropped += sum(meta["pairs_dropped_overlapping"].values())
     assert dropped > 0  # the generator's cars do pass through each other
+
+
+def recorded_sizes(recordings: Path) -> set[tuple[float, float]]:
+    """Every (length, width) the generated track files give a car."""
+    sizes = set()
+    for path in (recordings / "INTERACTION").rglob("*.csv"):
+        with open(path, newline="") as fh:
+            sizes |= {(float(row["length"]), float(row["width"])) for row in csv.DictReader(fh)
+                      if row.get("agent_type") == "car"}
+    return sizes
+
+
+def test_each_pair_keeps_its_two_vehicles_recorded_sizes(imported, recordings):
+    known = recorded_sizes(recordings)
+    for world in ("roundabout", "intersection"):
+        sizes = imported[world].sizes
+        assert sizes.shape == (len(imported[world]), 2, 2)
+        assert {(round(float(a), 3), round(float(b), 3)) for a, b in sizes.reshape(-1, 2)} <= known
+        lengths = sizes[..., 0]
+        assert lengths.min() < 4.6 < np.median(lengths) + 0.5 and lengths.max() > 8.0  # buses
+        # the trajectories file keeps them
+        again = TrajectorySet.load(imported["layout"].trajectories(world)).sizes
+        assert np.array_equal(again, sizes)
+
+
+def test_a_log_without_sizes_draws_the_configs_agent():
+    pair = Pair("r", 1, 2, 0, np.zeros((3, 2, 2)), np.zeros((3, 2)), np.zeros((3, 2)),
+                np.array([[np.nan, np.nan], [12.0, 2.5]]))
+    looks = config(ROUNDABOUT, agent={"kind": "car", "length_m": 4.2, "width_m": 1.8})
+    assert agent_sizes(pair, looks).tolist() == [[4.2, 1.8], [12.0, 2.5]]
+
+
+def test_sizes_reach_the_trial_payload_and_a_simulated_clip_has_none(imported):
+    trajs = imported["intersection"]
+    def as_stored(i: int) -> list[list[float]]:  # centimetres, no float32 digits
+        return [[round(float(v), 2) for v in agent] for agent in trajs.sizes[i]]
+
+    sized = clip_of(trajs, 0, 0, 4, "robot_turn")
+    assert sized.sizes == as_stored(0)
+    assert sized.shown()["sizes"] == sized.sizes and "sizes" in sized.model_dump()
+    plain = clip_of(dataclasses.replace(trajs, sizes=None), 0, 0, 4, "robot_turn")
+    assert set(plain.shown()) == {"positions", "headings"}  # as before sizes existed
+    assert "sizes" not in plain.model_dump() and "sizes" not in plain.model_dump_json()
+    segment = clip_of(trajs, 1, 0, 4, "robot_turn")
+    trial = TrialRecord(trial_id="t", world="intersection", kind="main", source_index=1,
+                        segment_start=0, robot_label=0, examples=[sized], segment=segment,
+                        start_states=[], model_input=[], predictions={}, cv_actions=[],
+                        policy_actions=[], clip_sha256="")
+    shown = trial.browser_payload()
+    assert shown["segment"]["sizes"] == as_stored(1)
+    assert shown["examples"][0]["sizes"] == sized.sizes
+
+
+def test_virtual_lanelet_borders_are_not_drawn():
+    frame = SceneFrame(np.zeros(2))
+    bounds = Bounds(x_min_m=-20, x_max_m=20, y_min_m=-20, y_max_m=20)
+    across = np.array([[-10.0, 0.0], [10.0, 0.0]])
+    lines = [LaneLine(kind, sub, across + [0, k]) for k, (kind, sub) in enumerate(
+        [("virtual", ""), ("line_thin", "dashed"), ("zebra_marking", ""), ("curbstone", "")])]
+    drawn = scene_lines(lines, frame, bounds)
+    assert [(line.kind, line.dashed) for line in drawn] == [
+        ("border", True), ("border", False), ("kerb", False)]
 
 
 def test_pairs_are_sampled_every_dt_and_labelled(imported):

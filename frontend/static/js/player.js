@@ -68,12 +68,12 @@ function followView(scene, width, height, point) {
 export function drawClipFrame(ctx, view, scene, clip, t, poses = poseAt(clip, t)) {
   drawBackground(ctx, view, scene, t);
   poses.forEach((pose, agent) => {
-    const style = agentStyle(scene, agent);
+    const style = agentStyle(scene, agent, clip.sizes);
     const past = clip.positions.slice(0, Math.floor(t) + 1).map((step) => step[agent]);
     drawTrace(ctx, view, style, [...past, pose.position], { dots: true, width: 2 });
   });
   const layout = new LabelLayout(ctx, view.width, view.height);
-  drawAgents(ctx, view, poses.map((pose, agent) => ({ style: agentStyle(scene, agent), ...pose })), layout);
+  drawAgents(ctx, view, poses.map((pose, agent) => ({ style: agentStyle(scene, agent, clip.sizes), ...pose })), layout);
   // the person may be out of a followed view: an arrow points to it (drawPointer draws nothing
   // for a point in view, as the person always is in a whole-scene view: the worlds keep both
   // agents inside the scene's bounds)

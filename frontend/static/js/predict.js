@@ -77,8 +77,10 @@ function availableHeight(canvas) {
  * `predictions`); a trial's own limits (steps, reach, scene bounds) come with the trial.
  *
  * The view is drawn at the server's scale for this world (`trial.view.px_per_m`,
- * app/prediction_view.py), the same on every screen, around the robot; `overview`, when
- * given, is a canvas that shows the whole scene with the zoomed frame on it.
+ * app/prediction_view.py), the same on every screen, around the robot, with the agents at
+ * their recorded sizes times the view's `outline_scale` (below 1 in a recorded world, so
+ * the first click lands clear of the robot's outline); `overview`, when given, is a canvas
+ * that shows the whole scene with the zoomed frame on it.
  */
 export class PredictionInput {
   constructor(canvas, trial, { rules, onChange = () => {}, onMessage = () => {}, overview = null }) {
@@ -195,6 +197,14 @@ export class PredictionInput {
     if (!this.relocated() || this.scene.recorded) return this.robotHeading;
     if (this.scene.lanes?.length) return Math.cos(this.robotHeading) >= 0 ? 0 : Math.PI;
     return null;
+  }
+
+  /** Agent i's style as this view draws it: the segment's recorded size, if any, times the
+   * server's outline_scale. */
+  agentAt(i) {
+    const style = agentStyle(this.scene, i, this.trial.segment.sizes);
+    const shrink = this.trial.view?.outline_scale ?? 1;
+    return { ...style, length_m: style.length_m * shrink, width_m: style.width_m * shrink };
   }
 
   get humanHeading() {
@@ -408,8 +418,8 @@ export class PredictionInput {
     publishView(this.canvas, view);
     this.view = view;
     const scene = this.scene;
-    const robot = agentStyle(scene, 0);
-    const human = agentStyle(scene, 1);
+    const robot = this.agentAt(0);
+    const human = this.agentAt(1);
     const layout = new LabelLayout(ctx, width, height);
     drawBackground(ctx, view, scene);
     const segment = this.trial.segment.positions;

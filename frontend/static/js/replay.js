@@ -71,8 +71,8 @@ export function drawAnswers(canvas, replay, tMs, only = null) {
   const shown = starts.filter((s) => only === null || s.start_index === only);
   const scene = viewScene(replay, shown, only !== null);
   const { ctx, view } = prepareCanvas(canvas, scene);
-  const robot = agentStyle(scene, 0);
-  const human = agentStyle(scene, 1);
+  const robot = agentStyle(scene, 0, trial.segment.sizes);
+  const human = agentStyle(scene, 1, trial.segment.sizes);
   drawBackground(ctx, view, scene);
   ctx.save();
   clipToScene(ctx, view, scene.bounds); // a close-up's traces and agents stop at its edge

@@ -211,10 +211,10 @@ function drawDriven(ctx, view, driven) {
 }
 
 // How a map's lines are drawn, faintest first: width in metres, held within [min, max] CSS px
-// so a line stays visible on the small overview map and does not swamp the close-up;
-// `dots`: a dotted line (round dots `gap` px apart).
+// so a line stays visible on the small overview map and does not swamp the close-up. A kind
+// not listed is not drawn: `virtual` lanelet borders (no paint), which banks built before
+// app/recordings/scene.py left them out still carry.
 const MAP_LINES = [
-  ["virtual", { widthM: 0.12, minPx: 1.2, maxPx: 1.5, dots: true, gapPx: 5 }],
   ["border", { widthM: 0.12, minPx: 1, maxPx: 2 }],
   ["kerb", { widthM: 0.3, minPx: 1.5, maxPx: 4 }],
   ["stop", { widthM: 0.5, minPx: 2, maxPx: 6 }],
@@ -237,11 +237,9 @@ function drawMapLines(ctx, view, recorded) {
   for (const [kind, style] of MAP_LINES) {
     ctx.strokeStyle = MAP[kind];
     ctx.lineWidth = Math.min(style.maxPx, Math.max(style.minPx, style.widthM * view.scale));
-    ctx.lineCap = style.dots ? "round" : "butt";
     ctx.lineJoin = "round";
     for (const line of groups.get(kind)) {
-      if (style.dots) ctx.setLineDash([0, style.gapPx]);
-      else ctx.setLineDash(line.dashed ? DASH_M.map((m) => m * view.scale) : []);
+      ctx.setLineDash(line.dashed ? DASH_M.map((m) => m * view.scale) : []);
       ctx.beginPath();
       line.points.forEach((p, i) => {
         const [px, py] = view.toPx(p);
@@ -252,7 +250,6 @@ function drawMapLines(ctx, view, recorded) {
     }
   }
   ctx.setLineDash([]);
-  ctx.lineCap = "butt";
 }
 
 function drawObstacle(ctx, view, obstacle) {
@@ -366,13 +363,18 @@ function ringSpots(anchor, distance, angles) {
     [anchor[0] + f * distance * Math.cos(a), anchor[1] + f * distance * Math.sin(a)])));
 }
 
-/** Role of agent i: 0 is the robot, 1 the human (DESIGN.md section 3); its tag is the study's
- * key for it (app/study/words.py). */
-export function agentStyle(scene, i) {
+/**
+ * Role of agent i: 0 is the robot, 1 the human (DESIGN.md section 3); its tag is
+ * the study's key for it (app/study/words.py). `sizes`, a clip's
+ * [length, width] (m) per agent as recorded (app/study/trials.py Clip), replace the scene's.
+ */
+export function agentStyle(scene, i, sizes = null) {
   const shape = scene.agents?.[i] || { kind: "disc", length_m: 1, width_m: 1 };
+  const size = sizes?.[i];
   const isRobot = i === 0;
   return {
     ...shape,
+    ...(size ? { length_m: size[0], width_m: size[1] } : {}),
     color: isRobot ? ROBOT_COLOR : HUMAN_COLOR,
     tag: isRobot ? WORDS.agent_key : WORDS.other_key,
     name: isRobot ? "robot" : "human",
