@@ -36,6 +36,10 @@ class TrackFileError(ValueError):
     """A track file does not follow the documented format; the message names file and line."""
 
 
+class PartialDownload(TrackFileError):
+    """The devkit's validation list names recordings that are not in the copy."""
+
+
 @dataclass
 class Track:
     """One agent in one recording: frames [T] on the recording's time grid, states [T, ...]."""
@@ -313,3 +317,19 @@ def official_val_recordings(data_dir: Path, scenario: str) -> list[str]:
         elif current == scenario:
             names.append(word)
     return names
+
+
+def check_listed_present(data_dir: Path, scenario: str, listed: list[str],
+                         present: list[str], switch: str) -> None:
+    """PartialDownload naming the listed recordings absent from the copy and what to do."""
+    missing = sorted(set(listed) - set(present))
+    if not missing:
+        return
+    shown = ", ".join(missing[:5]) + (", ..." if len(missing) > 5 else "")
+    path = Path(data_dir) / "recorded_trackfiles" / OFFICIAL_VAL_LIST
+    raise PartialDownload(
+        f"{path}: {len(missing)} of the {len(listed)} {scenario} recordings this validation "
+        f"list holds out are not in {path.parent / scenario}: {shown} ({len(present)} "
+        f"recordings are there: a partial download?), so the list cannot hold them out. "
+        f"Add the missing files; or remove the list, and each recording's last part is held "
+        f"out instead; or keep the list and set {switch} to do the same")
