@@ -317,3 +317,20 @@ def test_the_vectorised_reader_leaves_a_doubtful_file_to_the_checking_reader(tmp
         path = _write(tmp_path / "doubt.csv", "\n".join([HEADER, *rows]) + "\n")
         assert ix._plain_rows(path, ix.VEHICLE_COLUMNS) is None
 
+
+def test_real_size_files_are_v10_recordings_at_the_asked_density(tmp_path):
+    from app.recordings.generated import generate_study_recordings
+
+    sparse, dense = (generate_study_recordings(tmp_path / name, 60.0, files=2,
+                                               arrivals_per_arm_min=rate)
+                     for name, rate in (("sparse", 6.0), ("dense", 24.0)))
+    for scenario in ("DR_USA_Roundabout_FT", "DR_USA_Intersection_EP0"):
+        folder = tmp_path / "dense" / "recorded_trackfiles" / scenario
+        assert sorted(p.name for p in folder.glob("vehicle_tracks_*.csv")) == [
+            "vehicle_tracks_000.csv", "vehicle_tracks_001.csv"]
+        assert (tmp_path / "dense" / "generator_labels" /
+                f"{scenario}_vehicle_tracks_001.csv").is_file()
+    assert all(d["cars"] > s["cars"] for d, s in zip(dense, sparse, strict=True))
+    with pytest.raises(ValueError, match="arrivals per arm per minute: 60 is not in"):
+        generate(tmp_path / "x", "DR_USA_Roundabout_FT", "v1.0", 60.0, 30.0,
+                 arrivals_per_arm_min=60.0)
