@@ -287,6 +287,7 @@ def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Pat
     exp = load_scenario_data(data_dir, scenario, cfg)
     loaded = time.perf_counter()
     run = train_all(exp, cfg, base_train_cfg, models_dir, workers)
+    trained = time.perf_counter()
     on, per_seed = run.on, run.per_seed
     cv = score_constant_velocity(on.windows, on.scored)
     summary = summarise(exp, cfg, on.windows, on.scored, on.labels, per_seed, cv)
@@ -300,7 +301,7 @@ def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Pat
     inputs = FigureInputs(exp.scenario, exp.train.trajs, exp.lane_lines, on.windows, on.scored,
                           cfg.field_grid, cfg.field_codes)
     write_report(out_dir, summary, per_seed, write_figures(inputs, per_seed, summary, out_dir))
-    wall_s = {"load": loaded - started, **run.wall_s}
+    wall_s = {"load": loaded - started, **run.wall_s, "report": time.perf_counter() - trained}
     write_json(out_dir / "meta.json", {
         "scenario": scenario, "layout": exp.layout, "config": cfg.model_dump(),
         "train_config": run.train_cfg.model_dump(), "inputs_sha256": exp.inputs,
