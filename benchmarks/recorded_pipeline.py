@@ -9,12 +9,13 @@ for each file count of `--files` runs, as a user does (`tomstudy`, each in its o
 `bundle build --study interaction_study` (both worlds, N files each). Each run's phases come
 from its artefacts: the interaction report's meta.json (`phase_wall_time_s`) and the
 bundle's manifest (`built.phase_wall_time_s`); per recording file (the load / data phase),
-per selection cell and per checkpoint. `--baseline-code DIR` first runs the same commands
-with another checkout (e.g. `git worktree add ../before <commit>`) on the same files and
-prints the before/after ratios and whether the results are identical (checkpoint hashes,
-bank, per-seed errors). The growth line divides each count's time by the smallest count's.
-Training keeps training.yaml's epochs and the study's seeds unless `--seeds` /
-`--max-epochs` cut them (quick checks only: the target is for the study's own rules).
+per selection cell and per checkpoint; `pairs` is the training pairs the models fit on (the
+bundle's: both worlds', after their `max_pairs` cap). `--baseline-code DIR` first runs the
+same commands with another checkout (e.g. `git worktree add ../before <commit>`) on the same
+files and prints the before/after ratios and whether the results are identical (checkpoint
+hashes, bank, per-seed errors, the ceilings). The growth line divides each count's time by
+the smallest count's. Training keeps training.yaml's epochs and the study's seeds unless
+`--seeds` / `--max-epochs` cut them (quick checks only: the target is for the study's rules).
 
     .venv/bin/python benchmarks/recorded_pipeline.py [--files 1,2,4,6] [--minutes 15]
         [--recordings DIR] [--baseline-code DIR] [--commands interaction,bundle]
@@ -117,11 +118,14 @@ def interaction_run(code: Path, data: Path, var: Path, configs_dir: Path, files:
     cells = len(cfg["code_levels"]["levels"])
     checkpoints = 2 * (cfg["seeds"] + cfg["frame_sensitivity"]["seeds"])
     phases = meta["phase_wall_time_s"]
-    return {"wall": wall, "cpu": cpu, "phases": phases,
+    pairs = json.loads((out / "summary.json").read_text())["pairs"]["train"]
+    return {"wall": wall, "cpu": cpu, "phases": phases, "pairs": pairs,
             "per_file": phases["load"] / files, "per_cell": phases["levels"] / cells,
             "per_checkpoint": phases["seeds"] / checkpoints,
             "results": {"checkpoints": meta["checkpoints"],
-                        "per_seed": (out / "per_seed.csv").read_text()}}
+                        "per_seed": (out / "per_seed.csv").read_text(),
+                        "code_purity": json.loads((out / "summary.json").read_text())[
+                            "code_purity"]}}
 
 
 def bundle_run(code: Path, data: Path, var: Path, configs_dir: Path, files: int) -> dict:
@@ -134,7 +138,9 @@ def bundle_run(code: Path, data: Path, var: Path, configs_dir: Path, files: int)
     worlds = yaml.safe_load((configs_dir / f"{STUDY}.yaml").read_text())["worlds"]
     cells = len(worlds) * grid_size(configs_dir)
     checkpoints = 2 * len(worlds) * len(manifest["seeds"])
-    return {"wall": wall, "cpu": cpu, "phases": phases,
+    pairs = sum(json.loads((var / "data" / world / "meta.json").read_text())["pairs"]["train"]
+                for world in worlds)
+    return {"wall": wall, "cpu": cpu, "phases": phases, "pairs": pairs,
             "per_file": phases["data"] / (files * len(worlds)),
             "per_cell": phases["selection"] / cells,
             "per_checkpoint": phases["training"] / checkpoints,
@@ -169,7 +175,7 @@ def print_row(tag: str, command: str, files: int, row: dict) -> None:
     """One run's line of the table."""
     phases = ", ".join(f"{k} {v:.0f}" for k, v in row["phases"].items())
     flag = "" if row["wall"] < TARGET_S else "  (over 5 min)"
-    print(f"{tag:8} {command:11} {files:5d} {row['wall']:8.1f} {row['cpu']:8.1f} "
+    print(f"{tag:8} {command:11} {files:5d} {row['pairs']:7d} {row['wall']:8.1f} {row['cpu']:8.1f} "
           f"{row['per_file']:8.2f} {row['per_cell']:8.1f} {row['per_checkpoint']:8.1f}   "
           f"{phases}{flag}", flush=True)
 
@@ -219,7 +225,7 @@ def main() -> None:
         generate(source.resolve(), max(counts), args.minutes, args.arrivals_per_arm_min)
         print(f"GENERATED, NOT REAL files: {args.minutes:g} min each, both scenarios, "
               f"{os.cpu_count()} CPUs (times depend on the machine's load)")
-        print(f"{'code':8} {'command':11} {'files':>5} {'wall s':>8} {'CPU s':>8} "
+        print(f"{'code':8} {'command':11} {'files':>5} {'pairs':>7} {'wall s':>8} {'CPU s':>8} "
               f"{'s/file':>8} {'s/cell':>8} {'s/ckpt':>8}   phases (s)")
         before = None
         if args.baseline_code:
