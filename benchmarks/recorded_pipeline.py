@@ -123,7 +123,7 @@ def interaction_run(code: Path, data: Path, var: Path, configs_dir: Path, files:
             "per_file": phases["load"] / files, "per_cell": phases["levels"] / cells,
             "per_checkpoint": phases["seeds"] / checkpoints,
             "results": {"checkpoints": meta["checkpoints"],
-                        "per_seed": (out / "per_seed.csv").read_text(),
+                        "per_seed": (out / "per_seed.csv").read_text().replace(str(var), "VAR"),
                         "code_purity": json.loads((out / "summary.json").read_text())[
                             "code_purity"]}}
 
@@ -163,7 +163,9 @@ def measure(code: Path, tag: str, counts: list[int], commands: list[str], source
     configs_dir = configs(code, root / tag / "configs", seeds, max_epochs)
     out = {}
     for files in counts:
-        data = first_files(source, files, root / tag / f"files_{files}" / "INTERACTION")
+        data = root / f"files_{files}" / "INTERACTION"  # one path for both checkouts: the
+        if not data.exists():  # checkpoints name their input files
+            first_files(source, files, data)
         for command in commands:
             var = root / tag / f"files_{files}" / f"var_{command}"
             out[(command, files)] = COMMANDS[command](code, data, var, configs_dir, files)
@@ -193,8 +195,9 @@ def print_comparison(before: dict, after: dict) -> None:
     """Before/after ratios and whether the results are identical."""
     for key in sorted(after):
         old, new = before[key], after[key]
-        same = json.dumps(old["results"], sort_keys=True) == json.dumps(new["results"],
-                                                                        sort_keys=True)
+        differ = [k for k in new["results"] if json.dumps(old["results"].get(k), sort_keys=True)
+                  != json.dumps(new["results"][k], sort_keys=True)]
+        same = "yes" if not differ else "no, " + ", ".join(differ) + " differ"
         print(f"{key[0]} {key[1]} files: baseline/this {old['wall'] / new['wall']:.2f}x wall, "
               f"{old['cpu'] / new['cpu']:.2f}x CPU; " + ", ".join(
                   f"{k} {old['phases'][k] / max(v, 0.1):.2f}x" for k, v in new["phases"].items()
