@@ -84,15 +84,23 @@ def generate_recordings_cmd(
     out: Annotated[Path | None, typer.Option(help="folder (default: <recordings dir>/"
                                              "INTERACTION, where the recorded worlds look)")]
     = None,
-    seconds: Annotated[float, typer.Option(min=60, help="training traffic per scenario; "
-                                           "half as much is held out")] = 900.0,
+    seconds: Annotated[float, typer.Option(min=60, help="training traffic per scenario, "
+                                           "half as much held out; with --files: traffic "
+                                           "per file")] = 900.0,
+    files: Annotated[int | None, typer.Option(min=1, help="real size: both scenarios in the "
+                                              "v1.0 layout, this many recording files each "
+                                              "(vehicle_tracks_000.csv, ...)")] = None,
+    arrivals_per_arm_min: Annotated[float | None, typer.Option(
+        min=0.1, max=59.9, help="cars arriving per arm per minute (default 12 at the "
+        "roundabout, 8.6 at the intersection; with --files 24: about 30 cars in view, "
+        "as on a real file)")] = None,
 ) -> None:
     """Write GENERATED, NOT REAL INTERACTION-format files of the interaction study's two
     scenarios (a v1.2 roundabout, a v1.0 intersection) for demos, tests and labs without data."""
     from app.recordings.generated import generate_study_recordings
 
     folder = out or get_settings().layout.recordings() / "INTERACTION"
-    for summary in generate_study_recordings(folder, seconds):
+    for summary in generate_study_recordings(folder, seconds, files, arrivals_per_arm_min):
         typer.echo(f"wrote {summary['scenario']} ({summary['layout']}) into {folder}: "
                    "GENERATED, NOT REAL DATA")
 

@@ -93,19 +93,28 @@ def _fit_ceiling(fit: tuple[np.ndarray, np.ndarray], check: tuple[np.ndarray, np
 
 def ceiling_scores(trainer: dict[str, Windows], trainer_labels: dict[str, dict],
                    val: Windows, val_labels: dict[str, np.ndarray],
-                   scored: np.ndarray) -> dict[str, float]:
+                   scored: np.ndarray, pool: JobPool | None = None) -> dict[str, float]:
     """Accuracy per label of CEILING on the scored val windows whose label is known;
-    `trainer` holds the trainer's 'train' and 'val' windows of the train pairs."""
+    `trainer` holds the trainer's 'train' and 'val' windows of the train pairs. The labels'
+    fits run on `pool`'s workers (each on one thread, like every job: the same numbers
+    on any number of workers)."""
     x = {split: encoder_inputs(trainer[split]) for split in ("train", "val")}
     x_val = encoder_inputs(val)
-    out = {}
+    names, jobs = [], []
     for name, y_val in val_labels.items():
         y = {split: trainer_labels[split][name] for split in ("train", "val")}
         if not (scored & (y_val >= 0)).any() or len(np.unique(y["train"][y["train"] >= 0])) < 2:
             continue
-        model = _fit_ceiling((x["train"], y["train"]), (x["val"], y["val"]))
-        out[name] = _accuracy(model, x_val[scored], y_val[scored])
-    return out
+        names.append(name)
+        jobs.append(((x["train"], y["train"]), (x["val"], y["val"]), x_val[scored], y_val[scored]))
+    scores = (pool or JobPool(1)).run(ceiling_accuracy, jobs, "interaction: ceilings", "label")
+    return dict(zip(names, scores, strict=True))
+
+
+def ceiling_accuracy(fit: tuple[np.ndarray, np.ndarray], check: tuple[np.ndarray, np.ndarray],
+                     x: np.ndarray, y: np.ndarray) -> float:
+    """One label's ceiling (fitted on `fit`, chosen on `check`) scored on (x, y)."""
+    return _accuracy(_fit_ceiling(fit, check), x, y)
 
 
 def held_out_purity(train_codes: np.ndarray, train_labels: np.ndarray, val_codes: np.ndarray,

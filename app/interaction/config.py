@@ -5,7 +5,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator
 
-from app.configio import StrictModel
+from app.configio import StrictModel, omitted_when_default
 from app.interaction.tracks import FRAME_MS
 
 
@@ -64,6 +64,9 @@ class InteractionConfig(StrictModel):
     turn_threshold_deg: float = Field(30.0, gt=0, description="heading change = a turn")
     v10_train_fraction: float = Field(0.8, gt=0, lt=1,
                                       description="v1.0 time split without a devkit val list")
+    v10_validation_list: Literal["use", "ignore"] = Field(
+        "use", description="v1.0: hold out the devkit's validation list's recordings ('use'), "
+        "or ignore the list and split every recording in time ('ignore')")
     seeds: int = Field(10, ge=2)
     max_train_pairs: int = Field(0, ge=0, description="0 = all; else an even subsample")
     eval_windows_per_pair: int = Field(20, ge=1)
@@ -72,6 +75,7 @@ class InteractionConfig(StrictModel):
     secondary: SecondaryConfig = Field(default_factory=SecondaryConfig)
     code_levels: CodeLevelsConfig = Field(default_factory=CodeLevelsConfig)
     frame_sensitivity: FrameSensitivityConfig = Field(default_factory=FrameSensitivityConfig)
+    _without_new_keys = omitted_when_default("v10_validation_list")
 
     @property
     def segment_len(self) -> int:

@@ -144,11 +144,9 @@ def _split_pairs(data_dir: Path, scenario: str, cfg: InteractionConfig):
                                           cfg.pair_max_distance_m)
     else:
         recs = tx.load_recordings(files["train"])
-        val_names = tx.official_val_recordings(data_dir, scenario)
-        if val_names and {r.name for r in recs} - set(val_names):
-            ranges = px.recording_split(recs, val_names)
-        else:
-            ranges = px.time_split(recs, cfg.v10_train_fraction)
+        ranges = px.v10_split(data_dir, scenario, recs, cfg.v10_train_fraction,
+                              cfg.v10_validation_list == "use",
+                              "v10_validation_list: ignore in the --config YAML")
         for split in tx.SPLITS:
             counts[split] = _agent_counts([r for r in recs if r.name in ranges[split]
                                            and ranges[split][r.name][1] >= 0])

@@ -64,7 +64,7 @@ from app.interaction.horizons import (
 from app.interaction.report import FigureInputs, write_figures, write_report
 from app.layout import Layout
 from app.learning.config import TrainConfig
-from app.learning.jobs import JobPool
+from app.learning.jobs import JobPool, job_pool
 from app.learning.train import train_and_save
 
 MODELS = ("ours", "vae", "cv")
@@ -264,12 +264,12 @@ class Trained:
 
 
 def train_all(exp: ScenarioData, cfg: InteractionConfig, base_train_cfg: TrainConfig,
-              models_dir: Path, workers: int) -> Trained:
+              models_dir: Path, workers: int | JobPool) -> Trained:
     """Choose Ours' levels, then train and score every seed; both phases on `workers`
-    processes (one pool, started once)."""
+    processes (one pool, started once, or the pool given)."""
     started = time.perf_counter()
     train_cfg = experiment_train_config(base_train_cfg, cfg)
-    with JobPool(workers) as pool:
+    with job_pool(workers) as pool:
         levels = choose_levels(exp.train.trajs, train_cfg, cfg.code_levels, pool)  # before purity
         chosen = time.perf_counter()
         train_cfg = with_levels(train_cfg, levels["levels"])
@@ -286,21 +286,24 @@ def run_experiment(data_dir: Path, scenario: str, out_dir: Path, models_dir: Pat
     started = time.perf_counter()
     exp = load_scenario_data(data_dir, scenario, cfg)
     loaded = time.perf_counter()
-    run = train_all(exp, cfg, base_train_cfg, models_dir, workers)
-    on, per_seed = run.on, run.per_seed
+    with JobPool(workers) as pool:  # the trainings' workers fit the ceilings too
+        run = train_all(exp, cfg, base_train_cfg, models_dir, pool)
+        trained = time.perf_counter()
+        on = run.on
+        ceiling = ceiling_scores(on.trainer.windows, on.trainer.labels, on.windows, on.labels,
+                                 on.scored, pool)
+    per_seed = run.per_seed
     cv = score_constant_velocity(on.windows, on.scored)
     summary = summarise(exp, cfg, on.windows, on.scored, on.labels, per_seed, cv)
     summary.update(secondary_results(exp, cfg, on.horizons, per_seed))
     summary.update(frame_sensitivity(cfg, on, cv, run.frame_rows))
-    ceiling = ceiling_scores(on.trainer.windows, on.trainer.labels, on.windows, on.labels,
-                             on.scored)
     summary.update(fsq_levels=run.levels, ceiling_model=CEILING,
                    code_purity=code_purity(per_seed, ceiling))
     out_dir = Path(out_dir)
     inputs = FigureInputs(exp.scenario, exp.train.trajs, exp.lane_lines, on.windows, on.scored,
                           cfg.field_grid, cfg.field_codes)
     write_report(out_dir, summary, per_seed, write_figures(inputs, per_seed, summary, out_dir))
-    wall_s = {"load": loaded - started, **run.wall_s}
+    wall_s = {"load": loaded - started, **run.wall_s, "report": time.perf_counter() - trained}
     write_json(out_dir / "meta.json", {
         "scenario": scenario, "layout": exp.layout, "config": cfg.model_dump(),
         "train_config": run.train_cfg.model_dump(), "inputs_sha256": exp.inputs,

@@ -15,6 +15,7 @@ import numpy as np
 from tqdm import tqdm
 
 from app.data.trajectory import Episode
+from app.interaction import tracks as tx
 from app.interaction.tracks import CAR_TYPES, Recording, Track
 
 
@@ -142,6 +143,19 @@ def recording_split(recordings: list[Recording], val_names: list[str]) -> dict[s
         ranges[split][rec.name] = (int(frames.min()), int(frames.max()))
         ranges["val" if split == "train" else "train"][rec.name] = (0, -1)
     return ranges
+
+
+def v10_split(data_dir, scenario: str, recordings: list[Recording], train_fraction: float,
+              use_list: bool, switch: str) -> dict[str, dict]:
+    """v1.0's ranges: the recordings on the devkit's validation list held out whole (unless
+    `use_list` is off), else each recording's last 1 - train_fraction; PartialDownload if the
+    list names recordings the copy lacks (`switch` names the config key that ignores it)."""
+    listed = tx.official_val_recordings(data_dir, scenario) if use_list else []
+    present = [r.name for r in recordings]
+    tx.check_listed_present(data_dir, scenario, listed, present, switch)
+    if listed and set(present) - set(listed):
+        return recording_split(recordings, listed)
+    return time_split(recordings, train_fraction)
 
 
 def time_split(recordings: list[Recording], train_fraction: float) -> dict[str, dict]:

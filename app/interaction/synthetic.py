@@ -36,6 +36,7 @@ ARM_LENGTH_M = 60.0
 LANE_OFFSET_M = 1.75
 INTERSECTION_BOX_M = 12.0
 CASE_FRAMES = 40
+MIN_ARRIVAL_GAP_S = 1.0  # between two cars arriving on one arm
 CAR_LENGTH_M, CAR_WIDTH_M = 4.6, 1.9  # the size the dataset's devkit assumes
 # (share of vehicles, (length min, max), (width min, max)) in m: cars, vans, buses and trucks
 VEHICLE_SIZES = ((0.85, (4.0, 5.0), (1.7, 2.0)), (0.11, (5.0, 6.5), (1.9, 2.2)),
@@ -245,12 +246,25 @@ def _step_car(car: _Car, pos, heading, curvature, others, occupied_arms: set[int
     car.s += car.v * DT_S
 
 
+def arrival_gap_s(kind: str, arrivals_per_arm_min: float | None = None) -> float:
+    """The random part of the gap between arrivals on an arm [s]: each gap is this,
+    exponentially distributed, plus MIN_ARRIVAL_GAP_S; by default 4 s (roundabout) / 6 s."""
+    if arrivals_per_arm_min is None:
+        return 4.0 if kind == "roundabout" else 6.0
+    if not 0 < arrivals_per_arm_min < 60 / MIN_ARRIVAL_GAP_S:
+        raise ValueError(f"arrivals per arm per minute: {arrivals_per_arm_min:g} is not in "
+                         f"(0, {60 / MIN_ARRIVAL_GAP_S:g}) (arrivals are at least "
+                         f"{MIN_ARRIVAL_GAP_S:g} s apart)")
+    return 60 / arrivals_per_arm_min - MIN_ARRIVAL_GAP_S
+
+
 def simulate_stream(kind: str, duration_s: float, seed: int,
+                    arrivals_per_arm_min: float | None = None,
                     ) -> tuple[list[_Car], list[dict]]:
     """Cars and pedestrians over `duration_s` at 10 Hz; logs are in local metres."""
     rng = np.random.default_rng(seed)
     size_rng = np.random.default_rng(seed + SIZE_STREAM)
-    arrival_s = 4.0 if kind == "roundabout" else 6.0  # mean gap between arrivals per arm
+    arrival_s = arrival_gap_s(kind, arrivals_per_arm_min)  # mean random gap per arm
     frames = int(round(duration_s / DT_S))
     cars: list[_Car] = []
     active: list[_Car] = []
@@ -261,7 +275,7 @@ def simulate_stream(kind: str, duration_s: float, seed: int,
         for arm in range(4):
             if t < next_arrival[arm]:
                 continue
-            next_arrival[arm] = t + rng.exponential(arrival_s) + 1.0
+            next_arrival[arm] = t + rng.exponential(arrival_s) + MIN_ARRIVAL_GAP_S
             route = _pick_route(kind, rng, arm)
             if any(np.linalg.norm(c.route.at(c.s)[0] - route.points[0]) < 12 for c in active):
                 continue
@@ -421,7 +435,8 @@ def read_manoeuvre_labels(path: Path) -> dict[tuple[str, int, int], dict[str, st
 
 
 def generate(out_dir: Path, scenario: str, layout: str = "v1.2", train_s: float = 180.0,
-             val_s: float = 60.0, seed: int = 0) -> dict:
+             val_s: float = 60.0, seed: int = 0,
+             arrivals_per_arm_min: float | None = None) -> dict:
     """Write a generated scenario in `layout` ('v1.2' or 'v1.0') under out_dir; returns counts."""
     if layout not in ("v1.0", "v1.2"):
         raise ValueError(f"layout must be 'v1.0' or 'v1.2', not {layout!r}")
@@ -431,7 +446,7 @@ def generate(out_dir: Path, scenario: str, layout: str = "v1.2", train_s: float 
     streams = {"train": (train_s, seed), "val": (val_s, seed + 1)}
     for index, (split, (seconds, stream_seed)) in enumerate(
             tqdm(streams.items(), desc=f"generate {scenario}", unit="split")):
-        cars, walkers = simulate_stream(kind, seconds, stream_seed)
+        cars, walkers = simulate_stream(kind, seconds, stream_seed, arrivals_per_arm_min)
         by_frame = _collect(cars, walkers, stream_seed)
         labels: list = []
         if layout == "v1.2":
@@ -444,6 +459,31 @@ def generate(out_dir: Path, scenario: str, layout: str = "v1.2", train_s: float 
         summary[f"{split}_pedestrians"] = len(walkers)
     write_map(out_dir / "maps" / f"{scenario}.osm", kind)
     return summary
+
+
+REAL_SIZE_ARRIVALS_PER_ARM_MIN = 24.0  # about 30 cars in view, as on a real INTERACTION file
+
+
+def generate_recordings(out_dir: Path, scenario: str, files: int, seconds: float,
+                        seed: int = 0, arrivals_per_arm_min: float | None = None) -> dict:
+    """Write `files` v1.0 recordings (vehicle_tracks_000.csv, ...) of `seconds` of traffic
+    each under out_dir, recording k from seed `seed + k`; returns counts."""
+    if files < 1:
+        raise ValueError(f"files: {files} recordings; need at least 1")
+    kind = geometry_of(scenario)
+    out_dir = Path(out_dir)
+    cars = 0
+    for index in tqdm(range(files), desc=f"generate {scenario}", unit="file"):
+        stream, walkers = simulate_stream(kind, seconds, seed + index, arrivals_per_arm_min)
+        labels: list = []
+        write_recording(out_dir / "recorded_trackfiles" / scenario, index,
+                        _collect(stream, walkers, seed + index), labels)
+        _write_labels(out_dir / "generator_labels" / f"{scenario}_vehicle_tracks_{index:03d}.csv",
+                      labels)
+        cars += len(stream)
+    write_map(out_dir / "maps" / f"{scenario}.osm", kind)
+    return {"scenario": scenario, "layout": "v1.0", "geometry": kind, "files": files,
+            "cars": cars}
 
 
 # ---------------------------------------------------------------- map

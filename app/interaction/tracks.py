@@ -36,6 +36,10 @@ class TrackFileError(ValueError):
     """A track file does not follow the documented format; the message names file and line."""
 
 
+class PartialDownload(TrackFileError):
+    """The devkit's validation list names recordings that are not in the copy."""
+
+
 @dataclass
 class Track:
     """One agent in one recording: frames [T] on the recording's time grid, states [T, ...]."""
@@ -130,7 +134,9 @@ def read_track_file(path: Path) -> list[Recording]:
             raise TrackFileError(f"{path}:1: empty file: expected a header line "
                                  f"({','.join(CASE_COLUMNS)} or {','.join(VEHICLE_COLUMNS)})")
         columns = _check_header(path, [c.strip() for c in header])
-        rows = _parse_rows(path, reader, columns)
+        rows = _plain_rows(path, columns)
+        if rows is None:  # a row the vectorised reader cannot vouch for: this one names it
+            rows = _parse_rows(path, reader, columns)
     if not rows:
         raise TrackFileError(f"{path}:2: no data rows after the header")
     return _group_tracks(path, rows, has_case="case_id" in columns)
@@ -257,6 +263,83 @@ def _parse_rows(path: Path, reader, columns: tuple[str, ...]) -> _Columns:
     return out
 
 
+def _plain_rows(path: Path, columns: tuple[str, ...]) -> _Columns | None:
+    """`_parse_rows`' result, parsed column by column, for a plain file (no quotes, `\n` line
+    ends) whose every row is valid; None if any is not (or may not be): then `_parse_rows`
+    reads the file and names the first problem. Numbers go through float() as there."""
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:  # line ends as they are
+            text = fh.read()
+    except UnicodeDecodeError:
+        return None
+    if '"' in text or "\r" in text:
+        return None
+    lines = text.split("\n")
+    numbers = [k + 1 for k in range(1, len(lines)) if lines[k].strip()]  # 1-based
+    rows = [lines[n - 1] for n in numbers]
+    if not rows:
+        return _Columns()
+    if any(row.count(",") != len(columns) - 1 for row in rows):
+        return None
+    cells = np.array(",".join(rows).split(","), dtype=object).reshape(len(rows), len(columns))
+    parsed = _plain_values(cells, {name: k for k, name in enumerate(columns)})
+    if parsed is None:
+        return None
+    ids, values, types = parsed
+    out = _Columns(types=types)
+    out.ids.frombytes(np.column_stack([ids, numbers]).astype(np.int64).tobytes())
+    out.values.frombytes(values.tobytes())
+    return out
+
+
+def _plain_values(cells: np.ndarray, index: dict[str, int]):
+    """(case, track, frame) [N, 3], the 7 values [N, 7] and the agent types of valid rows;
+    None if a cell is not what `_parse_rows` accepts."""
+    types = [cell.strip() for cell in cells[:, index["agent_type"]]]
+    if not all(types):
+        return None
+    numeric = {}
+    for name in ("track_id", "frame_id", "timestamp_ms", "x", "y", "vx", "vy",
+                 *(["case_id"] if "case_id" in index else [])):
+        numeric[name] = _floats(cells[:, index[name]])
+        if numeric[name] is None or not np.isfinite(numeric[name]).all():
+            return None
+    for name in ("track_id", "frame_id", "timestamp_ms", "case_id"):
+        value = numeric.get(name)
+        if value is not None and (np.any(value != np.trunc(value))
+                                  or np.any(np.abs(value) > 2.0**62)):
+            return None
+    stamps = numeric["timestamp_ms"].astype(np.int64)
+    if np.any(stamps % FRAME_MS):
+        return None
+    shape = np.full((len(cells), 3), math.nan)
+    if "psi_rad" in index:
+        loose = np.array([t in NON_VEHICLE_TYPES for t in types])
+        for k, name in enumerate(("psi_rad", "length", "width")):
+            texts = cells[:, index[name]]
+            empty = np.array([not t.strip() for t in texts])
+            if np.any(empty & ~loose):
+                return None
+            value = _floats(np.where(empty, "nan", texts))
+            if value is None or not np.isfinite(value[~empty]).all():
+                return None
+            shape[:, k] = value
+    interned: dict[str, str] = {}
+    case = numeric["case_id"] if "case_id" in numeric else np.zeros(len(cells))
+    ids = np.column_stack([case, numeric["track_id"]]).astype(np.int64)
+    values = np.column_stack([numeric[c] for c in ("x", "y", "vx", "vy")] + [shape])
+    return (np.column_stack([ids, stamps // FRAME_MS]), np.ascontiguousarray(values),
+            [interned.setdefault(t, t) for t in types])
+
+
+def _floats(texts: np.ndarray) -> np.ndarray | None:
+    """float() of every cell, or None if one is not a number."""
+    try:
+        return np.array([float(text) for text in texts], dtype=np.float64)
+    except ValueError:
+        return None
+
+
 def _group_tracks(path: Path, cols: _Columns, has_case: bool) -> list[Recording]:
     ids = np.frombuffer(cols.ids, dtype=np.int64).reshape(-1, 4)
     values = np.frombuffer(cols.values, dtype=np.float64).reshape(-1, 7)
@@ -313,3 +396,19 @@ def official_val_recordings(data_dir: Path, scenario: str) -> list[str]:
         elif current == scenario:
             names.append(word)
     return names
+
+
+def check_listed_present(data_dir: Path, scenario: str, listed: list[str],
+                         present: list[str], switch: str) -> None:
+    """PartialDownload naming the listed recordings absent from the copy and what to do."""
+    missing = sorted(set(listed) - set(present))
+    if not missing:
+        return
+    shown = ", ".join(missing[:5]) + (", ..." if len(missing) > 5 else "")
+    path = Path(data_dir) / "recorded_trackfiles" / OFFICIAL_VAL_LIST
+    raise PartialDownload(
+        f"{path}: {len(missing)} of the {len(listed)} {scenario} recordings this validation "
+        f"list holds out are not in {path.parent / scenario}: {shown} ({len(present)} "
+        f"recordings are there: a partial download?), so the list cannot hold them out. "
+        f"Add the missing files; or remove the list, and each recording's last part is held "
+        f"out instead; or keep the list and set {switch} to do the same")

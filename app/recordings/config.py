@@ -11,7 +11,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from app.configio import StrictModel
+from app.configio import StrictModel, omitted_when_default
 
 MIN_WINDOW_STEPS = 9
 
@@ -20,13 +20,18 @@ class InteractionSource(StrictModel):
     """INTERACTION track files of one scenario, in the devkit's v1.0 or v1.2 layout.
 
     Held out (the bank's trials, never trained on): v1.2's val file; v1.0's recordings the
-    devkit's validation list names, else the last `held_out_fraction` of each recording."""
+    devkit's validation list names (unless `validation_list: ignore`), else the last
+    `held_out_fraction` of each recording."""
 
     format: Literal["interaction"]
     path: str = Field(min_length=1, description="the download's folder, relative to the "
                       "recordings dir (or absolute)")
     scenario: str = Field(min_length=1, description="e.g. DR_USA_Roundabout_FT")
     held_out_fraction: float = Field(0.2, gt=0, lt=1)
+    validation_list: Literal["use", "ignore"] = Field(
+        "use", description="v1.0: hold out the devkit's validation list's recordings, or "
+        "ignore the list (a partial download) and hold out each recording's last part")
+    _without_new_keys = omitted_when_default("validation_list")
 
 
 class CsvSource(StrictModel):

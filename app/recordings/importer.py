@@ -102,11 +102,9 @@ def interaction_recordings(root: Path, source: InteractionSource) -> Recordings:
         recordings = train + val
     else:
         recordings = tx.load_recordings(files["train"])
-        listed = tx.official_val_recordings(root, source.scenario)
-        if listed and {r.name for r in recordings} - set(listed):
-            ranges = px.recording_split(recordings, listed)
-        else:
-            ranges = px.time_split(recordings, 1 - source.held_out_fraction)
+        ranges = px.v10_split(root, source.scenario, recordings, 1 - source.held_out_fraction,
+                              source.validation_list == "use",
+                              "source.validation_list: ignore in the world's config")
     inputs = sorted({f for fs in files.values() for f in fs})
     map_path = root / "maps" / f"{source.scenario}.osm"
     lines = []

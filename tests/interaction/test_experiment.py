@@ -222,6 +222,7 @@ def test_levels_are_chosen_on_validation_loss_without_labels(small_data):
 def test_ceiling_learns_the_entry_arm_from_the_observed_second(small_data):
     from app.interaction.codes import ceiling_scores
     from app.learning.config import TrainConfig
+    from app.learning.jobs import JobPool
 
     cfg = ic.InteractionConfig()
     exp = ds.load_scenario_data(small_data, SCENARIO, cfg)
@@ -232,6 +233,9 @@ def test_ceiling_learns_the_entry_arm_from_the_observed_second(small_data):
     ceiling = ceiling_scores(trainer.windows, trainer.labels, windows, labels, scored)
     chance = np.bincount(labels["entry_arm"]).max() / len(windows)
     assert set(ceiling) == set(labels) and ceiling["entry_arm"] > chance + 0.2
+    with JobPool(2) as pool:  # the labels fitted on two workers: the same accuracies
+        assert ceiling_scores(trainer.windows, trainer.labels, windows, labels, scored,
+                              pool) == ceiling
 
 
 

@@ -284,3 +284,53 @@ def test_projection_matches_the_devkit_convention(tmp_path):
     np.testing.assert_allclose(border.points, [[1, 1], [101, 1]], atol=1e-3)
     np.testing.assert_allclose(thin.points, [[1, 4], [1, 7]], atol=1e-3)
     assert (thin.kind, thin.subtype) == ("line_thin", "dashed")
+
+
+def _checked_rows(path: Path) -> "ix._Columns":
+    with ix.csv_reader(path) as reader:
+        columns = ix._check_header(path, [c.strip() for c in next(reader)])
+        return ix._parse_rows(path, reader, columns), columns
+
+
+@pytest.mark.parametrize("layout, name", [("v1.2", "train/DR_USA_Roundabout_FT_train.csv"),
+                                          ("v1.0", "recorded_trackfiles/DR_USA_Intersection_EP0/"
+                                                   "vehicle_tracks_000.csv"),
+                                          ("v1.0", "recorded_trackfiles/DR_USA_Intersection_EP0/"
+                                                   "pedestrian_tracks_000.csv")])
+def test_the_vectorised_reader_reads_what_the_checking_reader_reads(generated, tmp_path, layout,
+                                                                    name):
+    lines = (generated / layout / name).read_text().split("\n")
+    lines.insert(3, "   ")  # a blank line still counts for the line numbers
+    path = _write(tmp_path / Path(name).name, "\n".join(lines))
+    checked, columns = _checked_rows(path)
+    plain = ix._plain_rows(path, columns)
+    assert plain is not None and len(plain) == len(checked) > 0
+    assert bytes(plain.ids) == bytes(checked.ids)  # case, track, frame, line
+    assert bytes(plain.values) == bytes(checked.values)  # bit for bit, NaN sizes included
+    assert plain.types == checked.types
+
+
+def test_the_vectorised_reader_leaves_a_doubtful_file_to_the_checking_reader(tmp_path):
+    good = _car_rows(1, range(1, 4), 0, 0, 5)
+    for rows in ([good[0], good[1].replace(",car,", ',"car",')], [good[0], good[1] + ",1"],
+                 [good[0], good[1].replace(",200,", ",250,")], [good[0] + "\r"]):
+        path = _write(tmp_path / "doubt.csv", "\n".join([HEADER, *rows]) + "\n")
+        assert ix._plain_rows(path, ix.VEHICLE_COLUMNS) is None
+
+
+def test_real_size_files_are_v10_recordings_at_the_asked_density(tmp_path):
+    from app.recordings.generated import generate_study_recordings
+
+    sparse, dense = (generate_study_recordings(tmp_path / name, 60.0, files=2,
+                                               arrivals_per_arm_min=rate)
+                     for name, rate in (("sparse", 6.0), ("dense", 24.0)))
+    for scenario in ("DR_USA_Roundabout_FT", "DR_USA_Intersection_EP0"):
+        folder = tmp_path / "dense" / "recorded_trackfiles" / scenario
+        assert sorted(p.name for p in folder.glob("vehicle_tracks_*.csv")) == [
+            "vehicle_tracks_000.csv", "vehicle_tracks_001.csv"]
+        assert (tmp_path / "dense" / "generator_labels" /
+                f"{scenario}_vehicle_tracks_001.csv").is_file()
+    assert all(d["cars"] > s["cars"] for d, s in zip(dense, sparse, strict=True))
+    with pytest.raises(ValueError, match="arrivals per arm per minute: 60 is not in"):
+        generate(tmp_path / "x", "DR_USA_Roundabout_FT", "v1.0", 60.0, 30.0,
+                 arrivals_per_arm_min=60.0)
