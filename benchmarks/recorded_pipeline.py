@@ -50,8 +50,9 @@ def cpu_s() -> float:
 
 def generate(folder: Path, files: int, minutes: float, rate: float | None) -> None:
     """Real-size generated files of both scenarios, unless `folder` already holds enough."""
-    have = sorted((folder / "recorded_trackfiles" / ROUNDABOUT).glob("vehicle_tracks_*.csv"))
-    if len(have) >= files:
+    have = [len(list((folder / "recorded_trackfiles" / s).glob("vehicle_tracks_*.csv")))
+            for s in SCENARIOS]
+    if min(have) >= files:  # an interrupted run leaves one scenario short
         return
     args = ["generate-recordings", "--out", str(folder), "--files", str(files),
             "--seconds", str(minutes * 60)]
