@@ -219,15 +219,19 @@ def test_start_states_lie_on_the_learned_data_near_the_robot(bank, small_study):
 def test_start_kinds_take_turns_and_fall_back():
     rng = np.random.default_rng(0)
     line = np.array([[x, 0.0] for x in range(1, 30)])
-    points, kinds = take_turns(np.zeros(2), {"a": line, "b": line + [0, 5]}, 4, 2.0, rng)
+    positions = np.concatenate([line, line + [0, 5]])  # kind a's states, then kind b's
+    a, b = np.arange(len(line)), len(line) + np.arange(len(line))
+    picks, kinds = take_turns(np.zeros(2), positions, {"a": a, "b": b}, 4, 2.0, rng)
     assert kinds == ["a", "b", "a", "b"]
-    every = np.array([np.zeros(2), *points])
+    assert all((pick in a) == (kind == "a") for pick, kind in zip(picks, kinds, strict=True))
+    every = np.array([np.zeros(2), *positions[picks]])
     gaps = np.linalg.norm(every[:, None] - every[None], axis=-1)
     assert gaps[~np.eye(5, dtype=bool)].min() >= 2.0
-    _, kinds = take_turns(np.zeros(2), {"a": line, "b": np.zeros((0, 2))}, 3, 2.0, rng)
+    none = np.zeros(0, dtype=int)
+    _, kinds = take_turns(np.zeros(2), positions, {"a": a, "b": none}, 3, 2.0, rng)
     assert kinds == ["a", "a", "a"]
     with pytest.raises(NoStartStates):
-        take_turns(np.zeros(2), {"a": line[:1], "b": line[:1]}, 2, 2.0, rng)
+        take_turns(np.zeros(2), positions, {"a": a[:1], "b": a[:1]}, 2, 2.0, rng)
 
 
 @pytest.fixture(scope="module")
