@@ -36,6 +36,17 @@ def shoot_instructions(page, prefix: str) -> None:
         page.screenshot(path=str(OUT / f"{prefix}_{name}.png"), full_page=True)
 
 
+def new_participant_page(browser, url: str, study_id: str):
+    """A new Prolific participant's page of `study_id` on a paused fake clock (in its own
+    context: close the page's context when done)."""
+    context = browser.new_context(viewport=VIEWPORT)
+    context.clock.install()
+    context.clock.pause_at(int(time.time() * 1000) + 1000)
+    page = context.new_page()
+    page.goto(f"{url}/s/{study_id}?{fresh_recruitment()}")
+    return page
+
+
 def main(url: str, study_id: str, prefix: str) -> None:
     """Shoot the instructions of `study_id` served at `url`."""
     from playwright.sync_api import sync_playwright
@@ -43,12 +54,7 @@ def main(url: str, study_id: str, prefix: str) -> None:
     OUT.mkdir(parents=True, exist_ok=True)
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        context = browser.new_context(viewport=VIEWPORT)
-        context.clock.install()
-        context.clock.pause_at(int(time.time() * 1000) + 1000)
-        page = context.new_page()
-        page.goto(f"{url}/s/{study_id}?{fresh_recruitment()}")
-        shoot_instructions(page, prefix)
+        shoot_instructions(new_participant_page(browser, url, study_id), prefix)
         browser.close()
     print(f"wrote {prefix}_{{{','.join(DEMO_MOMENTS_MS)}}}.png into {OUT}")
 

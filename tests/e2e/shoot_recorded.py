@@ -16,17 +16,14 @@ and the dashboard draws its error plots and field panels.
 
 import shutil
 import tempfile
-import time
 from pathlib import Path
 
 from tests.conftest import REPO, cached_interaction_study, free_port, start_server
 from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
 from tests.e2e.pages import (
-    VIEWPORT,
     answer_survey,
     answer_trial,
     current_state,
-    fresh_recruitment,
     open_dashboard,
     place,
     press_on,
@@ -34,7 +31,7 @@ from tests.e2e.pages import (
     start_predicting,
     visible,
 )
-from tests.e2e.shoot_instructions import shoot_instructions
+from tests.e2e.shoot_instructions import new_participant_page, shoot_instructions
 
 OUT = REPO / "var" / "screens"
 MID_CLIP_MS = 1600  # into the first example: about half of its 9 steps of 0.35 s
@@ -116,13 +113,9 @@ def main() -> None:
     try:
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-            context = browser.new_context(viewport=VIEWPORT)
-            context.clock.install()
-            context.clock.pause_at(int(time.time() * 1000) + 1000)
-            page = context.new_page()
-            page.goto(f"{url}/s/{study.study_id}?{fresh_recruitment()}")
+            page = new_participant_page(browser, url, study.study_id)
             shoot_participant(page, study.study_id)
-            context.close()
+            page.context.close()
             page = browser.new_page(viewport={"width": 1400, "height": 1000})
             shoot_replay(page, url, study.study_id)
             browser.close()
