@@ -48,10 +48,12 @@ def cpu_s() -> float:
     return children.ru_utime + children.ru_stime
 
 
-def generate(folder: Path, files: int, minutes: float, rate: float | None) -> None:
-    """Real-size generated files of both scenarios, unless `folder` already holds enough."""
+def generate(folder: Path, files: int, minutes: float, rate: float | None,
+             scenarios: tuple[str, ...]) -> None:
+    """Real-size generated files of both scenarios, unless `folder` already holds enough of
+    the `scenarios` the commands read."""
     have = [len(list((folder / "recorded_trackfiles" / s).glob("vehicle_tracks_*.csv")))
-            for s in SCENARIOS]
+            for s in scenarios]
     if min(have) >= files:  # an interrupted run leaves one scenario short
         return
     args = ["generate-recordings", "--out", str(folder), "--files", str(files),
@@ -62,10 +64,10 @@ def generate(folder: Path, files: int, minutes: float, rate: float | None) -> No
                    env={**os.environ, "PYTHONPATH": str(CODE)}, stdout=subprocess.DEVNULL)
 
 
-def first_files(source: Path, files: int, out: Path) -> Path:
+def first_files(source: Path, files: int, out: Path, scenarios: tuple[str, ...]) -> Path:
     """A folder whose recorded_trackfiles, labels and maps are links to the first `files`
-    recordings of each scenario (their sidecar labels and the maps)."""
-    for scenario in SCENARIOS:
+    recordings of each of `scenarios` (their sidecar labels and the maps)."""
+    for scenario in scenarios:
         folder = out / "recorded_trackfiles" / scenario
         folder.mkdir(parents=True)
         for k in range(files):
@@ -156,6 +158,12 @@ def grid_size(configs_dir: Path) -> int:
 
 
 COMMANDS = {"interaction": interaction_run, "bundle": bundle_run}
+READS = {"interaction": (ROUNDABOUT,), "bundle": SCENARIOS}  # the scenarios each command reads
+
+
+def scenarios_read(commands: list[str]) -> tuple[str, ...]:
+    """The scenarios any of `commands` reads, in SCENARIOS order."""
+    return tuple(s for s in SCENARIOS if any(s in READS[c] for c in commands))
 
 
 def measure(code: Path, tag: str, counts: list[int], commands: list[str], source: Path,
@@ -166,7 +174,7 @@ def measure(code: Path, tag: str, counts: list[int], commands: list[str], source
     for files in counts:
         data = root / f"files_{files}" / "INTERACTION"  # one path for both checkouts: the
         if not data.exists():  # checkpoints name their input files
-            first_files(source, files, data)
+            first_files(source, files, data, scenarios_read(commands))
         for command in commands:
             var = root / tag / f"files_{files}" / f"var_{command}"
             out[(command, files)] = COMMANDS[command](code, data, var, configs_dir, files)
@@ -226,7 +234,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         source = args.recordings or root / "generated"
-        generate(source.resolve(), max(counts), args.minutes, args.arrivals_per_arm_min)
+        generate(source.resolve(), max(counts), args.minutes, args.arrivals_per_arm_min,
+                 scenarios_read(commands))
         print(f"GENERATED, NOT REAL files: {args.minutes:g} min each, both scenarios, "
               f"{os.cpu_count()} CPUs (times depend on the machine's load)")
         print(f"{'code':8} {'command':11} {'files':>5} {'pairs':>7} {'wall s':>8} {'CPU s':>8} "

@@ -38,7 +38,7 @@ import numpy as np
 
 from analysis.atomic import write_json
 from app.bank.bundle import BANK_META
-from app.data.trajectory import ROBOT, TrajectorySet
+from app.data.trajectory import ROBOT, TrajectorySet, wrap_angle
 from app.fileio import read_bytes
 from app.layout import Layout
 from app.prediction_view import (
@@ -269,8 +269,7 @@ def start_state_figures(world_bank: dict, world_meta: dict | None) -> dict:
 
 def heading_error_deg(heading: float, move: np.ndarray) -> float:
     """Angle [deg] between a heading [rad] and a move's direction."""
-    gap = np.arctan2(move[1], move[0]) - heading
-    return float(np.degrees(np.abs(np.arctan2(np.sin(gap), np.cos(gap)))))
+    return float(np.degrees(np.abs(wrap_angle(np.arctan2(move[1], move[0]) - heading))))
 
 
 def kind_figures(errors: list[float], lengths: list[float], min_click_m: float) -> dict:

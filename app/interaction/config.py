@@ -68,7 +68,8 @@ class InteractionConfig(StrictModel):
         "use", description="v1.0: hold out the devkit's validation list's recordings ('use'), "
         "or ignore the list and split every recording in time ('ignore')")
     seeds: int = Field(10, ge=2)
-    max_train_pairs: int = Field(0, ge=0, description="0 = all; else an even subsample")
+    max_train_pairs: int = Field(700, ge=0, description="an even subsample beyond this "
+                                 "(fixed from the time budget); 0 = every pair")
     eval_windows_per_pair: int = Field(20, ge=1)
     field_grid: int = Field(25, ge=5, description="grid points per side of a vector field")
     field_codes: int = Field(6, ge=1, description="most used codes drawn per model")

@@ -52,7 +52,7 @@ class ScenarioData:
     lane_lines: list[LaneLine]
     inputs: dict[str, str]
     horizon_val: PairData  # val pairs long enough for the secondary horizons (v1.0), else val
-
+    train_pairs_found: int  # before the max_train_pairs cap
 
 
 def _manoeuvre_lookup(data_dir: Path, scenario: str) -> dict | None:
@@ -179,7 +179,8 @@ def load_scenario_data(data_dir: Path, scenario: str, cfg: InteractionConfig) ->
             raise InteractionError(f"{scenario}: only {len(pairs[split])} {split} pairs (cars "
                                    f"present for {cfg.window_frames} frames with another car "
                                    f"within {cfg.pair_max_distance_m} m); need at least 3")
-    if 0 < cfg.max_train_pairs < len(pairs["train"]):
+    found = len(pairs["train"])
+    if 0 < cfg.max_train_pairs < found:
         keep = np.linspace(0, len(pairs["train"]) - 1, cfg.max_train_pairs).round().astype(int)
         pairs["train"] = [pairs["train"][k] for k in keep]
     world = f"interaction_{scenario}"
@@ -199,7 +200,7 @@ def load_scenario_data(data_dir: Path, scenario: str, cfg: InteractionConfig) ->
             tqdm.write(f"warning: {err}; plots drawn without lane lines")
         inputs[str(map_path)] = sha256_file(map_path)
     return ScenarioData(scenario, layout, data["train"], data["val"], lines, inputs,
-                        horizon_val)
+                        horizon_val, found)
 
 
 def heading_sector(velocity: np.ndarray) -> np.ndarray:

@@ -324,7 +324,8 @@ def summarise(exp: ScenarioData, cfg: InteractionConfig, windows: Windows, score
         "scenario": exp.scenario, "layout": exp.layout, "seeds": len(per_seed),
         "dt_s": cfg.dt_s, "segment_steps": cfg.segment_len, "observed_s":
             cfg.segment_len * cfg.dt_s, "predict_steps": cfg.predict_steps,
-        "pairs": {"train": exp.train.n_pairs, "val": exp.val.n_pairs},
+        "pairs": {"train": exp.train.n_pairs, "val": exp.val.n_pairs,
+                  "train_found": exp.train_pairs_found},
         "agents": {"train": exp.train.agent_counts, "val": exp.val.agent_counts},
         "label_counts": counts,
         "map_lines": len(exp.lane_lines),

@@ -153,6 +153,7 @@ def test_max_train_pairs_subsamples_evenly(small_data):
     full = ds.load_scenario_data(small_data, SCENARIO, ic.InteractionConfig())
     capped = ds.load_scenario_data(small_data, SCENARIO, ic.InteractionConfig(max_train_pairs=10))
     assert capped.train.n_pairs == 10 and full.train.n_pairs > 10
+    assert capped.train_pairs_found == full.train_pairs_found == full.train.n_pairs
     assert capped.val.n_pairs == full.val.n_pairs
     np.testing.assert_array_equal(capped.train.trajs.positions[0], full.train.trajs.positions[0])
 
