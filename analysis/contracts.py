@@ -63,6 +63,16 @@ def plugin_names(columns) -> list[str]:
     return [n for n in names if n not in MODELS and present.issuperset(plugin_columns(n))]
 
 
+def column_kinds(columns) -> dict[str, str]:
+    """Every predictions export column among `columns` and its kind (text, bool, int or
+    float): the contract's, then each plug-in predictor's."""
+    kinds = {c: ("text" if c in STRING_COLUMNS else "bool" if c in BOOL_COLUMNS
+                 else "int" if c in INT_COLUMNS else "float") for c in EXPORT_COLUMNS}
+    for name in plugin_names(columns):
+        kinds |= dict(zip(plugin_columns(name), PLUGIN_FIELDS.values(), strict=True))
+    return kinds
+
+
 # columns added after the first export, with the value an older export's rows read as
 ADDED_COLUMNS = {"arm": "", "replaced": False, "click_input": "", "export_version": 1,
                  "prolific_check": "",

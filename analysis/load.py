@@ -18,18 +18,15 @@ import pandas as pd
 
 from analysis.contracts import (
     ADDED_COLUMNS,
-    BOOL_COLUMNS,
     COARSE_OBSERVERS,
     EXPORT_COLUMNS,
     EXPORT_VERSION,
-    INT_COLUMNS,
     PLUGIN_FIELDS,
     RENAMED_COLUMNS,
     SORT_KEYS,
     STORED_NAMES,
-    STRING_COLUMNS,
+    column_kinds,
     plugin_columns,
-    plugin_names,
 )
 from analysis.csvsafe import restore_text
 
@@ -48,16 +45,6 @@ def _as_bool(values: pd.Series) -> pd.Series:
         bad = values[mapped.isna()].iloc[0]
         raise DataError(f"{values.name}: not a boolean: {bad!r}")
     return mapped.astype(bool)
-
-
-def column_kinds(columns) -> dict[str, str]:
-    """Every export column among `columns` and its kind (text, bool, int or float): the
-    contract's, then each plug-in predictor's."""
-    kinds = {c: ("text" if c in STRING_COLUMNS else "bool" if c in BOOL_COLUMNS
-                 else "int" if c in INT_COLUMNS else "float") for c in EXPORT_COLUMNS}
-    for name in plugin_names(columns):
-        kinds |= dict(zip(plugin_columns(name), PLUGIN_FIELDS.values(), strict=True))
-    return kinds
 
 
 def _cast(values: pd.Series, kind: str) -> pd.Series:

@@ -650,9 +650,11 @@ def export_cmd(
     study: Annotated[str, typer.Option(help="study id")] = "paper_study",
     what: Annotated[str, typer.Option(help="predictions, survey, events or participants")]
     = "predictions",
-    out: Annotated[Path | None, typer.Option(help="CSV file (default: stdout)")] = None,
+    out: Annotated[Path | None, typer.Option(help="CSV file (default: stdout); its codebook "
+                                             "goes beside it as FILE.datapackage.json")] = None,
 ) -> None:
-    """Write one of the study's exports as CSV, read from DATABASE_URL."""
+    """Write one of the study's exports as CSV, read from DATABASE_URL, and with --out its
+    codebook (a Frictionless Data Package) beside it."""
     from sqlmodel import Session
 
     from analysis.contracts import WHAT
@@ -673,8 +675,27 @@ def export_cmd(
         write_csv(frame, out if out is not None else sys.stdout)
     except OSError as err:
         fail(f"--out: cannot write {out}: {err.strerror or err}")
-    if out is not None:
-        typer.echo(f"wrote {out} ({len(frame)} rows)", err=True)
+    if out is None:
+        typer.echo("no codebook on stdout: give --out FILE.csv to write FILE.datapackage.json "
+                   "beside it (or GET /api/researcher/export/" + what + ".datapackage.json)",
+                   err=True)
+        return
+    package = write_export_package(frame, config, study, what, out)
+    typer.echo(f"wrote {out} ({len(frame)} rows) and its codebook {package}", err=True)
+
+
+def write_export_package(frame, config, study: str, what: str, out: Path) -> Path:
+    """Write the data package of the export CSV `out` beside it; returns its path."""
+    from analysis.atomic import write_json
+    from app.researcher.exports import export_package, package_path
+
+    target = package_path(out)
+    package = export_package(frame, config, study, what, out.read_bytes(), out.name)
+    try:
+        write_json(target, package)
+    except OSError as err:
+        fail(f"--out: cannot write {target}: {err.strerror or err}")
+    return target
 
 
 def writable_target(out: Path) -> None:

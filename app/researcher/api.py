@@ -1,10 +1,11 @@
 """Researcher API behind the bearer token: dashboard summary, exports, withdrawals and Prolific
 approvals and return requests."""
 
+from pathlib import Path
 from typing import Literal
 
 from fastapi import APIRouter, Request
-from fastapi.responses import Response
+from fastapi.responses import JSONResponse, Response
 
 from app.researcher import exports, payments, progress, withdrawal
 from app.server.deps import AdminDep, SessionDep, study_context
@@ -35,11 +36,39 @@ def read_predictions_export(study_id: str, request: Request, db: SessionDep,
     return _csv(request, db, study_id, "predictions")
 
 
+@router.get("/export/{what}.datapackage.json")
+def read_export_package(what: Literal[exports.WHAT], study_id: str, request: Request,
+                        db: SessionDep, _: AdminDep) -> JSONResponse:
+    """The codebook of one export: a Frictionless Data Package describing the CSV the sibling
+    route serves now (its columns, units, allowed values, sha256 and rows)."""
+    return _package(request, db, study_id, what)
+
+
+@router.get("/export.datapackage.json")
+def read_predictions_package(study_id: str, request: Request, db: SessionDep,
+                             _: AdminDep) -> JSONResponse:
+    """The predictions export's codebook (the same as /export/predictions.datapackage.json)."""
+    return _package(request, db, study_id, "predictions")
+
+
 def _csv(request: Request, db: SessionDep, study_id: str, what: str) -> Response:
     config = study_context(request, study_id).config
     return Response(exports.export_csv(db, config, study_id, what), media_type="text/csv",
-                    headers={"Content-Disposition":
-                             f'attachment; filename="{study_id}_{what}.csv"'})
+                    headers=_attachment(exports.export_filename(study_id, what)))
+
+
+def _package(request: Request, db: SessionDep, study_id: str, what: str) -> JSONResponse:
+    config = study_context(request, study_id).config
+    frame = exports.export_table(db, config, study_id, what)
+    csv_name = exports.export_filename(study_id, what)
+    package = exports.export_package(frame, config, study_id, what,
+                                     exports.csv_text(frame).encode(), csv_name)
+    name = exports.package_path(Path(csv_name)).name
+    return JSONResponse(package, headers=_attachment(name))
+
+
+def _attachment(name: str) -> dict[str, str]:
+    return {"Content-Disposition": f'attachment; filename="{name}"'}
 
 
 @router.post("/withdrawals", status_code=201)

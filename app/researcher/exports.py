@@ -18,11 +18,13 @@ import io
 import json
 from collections import defaultdict
 from datetime import datetime
+from pathlib import Path
 
 import pandas as pd
 from sqlalchemy import func, select
 from sqlmodel import Session
 
+from analysis.codebook import StudyTerms, data_package
 from analysis.contracts import (
     DEVICE,
     EVENTS,
@@ -62,9 +64,51 @@ def export_table(db: Session, config: StudyConfig, study_id: str, what: str) -> 
 def export_csv(db: Session, config: StudyConfig, study_id: str, what: str) -> str:
     """An export as CSV text; text cells a spreadsheet would run as a formula start with a
     quote (analysis/csvsafe.py), which analysis.exports.read_export removes."""
+    return csv_text(export_table(db, config, study_id, what))
+
+
+def csv_text(frame: pd.DataFrame) -> str:
+    """An export's frame as the CSV text every export is written as."""
     buffer = io.StringIO()
-    write_csv(export_table(db, config, study_id, what), buffer)
+    write_csv(frame, buffer)
     return buffer.getvalue()
+
+
+def export_filename(study_id: str, what: str) -> str:
+    """The file name a downloaded export is saved as (and its data package names)."""
+    return f"{study_id}_{what}.csv"
+
+
+def package_path(csv_path: Path) -> Path:
+    """Where an export's data package goes: FILE.csv -> FILE.datapackage.json beside it."""
+    return csv_path.with_name(csv_path.name.removesuffix(".csv") + ".datapackage.json")
+
+
+def export_package(frame: pd.DataFrame, config: StudyConfig, study_id: str, what: str,
+                   csv: bytes, path: str) -> dict:
+    """The Frictionless Data Package (analysis/codebook.py) of an export: `frame` as written
+    to `csv`, saved as `path` beside the package."""
+    terms = StudyTerms(worlds=tuple(config.worlds),
+                       questions=tuple(q.key for q in config.survey))
+    return data_package(what, list(frame.columns), csv, path, len(frame), study_id,
+                        row_hashes(frame), terms)
+
+
+def row_hashes(frame: pd.DataFrame) -> dict[str, list[str]]:
+    """The config, bank and model hashes an export's rows carry, each distinct value once
+    (a predictions export's models_sha256 as the other exports give it, per session)."""
+    hashes = {key: sorted(set(frame[key])) for key in ("config_sha256", "bank_sha256")}
+    if "models_sha256" in frame:
+        return hashes | {"models_sha256": sorted(set(frame["models_sha256"]))}
+    models: dict[str, dict] = defaultdict(dict)
+    cells = frame[["participant_id", "world", "ours_sha256", "vae_sha256"]].drop_duplicates()
+    for session, world, ours, vae in cells.itertuples(index=False):
+        models[session][world] = {"ours": ours, "vae": vae}
+    return hashes | {"models_sha256": sorted({_models_json(m) for m in models.values()})}
+
+
+def _models_json(models: dict) -> str:
+    return json.dumps(models, sort_keys=True, separators=(",", ":"))
 
 
 # ---------------------------------------------------------------- predictions
@@ -113,7 +157,7 @@ def _models(db: Session, study_id: str) -> dict[int, str]:
     models: dict[int, dict] = defaultdict(dict)
     for session, world, ours, vae in rows:
         models[session][world] = {"ours": ours, "vae": vae}
-    return {k: json.dumps(v, sort_keys=True, separators=(",", ":")) for k, v in models.items()}
+    return {k: _models_json(v) for k, v in models.items()}
 
 
 def _versions(sessions: list[Participant], models: dict[int, str]) -> dict[int, dict]:

@@ -1,10 +1,13 @@
 """The researcher dashboard in Debian's chromium: bot sessions in the table, one replay drawn."""
 
 import asyncio
+import json
 import re
 
+import frictionless
 import httpx
 import pytest
+from playwright.sync_api import expect
 
 from app.pilot.bots import run_bots
 from tests.conftest import ADMIN_TOKEN
@@ -113,6 +116,38 @@ def test_withdrawal_from_the_dashboard_asks_first_and_shows_the_audit_line(
     assert f"audit line {line['id']}" in page.text_content("#withdraw-message")
     page.wait_for_selector(row, state="detached")  # the table was refreshed
     assert page.locator("#withdraw-audit tbody tr").count() == 1
+    assert errors == []
+    page.close()
+
+
+def test_the_dashboard_downloads_each_export_with_its_codebook(browser_server, bot_sessions,
+                                                               chromium, tmp_path):
+    """The CSV and its datapackage.json land side by side under the names the package
+    expects, and `frictionless` validates the one against the other."""
+    page = chromium.new_page(viewport={"width": 1300, "height": 900}, bypass_csp=True,
+                             accept_downloads=True)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    log_in(page, browser_server.url)
+    page.wait_for_selector("table.sessions tbody tr")
+    assert axe_violations(page) == []
+    for what in ("survey", "predictions"):
+        page.select_option("#export-what", what)
+        for button in ("#download-codebook", "#download"):
+            with page.expect_download() as download:
+                page.click(button)
+            download.value.save_as(tmp_path / download.value.suggested_filename)
+        expect(page.locator("#dashboard-message")).to_have_text(re.compile("^Downloaded"))
+        package = tmp_path / f"{BROWSER_STUDY}_{what}.datapackage.json"
+        assert json.loads(package.read_text())["resources"][0]["path"] == (
+            f"{BROWSER_STUDY}_{what}.csv")
+        report = frictionless.validate(package)
+        assert report.valid, report.flatten(["type", "fieldName", "note"])
+    expect(page.locator("#download-codebook")).to_have_accessible_description(
+        re.compile("^The codebook"))
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    page.locator("#dashboard section.card").first.screenshot(
+        path=str(SCREENSHOTS / "dashboard_codebook.png"))
     assert errors == []
     page.close()
 

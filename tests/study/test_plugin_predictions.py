@@ -4,6 +4,7 @@ alike from the CSV and the database, and listed on the dashboard."""
 
 import io
 
+import frictionless
 import numpy as np
 import pandas as pd
 import pytest
@@ -138,3 +139,19 @@ def test_the_replay_draws_the_plugin_from_its_stored_answer(client, ctrv_study, 
     rolled = starts[:, None] + dt_s * np.cumsum(ctrv_of(record, dt_s), axis=1)
     got = np.asarray([s["paths"]["ctrv"] for s in replay["starts"]])
     assert got == pytest.approx(rolled, abs=1e-3)
+
+
+def test_the_codebook_describes_and_validates_the_plugins_columns(client, ctrv_study, bank,
+                                                                  tmp_path):
+    text = finished_export(client, ctrv_study.study_id, bank)
+    r = client.get("/api/researcher/export.datapackage.json",
+                   params={"study_id": ctrv_study.study_id}, headers=ADMIN)
+    assert r.status_code == 200, r.text
+    resource = r.json()["resources"][0]
+    fields = {f["name"]: f for f in resource["schema"]["fields"]}
+    assert "plug-in predictor ctrv" in fields["ctrv_vx"]["description"]
+    assert fields["ctrv_code"]["type"] == "integer" and fields["ctrv_vy"]["unit"] == "m/s"
+    (tmp_path / resource["path"]).write_text(text)
+    (tmp_path / "datapackage.json").write_text(r.text)
+    report = frictionless.validate(tmp_path / "datapackage.json")
+    assert report.valid, report.flatten(["type", "fieldName", "note"])

@@ -202,9 +202,18 @@ export class ResearcherApi {
   }
 
   /** One export (`what`: predictions, survey, events or participants) as a Blob. */
-  async exportCsv(studyId, what = "predictions") {
+  exportCsv(studyId, what = "predictions") {
+    return this.exportFile(studyId, `${enc(what)}.csv`);
+  }
+
+  /** One export's codebook (its Frictionless datapackage.json) as a Blob. */
+  exportPackage(studyId, what = "predictions") {
+    return this.exportFile(studyId, `${enc(what)}.datapackage.json`);
+  }
+
+  async exportFile(studyId, name) {
     const query = studyId ? `?study_id=${enc(studyId)}` : "";
-    const response = await fetch(`/api/researcher/export/${enc(what)}.csv${query}`, { headers: this.auth() });
+    const response = await fetch(`/api/researcher/export/${name}${query}`, { headers: this.auth() });
     if (!response.ok) throw new ApiError(response.status, await response.text());
     return response.blob();
   }

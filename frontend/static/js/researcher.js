@@ -183,6 +183,7 @@ class Dashboard {
     });
     $("refresh").onclick = () => this.refresh();
     $("download").onclick = () => this.download();
+    $("download-codebook").onclick = () => this.download(true);
     $("logout").onclick = () => this.logout();
     $("rules-select").onchange = () => this.refresh();
     $("show-external-ids").onchange = () => this.refresh();
@@ -316,22 +317,29 @@ class Dashboard {
     }
   }
 
-  async download() {
-    $("dashboard-message").textContent = "Preparing the export…";
+  /** Download the chosen export's CSV, or (`codebook`) its datapackage.json, named as the
+   * package's resource path expects: <study>_<what>.csv beside <study>_<what>.datapackage.json. */
+  async download(codebook = false) {
+    $("dashboard-message").textContent = codebook ? "Preparing the codebook…" : "Preparing the export…";
     try {
       const what = $("export-what").value;
-      const blob = await this.api.exportCsv(this.studyId(), what);
-      const url = URL.createObjectURL(blob);
-      const link = Object.assign(document.createElement("a"), { href: url, download: `${this.studyId() || "study"}_${what}.csv` });
-      document.body.append(link);
-      link.click();
-      link.remove();
-      setTimeout(() => URL.revokeObjectURL(url), 10000);
+      const base = `${this.studyId() || "study"}_${what}`;
+      const blob = codebook ? await this.api.exportPackage(this.studyId(), what) : await this.api.exportCsv(this.studyId(), what);
+      saveBlob(blob, codebook ? `${base}.datapackage.json` : `${base}.csv`);
       $("dashboard-message").textContent = `Downloaded ${(blob.size / 1024).toFixed(1)} kB.`;
     } catch (error) {
-      $("dashboard-message").textContent = `Export failed: ${error.message}`;
+      $("dashboard-message").textContent = `${codebook ? "Codebook" : "Export"} failed: ${error.message}`;
     }
   }
+}
+
+function saveBlob(blob, name) {
+  const url = URL.createObjectURL(blob);
+  const link = Object.assign(document.createElement("a"), { href: url, download: name });
+  document.body.append(link);
+  link.click();
+  link.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 10000);
 }
 
 new Dashboard().start();
