@@ -1,7 +1,8 @@
 """Self-contained HTML reports: jinja2 templates (autoescaped) with figures embedded as data URIs.
 
-Both reports (analysis/report.py, app/interaction/report.py) render through
-`render_page`; their templates are in analysis/templates/ and extend `base.html.j2`.
+The reports (analysis/report.py, app/interaction/report.py) and the preregistration
+(app/prereg/write.py) render through `render_page`; their templates are in analysis/templates/
+and extend `base.html.j2`.
 """
 
 import base64

@@ -298,6 +298,26 @@ def power(
     typer.echo(f"wrote {out}")
 
 
+@cli.command()
+def prereg(
+    study: Annotated[str, typer.Option(help="study id")] = "paper_study",
+    out: Annotated[Path | None, typer.Option(help="output folder (default "
+                                             "var/reports/prereg-<study>/)")] = None,
+) -> None:
+    """Write the study's preregistration (OSF template's sections) as Markdown and a
+    self-contained HTML page, from its config, frozen bundle, instrument and power results."""
+    from app.bank.bundle import BundleError
+    from app.prereg.write import write_prereg
+
+    settings = get_settings()
+    try:
+        paths = write_prereg(settings, study, out or settings.layout.prereg_report(study))
+    except (ConfigError, BundleError) as err:
+        fail(f"--study: {study}: {err}")
+    for path in paths:
+        typer.echo(f"wrote {path}")
+
+
 def study_simulation(study: str, observers: Path | None = None,
                      bank: Path | None = None) -> "SimulationInputs":
     """What simulated participants of `study` run on; exit 2 naming what is missing."""

@@ -11,6 +11,7 @@
       trials/<study>/display_check.json                                 check-display
       bundles/<study>/manifest.json, bank.json.gz, models/, configs/    bundle build
       reports/<study>/, power-<study>-<bots>/, instrument-<study>/      analyze, power, instrument
+      reports/prereg-<study>/                                           prereg
       reports/interaction/<scenario>/                                   interaction
       study.db, pilot_<bots>.db                                         serve, make pilot
       studies/<study>/completion_codes.json     a study's generated codes   serve, codes
@@ -121,6 +122,10 @@ class Layout:
     def instrument_report(self, study_id: str) -> Path:
         """reports/instrument-<study>/: `tomstudy instrument`."""
         return self.root / "reports" / f"instrument-{study_id}"
+
+    def prereg_report(self, study_id: str) -> Path:
+        """reports/prereg-<study>/: `tomstudy prereg`."""
+        return self.root / "reports" / f"prereg-{study_id}"
 
     def interaction_report(self, scenario: str) -> Path:
         """reports/interaction/<scenario>/: `tomstudy interaction`."""

@@ -19,7 +19,7 @@ def test_analysis_imports_nothing_from_app():
 
 
 OFFLINE = ("worlds", "data", "learning", "interaction", "recordings", "observers", "study",
-           "bank", "predictors")
+           "bank", "predictors", "prereg")
 WEB = ("fastapi", "sqlmodel", "sqlalchemy", "starlette", "app.server", "app.researcher",
        "app.pilot", "app.main")
 

@@ -201,6 +201,7 @@ def run_power(bank_path: Path, preset: str, trials_per_world: int, out_dir: Path
     figures = plot_power(curve, alpha, preset, out_dir / "power")
     needed = {world: _smallest_n(group, 0.8) for world, group in curve.groupby("world")}
     summary = {"kind": preset, "alpha": alpha, "pool": pool, "reps": reps, "seed": seed,
+               "bank_sha256": bank.sha256,  # of the JSON, as sessions record it
                "trials_per_world": trials_per_world, "n_for_power_0.8": needed,
                "d_z": curve.groupby("world")["d_z"].first().to_dict(),
                "power_at": {f"{w}@{n}": float(g.loc[g["n"] == n, "power"].iloc[0])
