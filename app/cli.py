@@ -2,6 +2,7 @@
 
 import sys
 from collections.abc import Iterable
+from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -559,11 +560,19 @@ def serve(
     host: Annotated[str, typer.Option(help="interface to listen on")] = "127.0.0.1",
     port: Annotated[int, typer.Option(min=1, max=65535)] = 8000,
     workers: Annotated[int, typer.Option(min=1, help="uvicorn worker processes")] = 1,
-    study: Annotated[str, typer.Option(help="study id(s), comma-separated")] = "paper_study",
+    study: Annotated[str | None, typer.Option(help="study id(s), comma-separated (default "
+                                              "paper_study; with --archive, its study)")]
+    = None,
     prepare: Annotated[bool, typer.Option("--prepare", help="first simulate, train and "
                                           "build-trials whatever is missing")] = False,
     allow_bank_change: Annotated[bool, typer.Option(
         "--allow-bank-change", help="serve although sessions ran another trial bank")] = False,
+    archive: Annotated[Path | None, typer.Option(
+        help="serve the study of this archive (`tomstudy archive`) from its own bundle, on a "
+             "fresh SQLite database; the lab's data dir and database are never read")] = None,
+    archive_dir: Annotated[Path | None, typer.Option(
+        help="with --archive: a new or empty folder for its configs, data and database "
+             "(default: a temporary folder, removed when the server stops)")] = None,
 ) -> None:
     """Serve the study (participant app, API, researcher dashboard) with uvicorn."""
     import uvicorn
@@ -571,23 +580,61 @@ def serve(
     from app.main import ready_to_serve
     from app.server.preflight import NotServable, forwarded_allow_ips, hand_to_workers
 
-    study_ids = study.split(",")
+    with ExitStack() as cleanup:
+        if archive is not None:
+            study = archived_study(archive, archive_dir, study, prepare, cleanup)
+        elif archive_dir is not None:
+            fail("--archive-dir: only with --archive")
+        study_ids = (study or "paper_study").split(",")
+        try:
+            settings = ready_to_serve(get_settings(), host, workers, study_ids,
+                                      allow_bank_change, prepare, say=typer.echo)
+        except NotServable as err:
+            fail(str(err))
+        hand_to_workers(settings, study_ids)
+        docs = "off in production" if settings.production else "/docs"
+        proxies = forwarded_allow_ips(settings)
+        typer.echo(f"serving http://{host}:{port}/s/{study_ids[0]}  "
+                   f"(researcher dashboard: /researcher, API docs: {docs}; client addresses "
+                   f"from X-Forwarded-For of {proxies} only)")
+        # info: each worker's start, and the supervisor replacing one that died; no access
+        # log (as before: request lines and client addresses stay out of the log)
+        uvicorn.run("app.main:app_from_env", factory=True, host=host, port=port,
+                    workers=workers, log_level="info", access_log=False,
+                    proxy_headers=True, forwarded_allow_ips=proxies)
+
+
+def archived_study(archive: Path, archive_dir: Path | None, study: str | None, prepare: bool,
+                   cleanup: ExitStack) -> str:
+    """Point this process (and its workers) at a fresh folder holding the archive's study,
+    set up from the verified archive; its study id. Exit 2 naming what is wrong."""
+    import os
+    import tempfile
+
+    from app.researcher.reproduce import (
+        LAB_ONLY_VARIABLES,
+        ArchiveError,
+        serving_environment,
+        unpack_for_serving,
+    )
+
+    if prepare:
+        fail("--prepare: an archive's bundle is served as it is; leave --prepare out")
+    root = archive_dir or Path(cleanup.enter_context(
+        tempfile.TemporaryDirectory(prefix="tomstudy-serve-archive-")))
     try:
-        settings = ready_to_serve(get_settings(), host, workers, study_ids, allow_bank_change,
-                                  prepare, say=typer.echo)
-    except NotServable as err:
+        os.environ.update(serving_environment(root))
+        for name in LAB_ONLY_VARIABLES:
+            os.environ.pop(name, None)
+        get_settings.cache_clear()
+        archived = unpack_for_serving(archive, get_settings())
+    except ArchiveError as err:
         fail(str(err))
-    hand_to_workers(settings, study_ids)
-    docs = "off in production" if settings.production else "/docs"
-    proxies = forwarded_allow_ips(settings)
-    typer.echo(f"serving http://{host}:{port}/s/{study_ids[0]}  "
-               f"(researcher dashboard: /researcher, API docs: {docs}; client addresses "
-               f"from X-Forwarded-For of {proxies} only)")
-    # info: each worker's start, and the supervisor replacing one that died; no access log
-    # (as before: request lines and client addresses stay out of the log)
-    uvicorn.run("app.main:app_from_env", factory=True, host=host, port=port,
-                workers=workers, log_level="info", access_log=False,
-                proxy_headers=True, forwarded_allow_ips=proxies)
+    if study not in (None, archived):
+        fail(f"--study: the archive holds study {archived!r}, not {study!r}")
+    typer.echo(f"serving {archive}'s study {archived} from its own bundle; its configs, data "
+               f"and a fresh SQLite database are in {root}")
+    return archived
 
 
 db_cli = typer.Typer(no_args_is_help=True,
@@ -718,10 +765,10 @@ def write_export_package(frame, config, study: str, what: str, out: Path) -> Pat
     return target
 
 
-def writable_target(out: Path) -> None:
+def writable_target(out: Path, kind: str = "CSV") -> None:
     """Make `out`'s folder where missing; a one-line CLI error where it cannot be a file."""
     if out.is_dir():
-        fail(f"--out: {out} is a folder; give a CSV file name")
+        fail(f"--out: {out} is a folder; give a {kind} file name")
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -737,9 +784,11 @@ def withdraw(
     participant_id: Annotated[str | None, typer.Option(
         "--participant-id", help="a session's public id (open and pilot sessions)")] = None,
 ) -> None:
-    """Delete every row of one participant (all sessions, one transaction); print the audit."""
+    """Delete every row of one participant (all sessions, one transaction); print the audit
+    line and the archives (`tomstudy archive`) that hold them, to re-issue."""
     import json
 
+    from app.researcher.archive_registry import RegistryError
     from app.researcher.withdrawal import withdraw_and_erase
     from app.server.schemas import WithdrawalByExternalId, WithdrawalByParticipantId
     from app.study.errors import Refused
@@ -751,13 +800,75 @@ def withdraw(
            WithdrawalByParticipantId(study_id=study, participant_id=participant_id))
     config, engine = study_database(study)
     try:
-        line = withdraw_and_erase(engine, study, who, config.recruitment.platform, via="cli")
+        line = withdraw_and_erase(engine, study, who, config.recruitment.platform, via="cli",
+                                  layout=get_settings().layout)
     except Refused as err:
         kind = err.detail.split(":", 1)[0]
         fail(err.detail.replace(f"{kind}:", f"--{kind.replace('_', '-')}:", 1), 1)
+    except RegistryError as err:
+        fail(str(err), 1)
     finally:
         engine.dispose()
     typer.echo(json.dumps(line))
+    for archive in line["archives"]:
+        warn(f"{archive['path']} (written {archive['created_at']}) holds this participant: "
+             "re-issue it without them (`tomstudy archive`) and withdraw the old copy")
+
+
+@cli.command()
+def archive(
+    study: Annotated[str, typer.Option(help="study id")],
+    out: Annotated[Path, typer.Option(help="the archive to write (.zip)")],
+    with_free_text: Annotated[bool, typer.Option(
+        "--with-free-text", help="also the survey's free-text answers (left out by default: "
+                                 "people may write what identifies them)")] = False,
+) -> None:
+    """Write one zip for a reviewer: the study's bundle and config, its exports (pseudonymous,
+    read from DATABASE_URL), the analysis of them, the environment and ARCHIVE.json with every
+    member's SHA-256 and the participants it holds (entered in the data dir's registry)."""
+    from analysis.report import AnalysisError
+    from app.bank.bundle import BundleError
+    from app.researcher.archive import ArchiveJob, write_archive
+    from app.researcher.archive_registry import RegistryError
+
+    if out.suffix != ".zip":
+        fail(f"--out: {out} must end in .zip")
+    writable_target(out, "zip")
+    config, engine = study_database(study)
+    try:
+        entry = write_archive(ArchiveJob(get_settings(), study, engine, config, with_free_text),
+                              out)
+    except (AnalysisError, BundleError, RegistryError, OSError) as err:
+        fail(str(err))
+    finally:
+        engine.dispose()
+    typer.echo(f"wrote {out} ({out.stat().st_size} bytes, SHA-256 {entry['sha256']}; "
+               f"{len(entry['participant_ids'])} participants; registered in "
+               f"{get_settings().layout.archive_registry()})")
+
+
+@cli.command()
+def reproduce(
+    archive: Annotated[Path, typer.Argument(help="an archive of `tomstudy archive`")],
+) -> None:
+    """Check every member's SHA-256, re-run the archived analysis here and print every number
+    beside its recomputation; exit 1 if a member is altered or a number differs."""
+    import tempfile
+
+    from analysis.report import AnalysisError
+    from app.bank.bundle import BundleError
+    from app.researcher.reproduce import ArchiveError
+    from app.researcher.reproduce import reproduce as run_reproduce
+
+    if not archive.is_file():
+        fail(f"ARCHIVE: {archive} not found")
+    with tempfile.TemporaryDirectory(prefix="tomstudy-reproduce-") as work:
+        try:
+            agreed = run_reproduce(archive, Path(work), say=typer.echo)
+        except (ArchiveError, AnalysisError, BundleError, ConfigError) as err:
+            fail(str(err), 1)
+    if not agreed:
+        raise typer.Exit(1)
 
 
 prolific_cli = typer.Typer(no_args_is_help=True, help="Prolific's API for a study's sessions "

@@ -15,6 +15,7 @@
       reports/interaction/<scenario>/                                   interaction
       study.db, pilot_<bots>.db                                         serve, make pilot
       studies/<study>/completion_codes.json     a study's generated codes   serve, codes
+      archives/registry.json  every archive written: its path, hash and participants   archive
       recordings/             a lab's recordings (TOMSTUDY_RECORDINGS_DIR)   import-recordings
 
 A study's model family (its config's `models.seeds`) lives at `checkpoint(world, model, seed)`;
@@ -141,6 +142,11 @@ class Layout:
     def completion_codes(self, study_id: str) -> Path:
         """studies/<study>/completion_codes.json: the study's generated completion codes."""
         return self.root / "studies" / study_id / "completion_codes.json"
+
+    def archive_registry(self) -> Path:
+        """archives/registry.json: the archives `tomstudy archive` wrote (path, SHA-256,
+        participant ids, time), so a withdrawal names the ones that hold the person."""
+        return self.root / "archives" / "registry.json"
 
     def study_database(self) -> Path:
         """study.db: the SQLite database `serve` uses when DATABASE_URL is unset."""

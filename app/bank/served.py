@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 from app.bank.bundle import BANK, Bundle, BundleError
 from app.bank.verify import load_bundle
 from app.settings import Settings
-from app.study.config import load_study_config
+from app.study.config import StudyConfig, load_study_config
 
 if TYPE_CHECKING:
     from analysis.report import StudyInputs
@@ -35,16 +35,25 @@ def analysis_inputs(settings: Settings, study_id: str,
                     warn: Callable[[str], None] = print) -> "StudyInputs":
     """What `analyze` takes from the study config and its bundle, as plain values and paths
     (without a bundle on this machine the analysis runs on the export alone, and `warn`s)."""
-    from analysis.report import StudyInputs
-
     config = load_study_config(settings, study_id)
     try:
         bundle = load_bundle(config, study_id, settings.configs_dir, settings.layout)
     except BundleError as err:
         warn(f"{err}; per-seed and family results need the bundle")
-        models, bank = {}, settings.layout.bundle_dir(study_id) / BANK
-    else:
-        models, bank = bundle.manifest["models"], bundle.root / BANK
+        return study_inputs(config, {}, settings.layout.bundle_dir(study_id) / BANK)
+    return bundle_inputs(config, bundle)
+
+
+def bundle_inputs(config: StudyConfig, bundle: Bundle) -> "StudyInputs":
+    """What `analyze` takes from a study config and the verified bundle it is served from."""
+    return study_inputs(config, bundle.manifest["models"], bundle.root / BANK)
+
+
+def study_inputs(config: StudyConfig, models: dict, bank: Path) -> "StudyInputs":
+    """The analysis's inputs as plain values and paths: the config, its exclusion rules, the
+    model family's content hashes and the trial bank's file."""
+    from analysis.report import StudyInputs
+
     return StudyInputs(config=config.model_dump(mode="json"), rules=config.exclusions,
                        models=models, bank=bank)
 

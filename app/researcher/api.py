@@ -8,8 +8,10 @@ from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, Response
 
 from app.researcher import exports, payments, progress, withdrawal
+from app.researcher.archive_registry import RegistryError, read_registry
 from app.server.deps import AdminDep, SessionDep, study_context
 from app.server.schemas import PaymentActionCreate, WithdrawalCreate
+from app.study.errors import Refused
 
 router = APIRouter(prefix="/api/researcher", tags=["researcher"])
 
@@ -75,11 +77,16 @@ def _attachment(name: str) -> dict[str, str]:
 def create_withdrawal(body: WithdrawalCreate, request: Request, db: SessionDep,
                       _: AdminDep) -> dict:
     """Delete every row of one participant (by external_id, or participant_id for open and
-    pilot sessions); answers the audit line (no id in it) and what became of the files."""
+    pilot sessions); answers the audit line (no id in it), the archives that hold the
+    participant (to re-issue) and what became of the files."""
     ctx = study_context(request, body.study_id)
-    audit = withdrawal.withdraw(db, body.study_id, body, ctx.config.recruitment.platform,
-                                via="api")
-    return withdrawal.audit_line(audit) | {
+    try:  # read before anything is deleted: an archive holding the person must be named
+        archives = read_registry(request.app.state.settings.layout)
+    except RegistryError as err:
+        raise Refused(503, f"archives: {err}") from None
+    done = withdrawal.withdraw(db, body.study_id, body, ctx.config.recruitment.platform,
+                               via="api")
+    return withdrawal.answer_line(done, archives) | {
         "storage": withdrawal.erase_from_files(request.app.state.engine)}
 
 

@@ -9,7 +9,9 @@ released first, so the next start fills its place. The audit line (WithdrawalAud
 keeps which kind of id was given, a fresh random salt, sha256(salt + ":" + id), the
 time, how it was asked for and the deleted row counts per table: enough to confirm a
 withdrawal to the person who asked, given their id, and nothing that names them. The
-same id may start again later, as a new person.
+same id may start again later, as a new person. The answer also names the archives
+(`tomstudy archive`, app/researcher/archive_registry.py) that hold a withdrawn session, so
+the lab re-issues them without it; the registry is read before anything is deleted.
 
 Deleted rows must leave the files too: SQLite overwrites them (secure_delete, db.py) and
 the write-ahead log is checkpointed and truncated right after (`erase_from_files`).
@@ -20,11 +22,14 @@ and backups until those rotate (README, "Exports and withdrawal").
 import hashlib
 import secrets
 import time
+from dataclasses import dataclass
 
 from sqlalchemy import delete, func, select
 from sqlalchemy.engine import Engine
 from sqlmodel import Session
 
+from app.layout import Layout
+from app.researcher.archive_registry import archives_holding, read_registry
 from app.server import balance
 from app.server.recruitment import normalise_external_id
 from app.server.schemas import WithdrawalByExternalId, WithdrawalCreate
@@ -45,13 +50,21 @@ CHECKPOINT_TRIES = 5
 CHILD_TABLES = (PredictionRow, TrialResponse, Event, Submission, TrialDraft)
 
 
+@dataclass(frozen=True)
+class Withdrawn:
+    """A withdrawal done: its audit row and the public ids of the sessions it deleted."""
+
+    audit: WithdrawalAudit
+    participant_ids: list[str]
+
+
 def id_hash(salt: str, external_id: str) -> str:
     """sha256(salt + ":" + external id), hex."""
     return hashlib.sha256(f"{salt}:{external_id}".encode()).hexdigest()
 
 
 def withdraw(db: Session, study_id: str, who: WithdrawalCreate, platform: str,
-             via: str) -> WithdrawalAudit:
+             via: str) -> Withdrawn:
     """Delete every session of the person `who` names in `study_id` and its rows; 404 if
     none. `platform` (the study's) says how an external id is spelled."""
     kind, given = id_given(who, platform)
@@ -60,6 +73,7 @@ def withdraw(db: Session, study_id: str, who: WithdrawalCreate, platform: str,
         sessions = _sessions_of(db, study_id, kind, given)
         if not sessions:
             raise Refused(404, f"{kind}: no session of this id in study {study_id!r}")
+        public_ids = sorted(p.public_id for p in sessions)
         for session in sessions:
             balance.release(db, session)
         salt = secrets.token_hex(16)
@@ -71,7 +85,7 @@ def withdraw(db: Session, study_id: str, who: WithdrawalCreate, platform: str,
     except BaseException:
         db.rollback()
         raise
-    return audit
+    return Withdrawn(audit, public_ids)
 
 
 def id_given(who: WithdrawalCreate, platform: str) -> tuple[str, str]:
@@ -102,12 +116,23 @@ def _locked(db: Session, query) -> list[Participant]:
 
 
 def withdraw_and_erase(engine: Engine, study_id: str, who: WithdrawalCreate, platform: str,
-                       via: str) -> dict:
-    """`withdraw` in a session of its own, then `erase_from_files`: the audit line with what
-    happened to the deleted rows on disk (Refused if no session matches)."""
+                       via: str, layout: Layout) -> dict:
+    """`withdraw` in a session of its own, then `erase_from_files`: the answer line (the audit
+    line and the archives of `layout`'s registry to re-issue) with what happened to the
+    deleted rows on disk (Refused if no session matches; RegistryError, before anything is
+    deleted, if the registry is unreadable)."""
+    archives = read_registry(layout)
     with Session(engine) as db:
-        line = audit_line(withdraw(db, study_id, who, platform, via=via))
+        line = answer_line(withdraw(db, study_id, who, platform, via=via), archives)
     return line | {"storage": erase_from_files(engine)}
+
+
+def answer_line(done: Withdrawn, archives: list[dict]) -> dict:
+    """The audit line of a withdrawal and, under `archives`, the registry's archives that hold
+    a session it deleted (path, SHA-256, time): those to re-issue without the person."""
+    line = audit_line(done.audit)
+    return line | {"archives": archives_holding(archives, line["study_id"],
+                                                done.participant_ids)}
 
 
 def erase_from_files(engine: Engine) -> str:

@@ -98,6 +98,8 @@ WITHDRAWAL_STATUSES = RESEARCHER_STATUSES | {
     404: "study_id: unknown study; external_id / participant_id: no session of this id in "
          "the study",
     413: TOO_LARGE,
+    503: f"{DB_DOWN}; archives: the data dir's archive registry is unreadable (nothing was "
+         "deleted)",
 }
 PAYMENT_STATUSES = RESEARCHER_STATUSES | {
     400: UNREADABLE,

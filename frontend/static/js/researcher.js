@@ -143,8 +143,12 @@ function auditTable(lines) {
 
 function withdrawalText(line) {
   const rows = Object.values(line.row_counts).reduce((a, b) => a + b, 0);
+  const archives = (line.archives ?? []).map((a) => a.path);
+  const reissue = archives.length
+    ? ` Re-issue without them the archive(s) that hold them: ${archives.join(", ")}.` : "";
   return `Withdrawn: ${line.row_counts.participant} session(s) and ${rows} rows deleted `
-    + `(audit line ${line.id}, ${new Date(line.withdrawn_at).toLocaleString()}). ${line.storage}.`;
+    + `(audit line ${line.id}, ${new Date(line.withdrawn_at).toLocaleString()}). ${line.storage}.`
+    + reissue;
 }
 
 /** GET a researcher route with the bearer token; `params` become the query string. */
