@@ -747,22 +747,18 @@ def export_cmd(
                    "beside it (or GET /api/researcher/export/" + what + ".datapackage.json)",
                    err=True)
         return
-    package = write_export_package(frame, config, study, what, out)
+    package = write_package_beside(frame, config, study, what, out)
     typer.echo(f"wrote {out} ({len(frame)} rows) and its codebook {package}", err=True)
 
 
-def write_export_package(frame, config, study: str, what: str, out: Path) -> Path:
+def write_package_beside(frame, config, study: str, what: str, out: Path) -> Path:
     """Write the data package of the export CSV `out` beside it; returns its path."""
-    from analysis.atomic import write_json
-    from app.researcher.exports import export_package, package_path
+    from app.researcher.exports import package_path, write_export_package
 
-    target = package_path(out)
-    package = export_package(frame, config, study, what, out.read_bytes(), out.name)
     try:
-        write_json(target, package)
+        return write_export_package(frame, config, study, what, out)
     except OSError as err:
-        fail(f"--out: cannot write {target}: {err.strerror or err}")
-    return target
+        fail(f"--out: cannot write {package_path(out)}: {err.strerror or err}")
 
 
 def writable_target(out: Path, kind: str = "CSV") -> None:

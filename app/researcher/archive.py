@@ -7,8 +7,10 @@
     study/<study>.yaml       the study config it is served and analysed with
     exports/<what>.csv       predictions, survey, events and participants, pseudonymous: no
                              platform id or completion code, no free-text answer unless asked
+    exports/<what>.datapackage.json   each export's codebook (analysis/codebook.py)
     analysis/                `tomstudy analyze` of exports/predictions.csv: summary.json and
                              every CSV (each number the report shows), and report.html
+    prereg/preregistration.{md,html}   `tomstudy prereg`: the preregistration
     environment.json         Python, the platform and every installed distribution's version
 
 Each member comes from one writer of MEMBER_WRITERS, called in order on a staging folder;
@@ -43,8 +45,9 @@ from app.bank.served import bundle_inputs, served_bundle
 from app.bank.verify import open_bundle
 from app.configio import load_yaml_model
 from app.fileio import sha256_file
+from app.prereg.write import write_prereg
 from app.researcher.archive_registry import read_registry, record_archive
-from app.researcher.exports import export_table
+from app.researcher.exports import export_table, write_export_package
 from app.settings import Settings
 from app.study.config import StudyConfig, study_config_path
 
@@ -54,6 +57,7 @@ BUNDLE = "bundle"
 STUDY = "study"
 EXPORTS = "exports"
 ANALYSIS = "analysis"
+PREREG = "prereg"
 ENVIRONMENT = "environment.json"
 # what the archived analysis says its rows came from: the same in the archive and on reproduce
 ANALYSIS_SOURCE = f"{EXPORTS}/predictions.csv"
@@ -89,13 +93,21 @@ def write_study_config(job: ArchiveJob, staging: Path) -> None:
 
 
 def write_exports(job: ArchiveJob, staging: Path) -> None:
-    """exports/<what>.csv: every export, without platform ids (and free text unless asked)."""
+    """exports/<what>.csv: every export, without platform ids (and free text unless asked),
+    each with its codebook beside it (<what>.datapackage.json, of the columns it holds)."""
     (staging / EXPORTS).mkdir()
     with Session(job.engine) as db:
         for what in WHAT:
-            frame = export_table(db, job.config, job.study_id, what)
-            write_csv(pseudonymous(frame, what, job.with_free_text),
-                      staging / EXPORTS / f"{what}.csv")
+            frame = pseudonymous(export_table(db, job.config, job.study_id, what), what,
+                                 job.with_free_text)
+            target = staging / EXPORTS / f"{what}.csv"
+            write_csv(frame, target)
+            write_export_package(frame, job.config, job.study_id, what, target)
+
+
+def write_preregistration(job: ArchiveJob, staging: Path) -> None:
+    """prereg/: the study's preregistration (`tomstudy prereg`), Markdown and HTML."""
+    write_prereg(job.settings, job.study_id, staging / PREREG)
 
 
 def pseudonymous(frame: pd.DataFrame, what: str, with_free_text: bool) -> pd.DataFrame:
@@ -143,6 +155,7 @@ MEMBER_WRITERS: tuple[Callable[[ArchiveJob, Path], None], ...] = (
     write_study_config,
     write_exports,
     write_analysis,
+    write_preregistration,
     write_environment,
 )
 

@@ -24,6 +24,7 @@ import pandas as pd
 from sqlalchemy import func, select
 from sqlmodel import Session
 
+from analysis.atomic import write_json
 from analysis.codebook import StudyTerms, data_package
 from analysis.contracts import (
     DEVICE,
@@ -82,6 +83,15 @@ def export_filename(study_id: str, what: str) -> str:
 def package_path(csv_path: Path) -> Path:
     """Where an export's data package goes: FILE.csv -> FILE.datapackage.json beside it."""
     return csv_path.with_name(csv_path.name.removesuffix(".csv") + ".datapackage.json")
+
+
+def write_export_package(frame: pd.DataFrame, config: StudyConfig, study_id: str, what: str,
+                         csv_path: Path) -> Path:
+    """Write the data package of the export CSV at `csv_path` (holding `frame`) beside it."""
+    target = package_path(csv_path)
+    write_json(target, export_package(frame, config, study_id, what, csv_path.read_bytes(),
+                                      csv_path.name))
+    return target
 
 
 def export_package(frame: pd.DataFrame, config: StudyConfig, study_id: str, what: str,

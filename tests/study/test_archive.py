@@ -13,6 +13,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+import frictionless
 import httpx
 import pandas as pd
 import pytest
@@ -132,7 +133,9 @@ def test_the_archive_holds_exactly_its_listed_members(pilot, archived):
     sid = pilot.study.study_id
     expected = ({"bundle/manifest.json", f"study/{sid}.yaml", "environment.json"}
                 | {f"bundle/{name}" for name in bundle["files"]}
-                | {f"exports/{what}.csv" for what in EXPORTS})
+                | {f"exports/{what}.csv" for what in EXPORTS}
+                | {f"exports/{what}.datapackage.json" for what in EXPORTS}
+                | {"prereg/preregistration.md", "prereg/preregistration.html"})
     analysis = {name for name in files if name.startswith("analysis/")}
     assert set(files) - {ARCHIVE_MANIFEST} == expected | analysis
     assert {"analysis/summary.json", "analysis/report.html",
@@ -142,6 +145,17 @@ def test_the_archive_holds_exactly_its_listed_members(pilot, archived):
     environment_lock = json.loads(files["environment.json"])
     assert environment_lock["python"].startswith(f"{sys.version_info.major}.")
     assert {"torch", "pandas", "tomstudy"} <= set(environment_lock["distributions"])
+
+
+def test_every_archived_export_is_valid_against_its_codebook(archived, tmp_path):
+    with zipfile.ZipFile(archived) as zf:
+        zf.extractall(tmp_path)
+    for what in EXPORTS:
+        package = json.loads((tmp_path / "exports" / f"{what}.datapackage.json").read_text())
+        assert "external_id" not in {f["name"] for f in package["resources"][0]["schema"][
+            "fields"]}
+        report = frictionless.validate(tmp_path / "exports" / f"{what}.datapackage.json")
+        assert report.valid, (what, report.flatten(["rowNumber", "fieldName", "message"]))
 
 
 def test_the_archive_names_its_participants_and_the_registry_holds_it(pilot, archived):
