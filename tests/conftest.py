@@ -334,6 +334,17 @@ def start_server(study: SmallStudy, db_url: str, port: int, workers: int = 1,
     raise RuntimeError("server did not answer within 60 s")
 
 
+def stop_server(proc: subprocess.Popen, grace_s: float = 10) -> None:
+    """Terminate a server a test started; kill it if it does not stop (it must not outlive
+    the test)."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=grace_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout=10)
+
+
 @pytest.fixture(scope="session")
 def live_server(small_study, tmp_path_factory):
     """A running `tomstudy serve` of the small study on SQLite; yields its base URL."""

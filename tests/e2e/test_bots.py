@@ -1,7 +1,6 @@
 """Pilot bots take the real study over HTTP against a real server on 127.0.0.1."""
 
 import asyncio
-import subprocess
 from collections import Counter
 
 import httpx
@@ -11,7 +10,7 @@ from sqlalchemy import create_engine, func, select, text
 from analysis.load import load_csv, load_database
 from app.pilot.bots import run_bots
 from app.server.tables import Participant, PredictionRow, Submission, TrialResponse
-from tests.conftest import free_port, fresh_database, start_server
+from tests.conftest import free_port, fresh_database, start_server, stop_server
 
 pytestmark = pytest.mark.slow
 BOUND_S = 300  # a whole bot run must finish within this
@@ -24,7 +23,7 @@ def fresh_server(small_study, tmp_path):
     port = free_port()
     proc = start_server(small_study, db_url, port, log=tmp_path / "server.log")
     yield f"http://127.0.0.1:{port}", db_url
-    stop(proc)
+    stop_server(proc)
 
 
 def _count(engine, table) -> int:
@@ -59,17 +58,7 @@ def crowd_server(request, small_study, tmp_path):
     proc = start_server(small_study, db_url, port, workers=workers, log=tmp_path / "server.log",
                         TOMSTUDY_TRUST_CLIENT_CLOCK="1")
     yield f"http://127.0.0.1:{port}", db_url
-    stop(proc)
-
-
-def stop(proc: subprocess.Popen) -> None:
-    """Terminate a server; kill it if it does not stop (it must not outlive the test)."""
-    proc.terminate()
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(timeout=10)
+    stop_server(proc)
 
 
 def test_two_hundred_concurrent_participants_complete_in_exact_balance(small_study,

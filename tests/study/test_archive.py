@@ -26,7 +26,7 @@ from app.pilot.bots import run_bots
 from app.researcher.archive import ARCHIVE_MANIFEST, pseudonymous
 from app.server.tables import Participant
 from app.settings import get_settings
-from tests.conftest import REPO, SmallStudy, free_port, local_client, start_server
+from tests.conftest import REPO, SmallStudy, free_port, local_client, start_server, stop_server
 
 BOTS = 8
 FREE_TEXT = "I watched where the robot was heading."  # every bot's answer to a text question
@@ -64,19 +64,9 @@ def pilot(small_study, tmp_path_factory) -> Pilot:
         results = asyncio.run(run_bots(f"http://127.0.0.1:{port}", small_study.study_id,
                                        "coarse", BOTS, concurrency=4))
     finally:
-        stop(proc)
+        stop_server(proc, grace_s=20)
     assert [r.error for r in results] == [None] * BOTS
     return Pilot(small_study, root, lab, db_url)
-
-
-def stop(proc: subprocess.Popen) -> None:
-    """Stop a server this module started (kill it if it does not stop)."""
-    proc.terminate()
-    try:
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(timeout=10)
 
 
 @contextmanager
@@ -258,7 +248,7 @@ def test_serve_archive_serves_the_study_from_the_archive_only(pilot, archived, t
         try:
             page = wait_for_page(proc, f"http://127.0.0.1:{port}/s/{pilot.study.study_id}", log)
         finally:
-            stop(proc)
+            stop_server(proc, grace_s=20)
     assert page.status_code == 200 and "<html" in page.text.lower()
     assert (review / "data" / "study.db").is_file()
     assert (review / "data" / "bundles" / pilot.study.study_id / "manifest.json").is_file()
