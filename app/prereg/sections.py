@@ -527,8 +527,8 @@ def deviations(inputs: Inputs) -> Section:
                        "deviations from the paper", f"{len(table.rows)} rows")
     return Section("Deviations from the paper", (
         "Where this platform departs from the paper (the README's table, with why and what "
-        "checks each); this study's own worlds, trials and sample are in Design and Sampling "
-        "plan.", table))
+        "checks each; its rows on worlds and trials are the paper study's). This study's own "
+        "worlds, trials and sample are in Design and Sampling plan.", table))
 
 
 def sources(inputs: Inputs) -> Section:
