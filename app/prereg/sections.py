@@ -5,6 +5,7 @@ inference criteria, then the observer family, the deviations from the paper and 
 Every number is taken through the inputs' ledger (app/prereg/sources.py), so the Sources
 table at the end names the file, key and SHA-256 it came from."""
 
+from analysis.codebook import StudyTerms, column_entry
 from app.bank.bundle import BANK, checkpoint_file
 from app.observers.family import COARSE_VARIANTS, GOAL_VARIANTS
 from app.prereg.document import Document, Items, Section, Table
@@ -19,22 +20,15 @@ PAPER_HYPOTHESIS = ("Ours will more accurately match the predictions made by hum
                     "participants as compared to VAE.")
 DEVIATIONS_HEADING = "## Where this implementation departs from the paper"
 # the export columns a preregistration names as measured (analysis/contracts.py has them all)
+# the predictions export's columns the analysis reads; their meaning is the codebook's
 MEASURED_COLUMNS = (
-    ("participant_vx, participant_vy", "the participant's predicted move per step (m/s), "
-     "from the clicked positions participant_click_x, participant_click_y"),
-    ("ours_vx, ours_vy, vae_vx, vae_vy", "the primary seed's Ours and VAE answer at the same "
-     "start state and step (every seed's answer is in the bank)"),
-    ("cv_vx, cv_vy, policy_vx, policy_vy", "constant velocity's answer and the world policy's "
-     "(the precise observer; in a recorded world what the car did next)"),
-    ("coarse_vx, coarse_scene_vx, coarse_momentum_vx (and _vy)", "the coarse observers' "
-     "expected answers"),
-    ("world, trial_id, arm, start_index, start_kind, step", "where in the design a row is"),
-    ("click_time_ms, trial_duration_ms", "when each click came and how long the trial took "
-     "(the too-fast rule)"),
-    ("attention_passed, completed, outcome", "what the exclusion rules read"),
-    ("bank_sha256, config_sha256", "the trial bank and study config the session ran"),
+    "participant_vx", "participant_vy", "participant_click_x", "participant_click_y",
+    "ours_vx", "ours_vy", "vae_vx", "vae_vy", "cv_vx", "cv_vy", "policy_vx", "policy_vy",
+    "coarse_vx", "coarse_vy", "coarse_scene_vx", "coarse_scene_vy", "coarse_momentum_vx",
+    "coarse_momentum_vy", "world", "trial_id", "arm", "start_index", "start_kind", "step",
+    "click_time_ms", "trial_duration_ms", "attention_passed", "completed", "outcome",
+    "bank_sha256", "config_sha256",
 )
-
 
 def preregistration(inputs: Inputs) -> Document:
     """The whole document for one study."""
@@ -371,6 +365,13 @@ def power_lines(inputs: Inputs) -> tuple:
 # -- variables
 
 
+def measured_rows() -> tuple[tuple[str, str, str], ...]:
+    """Each measured column with its unit and meaning, as the export's codebook gives them."""
+    entries = ((name, column_entry("predictions", name, StudyTerms()))
+               for name in MEASURED_COLUMNS)
+    return tuple((name, entry.unit or "-", entry.text) for name, entry in entries)
+
+
 def variables(inputs: Inputs) -> Section:
     """Manipulated and measured variables, the index, and the survey."""
     survey = tuple((q.key, q.kind, q.text) for q in inputs.config.survey)
@@ -380,7 +381,7 @@ def variables(inputs: Inputs) -> Section:
         "VAE, and the others above) is not shown to participants: every move is compared "
         "with every predictor's answer at the same start state and step.",
         "**Measured** (export columns, `tomstudy export --what predictions`):",
-        Table(("columns", "meaning"), MEASURED_COLUMNS),
+        Table(("column", "unit", "meaning (the export's codebook)"), measured_rows()),
         "**Index:** alignment error = 1 - cos of the angle between a predictor's move and the "
         "participant's at the same start state and step, in [0, 2] (0: the same direction); a "
         "predictor move shorter than 1e-6 m/s scores 1.",

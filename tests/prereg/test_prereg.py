@@ -116,14 +116,16 @@ def test_the_html_page_is_self_contained_and_has_every_section(paper):
     assert "<code>tomstudy instrument --study paper_study</code>" in html
 
 
-def test_measured_columns_are_export_columns():
+def test_measured_columns_are_export_columns_described_by_the_codebook():
     from analysis.contracts import EXPORT_COLUMNS, plugin_columns
+    from app.prereg.sections import measured_rows
 
     known = {*EXPORT_COLUMNS, *(c for name in ("coarse", "coarse_scene", "coarse_momentum")
                                for c in plugin_columns(name))}
-    for columns, _ in MEASURED_COLUMNS:
-        for column in re.findall(r"[a-z_]+_[a-z0-9]+|[a-z]+", columns.split(" (")[0]):
-            assert column in known, column
+    assert set(MEASURED_COLUMNS) <= known
+    rows = dict((name, (unit, text)) for name, unit, text in measured_rows())
+    assert rows["participant_vx"][0] == "m/s" and rows["click_time_ms"][0] == "ms"
+    assert "coarse observer coarse_scene" in rows["coarse_scene_vx"][1]
 
 
 def test_the_readme_deviations_table_is_read_by_its_heading():
