@@ -12,8 +12,7 @@ from sqlalchemy import create_engine, func, select
 from analysis.contracts import COARSE_OBSERVERS
 from app.pilot.bots import run_bots
 from app.server.tables import PredictionRow
-from tests.conftest import TOMSTUDY, free_port, start_server
-from tests.e2e.test_bots import stop
+from tests.conftest import TOMSTUDY, free_port, start_server, stop_server
 
 pytestmark = pytest.mark.slow
 KINDS = ("coarse", "precise", "random")
@@ -28,7 +27,7 @@ def recorded_server(interaction_study, tmp_path):
     proc = start_server(interaction_study, db_url, port, log=tmp_path / "server.log",
                         TOMSTUDY_TRUST_CLIENT_CLOCK="1")
     yield f"http://127.0.0.1:{port}", db_url
-    stop(proc)
+    stop_server(proc)
 
 
 def test_bots_take_the_recorded_study_and_every_predictor_is_compared(
