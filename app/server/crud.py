@@ -205,7 +205,6 @@ def replay_if_stored(db: Session, participant: Participant, body: SubmissionBody
     try:
         yield outcome
     except Refused:
-        db.rollback()  # a refusal before `advance` may hold the study's lock (take_place)
         if already_stored(db, participant, body, submission_kind):
             outcome.stored = False
             return

@@ -54,7 +54,11 @@ def take_place(db: Session, ctx: StudyContext, participant: Participant,
         return {}
     balance.lock_study(db, ctx.study_id)
     usage, live = balance.read_standing(db, ctx)
-    admit(ctx, usage, live)
+    try:
+        admit(ctx, usage, live)
+    except Refused:
+        db.rollback()  # the study's lock goes before the refusal is answered
+        raise
     order, steps = assign_plan(ctx.config, ctx.bank, usage, rng or np.random.default_rng())
     return {"world_order": ",".join(order), "plan": dump_plan(steps),
             "counted": balance.may_count(participant)}
