@@ -69,7 +69,7 @@ def withdraw(db: Session, study_id: str, who: WithdrawalCreate, platform: str,
     none. `platform` (the study's) says how an external id is spelled."""
     kind, given = id_given(who, platform)
     try:
-        balance.lock_study(db, study_id)  # no session start of this study runs meanwhile
+        balance.lock_study(db, study_id)  # no consent of this study reads the counts meanwhile
         sessions = _sessions_of(db, study_id, kind, given)
         if not sessions:
             raise Refused(404, f"{kind}: no session of this id in study {study_id!r}")

@@ -6,9 +6,9 @@ BalanceCount holds, per study, how many counted sessions use each world order
 `in_progress_timeout_min`, released in bounded batches by each worker's `sweep_stale`, off
 the request path) or completes excluded (failed attention check, too many too-fast
 trials); a stale session that comes back and completes validly counts again. Pilot
-sessions never count. On
-PostgreSQL a transaction-scoped advisory lock makes read-choose-increment atomic across
-workers; SQLite serialises writers itself and the server refuses several workers on it.
+sessions never count. On PostgreSQL a transaction-scoped advisory lock (`lock_study`) makes a
+consent's read-choose-increment atomic across workers; SQLite serialises writers itself and
+the server refuses several workers on it.
 """
 
 import asyncio
@@ -17,7 +17,7 @@ import logging
 from collections import Counter
 from datetime import datetime, timedelta
 
-from sqlalchemy import bindparam, case, func, select, text, update
+from sqlalchemy import String, bindparam, case, func, literal, select, text, union_all, update
 from sqlalchemy.engine import Engine
 from sqlmodel import Session
 
@@ -25,8 +25,8 @@ from analysis.contracts import PROLIFIC_UNCONFIRMED, ExclusionRules, too_fast_sh
 from app.server.context import StudyContext
 from app.server.db import insert_skipping_duplicates
 from app.server.plan import TrialStep, Usage, parse_plan, world_orders
-from app.server.tables import BalanceCount, Participant, TrialResponse, utcnow
-from app.study.config import StudyConfig
+from app.server.tables import BalanceCount, Participant, TrialResponse, keep_loaded, utcnow
+from app.study.config import StudyConfig, live_session_cap
 
 ORDER = "order:"
 TRIAL = "trial:"
@@ -53,11 +53,16 @@ def ensure_rows(engine: Engine, ctx: StudyContext) -> None:
 
 
 def lock_study(db: Session, study_id: str) -> None:
-    """Serialise session starts of one study until the transaction ends (PostgreSQL)."""
+    """Serialise what reads or changes one study's places (consents, withdrawals, Prolific's
+    verdicts) until the transaction ends: PostgreSQL's advisory lock, SQLite's write lock."""
     if db.get_bind().dialect.name == "postgresql":
         key = int.from_bytes(hashlib.sha256(f"tomstudy:{study_id}".encode()).digest()[:8],
                              "big", signed=True)
         db.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": key})
+    elif not db.connection().connection.dbapi_connection.in_transaction:
+        # sqlite3 begins a transaction only at the first write: the reads after the lock
+        # must already be inside it, or a write elsewhere could slip in between
+        db.execute(text("BEGIN IMMEDIATE"))
 
 
 def read_counts(db: Session, study_id: str) -> dict[str, int]:
@@ -67,9 +72,31 @@ def read_counts(db: Session, study_id: str) -> dict[str, int]:
     return dict(rows.all())
 
 
-def read_usage(db: Session, study_id: str) -> Usage:
-    """The study's counts per world order and per trial, as a plan's assignment reads them."""
-    counts = read_counts(db, study_id)
+LIVE = "live"  # the row of read_standing holding the live-session count (not a count key)
+
+
+def read_standing(db: Session, ctx: StudyContext) -> tuple[Usage, int]:
+    """The study's counts per world order and per trial (as a plan's assignment reads them)
+    and its live sessions counted up to its cap, in one statement."""
+    cap = live_session_cap(ctx.config)
+    counts = (select(BalanceCount.key, BalanceCount.count)
+              .where(BalanceCount.study_id == ctx.study_id))
+    live = select(literal(LIVE, String), func.count()).select_from(_live(ctx, cap).subquery())
+    rows = dict(db.execute(union_all(counts, live)).all())
+    return usage_of(rows), rows[LIVE]
+
+
+def _live(ctx: StudyContext, at_most: int):
+    """Counted unfinished sessions written to within the timeout, up to `at_most` of them."""
+    return (select(Participant.id)
+            .where(Participant.study_id == ctx.study_id, Participant.counted.is_(True),
+                   Participant.completed.is_(False),
+                   Participant.updated_at >= in_progress_cutoff(ctx.config))
+            .limit(at_most))
+
+
+def usage_of(counts: dict[str, int]) -> Usage:
+    """Counts by key as usage per world order and per trial (other keys ignored)."""
     orders = {tuple(k[len(ORDER):].split(",")): v for k, v in counts.items()
               if k.startswith(ORDER)}
     trials = {k[len(TRIAL):]: v for k, v in counts.items() if k.startswith(TRIAL)}
@@ -98,16 +125,26 @@ def _set_counted(db: Session, participant: Participant, counted: bool) -> bool:
                        .values(counted=counted))
     flipped = moved.rowcount == 1
     if flipped:
-        participant.counted = counted
+        keep_loaded(participant, counted=counted)
     return flipped
 
 
+def may_count(participant: Participant) -> bool:
+    """False for a session Prolific has not confirmed: it never counts
+    (app/server/prolific_check.py)."""
+    return participant.prolific_check not in PROLIFIC_UNCONFIRMED
+
+
 def hold(db: Session, participant: Participant) -> None:
-    """Add the session's order and trials to the counts (inside the caller's transaction);
-    a session Prolific has not confirmed never counts."""
-    if participant.prolific_check in PROLIFIC_UNCONFIRMED:  # app/server/prolific_check.py
-        return
-    if _set_counted(db, participant, True):
+    """Add the session's order and trials to the counts (inside the caller's transaction)."""
+    if may_count(participant) and _set_counted(db, participant, True):
+        add_held(db, participant)
+
+
+def add_held(db: Session, participant: Participant) -> None:
+    """Add a session whose `counted` was just set (with its step, places.take_place) to the
+    counts; nothing for one that does not count."""
+    if participant.counted:
         _add(db, participant.study_id, plan_keys(participant.world_order, participant.plan), 1)
 
 
@@ -165,16 +202,6 @@ async def sweep_stale(engine: Engine, studies: list[StudyContext], interval_s: f
             except Exception as err:  # a database hiccup must not end the sweep
                 logger.warning("releasing stale sessions of %s failed: %s", ctx.study_id, err)
         await asyncio.sleep(interval_s)
-
-
-def live_sessions(db: Session, ctx: StudyContext, at_most: int) -> int:
-    """Counted unfinished sessions written to within the timeout, counting up to `at_most`."""
-    live = (select(Participant.id)
-            .where(Participant.study_id == ctx.study_id, Participant.counted.is_(True),
-                   Participant.completed.is_(False),
-                   Participant.updated_at >= in_progress_cutoff(ctx.config))
-            .limit(at_most).subquery())
-    return db.execute(select(func.count()).select_from(live)).scalar_one()
 
 
 def settle_completion(db: Session, participant: Participant, excluded: bool) -> None:

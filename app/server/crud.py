@@ -18,7 +18,7 @@ from sqlmodel import Session
 
 from app.server import balance, endings, places
 from app.server.context import StudyContext
-from app.server.plan import BEFORE_TRIALS, Phase, expect_phase
+from app.server.plan import BEFORE_TRIALS, Phase, expect_phase, has_consented
 from app.server.schemas import (
     ConsentCreate,
     ContinueCreate,
@@ -27,7 +27,7 @@ from app.server.schemas import (
     SubmissionBody,
     SurveyCreate,
 )
-from app.server.tables import Event, Participant, Submission, utcnow
+from app.server.tables import Event, Participant, Submission, keep_loaded, utcnow
 from app.server.validation import validate_survey
 from app.study.errors import Refused
 
@@ -112,11 +112,10 @@ def advance(db: Session, participant: Participant, body: SubmissionBody, submiss
 
 def _mirror(participant: Participant, values: dict) -> None:
     """Keep the loaded row in step with the UPDATE instead of reading it back."""
-    for key, value in values.items():
-        if key != "attention_failed":
-            setattr(participant, key, value)
+    stored = {key: value for key, value in values.items() if key != "attention_failed"}
     if "attention_failed" in values:
-        participant.attention_failed += 1
+        stored["attention_failed"] = participant.attention_failed + 1
+    keep_loaded(participant, **stored)
 
 
 def record_consent(db: Session, ctx: StudyContext, participant: Participant,
@@ -125,11 +124,10 @@ def record_consent(db: Session, ctx: StudyContext, participant: Participant,
     (places.take_place) and their device info is stored from now on."""
     with replay_if_stored(db, participant, body, "consent") as fresh:
         expect_phase(participant, Phase.CONSENT)
-        # the study's lock before the session's row, the order a session start takes them in
-        balance.lock_study(db, ctx.study_id)
+        place = places.take_place(db, ctx, participant)  # the study's lock, then the row's
         fresh.stored = advance(db, participant, body, "consent", {"agree": True},
-                               updates={"client": body.client.model_dump()},
-                               before_commit=lambda: places.take_place(db, ctx, participant))
+                               updates={"client": body.client.model_dump(), **place},
+                               before_commit=lambda: balance.add_held(db, participant))
 
 
 def record_instructions(db: Session, participant: Participant, body: SubmissionBody) -> None:
@@ -165,7 +163,7 @@ def record_decline(db: Session, ctx: StudyContext, participant: Participant,
         expect_phase(participant, Phase.CONSENT)
         fresh.stored = advance(db, participant, body, "decline", {},
                                ending=endings.ending_values(ctx.config, "declined_consent"),
-                               before_commit=lambda: _forget(db, participant))
+                               updates=FORGOTTEN, before_commit=lambda: _forget(db, participant))
 
 
 def record_screen_out(db: Session, ctx: StudyContext, participant: Participant,
@@ -175,16 +173,19 @@ def record_screen_out(db: Session, ctx: StudyContext, participant: Participant,
         expect_phase(participant, *BEFORE_TRIALS)
         fresh.stored = advance(db, participant, body, "screen_out", {"reason": body.reason},
                                ending=endings.ending_values(ctx.config, "screened_out"),
-                               before_commit=lambda: _forget(db, participant))
+                               updates=FORGOTTEN, before_commit=lambda: _forget(db, participant))
+
+
+FORGOTTEN = {"client": {}, "events_stored": 0}  # what an ending before taking part clears
 
 
 def _forget(db: Session, participant: Participant) -> None:
-    """Keep nothing of a session that ends before taking part but its receipt."""
-    db.execute(delete(Event.__table__).where(Event.participant_id == participant.id))
-    db.execute(update(Participant.__table__).where(Participant.id == participant.id)
-               .values(client={}, events_stored=0))
-    participant.client, participant.events_stored = {}, 0
-    balance.release(db, participant)
+    """Keep nothing of a session that ends before taking part but its receipt (its columns
+    go with the ending's step: FORGOTTEN). Before consent there is nothing to delete: events
+    and counting start at consent (telemetry.py, places.take_place)."""
+    if has_consented(participant):
+        db.execute(delete(Event.__table__).where(Event.participant_id == participant.id))
+        balance.release(db, participant)
 
 
 class _Outcome:

@@ -85,8 +85,13 @@ def _sqlite_pragmas(dbapi_connection, _record) -> None:
 
 def insert_skipping_duplicates(conn: Connection, table: Table):
     """An INSERT that skips rows whose unique key is already stored (SQLite, PostgreSQL)."""
+    return upsert(conn, table).on_conflict_do_nothing()
+
+
+def upsert(conn: Connection, table: Table):
+    """An INSERT that can say what to do on a conflict (ON CONFLICT: SQLite, PostgreSQL)."""
     dialect = postgresql if conn.dialect.name == "postgresql" else sqlite
-    return dialect.insert(table).on_conflict_do_nothing()
+    return dialect.insert(table)
 
 
 def create_tables(engine: Engine) -> None:

@@ -1,10 +1,13 @@
 """FastAPI dependencies: database session, study context, participant, researcher token.
 
-The participant path is async end to end: its database work runs in short synchronous
-blocks on the event loop, each ending its transaction (so its pooled connection goes
-back at once). Sync dependencies would run in the thread pool and hold a connection
-from lookup until clean-up; under many concurrent requests the pool and the thread pool
-then wait on each other until the pool times out.
+The participant path is async end to end: its database work runs in synchronous code on
+the event loop, from the participant's lookup (which opens the request's one transaction)
+to the route's commit, with nothing awaited in between, so the pooled connection is held
+for that work alone and goes back at the commit (one checkout, and on PostgreSQL one
+pre-ping and BEGIN, per request). A route that refuses before its commit leaves the
+rollback to get_db's clean-up. Sync dependencies would run in the thread pool and hold a
+connection from lookup until clean-up; under many concurrent requests the pool and the
+thread pool then wait on each other until the pool times out.
 """
 
 import secrets
@@ -56,12 +59,10 @@ def study_context(request: Request, study_id: str) -> StudyContext:
 
 async def get_participant(request: Request, db: SessionDep,
                           x_session_token: SessionTokenHeader) -> Participant:
-    """The participant whose session token is in the X-Session-Token header; 410 once the
-    session can no longer continue (replaced by a newer attempt, or its bank is gone)."""
-    try:
-        participant = participant_by_token(db, x_session_token)
-    finally:
-        db.commit()  # end the read transaction (connection back to the pool, row kept)
+    """The participant whose session token is in the X-Session-Token header, read in the
+    transaction the route goes on with; 410 once the session can no longer continue
+    (replaced by a newer attempt, or its bank is gone)."""
+    participant = participant_by_token(db, x_session_token)
     ctx = study_context(request, participant.study_id)
     check_can_continue(participant, ctx.bank.sha256, ctx.config.recruitment.platform)
     return participant

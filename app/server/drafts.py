@@ -5,15 +5,16 @@ being answered and when the trial was first shown after every change (PUT .../dr
 GET .../state hands the draft back with the trial. It is kept on the server rather than in
 the browser because a server copy survives a crash, a cleared browser or a change of
 device, can be handed to the tab that takes over (tabs.py), and shows the researcher what
-was resumed. One row per session; a save with a lower `seq` than the stored one (a late
-retry) changes nothing, and the row goes in the transaction that stores the trial.
+was resumed. One row per session, written by one upsert; a save with a lower `seq` than the
+stored one (a late retry) changes nothing, and the row goes in the transaction that stores
+the trial.
 """
 
-from sqlalchemy import delete, or_, select, update
+from sqlalchemy import delete, or_, select
 from sqlmodel import Session
 
 from app.server.context import StudyContext
-from app.server.db import insert_skipping_duplicates
+from app.server.db import upsert
 from app.server.plan import TrialStep, current_step, expect_trial
 from app.server.schemas import DraftSave
 from app.server.tables import Participant, TrialDraft, utcnow
@@ -28,15 +29,15 @@ def save_draft(db: Session, ctx: StudyContext, participant: Participant, body: D
     values = {"trial_ref": step.ref, "seq": body.seq, "saved_at": utcnow(),
               "data": body.model_dump(exclude={"trial_id", "seq"})}
     conn = db.connection()
+    newer = upsert(conn, table).values(participant_id=participant.id, **values)
     try:
-        moved = conn.execute(update(table).where(
-            table.c.participant_id == participant.id,
-            or_(table.c.trial_ref != step.ref, table.c.seq < body.seq)).values(**values))
-        if moved.rowcount == 0:
-            conn.execute(insert_skipping_duplicates(conn, table)
-                         .values(participant_id=participant.id, **values))
-        stored = conn.execute(select(table.c.seq).where(
-            table.c.participant_id == participant.id)).scalar_one()
+        stored = conn.execute(newer.on_conflict_do_update(
+            index_elements=[table.c.participant_id], set_=values,
+            where=or_(table.c.trial_ref != step.ref, table.c.seq < body.seq))
+            .returning(table.c.seq)).scalar()
+        if stored is None:  # a newer save of this trial is stored: it stays
+            stored = conn.execute(select(table.c.seq).where(
+                table.c.participant_id == participant.id)).scalar_one()
         db.commit()
     except BaseException:
         db.rollback()
@@ -74,13 +75,13 @@ def check_click_inputs(points: list[list], inputs: list[list]) -> None:
 
 
 def current_draft(db: Session, participant: Participant) -> dict | None:
-    """The draft of the trial the participant is at (with its `seq`), or None."""
+    """The draft of the trial the participant is at (with its `seq`), or None (read in the
+    caller's transaction)."""
     step = current_step(participant)
     if not isinstance(step, TrialStep):
         return None
     row = db.execute(select(TrialDraft.seq, TrialDraft.data).where(
         TrialDraft.participant_id == participant.id, TrialDraft.trial_ref == step.ref)).first()
-    db.commit()  # end the read transaction
     return None if row is None else {**row.data, "seq": row.seq}
 
 

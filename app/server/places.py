@@ -4,9 +4,10 @@ progress.
 A session takes a place from consent on, never at its start. A start proves nothing (any
 script can send a Prolific-shaped id), so counting it let one address fill the live cap and
 `max_counted_sessions` with made-up ids. `take_place` is the one function that makes a
-session count, in its consent's transaction: a check that must pass before a session counts
-(the platform confirming the submission, say) belongs there. A session that has not consented
-holds nothing, and `consent_timeout_min` after its start its external id may start again
+session count, in its consent's transaction and under the study's lock, so the cap, "full"
+and the balance are exact there: a check that must pass before a session counts (the platform
+confirming the submission, say) belongs there. A session that has not consented holds
+nothing, and `consent_timeout_min` after its start its external id may start again
 (sessions.py replaces it).
 """
 
@@ -14,7 +15,6 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta
 
 import numpy as np
-from sqlalchemy import update
 from sqlmodel import Session
 
 from app.server import balance, notices
@@ -44,32 +44,30 @@ def status_cutoffs(config: StudyConfig) -> Cutoffs:
 
 
 def take_place(db: Session, ctx: StudyContext, participant: Participant,
-               rng: np.random.Generator | None = None) -> None:
-    """Make a consenting session count (pilots never do), inside the consent's transaction:
-    admit it (503 while the study runs its cap, 409 closed or full), give it the plan the
-    balance now asks for (nothing of the start's plan was shown yet) and hold its counts."""
+               rng: np.random.Generator | None = None) -> dict:
+    """The Participant columns that make a consenting session count (none for a pilot), to
+    store with the consent's step in its transaction, whose end releases the study's lock
+    taken here: admitted (503 while the study runs its cap, 409 closed or full), the plan the
+    balance now asks for (nothing of the start's plan was shown yet) and `counted`; then
+    balance.add_held adds it to the counts."""
     if participant.pilot:
-        return
-    balance.lock_study(db, ctx.study_id)  # re-entrant: the consent took it first
-    usage = balance.read_usage(db, ctx.study_id)
-    admit(db, ctx, usage)
-    _reassign_plan(db, ctx, participant, usage, rng or np.random.default_rng())
-    balance.hold(db, participant)
+        return {}
+    balance.lock_study(db, ctx.study_id)
+    usage, live = balance.read_standing(db, ctx)
+    try:
+        admit(ctx, usage, live)
+    except Refused:
+        db.rollback()  # the study's lock goes before the refusal is answered
+        raise
+    order, steps = assign_plan(ctx.config, ctx.bank, usage, rng or np.random.default_rng())
+    return {"world_order": ",".join(order), "plan": dump_plan(steps),
+            "counted": balance.may_count(participant)}
 
 
-def _reassign_plan(db: Session, ctx: StudyContext, participant: Participant, usage: Usage,
-                   rng: np.random.Generator) -> None:
-    order, steps = assign_plan(ctx.config, ctx.bank, usage, rng)
-    values = {"world_order": ",".join(order), "plan": dump_plan(steps)}
-    db.execute(update(Participant.__table__).where(Participant.id == participant.id)
-               .values(**values))
-    participant.world_order, participant.plan = values["world_order"], values["plan"]
-
-
-def admit(db: Session, ctx: StudyContext, usage: Usage) -> None:
-    """Refuse a new place while the study runs its cap of unfinished sessions (503), or is
-    closed or full (409), each with a notice."""
-    check_room(db, ctx)
+def admit(ctx: StudyContext, usage: Usage, live: int) -> None:
+    """Refuse a new place while the study runs its cap of unfinished sessions (503: `live`
+    of them run), or is closed or full (409), each with a notice."""
+    check_room(ctx, live)
     recruitment = ctx.config.recruitment
     if recruitment.closed:
         raise Refused(409, "study_id: the study is closed to new participants "
@@ -80,10 +78,11 @@ def admit(db: Session, ctx: StudyContext, usage: Usage) -> None:
                            "recruitment.max_counted_sessions)", notices.full(recruitment.platform))
 
 
-def check_room(db: Session, ctx: StudyContext) -> None:
-    """503 while the study runs as many unfinished counted sessions as it takes at once."""
+def check_room(ctx: StudyContext, live: int) -> None:
+    """503 while the study runs (`live`) as many unfinished counted sessions as it takes at
+    once."""
     cap = live_session_cap(ctx.config)
-    if balance.live_sessions(db, ctx, cap) >= cap:
+    if live >= cap:
         raise Refused(503, f"study: {cap} sessions are running, the most this study takes at "
                            "once; please try again in a few minutes",
                       notices.busy(), headers={"Retry-After": str(ROOM_RETRY_S)})

@@ -1,14 +1,20 @@
 """Starting, resuming and replacing a participant's session, with a balanced plan.
 
-A session start is checked against the study's platform (recruitment.py), then, under
-the study's lock, either resumes the live session of that external id (same attempt
-key), replaces it (a new attempt after it went stale), or creates a new one whose plan
-takes the least-used world order and the least-exposed trials (plan.py, from the counts
-balance.py keeps), unless the study is closed, full or already runs `live_session_cap`
-unfinished sessions. A start takes no place: a session counts from consent on (places.py),
-and one that never consents frees its external id after `consent_timeout_min`. Its cost
-does not grow with the number of stored participants; stale sessions are released
-elsewhere (balance.release_stale_batch, off the request path).
+A session start is checked against the study's platform (recruitment.py), then either
+resumes the live session of that external id (same attempt key), replaces it (a new attempt
+after it went stale), or creates a new one whose plan takes the least-used world order and
+the least-exposed trials (plan.py, from the counts balance.py keeps), unless the study is
+closed, full or already runs `live_session_cap` unfinished sessions. A start takes no place:
+a session counts from consent on (places.py), and one that never consents frees its external
+id after `consent_timeout_min`.
+
+A start takes no lock, since nothing it decides has to be exact: the consent decides the
+room, "full" and the plan again under the study's lock (places.take_place), and a pilot's
+plan never counts. Two starts of one external id at once are kept apart by the database's
+unique index of live external ids (the later one resumes or is refused, start_session). So a
+new session costs three statements (the live session of the id; the counts with the live
+sessions; the INSERT) and a commit, at any study size; stale sessions are released elsewhere
+(balance.release_stale_batch, off the request path).
 """
 
 import secrets
@@ -40,8 +46,7 @@ def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
     `prolific_check` is what Prolific said of a new one (prolific_check.check_start)."""
     who = identify(ctx.config, body, ctx.preview_key)
     try:
-        return _start_locked(db, ctx, body, who, rng or np.random.default_rng(),
-                             prolific_check)
+        return _start(db, ctx, body, who, rng or np.random.default_rng(), prolific_check)
     except IntegrityError:  # the same external id started in another process at once
         db.rollback()
         existing = live_participant(db, ctx.study_id, who.external_id)
@@ -56,19 +61,17 @@ def start_session(db: Session, ctx: StudyContext, body: SessionCreate,
         raise
 
 
-def _start_locked(db: Session, ctx: StudyContext, body: SessionCreate, who: Identity,
-                  rng: np.random.Generator, prolific_check: str | None
-                  ) -> tuple[Participant, bool]:
-    balance.lock_study(db, ctx.study_id)
+def _start(db: Session, ctx: StudyContext, body: SessionCreate, who: Identity,
+           rng: np.random.Generator, prolific_check: str | None) -> tuple[Participant, bool]:
     existing = live_participant(db, ctx.study_id, who.external_id)
     if existing is not None:
         if _resumable(existing, who, ctx):
             db.commit()
             return existing, True
         _replace(db, existing)
-    usage = balance.read_usage(db, ctx.study_id)
+    usage, live = balance.read_standing(db, ctx)
     if not who.pilot:  # no place is taken yet (places.take_place, at consent)
-        places.admit(db, ctx, usage)
+        places.admit(ctx, usage, live)
     order, steps = assign_plan(ctx.config, ctx.bank, usage, rng)
     participant = Participant(
         study_id=ctx.study_id, recruitment=who.recruitment, external_id=who.external_id,
@@ -119,7 +122,8 @@ def _is_stale(participant: Participant, ctx: StudyContext) -> bool:
 
 def _replace(db: Session, old: Participant) -> None:
     """Retire a stale session (its rows stay) so a new attempt can take the external id."""
-    db.execute(update(Participant.__table__).where(Participant.id == old.id)
+    db.execute(update(Participant.__table__)
+               .where(Participant.id == old.id, Participant.replaced_at.is_(None))
                .values(replaced_at=utcnow()))
     balance.release(db, old)
     db.flush()

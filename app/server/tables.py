@@ -10,12 +10,20 @@ beside the human's.
 from datetime import UTC, datetime
 
 from sqlalchemy import JSON, Column, Index, text
+from sqlalchemy.orm.attributes import set_committed_value
 from sqlmodel import Field, SQLModel
 
 
 def utcnow() -> datetime:
     """Timezone-aware now (UTC)."""
     return datetime.now(UTC)
+
+
+def keep_loaded(row: SQLModel, **stored) -> None:
+    """Show on a loaded row what an UPDATE just stored, without the ORM writing it again."""
+    # a plain setattr marks the row dirty, and the commit's flush repeats the UPDATE
+    for key, value in stored.items():
+        set_committed_value(row, key, value)
 
 
 # ---------------------------------------------------------------- participants

@@ -16,10 +16,11 @@ from sqlalchemy import update
 from sqlmodel import Session
 
 from app.server import notices, telemetry
+from app.server.drafts import current_draft
 from app.server.plan import TrialStep, current_step
 from app.server.schemas import PAGE_OPENED, TAB_TAKEOVER, TabClaim, TabRelease
 from app.server.sessions import as_utc
-from app.server.tables import Participant, utcnow
+from app.server.tables import Participant, keep_loaded, utcnow
 from app.study.errors import Refused
 
 TAB_HEADER = "X-Tab-Id"
@@ -27,8 +28,7 @@ HEARTBEAT_S = 10  # the live page says it is still there this often (handed to t
 TAB_ALIVE_S = 30  # a live tab not heard from for this long is gone: another may claim
 
 
-def claim_tab(db: Session, participant: Participant, body: TabClaim,
-              draft: dict | None) -> None:
+def claim_tab(db: Session, participant: Participant, body: TabClaim) -> None:
     """Make `body.tab_id` the live tab (409 while another is alive, unless a takeover)."""
     held_by = participant.live_tab
     taken_over = held_by not in (None, body.tab_id) and _alive(participant)
@@ -44,11 +44,11 @@ def claim_tab(db: Session, participant: Participant, body: TabClaim,
         if moved.rowcount != 1:
             raise Refused(409, "tab: another tab claimed this session at the same moment; "
                                "try again", notices.open_in_another_tab())
-        participant.live_tab, participant.live_tab_seen_at = body.tab_id, now
+        keep_loaded(participant, live_tab=body.tab_id, live_tab_seen_at=now)
         if body.opened:
             telemetry.record_server_event(
                 db, participant, TAB_TAKEOVER if taken_over else PAGE_OPENED,
-                body.t_client_ms, opened_at(participant, draft))
+                body.t_client_ms, opened_at(participant, current_draft(db, participant)))
         db.commit()
     except BaseException:
         db.rollback()

@@ -17,7 +17,7 @@ from app.server.db import insert_skipping_duplicates
 from app.server.plan import has_consented
 from app.server.schemas import EventsCreate
 from app.server.sessions import has_ended
-from app.server.tables import Event, Participant, utcnow
+from app.server.tables import Event, Participant, keep_loaded, utcnow
 from app.study.errors import Refused
 
 MAX_EVENTS_PER_SESSION = 1000  # the browser sends about 3 per trial; 1000 is far above that
@@ -57,7 +57,7 @@ def record_server_event(db: Session, participant: Participant, kind: str,
     conn.execute(Event.__table__.insert(), [{
         "submission_id": str(uuid.uuid4()), "participant_id": participant.id, "kind": kind,
         "t_client_ms": t_client_ms, "data": data, "received_at": utcnow()}])
-    participant.events_stored += 1
+    keep_loaded(participant, events_stored=participant.events_stored + 1)
     return True
 
 

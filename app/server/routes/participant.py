@@ -62,7 +62,9 @@ async def create_session(body: SessionCreate, request: Request, response: Respon
 async def read_state(participant: ParticipantDep, ctx: ContextDep, db: SessionDep) -> Response:
     """The current phase, progress and what the phase needs; in a trial, the clicks saved
     so far (`step.draft`), so a refresh resumes where it was."""
-    return state_response(ctx, participant, draft=drafts.current_draft(db, participant))
+    draft = drafts.current_draft(db, participant)
+    db.commit()  # end the read transaction before the answer is built
+    return state_response(ctx, participant, draft=draft)
 
 
 @router.put(f"{SESSION_PATH}/draft")
@@ -76,7 +78,7 @@ async def save_draft(body: DraftSave, participant: WriterDep, ctx: ContextDep,
 async def claim_tab(body: TabClaim, participant: ParticipantDep, db: SessionDep) -> dict:
     """Make this browser tab the session's live one (on load, then as a heartbeat); answers
     how often to say so again."""
-    tabs.claim_tab(db, participant, body, drafts.current_draft(db, participant))
+    tabs.claim_tab(db, participant, body)
     return {"live": True, "heartbeat_s": tabs.HEARTBEAT_S}
 
 
