@@ -10,7 +10,10 @@ writes and fsyncs (their time only with track_wal_io_timing, which `time_wal_io`
 `verdict` says in one line which of these is the limit.
 """
 
+import math
 import os
+import subprocess
+import sys
 import threading
 import time
 from collections import Counter
@@ -195,3 +198,53 @@ def waits_line(usage: Usage) -> str:
             f"wait on the advisory lock, {locks:.0f}% on other locks, {wal_share:.0f}% on WAL "
             f"writes/fsyncs (top: {top}); {syncs:.0f} WAL fsyncs/s, fsync busy {busy:.0f}% of "
             "the window")
+
+
+class Profile:
+    """py-spy sampling one worker process for a window (--nonblocking: the worker is not
+    paused); `top` names where its time went."""
+
+    def __init__(self, pid: int, seconds: float, out: Path) -> None:
+        py_spy = Path(sys.executable).parent / "py-spy"
+        if not py_spy.is_file():
+            raise FileNotFoundError(f"{py_spy}: --profile needs py-spy (requirements/dev.txt)")
+        self.out = out
+        self.proc = subprocess.Popen(
+            [str(py_spy), "record", "--pid", str(pid), "--duration", str(math.ceil(seconds)),
+             "--rate", "50", "--nonblocking", "--format", "raw", "--output", str(out)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def top(self, count: int = 4) -> str:
+        """The functions with most samples on top of the stack, and the project's functions
+        deepest in it (with what they call): shares of the worker's busy samples."""
+        self.proc.wait(timeout=120)
+        leaf, inside, total = Counter(), Counter(), 0
+        for line in self.out.read_text().splitlines() if self.out.is_file() else []:
+            stack, _, samples = line.rpartition(" ")
+            frames = [frame_name(f) for f in stack.split(";")]
+            total += int(samples)
+            leaf[frames[-1]] += int(samples)
+            ours = [f for f in frames if f.split(" ")[-1].startswith("app/")]
+            inside[ours[-1] if ours else "(outside the project's code)"] += int(samples)
+        if not total:
+            return "no samples (py-spy could not attach)"
+        return (f"on top of the stack {shares(leaf, total, count)}; the project's deepest "
+                f"function {shares(inside, total, count)}")
+
+
+def shares(counter: Counter, total: int, count: int) -> str:
+    """The `count` commonest entries with their share of `total`."""
+    return ", ".join(f"{name} {n / total:.0%}" for name, n in counter.most_common(count))
+
+
+def frame_name(frame: str) -> str:
+    """py-spy's `func (path:line)` as `func path`, a project path from its app/ on."""
+    func, _, where = frame.partition(" (")
+    path = where.rsplit(":", 1)[0]
+    return f"{func or '?'} {path[path.rfind('/app/') + 1:] if '/app/' in path else path}"
+
+
+def busiest_worker(server_pid: int) -> int:
+    """The server process below `server_pid` (itself with one worker) that has used most CPU."""
+    tree = process_tree(server_pid)
+    return max(tree, key=lambda pid: (cpu_ticks(pid) or 0, pid != server_pid))

@@ -66,7 +66,14 @@ from app.server.tabs import TAB_HEADER  # noqa: E402
 from app.settings import Settings  # noqa: E402
 from app.study.estimate import MEDIAN_PACE, player_timing  # noqa: E402
 from benchmarks._rawhttp import RawClient  # noqa: E402
-from benchmarks._saturation import Sampler, Usage, time_wal_io, verdict  # noqa: E402
+from benchmarks._saturation import (  # noqa: E402
+    Profile,
+    Sampler,
+    Usage,
+    busiest_worker,
+    time_wal_io,
+    verdict,
+)  # noqa: E402
 from benchmarks.study_load import drafts, event, recruitment_params, write  # noqa: E402
 from tests.conftest import (  # noqa: E402
     REPO,
@@ -360,6 +367,7 @@ class StepResult:
     end: float
     usage: Usage | None = None
     warm: bool = True  # a participant finished before the window (steady state)
+    profile: str = ""  # where one worker's time went (--profile)
     stats: dict = field(default_factory=dict)  # route -> (n, per s, p50 ms, p99 ms)
 
     def summarise(self) -> None:
@@ -380,9 +388,10 @@ class StepResult:
         return sum(s[1] for r, s in self.stats.items() if r != BARE)
 
 
-async def measure_step(port: int, rate: float, args: argparse.Namespace,
-                       sampler: Sampler) -> StepResult:
-    """Arrivals at `rate`: warm up until one is done, then the --step-s window, sampled."""
+async def measure_step(port: int, rate: float, args: argparse.Namespace, sampler: Sampler,
+                       profile_to: Path | None = None) -> StepResult:
+    """Arrivals at `rate`: warm up until one is done, then the --step-s window, sampled (and
+    one worker profiled into `profile_to`)."""
     crowd = Crowd(port, STUDY, rate, args.think_scale, args.seed)
     crowd.watch(asyncio.create_task(crowd.probe(args.bare_per_s)))
     arriving = asyncio.create_task(crowd.arrive())
@@ -390,6 +399,8 @@ async def measure_step(port: int, rate: float, args: argparse.Namespace,
         warm = await crowd.until(crowd.first_done.wait(), args.warmup_max_s)
         start = time.perf_counter()
         sampler.start()
+        profile = (Profile(busiest_worker(sampler.server_pid), args.step_s, profile_to)
+                   if profile_to else None)
         await crowd.until(asyncio.sleep(args.step_s))
         end = time.perf_counter()
         usage = sampler.stop()
@@ -397,6 +408,8 @@ async def measure_step(port: int, rate: float, args: argparse.Namespace,
         arriving.cancel()
         await crowd.close()
     step = StepResult(rate, crowd, start, end, usage, warm)
+    if profile is not None:
+        step.profile = await asyncio.to_thread(profile.top)
     step.summarise()
     return step
 
@@ -464,8 +477,9 @@ class Deployment:
         """One rate on a fresh server, sampled."""
         proc, port, url = self.serve(f"r{rate:g}".replace(".", "_"))
         sampler = Sampler(proc.pid, url if self.args.database == "postgres" else None)
+        profile_to = self.root / f"profile_r{rate:g}.txt" if self.args.profile else None
         try:
-            return asyncio.run(measure_step(port, rate, self.args, sampler))
+            return asyncio.run(measure_step(port, rate, self.args, sampler, profile_to))
         finally:
             sampler.close()
             stop_server(proc)
@@ -499,6 +513,8 @@ def print_table(title: str, steps: list[StepResult], think_scale: float, workers
         print(step_line(step))
         if step.usage is not None:
             print(f"  what saturates: {verdict(step.usage, workers)}")
+        if step.profile:
+            print(f"  one worker's busy samples (py-spy): {step.profile}")
 
 
 def step_line(step: StepResult) -> str:
@@ -557,6 +573,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help="at most this long waiting for a step's first participant")
     parser.add_argument("--bare-per-s", type=float, default=BARE_PER_S)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--profile", action="store_true",
+                        help="py-spy one worker during each window (it costs some CPU)")
     parser.add_argument("--participants", type=int, default=0,
                         help="instead of the sweep: this many through the whole flow at the "
                         "first rate; exit 1 unless every one is done")
