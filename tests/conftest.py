@@ -310,10 +310,11 @@ def free_port() -> int:
 
 
 def start_server(study: SmallStudy, db_url: str, port: int, workers: int = 1,
-                 log: Path | None = None, args: tuple[str, ...] = (), ready_s: float = 60,
+                 log: Path | None = None, args: tuple[str, ...] = (), ready_s: float = 180,
                  **env: str) -> subprocess.Popen:
     """`tomstudy serve` as a real process (extra `args` and `env` variables); returns once
-    it answers (RuntimeError if not within `ready_s`)."""
+    it answers (RuntimeError if not within `ready_s`: the paper study's start recomputes every
+    model answer of its bundle, which takes minutes on a busy machine)."""
     out = open(log, "ab") if log else subprocess.DEVNULL  # noqa: SIM115 (the child keeps it)
     proc = subprocess.Popen(
         [TOMSTUDY, "serve", "--host", "127.0.0.1",
