@@ -8,9 +8,10 @@ instructions, goes on from each part's screens (world_intro, practice_over), and
 practice and main trial watches the clips (the player's own timing), posts the clip_finished
 event a second later (the page's telemetry flush), saves a draft on "Make predictions", after
 every click and on every next start state (PUT .../draft, one at a time), and submits; the
-survey, then done. Writes name the tab (X-Tab-Id) as the page's do. The phases answered are
-checked against app/server/plan.py's Phase before anything runs, and a participant meeting
-a phase the benchmark cannot answer fails the whole run (exit code 1, the phase named).
+survey, then done, where the tab is closed (POST .../tab/release). Writes name the tab
+(X-Tab-Id) as the page's do. The phases answered are checked against app/server/plan.py's
+Phase before anything runs, and a participant meeting a phase the benchmark cannot answer
+fails the whole run (exit code 1, the phase named).
 
 Arrivals are a Poisson process (open loop: a participant arrives whether or not the server
 has answered the ones before); each request opens its own connection (a browser idle for
@@ -90,7 +91,8 @@ STUDY = "paper_study"
 PEAK_PER_S = 22 / 120  # the paper study's target, all arriving within two minutes
 BARE = "GET bare"
 ROUTES = ("POST sessions", "GET state", "POST tab", "POST consent", "POST instructions",
-          "POST continue", "POST events", "PUT draft", "POST predictions", "POST survey")
+          "POST continue", "POST events", "PUT draft", "POST predictions", "POST survey",
+          "POST tab/release")
 P99_LIMIT_MS = 100.0
 THINK_S = {Phase.CONSENT: (10, 20), Phase.INSTRUCTIONS: (20, 40), Phase.WORLD_INTRO: (10, 20),
            Phase.PRACTICE_OVER: (5, 10), Phase.SURVEY: (30, 60)}
@@ -208,6 +210,8 @@ class Arrival:
                 state = await self.answer(state)
             self.phases.append(Phase.DONE.value)
             self.ended_at = time.perf_counter()
+            await self.call("POST tab/release", f"{SESSION_PATH}/tab/release",
+                            {"tab_id": self.tab_id})  # the page's goodbye when it is closed
             self.crowd.first_done.set()
         except RequestRefused:
             pass
@@ -366,7 +370,7 @@ class StepResult:
     start: float
     end: float
     usage: Usage | None = None
-    warm: bool = True  # a participant finished before the window (steady state)
+    warm: bool | None = True  # a participant finished before the window (None: a cohort)
     profile: str = ""  # where one worker's time went (--profile)
     stats: dict = field(default_factory=dict)  # route -> (n, per s, p50 ms, p99 ms)
 
@@ -428,7 +432,7 @@ async def run_cohort(port: int, count: int, rate: float, think_scale: float, tim
     finally:
         probe.cancel()
         await crowd.close()
-    step = StepResult(rate, crowd, start, time.perf_counter(), warm=False)
+    step = StepResult(rate, crowd, start, time.perf_counter(), warm=None)
     step.summarise()
     return step
 
@@ -528,7 +532,7 @@ def step_line(step: StepResult) -> str:
         per_person = np.mean([p.requests for p in done])
         line += (f" (Little's law: {step.rate:g} x {per_person:.0f} requests a participant = "
                  f"{step.rate * per_person:.1f})")
-    if not step.warm:
+    if step.warm is False:
         line += "; not at steady state (no participant had finished when the window began)"
     return line + "".join(f"\n  refused: {r}" for r in refused[:3])
 
@@ -554,7 +558,7 @@ def cohort(args: argparse.Namespace, root: Path) -> bool:
                                       args.timeout_s, args.seed))
     finally:
         stop_server(proc)
-    print_table(f"{args.participants} participants at {args.rates[0]:g} arrivals/s, "
+    print_table(f"{args.participants} participant(s) at {args.rates[0]:g} arrivals/s, "
                 f"{deployment.name}", [step], args.think_scale, deployment.workers)
     return all(p.phases[-1:] == [Phase.DONE.value] for p in step.crowd.people)
 
