@@ -544,9 +544,11 @@ def summary(name: str, steps: list[StepResult]) -> str:
         return f"{name}: holds no tested rate ({steps[0].rate:g} arrivals/s already broke)"
     best = held[-1]
     more = "" if len(held) < len(steps) else " (every tested rate: add higher --rates)"
+    if best.warm is False:
+        more += " (not at steady state: raise --warmup-max-s)"
     return (f"{name}: holds {best.rate:g} arrivals/s ({best.requests_per_s():.0f} requests/s) "
             f"with every route's p99 under {P99_LIMIT_MS:.0f} ms, "
-            f"{best.rate / PEAK_PER_S:.0f}x the paper study's expected peak{more}")
+            f"{best.rate / PEAK_PER_S:.2g}x the paper study's expected peak{more}")
 
 
 def cohort(args: argparse.Namespace, root: Path) -> bool:
