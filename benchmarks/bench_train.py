@@ -1,9 +1,11 @@
 """Train time per model per world, and one study trial's inference time vs bare numpy.
 
 Run: .venv/bin/python benchmarks/bench_train.py [--worlds highway obstacle] [--models ours vae]
-Needs var/data/<world>/trajectories.npz (`make data`). Prints:
+Simulates var/data/<world>/trajectories.npz first where it is missing (what `make data` does;
+a fresh clone after `make serve` has none: the served bundle ships no trajectories). Prints:
 - wall time of `train_and_save` (default training.yaml) per model and world; target < 60 s
-  (the VAE's k-means k: the codes of the Ours trained before it, else of var/models' Ours)
+  (the VAE's k-means k: the codes of the Ours trained before it, else of the primary Ours of
+  the bundle the paper study is served from)
   on 2000 trajectories (its CPU time and the load average are printed too: on a machine
   shared with other jobs, wall time overstates the cost);
 - one trial (encode one segment, predict n steps from 5 states) through `TrainedModel.trial`,
@@ -22,16 +24,20 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from app.bank.prepare import ensure_trajectories
+from app.bank.served import served_bundle
 from app.data.trajectory import TrajectorySet
 from app.data.windows import make_windows, segment_features
 from app.learning.checkpoint import load_model, mlp_numpy
 from app.learning.config import load_train_config
 from app.learning.fsq import quantize
 from app.learning.train import ours_code_count, train_and_save
-from app.settings import get_settings
+from app.settings import Settings, get_settings
 
 TRAIN_TARGET_S = 60.0
 INFERENCE_TARGET_RATIO = 3.0
+STUDY = "paper_study"
+TRAJECTORIES, SEED = 2000, 0  # what `make data` simulates
 
 
 def best_per_call(fn, number: int = 2000, repeat: int = 7) -> float:
@@ -78,25 +84,32 @@ def time_trial(ckpt: Path, trajs: TrajectorySet) -> dict:
     return {"api_us": api * 1e6, "bare_us": bare * 1e6, "torch_us": torch_s * 1e6}
 
 
+def vae_clusters(settings: Settings, world: str, ours_checkpoint: Path | None) -> int:
+    """The VAE's k-means k: the codes the Ours this run trained uses, else the served
+    bundle's primary Ours."""
+    if ours_checkpoint is not None:
+        return ours_code_count(ours_checkpoint, world)
+    bundle = served_bundle(settings, STUDY)
+    return int(bundle.model(world, "ours", bundle.seeds[0]).codes["n_codes_used"])
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--worlds", nargs="+", default=["highway", "obstacle"])
     parser.add_argument("--models", nargs="+", default=["ours", "vae"])
     args = parser.parse_args()
     cfg = load_train_config()
-    layout = get_settings().layout
+    settings = get_settings()
+    layout = settings.layout
     failed = False
     for world in args.worlds:
-        npz = layout.trajectories(world)
-        if not npz.is_file():
-            print(f"{world}: {npz} missing; run `make data` first")
-            failed = True
-            continue
-        trajs = TrajectorySet.load(npz)
-        ours_checkpoint = layout.checkpoint(world, "ours")  # until this run trains its own
+        ensure_trajectories(layout, world, TRAJECTORIES, SEED, print)
+        trajs = TrajectorySet.load(layout.trajectories(world))
+        ours_checkpoint = None  # until this run trains its own
         with tempfile.TemporaryDirectory() as tmp:
             for model_name in args.models:
-                clusters = ours_code_count(ours_checkpoint, world) if model_name == "vae" else None
+                clusters = (vae_clusters(settings, world, ours_checkpoint)
+                            if model_name == "vae" else None)
                 started, cpu_started = time.perf_counter(), time.process_time()
                 ckpt = train_and_save(trajs, model_name, 0, cfg, Path(tmp) / model_name,
                                       progress=False, vae_clusters=clusters)

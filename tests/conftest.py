@@ -310,16 +310,17 @@ def free_port() -> int:
 
 
 def start_server(study: SmallStudy, db_url: str, port: int, workers: int = 1,
-                 log: Path | None = None, args: tuple[str, ...] = (),
+                 log: Path | None = None, args: tuple[str, ...] = (), ready_s: float = 180,
                  **env: str) -> subprocess.Popen:
     """`tomstudy serve` as a real process (extra `args` and `env` variables); returns once
-    it answers."""
+    it answers (RuntimeError if not within `ready_s`: the paper study's start recomputes every
+    model answer of its bundle, which takes minutes on a busy machine)."""
     out = open(log, "ab") if log else subprocess.DEVNULL  # noqa: SIM115 (the child keeps it)
     proc = subprocess.Popen(
         [TOMSTUDY, "serve", "--host", "127.0.0.1",
          "--port", str(port), "--workers", str(workers), "--study", study.study_id, *args],
         env=study.env(db_url, **env), stdout=out, stderr=subprocess.STDOUT, cwd=REPO)
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + ready_s
     while time.monotonic() < deadline:
         if proc.poll() is not None:
             raise RuntimeError(f"server exited with {proc.returncode}; see {log}")
@@ -331,7 +332,7 @@ def start_server(study: SmallStudy, db_url: str, port: int, workers: int = 1,
             pass
         time.sleep(0.2)
     proc.kill()
-    raise RuntimeError("server did not answer within 60 s")
+    raise RuntimeError(f"server did not answer within {ready_s:.0f} s")
 
 
 def stop_server(proc: subprocess.Popen, grace_s: float = 10) -> None:
