@@ -18,6 +18,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
+from limits import RateLimitItem
 from sqlalchemy.exc import InterfaceError, OperationalError
 from sqlalchemy.exc import TimeoutError as PoolTimeout
 from starlette.middleware.trustedhost import TrustedHostMiddleware
@@ -241,7 +242,7 @@ def rate_limits(settings: Settings) -> dict:
         raise UnsafeSettings(f"refusing to start: {err}") from None
 
 
-def lockout_limit(settings: Settings):
+def lockout_limit(settings: Settings) -> RateLimitItem | None:
     """The researcher routes' lockout limit after wrong tokens (None: off); UnsafeSettings if
     unreadable."""
     try:

@@ -1,0 +1,35 @@
+"""Session starts and researcher requests from one chosen loopback address (127.1.x.y), each
+over a connection of its own, so the kernel may hand each one to any worker of a server."""
+
+import uuid
+from concurrent.futures import ThreadPoolExecutor
+
+import httpx
+
+from tests.study.flow import prolific
+
+
+def start_once(port: int, study_id: str, source: str, name: str) -> int:
+    """One session start from `source` to the server on `port`; its status."""
+    transport = httpx.HTTPTransport(local_address=source)
+    with httpx.Client(transport=transport, timeout=20) as client:
+        return client.post(f"http://127.0.0.1:{port}/api/sessions", json={
+            "study_id": study_id, "recruitment": prolific(name)}).status_code
+
+
+def send_starts(ports: list[int], study_id: str, source: str, count: int) -> list[int]:
+    """`count` starts of new participants from `source`, to `ports` in turn, four at a time;
+    their statuses."""
+    with ThreadPoolExecutor(4) as pool:
+        return list(pool.map(lambda i: start_once(ports[i % len(ports)], study_id, source,
+                                                  uuid.uuid4().hex), range(count)))
+
+
+def researcher_status(port: int, study_id: str, source: str, token: str) -> int:
+    """GET the researcher summary of `study_id` from `source` with bearer `token`; its
+    status."""
+    transport = httpx.HTTPTransport(local_address=source)
+    with httpx.Client(transport=transport, timeout=20) as client:
+        return client.get(f"http://127.0.0.1:{port}/api/researcher/summary",
+                          params={"study_id": study_id},
+                          headers={"Authorization": f"Bearer {token}"}).status_code
