@@ -2,7 +2,6 @@
 over a connection of its own, so the kernel may hand each one to any worker of a server."""
 
 import uuid
-from concurrent.futures import ThreadPoolExecutor
 
 import httpx
 
@@ -18,11 +17,14 @@ def start_once(port: int, study_id: str, source: str, name: str) -> int:
 
 
 def send_starts(ports: list[int], study_id: str, source: str, count: int) -> list[int]:
-    """`count` starts of new participants from `source`, to `ports` in turn, four at a time;
-    their statuses."""
-    with ThreadPoolExecutor(4) as pool:
-        return list(pool.map(lambda i: start_once(ports[i % len(ports)], study_id, source,
-                                                  uuid.uuid4().hex), range(count)))
+    """`count` starts of new participants from `source`, to `ports` in turn, one after
+    another; their statuses.
+
+    One at a time, each new connection wakes every worker waiting on the shared socket and
+    any one may take it; a burst of connections would mostly go to one worker (asyncio
+    accepts every pending connection on one wake-up)."""
+    return [start_once(ports[i % len(ports)], study_id, source, uuid.uuid4().hex)
+            for i in range(count)]
 
 
 def researcher_status(port: int, study_id: str, source: str, token: str) -> int:

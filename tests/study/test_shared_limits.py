@@ -11,6 +11,7 @@ from app.server.preflight import check_rate_limit_storage
 from tests.conftest import ADMIN_TOKEN, free_port, fresh_database, start_server, stop_server
 from tests.study.starts import researcher_status, send_starts, start_once
 from tests.study.test_hosting import run_serve
+from tests.study.test_serve_process import wait_for_log
 
 STARTS_PER_MINUTE = 20
 SENT = 45
@@ -32,6 +33,7 @@ def serving(small_study, postgres_url, tmp_path, request):
         return port
 
     serve.logs = lambda: "".join(p.read_text() for p in tmp_path.glob("server-*.log"))
+    serve.log_of = lambda port: tmp_path / f"server-{port}.log"
     yield serve
     for proc in procs:
         stop_server(proc)
@@ -41,6 +43,8 @@ def serving(small_study, postgres_url, tmp_path, request):
 def test_two_workers_sharing_redis_accept_one_limit_of_starts(serving, redis_server,
                                                               small_study):
     port = serving(redis_server.url, workers=2)
+    # both serving (start_server returns once one answers), so either may take a start
+    assert len(wait_for_log(serving.log_of(port), "Application startup complete", 2)) == 2
     statuses = send_starts([port], small_study.study_id, "127.1.0.1", SENT)
     assert statuses.count(201) == STARTS_PER_MINUTE
     assert statuses.count(429) == SENT - STARTS_PER_MINUTE
