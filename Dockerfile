@@ -35,8 +35,10 @@
 # the server uses SQLite in the mounted var/ (one worker only). With a PostgreSQL
 # DATABASE_URL (psycopg 3), e.g. a line
 # DATABASE_URL=postgresql+psycopg://tomstudy:<password>@db-host:5432/tomstudy in the env
-# file, it can run several workers: append `--workers 4` to the run command (arguments are
-# serve options, see app/server/entrypoint.sh). The paper's study is served from the frozen
+# file, and a shared rate-limit store (TOMSTUDY_RATE_LIMIT_STORAGE=redis://redis-host:6379/0:
+# production refuses several workers that each count the limits alone), it can run several
+# workers: append `--workers 4` to the run command (arguments are serve options, see
+# app/server/entrypoint.sh). The paper's study is served from the frozen
 # bundle in study_configs/bundles/ (copied in below), so the first start trains nothing; a
 # study of your own with `bundle: built` is built into var/ on its first start (minutes, see
 # the README). HEALTHCHECK asks /healthz (which checks the database) on the host and port the

@@ -15,6 +15,8 @@ from app.settings import get_settings
 if TYPE_CHECKING:
     from app.bank.served import SimulationInputs
 
+# seconds a serve worker may take to answer uvicorn's supervisor before it is replaced
+WORKER_HEALTHCHECK_S = 60
 cli = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Worlds, models and the online study of how people predict a robot.")
 
@@ -599,9 +601,13 @@ def serve(
                    f"from X-Forwarded-For of {proxies} only)")
         # info: each worker's start, and the supervisor replacing one that died; no access
         # log (as before: request lines and client addresses stay out of the log)
+        # a worker answers the supervisor's health check only once it has re-imported this
+        # CLI (spawn), about 1 s of CPU: on a loaded machine that passed uvicorn's default 5 s,
+        # and the supervisor killed and replaced every worker before it could serve
         uvicorn.run("app.main:app_from_env", factory=True, host=host, port=port,
                     workers=workers, log_level="info", access_log=False,
-                    proxy_headers=True, forwarded_allow_ips=proxies)
+                    proxy_headers=True, forwarded_allow_ips=proxies,
+                    timeout_worker_healthcheck=WORKER_HEALTHCHECK_S)
 
 
 def archived_study(archive: Path, archive_dir: Path | None, study: str | None, prepare: bool,

@@ -18,6 +18,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
+from limits import RateLimitItem
 from sqlalchemy.exc import InterfaceError, OperationalError
 from sqlalchemy.exc import TimeoutError as PoolTimeout
 from starlette.middleware.trustedhost import TrustedHostMiddleware
@@ -36,6 +37,7 @@ from app.server.completion_codes import PublicCode, refuse_public_codes, served_
 from app.server.context import StudyContext
 from app.server.db import create_tables, make_engine
 from app.server.headers import MTURK_FRAMERS, SecurityHeaders
+from app.server.limitstore import LimitStore
 from app.server.lockout import TokenLockout
 from app.server.openapi import declare_error_responses
 from app.server.preflight import (
@@ -43,6 +45,7 @@ from app.server.preflight import (
     NotServable,
     check_data_dir_writable,
     check_database,
+    check_rate_limit_storage,
     check_workers,
     forwarded_allow_ips,
     needs_generated_token,
@@ -76,7 +79,7 @@ def check_production(settings: Settings) -> None:
     """Refuse a server without a researcher token (there is no default), and production mode
     with a weak token, client clocks trusted or rate limits off; unreadable limits too."""
     rate_limits(settings)
-    token_lockout(settings)
+    lockout_limit(settings)
     token = settings.admin_token.strip()
     problem = weak_token_problem(token) if settings.production or not token else None
     if problem:
@@ -147,6 +150,7 @@ def ready_to_serve(settings: Settings, host: str, workers: int, study_ids: list[
     check_production(settings)
     forwarded_allow_ips(settings)
     check_workers(settings, workers)
+    check_rate_limit_storage(settings, workers, say)
     check_data_dir_writable(settings.layout)
     if prepare:
         for study_id in study_ids:
@@ -192,7 +196,8 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
                   description="Online study of how people predict a robot (app/server/API.md).")
     app.state.settings = settings
     app.state.prolific = client_from(settings)  # None: no token, Prolific is not asked
-    app.state.token_lockout = token_lockout(settings)
+    store = limit_store(settings)  # one per worker: the middleware and the lockout share it
+    app.state.token_lockout = TokenLockout(lockout_limit(settings), store)
     app.state.default_study = studies[0]
     app.state.templates = Jinja2Templates(directory=FRONTEND_DIR / "templates")
     app.mount("/static", StaticFiles(directory=FRONTEND_DIR / "static"), name="static")
@@ -203,7 +208,7 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
     add_database_down_handler(app)
     declare_error_responses(app)
     app.add_middleware(BodyLimit, max_bytes=MAX_BODY_BYTES)
-    app.add_middleware(RateLimit, **rate_limits(settings))
+    app.add_middleware(RateLimit, **rate_limits(settings), store=store)
     app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.trusted_hosts,
                        www_redirect=False)
     configs = [load_study_config(settings, sid) for sid in studies]
@@ -237,11 +242,20 @@ def rate_limits(settings: Settings) -> dict:
         raise UnsafeSettings(f"refusing to start: {err}") from None
 
 
-def token_lockout(settings: Settings) -> TokenLockout:
-    """The researcher routes' lockout after wrong tokens; UnsafeSettings if unreadable."""
+def lockout_limit(settings: Settings) -> RateLimitItem | None:
+    """The researcher routes' lockout limit after wrong tokens (None: off); UnsafeSettings if
+    unreadable."""
     try:
-        return TokenLockout(parse_limit("TOMSTUDY_RESEARCHER_LOCKOUT",
-                                        settings.researcher_lockout))
+        return parse_limit("TOMSTUDY_RESEARCHER_LOCKOUT", settings.researcher_lockout)
+    except ValueError as err:
+        raise UnsafeSettings(f"refusing to start: {err}") from None
+
+
+def limit_store(settings: Settings) -> LimitStore:
+    """The store the rate limits and the lockout count in; UnsafeSettings if its URI is not
+    one the limits library can use."""
+    try:
+        return LimitStore(settings.rate_limit_storage)
     except ValueError as err:
         raise UnsafeSettings(f"refusing to start: {err}") from None
 

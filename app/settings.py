@@ -33,8 +33,13 @@ class Settings(BaseSettings):
     database_password_file: Path | None = None
     # comma-separated public host names of the study (e.g. study.example.org)
     allowed_hosts: str = ""
-    # per worker process; "" turns a limit off (refused in production). Session starts per
-    # client address: a classroom of 30 behind one NAT starts at once, reloads included
+    # where the rate limits and the researcher lockout count (app/server/limitstore.py): a
+    # `limits` storage URI. memory:// counts in each worker process (one worker: SQLite);
+    # redis://host:6379/0 shares the counts between every worker and host
+    rate_limit_storage: str = "memory://"
+    # per client (per worker with memory://); "" turns a limit off (refused in production).
+    # Session starts per client address: a classroom of 30 behind one NAT starts at once,
+    # reloads included
     rate_limit_starts: str = "60/minute"
     # requests of one started session (/api/session/...), per session token: a participant
     # makes about 31 a minute (README), its page's retries included
@@ -42,7 +47,8 @@ class Settings(BaseSettings):
     # comma-separated addresses or networks of the reverse proxy whose X-Forwarded-For names
     # the client; "" trusts only 127.0.0.1 (a proxy on this machine); "*" is refused
     trusted_proxies: str = ""
-    # wrong researcher tokens per client address and worker before a lockout (429)
+    # wrong researcher tokens per client address (and worker, with memory://) before a
+    # lockout (429)
     researcher_lockout: str = "10 per 10 minutes"
     # how often each worker releases stale sessions' balance counts (balance.sweep_stale)
     stale_sweep_s: float = Field(default=30.0, gt=0)

@@ -1,4 +1,5 @@
-"""Shared fixtures: a small real study pipeline, servers, and a throwaway PostgreSQL cluster."""
+"""Shared fixtures: a small real study pipeline, servers, and throwaway PostgreSQL and Redis
+servers."""
 
 import hashlib
 import os
@@ -18,6 +19,7 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 SMALL_STUDY = "small_study"
 PG_BIN = Path("/usr/lib/postgresql/15/bin")
+REDIS_SERVER = Path("/usr/bin/redis-server")  # Debian's redis-server (the shared rate-limit store)
 ADMIN_TOKEN = "test-token"  # the researcher token of every test server and app
 # test clients send many requests from one address (TestClient's peer is "testclient"):
 # rate limits are off unless a test turns them on (tests/study/test_traffic.py)
@@ -403,3 +405,59 @@ def fresh_database(server_url: str, name: str) -> str:
         conn.execute(text(f'CREATE DATABASE "{name}"'))
     engine.dispose()
     return server_url.rsplit("/", 1)[0] + f"/{name}"
+
+
+# ---------------------------------------------------------------- Redis
+
+@dataclass
+class RedisServer:
+    """A throwaway redis-server on a loopback port, no persistence; `stop` and `start` again
+    (same port, empty) to take it away mid-run."""
+
+    root: Path
+    port: int
+    proc: subprocess.Popen | None = None
+
+    @property
+    def url(self) -> str:
+        """Its address as TOMSTUDY_RATE_LIMIT_STORAGE takes it."""
+        return f"redis://127.0.0.1:{self.port}/0"
+
+    def start(self) -> None:
+        """Start it and return once it answers PING."""
+        self.proc = subprocess.Popen(
+            [str(REDIS_SERVER), "--port", str(self.port), "--bind", "127.0.0.1", "--save", "",
+             "--appendonly", "no", "--dir", str(self.root), "--daemonize", "no"],
+            stdout=open(self.root / "redis.log", "ab"), stderr=subprocess.STDOUT)  # noqa: SIM115
+        deadline = time.monotonic() + 20
+        while not self.answers():
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                self.stop()
+                raise RuntimeError(f"redis-server did not start; see {self.root / 'redis.log'}")
+            time.sleep(0.05)
+
+    def answers(self) -> bool:
+        """True if it answers PING."""
+        try:
+            with socket.create_connection(("127.0.0.1", self.port), timeout=1) as sock:
+                sock.sendall(b"PING\r\n")
+                return sock.recv(16).startswith(b"+PONG")
+        except OSError:
+            return False
+
+    def stop(self) -> None:
+        """Stop it (its counts are gone)."""
+        if self.proc is not None:
+            stop_server(self.proc)
+            self.proc = None
+
+
+@pytest.fixture
+def redis_server(tmp_path_factory):
+    """A throwaway redis-server (Debian's) on a free loopback port, stopped after the test."""
+    if not REDIS_SERVER.exists():
+        pytest.skip(f"{REDIS_SERVER} not found (apt-get install redis-server)")
+    server = RedisServer(tmp_path_factory.mktemp("redis"), free_port())
+    server.start()
+    yield server
+    server.stop()

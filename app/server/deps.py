@@ -97,12 +97,12 @@ async def require_admin(request: Request, settings: SettingsDep,
     many wrong ones (lockout.py)."""
     lockout: TokenLockout = request.app.state.token_lockout
     client = client_key(request.client.host if request.client else "unknown")
-    lockout.check(client)
+    await lockout.check(client)
     if not authorization or not authorization.lower().startswith("bearer "):
         raise Refused(401, "authorization: missing bearer token (Authorization: Bearer <token>)")
     token = authorization[7:].strip()
     if not secrets.compare_digest(token.encode(), settings.admin_token.encode()):
-        lockout.failed(client)
+        await lockout.failed(client)
         raise Refused(403, "authorization: wrong researcher token")
 
 

@@ -4,15 +4,19 @@ A refusal here names the setting or file to fix and comes before uvicorn forks, 
 unservable study fails once, clearly, instead of in every worker's traceback.
 """
 
+import asyncio
 import ipaddress
 import os
 import secrets
 import tempfile
+from collections.abc import Callable
 
 from app.layout import Layout
 from app.server.bank_guard import BankChanged, check_bank_unchanged
 from app.server.context import StudyContext
 from app.server.db import create_tables, is_sqlite, make_engine
+from app.server.limitstore import SETTING as STORAGE_SETTING
+from app.server.limitstore import LimitStore, reachable, shown
 from app.server.migrate import SchemaError
 from app.settings import Settings, get_settings
 
@@ -69,6 +73,32 @@ def check_workers(settings: Settings, workers: int) -> None:
             f"--workers {workers} needs a database several processes can share: set "
             f"DATABASE_URL to PostgreSQL (postgresql+psycopg://user:password@host:5432/db), "
             f"or serve SQLite with --workers 1")
+
+
+def check_rate_limit_storage(settings: Settings, workers: int,
+                             say: Callable[[str], None] = print) -> None:
+    """Refuse a rate-limit store that is not a `limits` URI or cannot be reached, and (in
+    production) several workers with limits on that each count in their own memory; on
+    loopback that gets a warning."""
+    try:
+        store = LimitStore(settings.rate_limit_storage)
+    except ValueError as err:
+        raise NotServable(str(err)) from None
+    if store.shared:
+        if not asyncio.run(reachable(store.storage)):
+            raise NotServable(f"{STORAGE_SETTING}: cannot reach {shown(store.uri)} (no answer "
+                              "to PING); start it, or fix the address")
+        return
+    limits_on = any(getattr(settings, name).strip() for name in (
+        "rate_limit_starts", "rate_limit_requests", "researcher_lockout"))
+    if workers == 1 or not limits_on:
+        return
+    problem = (f"--workers {workers} with {STORAGE_SETTING}={store.uri}: each worker counts "
+               f"the rate limits in its own memory, so a client gets up to {workers} times "
+               "each limit; set it to a Redis every worker shares (redis://host:6379/0)")
+    if settings.production:
+        raise NotServable(problem)
+    say(f"warning: {problem}")
 
 
 def check_data_dir_writable(layout: Layout) -> None:

@@ -3,28 +3,27 @@
 Session starts are limited per client address; every request of a started session
 (/api/session/...) per session token, so a classroom or a lab behind one address (one NAT)
 is not throttled as one client: each participant has their own budget, and the address's
-budget is spent only on starts. Each is a sliding window kept in this worker's memory
-(`limits`' MemoryStorage): with N workers a client gets up to N times the limit, which still
-bounds it. The client address is the TCP peer, or the one a trusted reverse proxy forwards
-(uvicorn's proxy headers, trusted from TOMSTUDY_TRUSTED_PROXIES: 127.0.0.1 by default). An IPv6
-client is keyed by its /64: one subscriber is routinely given a whole /64, so its single
-addresses would be unlimited keys. A session request without a token of a session's shape
-is keyed by its address, and one address's session requests together stop at
-SESSIONS_PER_ADDRESS sessions' worth: made-up tokens of the right shape would otherwise each
-get a budget of their own. Beyond a limit the answer is 429 with `Retry-After`; the browser
-retries such writes with the same body.
+budget is spent only on starts. Each is a sliding window counted in the store
+TOMSTUDY_RATE_LIMIT_STORAGE names (limitstore.py): this worker's memory by default (with N
+workers a client gets up to N times a limit), or a Redis every worker and host shares (one
+limit), which fails open while it cannot be reached. The client address is the TCP peer, or
+the one a trusted reverse proxy forwards (uvicorn's proxy headers, trusted from
+TOMSTUDY_TRUSTED_PROXIES: 127.0.0.1 by default). An IPv6 client is keyed by its /64: one
+subscriber is routinely given a whole /64, so its single addresses would be unlimited keys.
+A session request without a token of a session's shape is keyed by its address, and one
+address's session requests together stop at SESSIONS_PER_ADDRESS sessions' worth: made-up
+tokens of the right shape would otherwise each get a budget of their own. Beyond a limit the
+answer is 429 with `Retry-After`; the browser retries such writes with the same body.
 """
 
 import ipaddress
-import math
 import re
-import time
 
 from fastapi.responses import JSONResponse
 from limits import RateLimitItem, parse
-from limits.storage import MemoryStorage
-from limits.strategies import SlidingWindowCounterRateLimiter
 from starlette.types import ASGIApp, Receive, Scope, Send
+
+from app.server.limitstore import LimitStore
 
 PARTICIPANT_PREFIX = "/api/session"  # /api/sessions (starts) and /api/session/... (a session)
 START_PATH = "/api/sessions"
@@ -73,17 +72,18 @@ def session_key(scope: Scope) -> str | None:
 
 class RateLimit:
     """ASGI middleware: 429 once a client address exceeds its limit of session starts
-    (`starts`), or a session its limit of requests (`requests`); None is no limit."""
+    (`starts`), or a session its limit of requests (`requests`); None is no limit. The
+    counts live in `store` (this process's memory if None)."""
 
     def __init__(self, app: ASGIApp, starts: RateLimitItem | None,
-                 requests: RateLimitItem | None) -> None:
+                 requests: RateLimitItem | None, store: LimitStore | None = None) -> None:
         self.app = app
         self.starts = starts
         self.requests = requests
         self.address_ceiling = None if requests is None else type(requests)(
             requests.amount * SESSIONS_PER_ADDRESS, requests.multiples,
             namespace=requests.namespace)
-        self.limiter = SlidingWindowCounterRateLimiter(MemoryStorage())
+        self.store = store or LimitStore()
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http" or not scope["path"].startswith(PARTICIPANT_PREFIX):
@@ -97,18 +97,24 @@ class RateLimit:
         key = token or address
         what = ("session starts from this address" if is_start
                 else "requests from this session" if token else "requests from this address")
-        if token and not self.limiter.hit(self.address_ceiling, ALL_SESSIONS, address):
+        if token and not await self.hit(self.address_ceiling, ALL_SESSIONS, address):
             return await self.refuse(self.address_ceiling, (ALL_SESSIONS, address),
                                      "requests from this address", scope, receive, send)
-        if self.limiter.hit(limit, what, key):
+        if await self.hit(limit, what, key):
             return await self.app(scope, receive, send)
         await self.refuse(limit, (what, key), what, scope, receive, send)
+
+    async def hit(self, limit: RateLimitItem, *identifiers: str) -> bool:
+        """Count one request against `limit`; False once it is spent (True if the store is
+        down)."""
+        return await self.store.ask(lambda: self.store.sliding.hit(limit, *identifiers),
+                                    if_down=True)
 
     async def refuse(self, limit: RateLimitItem, identifiers: tuple[str, str], what: str,
                      scope: Scope, receive: Receive, send: Send) -> None:
         """429 with Retry-After: when the window of `limit` under `identifiers` has room."""
-        reset_at = self.limiter.get_window_stats(limit, *identifiers).reset_time
-        wait_s = max(1, math.ceil(reset_at - time.time()))
+        wait_s = await self.store.wait_s(self.store.sliding, limit, *identifiers)
         response = JSONResponse({"detail": f"rate: too many {what}; try again in {wait_s} s"},
                                 status_code=429, headers={"Retry-After": str(wait_s)})
         await response(scope, receive, send)
+

@@ -1,5 +1,7 @@
-"""compose.yaml and the image's entrypoint: real settings and commands, no secrets, loopback."""
+"""compose.yaml and the image's entrypoint: real settings and commands, no secrets, two app
+containers sharing PostgreSQL and Redis behind the only published service, a proxy."""
 
+import ipaddress
 import os
 import re
 import subprocess
@@ -10,12 +12,17 @@ import yaml
 from sqlalchemy.engine import make_url
 
 from app.cli import cli
+from app.server.limitstore import LimitStore
 from app.settings import Settings
 from tests.conftest import REPO
 
 COMPOSE = yaml.safe_load((REPO / "compose.yaml").read_text())
 SERVER = COMPOSE["services"]["server"]
 DB = COMPOSE["services"]["db"]
+REDIS = COMPOSE["services"]["redis"]
+PROXY = COMPOSE["services"]["proxy"]
+APPS = {name: service for name, service in COMPOSE["services"].items()
+        if "build" in service}  # the app containers: the image this repository builds
 ENTRYPOINT = REPO / "app" / "server" / "entrypoint.sh"
 REQUIRED = re.compile(r"\$\{(\w+):\?[^}]+\}")  # compose's ${VAR:?message}: unset stops `up`
 
@@ -81,12 +88,47 @@ def test_base_images_are_pinned_by_digest_and_the_database_is_checked_over_tcp()
     assert DB["healthcheck"]["test"][:4] == ["CMD", "pg_isready", "-h", "127.0.0.1"]
 
 
-def test_only_loopback_publishes_the_server_and_nothing_publishes_the_database():
-    assert "ports" not in DB
-    assert SERVER["ports"]  # published, on loopback only
-    for port in SERVER["ports"]:
-        host_ip = port["host_ip"] if isinstance(port, dict) else str(port).split(":")[0]
-        assert host_ip == "127.0.0.1"
+def test_only_the_proxy_publishes_a_port():
+    assert set(APPS) == {"server", "server_b"}
+    published = {name for name, service in COMPOSE["services"].items() if "ports" in service}
+    assert published == {"proxy"}
+    assert COMPOSE["networks"]["backend"]["internal"] is True
+    for service in (DB, REDIS):
+        assert service["networks"] == ["backend"]
+
+
+def test_every_app_container_shares_the_database_and_the_rate_limit_store():
+    for name, app in APPS.items():
+        env = app["environment"]
+        assert env["DATABASE_URL"] == SERVER["environment"]["DATABASE_URL"], name
+        assert env["TOMSTUDY_RATE_LIMIT_STORAGE"] == "redis://redis:6379/0", name
+        assert LimitStore(env["TOMSTUDY_RATE_LIMIT_STORAGE"]).shared  # a URI limits knows
+        assert app["secrets"] == SERVER["secrets"] and app["command"] == SERVER["command"]
+        assert set(app["networks"]) == {"backend", "frontend"}
+    assert REDIS["healthcheck"]["test"] == ["CMD", "redis-cli", "ping"]
+    assert re.fullmatch(r"redis:\d+\.\d+\.\d+(@sha256:[0-9a-f]{64})?", REDIS["image"])
+
+
+def test_the_start_order_is_stores_then_one_app_then_the_other_then_the_proxy():
+    healthy = {"condition": "service_healthy"}
+    assert SERVER["depends_on"] == {"db": healthy, "redis": healthy}
+    # one container builds a first start's study into the shared `var` volume, then the other
+    assert APPS["server_b"]["depends_on"] == {"db": healthy, "redis": healthy, "server": healthy}
+    assert PROXY["depends_on"] == {name: healthy for name in APPS}
+    assert all(app["volumes"] == SERVER["volumes"] for app in APPS.values())
+
+
+def test_the_proxy_balances_both_app_containers_and_the_apps_trust_only_it():
+    caddyfile = (REPO / "deploy" / "Caddyfile").read_text()
+    upstreams = re.search(r"^\s*reverse_proxy (.+?) \{", caddyfile, re.M).group(1).split()
+    assert upstreams == [f"{name}:8000" for name in APPS]
+    assert "./deploy/Caddyfile:/etc/caddy/Caddyfile:ro" in PROXY["volumes"]
+    address = PROXY["networks"]["frontend"]["ipv4_address"]
+    subnet = COMPOSE["networks"]["frontend"]["ipam"]["config"][0]["subnet"]
+    assert ipaddress.ip_address(address) in ipaddress.ip_network(subnet)
+    for app in APPS.values():
+        assert app["environment"]["TOMSTUDY_TRUSTED_PROXIES"] == address
+    assert re.fullmatch(r"caddy:\d+\.\d+\.\d+(@sha256:[0-9a-f]{64})?", PROXY["image"])
 
 
 def test_server_waits_for_a_healthy_database_and_keeps_its_data_in_a_named_volume():
@@ -187,5 +229,6 @@ def test_the_image_trusts_forwarded_addresses_only_from_a_named_proxy():
     settings = [line for line in dockerfile.splitlines() if not line.startswith("#")]
     assert not any("FORWARDED_ALLOW_IPS" in line for line in settings)  # it was `*`
     assert "TOMSTUDY_TRUSTED_PROXIES" in dockerfile  # the comment says how to name the proxy
-    assert SERVER["environment"]["TOMSTUDY_TRUSTED_PROXIES"] == "${TOMSTUDY_TRUSTED_PROXIES:-}"
+    assert SERVER["environment"]["TOMSTUDY_TRUSTED_PROXIES"] == (
+        PROXY["networks"]["frontend"]["ipv4_address"])
     assert "TOMSTUDY_TRUSTED_PROXIES" in settings_env_names()
