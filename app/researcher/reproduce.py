@@ -35,9 +35,10 @@ from app.study.config import load_study_config
 
 SIGNIFICANT_DIGITS = 10
 IDENTIFIERS = ("_id", "_sha256")  # CSV columns compared as text
-# the lab's own database and platform credentials, which a reviewer's server never reads
+# the lab's own database, platform credentials and rate-limit store, which a reviewer's
+# server never reads or counts in
 LAB_ONLY_VARIABLES = ("TOMSTUDY_DATABASE_PASSWORD_FILE", "TOMSTUDY_PROLIFIC_TOKEN",
-                      "TOMSTUDY_PROLIFIC_TOKEN_FILE")
+                      "TOMSTUDY_PROLIFIC_TOKEN_FILE", "TOMSTUDY_RATE_LIMIT_STORAGE")
 
 
 class ArchiveError(ValueError):

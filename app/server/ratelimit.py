@@ -117,4 +117,3 @@ class RateLimit:
         response = JSONResponse({"detail": f"rate: too many {what}; try again in {wait_s} s"},
                                 status_code=429, headers={"Retry-After": str(wait_s)})
         await response(scope, receive, send)
-
