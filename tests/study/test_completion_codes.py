@@ -24,7 +24,7 @@ from app.server.completion_codes import (
 )
 from app.settings import REPO_ROOT
 from app.study.config import StudyConfig
-from tests.conftest import REPO, TOMSTUDY, local_client
+from tests.conftest import REPO, TOMSTUDY, local_client, patience
 from tests.study.flow import ADMIN, Participant, new_id, served_codes
 
 CODE = re.compile(r"^[A-HJKMNP-TV-Z2-9]{10}$")
@@ -104,7 +104,7 @@ def test_production_refuses_a_code_the_repository_makes_public(small_study, tmp_
                           TOMSTUDY_RATE_LIMIT_STARTS="20/minute",
                           TOMSTUDY_RATE_LIMIT_REQUESTS="300/minute")
     run = subprocess.run([TOMSTUDY, "serve", "--port", "1", "--study", small_study.study_id],
-                         env=env, cwd=REPO, capture_output=True, text=True, timeout=60)
+                         env=env, cwd=REPO, capture_output=True, text=True, timeout=patience(60))
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "recruitment.endings.failed_checks.completion_code: 'C2TOMREVIEW' is public" in (
         run.stderr)
@@ -131,7 +131,7 @@ def test_codes_come_from_one_place(tmp_path, recruitment, field):
 def test_tomstudy_codes_prints_each_ending_with_its_prolific_action(small_study):
     run = subprocess.run([TOMSTUDY, "codes", "--study", small_study.study_id],
                          env=small_study.env("sqlite://"), cwd=REPO, capture_output=True,
-                         text=True, timeout=60)
+                         text=True, timeout=patience(60))
     assert run.returncode == 0, run.stderr
     codes = study_codes(small_study.layout, small_study.study_id)
     lines = run.stdout.splitlines()
