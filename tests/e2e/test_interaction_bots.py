@@ -37,7 +37,7 @@ def test_bots_take_the_recorded_study_and_every_predictor_is_compared(
     for kind in KINDS:
         results = asyncio.run(asyncio.wait_for(
             run_bots(url, interaction_study.study_id, kind, BOTS, concurrency=BOTS,
-                     bank_path=bank), 120))
+                     bank_path=bank), patience(120)))
         assert [r.error for r in results if r.error] == [] and all(r.completion_code
                                                                     for r in results)
     with create_engine(db_url).connect() as conn:
