@@ -302,6 +302,47 @@ def settings_of(study: SmallStudy):
         get_settings.cache_clear()
 
 
+# ---------------------------------------------------------------- patience
+
+# A hang guard's bound is set for a quiet machine of the reference's speed and scaled by how
+# much slower this one runs right now, from two measures: the 1-minute load average per core
+# (sustained contention, e.g. a parallel suite or a CPU hog) and a ~30 ms calibration loop
+# timed against its uncontended time on the reference machine (reacts at once, and sees a
+# slower CPU). Either alone misses a case: the load average lags a hog that just started;
+# the short loop can fall between another process's time slices. The larger one wins.
+CALIBRATION_CHUNKS = 40
+REFERENCE_CHUNK_S = 0.00075  # one chunk's fastest time on the reference (2 cores, Python 3.11)
+MAX_SLOWDOWN = 12.0  # beyond this a run is broken, not slow: a real hang still fails
+_slowdown_cache: list[float] = [0.0, 1.0]  # (monotonic time measured, factor)
+
+
+def _calibration_chunk() -> None:
+    total = 0
+    for i in range(20_000):
+        total += i * i
+
+
+def machine_slowdown() -> float:
+    """How many times slower than the quiet reference machine this one runs now (1 to 12);
+    remeasured at most every 5 s."""
+    measured_at, factor = _slowdown_cache
+    if time.monotonic() - measured_at < 5:
+        return factor
+    start = time.perf_counter()
+    for _ in range(CALIBRATION_CHUNKS):
+        _calibration_chunk()
+    loop = (time.perf_counter() - start) / (CALIBRATION_CHUNKS * REFERENCE_CHUNK_S)
+    load = os.getloadavg()[0] / (os.cpu_count() or 1)
+    factor = min(MAX_SLOWDOWN, max(1.0, loop, load))
+    _slowdown_cache[:] = [time.monotonic(), factor]
+    return factor
+
+
+def patience(seconds: float) -> float:
+    """A hang guard's bound of `seconds` on a quiet machine, scaled by machine_slowdown()."""
+    return seconds * machine_slowdown()
+
+
 # ---------------------------------------------------------------- servers
 
 def free_port() -> int:
@@ -312,29 +353,31 @@ def free_port() -> int:
 
 
 def start_server(study: SmallStudy, db_url: str, port: int, workers: int = 1,
-                 log: Path | None = None, args: tuple[str, ...] = (), ready_s: float = 180,
+                 log: Path | None = None, args: tuple[str, ...] = (), ready_s: float = 60,
                  **env: str) -> subprocess.Popen:
     """`tomstudy serve` as a real process (extra `args` and `env` variables); returns once
-    it answers (RuntimeError if not within `ready_s`: the paper study's start recomputes every
-    model answer of its bundle, which takes minutes on a busy machine)."""
+    it answers (RuntimeError if not within `ready_s` on a quiet machine, scaled by `patience`;
+    the paper study's start recomputes every model answer of its bundle: give it more)."""
     out = open(log, "ab") if log else subprocess.DEVNULL  # noqa: SIM115 (the child keeps it)
     proc = subprocess.Popen(
         [TOMSTUDY, "serve", "--host", "127.0.0.1",
          "--port", str(port), "--workers", str(workers), "--study", study.study_id, *args],
         env=study.env(db_url, **env), stdout=out, stderr=subprocess.STDOUT, cwd=REPO)
-    deadline = time.monotonic() + ready_s
+    bound_s = patience(ready_s)
+    deadline = time.monotonic() + bound_s
     while time.monotonic() < deadline:
         if proc.poll() is not None:
             raise RuntimeError(f"server exited with {proc.returncode}; see {log}")
         try:
-            page = httpx.get(f"http://127.0.0.1:{port}/s/{study.study_id}", timeout=1)
+            page = httpx.get(f"http://127.0.0.1:{port}/s/{study.study_id}",
+                             timeout=patience(1))
             if page.status_code == 200:
                 return proc
         except httpx.TransportError:
             pass
         time.sleep(0.2)
     proc.kill()
-    raise RuntimeError(f"server did not answer within {ready_s:.0f} s")
+    raise RuntimeError(f"server did not answer within {bound_s:.0f} s; see {log or 'its output'}")
 
 
 def stop_server(proc: subprocess.Popen, grace_s: float = 10) -> None:
@@ -342,10 +385,10 @@ def stop_server(proc: subprocess.Popen, grace_s: float = 10) -> None:
     the test)."""
     proc.terminate()
     try:
-        proc.wait(timeout=grace_s)
+        proc.wait(timeout=patience(grace_s))
     except subprocess.TimeoutExpired:
         proc.kill()
-        proc.wait(timeout=10)
+        proc.wait(timeout=patience(10))
 
 
 @pytest.fixture(scope="session")
@@ -356,8 +399,7 @@ def live_server(small_study, tmp_path_factory):
     proc = start_server(small_study, f"sqlite:///{root / 'study.db'}", port,
                         log=root / "server.log")
     yield f"http://127.0.0.1:{port}"
-    proc.terminate()
-    proc.wait(timeout=10)
+    stop_server(proc)
 
 
 # ---------------------------------------------------------------- PostgreSQL
@@ -386,7 +428,8 @@ def start_cluster(root: Path, fsync: bool = False):
     options = (f"-c listen_addresses=127.0.0.1 -p {port} -k {root} -c max_connections=200"
                + ("" if fsync else " -c fsync=off"))
     subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-o", options,
-                    "-l", str(root / "pg.log"), "-w", "start"], check=True, capture_output=True)
+                    "-l", str(root / "pg.log"), "-w", "-t", str(round(patience(60))), "start"],
+                   check=True, capture_output=True)
 
     def stop() -> None:
         subprocess.run([*as_postgres, str(PG_BIN / "pg_ctl"), "-D", str(data), "-m",

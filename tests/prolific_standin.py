@@ -21,6 +21,8 @@ from datetime import UTC, datetime
 import uvicorn
 from fastapi import FastAPI, Header, HTTPException, Request
 
+from tests.conftest import patience
+
 API = "/api/v1"
 
 
@@ -98,7 +100,7 @@ def serve(standin: ProlificStandIn, port: int):
                                            log_level="warning", lifespan="off"))
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + patience(10)
     while not server.started:
         if time.monotonic() > deadline or not thread.is_alive():
             raise RuntimeError("the Prolific stand-in did not start")
@@ -107,4 +109,4 @@ def serve(standin: ProlificStandIn, port: int):
         yield f"http://127.0.0.1:{port}{API}/"
     finally:
         server.should_exit = True
-        thread.join(timeout=10)
+        thread.join(timeout=patience(10))

@@ -13,6 +13,7 @@ from tests.conftest import (
     SmallStudy,
     build_bundle_of,
     free_port,
+    patience,
     start_server,
 )
 
@@ -59,7 +60,7 @@ def serve_study(study: SmallStudy, root: Path):
     proc = start_server(study, f"sqlite:///{db_path}", port, log=root / "server.log")
     yield BrowserServer(f"http://127.0.0.1:{port}", db_path)
     proc.terminate()
-    proc.wait(timeout=10)
+    proc.wait(timeout=patience(10))
 
 
 @pytest.fixture(scope="session")
@@ -86,5 +87,35 @@ def chromium():
 
     with sync_playwright() as playwright:
         browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        yield browser
+        yield PatientBrowser(browser)
         browser.close()
+
+
+class PatientBrowser:
+    """A Playwright Browser whose contexts, pages and `expect`s wait as long as patience()
+    allows (Playwright's own defaults: 30 s for actions, 5 s for `expect`)."""
+
+    def __init__(self, browser):
+        self._browser = browser
+
+    def __getattr__(self, name: str):
+        return getattr(self._browser, name)
+
+    def new_context(self, **options):
+        """Browser.new_context with the scaled default timeout."""
+        context = self._browser.new_context(**options)
+        context.set_default_timeout(self._patient_defaults())
+        return context
+
+    def new_page(self, **options):
+        """Browser.new_page with the scaled default timeout."""
+        page = self._browser.new_page(**options)
+        page.set_default_timeout(self._patient_defaults())
+        return page
+
+    @staticmethod
+    def _patient_defaults() -> float:
+        from playwright.sync_api import expect
+
+        expect.set_options(timeout=patience(5) * 1000)
+        return patience(30) * 1000

@@ -7,7 +7,7 @@ import uuid
 from pathlib import Path
 
 from app.layout import Layout
-from tests.conftest import ADMIN_TOKEN, REPO, SmallStudy
+from tests.conftest import ADMIN_TOKEN, REPO, SmallStudy, patience
 from tests.e2e.conftest import BROWSER_STUDY
 
 VIEWPORT = {"width": 1280, "height": 900}
@@ -22,6 +22,11 @@ THINK_MS = 1500  # fake-clock time between two clicks
 # an arrow key moves the keyboard cursor by this share of max_step_m (predict.js's own)
 KEY_STEP_FRACTION = float(re.search(r"^const KEY_STEP_FRACTION = ([\d.]+);", (
     REPO / "frontend" / "static" / "js" / "predict.js").read_text(), re.M).group(1))
+
+
+def wait_ms() -> float:
+    """A screen's wait in milliseconds: 15 s on a quiet machine, scaled by patience()."""
+    return patience(15) * 1000
 
 
 def fresh_recruitment() -> str:
@@ -61,7 +66,7 @@ def bank_of(study: SmallStudy, study_id: str = BROWSER_STUDY) -> dict:
 
 def visible(page, screen: str) -> None:
     """Wait until the participant app shows `screen`."""
-    page.wait_for_selector(f"#screen-{screen}:not([hidden])", timeout=15000)
+    page.wait_for_selector(f"#screen-{screen}:not([hidden])", timeout=wait_ms())
 
 
 # the screens between trials that only ask to go on, and their buttons
@@ -106,14 +111,14 @@ def onward(page) -> str:
 def shown_screen(page) -> str:
     """Wait until one of the participant app's screens is shown; its name."""
     screens = [*ONWARD, "trial", "survey", "done"]
-    page.wait_for_function(f"() => {json.dumps(screens)}.some({SHOWN})", timeout=15000)
+    page.wait_for_function(f"() => {json.dumps(screens)}.some({SHOWN})", timeout=wait_ms())
     return next(s for s in screens if page.evaluate(f"s => ({SHOWN})(s)", s))
 
 
 def press_on(page, screen: str) -> None:
     """Press the button of a screen that only asks to go on, and wait until it is gone."""
     page.click(ONWARD[screen])
-    page.wait_for_function(f"s => !({SHOWN})(s)", arg=screen, timeout=15000)
+    page.wait_for_function(f"s => !({SHOWN})(s)", arg=screen, timeout=wait_ms())
 
 
 def answer_survey(page) -> None:
@@ -243,7 +248,7 @@ FEEDBACK_OR_GONE = """() => document.querySelector('#screen-trial').hidden
 def through_feedback(page) -> int:
     """After submitting a trial: press on through a practice trial's feedback (a screen per
     start position); how many screens it showed (0 after a scored trial)."""
-    page.wait_for_function(FEEDBACK_OR_GONE, timeout=15000)
+    page.wait_for_function(FEEDBACK_OR_GONE, timeout=wait_ms())
     shown = 0
     while page.is_visible("#screen-trial") and page.is_visible("#feedback-legend"):
         shown += 1

@@ -18,7 +18,7 @@ import httpx
 
 from app.layout import DEFAULT_DATA_DIR, Layout
 from app.server.recruitment import preview_key
-from tests.conftest import REPO, TOMSTUDY
+from tests.conftest import REPO, TOMSTUDY, patience
 from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
 
 STUDY = "paper_study"
@@ -31,7 +31,8 @@ def serve(db: Path, port: int, token: str) -> subprocess.Popen:
                              str(port)], env={**_env(), **env}, cwd=REPO)
     for _ in range(120):
         try:
-            if httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=1).status_code == 200:
+            health = httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=patience(1))
+            if health.status_code == 200:
                 return proc
         except httpx.TransportError:
             time.sleep(0.5)
@@ -99,7 +100,7 @@ def main(pilot_db: Path = Layout(DEFAULT_DATA_DIR).pilot_database("coarse"),
         shoot(url, token, out)
     finally:
         proc.terminate()
-        proc.wait(timeout=10)
+        proc.wait(timeout=patience(10))
     print(f"wrote {out}/dashboard.png, replay.png, replay_start.png")
 
 

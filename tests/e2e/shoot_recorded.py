@@ -18,7 +18,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from tests.conftest import REPO, cached_interaction_study, free_port, start_server
+from tests.conftest import REPO, cached_interaction_study, free_port, patience, start_server
 from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
 from tests.e2e.pages import (
     answer_survey,
@@ -121,7 +121,7 @@ def main() -> None:
             browser.close()
     finally:
         proc.terminate()
-        proc.wait(timeout=10)
+        proc.wait(timeout=patience(10))
         shutil.rmtree(root, ignore_errors=True)
     print(f"wrote {', '.join(sorted(p.name for p in OUT.glob('recorded_*.png')))} into {OUT}")
 

@@ -12,7 +12,15 @@ import pytest
 import yaml
 
 from app.study.consent import PLATFORM_NAMES
-from tests.conftest import FILLED_CONSENT, REPO, TOMSTUDY, SmallStudy, free_port, start_server
+from tests.conftest import (
+    FILLED_CONSENT,
+    REPO,
+    TOMSTUDY,
+    SmallStudy,
+    free_port,
+    patience,
+    start_server,
+)
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import SCREENSHOTS, VIEWPORT, fresh_recruitment, visible
 
@@ -42,7 +50,7 @@ def filled_server(browser_study, tmp_path_factory):
                         log=root / "server.log", **PRODUCTION_ENV)
     yield f"http://127.0.0.1:{port}"
     proc.terminate()
-    proc.wait(timeout=10)
+    proc.wait(timeout=patience(10))
 
 
 def test_the_consent_page_shows_every_section_of_the_form(chromium, filled_server):
@@ -74,7 +82,7 @@ def test_production_refuses_to_start_with_the_shipped_placeholders(browser_study
     env = browser_study.env(f"sqlite:///{tmp_path / 'p.db'}", **PRODUCTION_ENV)
     run = subprocess.run([TOMSTUDY, "serve", "--host", "127.0.0.1", "--port", str(free_port()),
                           "--study", BROWSER_STUDY], env=env, capture_output=True, text=True,
-                         timeout=120, cwd=REPO)
+                         timeout=patience(120), cwd=REPO)
     assert run.returncode == 2, run.stdout + run.stderr
     assert run.stderr == (f"error: refusing to serve study {BROWSER_STUDY} in production mode: "
                           "consent.institution: still holds the placeholder [YOUR INSTITUTION]; "

@@ -10,7 +10,7 @@ import pytest
 from playwright.sync_api import expect
 
 from app.pilot.bots import run_bots
-from tests.conftest import ADMIN_TOKEN
+from tests.conftest import ADMIN_TOKEN, patience
 from tests.e2e.axe import axe_violations
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import SCREENSHOTS, log_in, researcher_page
@@ -80,7 +80,7 @@ def test_dashboard_lists_sessions_and_replays_a_trial(browser_server, bot_sessio
 
 def test_withdrawal_from_the_dashboard_asks_first_and_shows_the_audit_line(
         browser_server, browser_study, bot_sessions, chromium):
-    with httpx.Client(base_url=browser_server.url, timeout=30) as http:
+    with httpx.Client(base_url=browser_server.url, timeout=patience(30)) as http:
         Participant(http, BROWSER_STUDY).start(**prolific("withdraws-later"))
     # bypass_csp: axe-core is injected as an inline script, which the page's CSP refuses
     page = chromium.new_page(viewport={"width": 1300, "height": 900}, bypass_csp=True)
@@ -156,7 +156,7 @@ def public_id(name: str, url: str) -> str:
     """The public id of the session of Prolific participant `name` (from the dashboard API)."""
     board = httpx.get(f"{url}/api/researcher/dashboard", params={
         "study_id": BROWSER_STUDY, "external_ids": True},
-        headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}, timeout=30).json()
+        headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}, timeout=patience(30)).json()
     [found] = [r["public_id"] for r in board["participants"] if r.get("external_id") == hex24(name)]
     return found
 
@@ -164,14 +164,16 @@ def public_id(name: str, url: str) -> str:
 def audit(url: str) -> list[dict]:
     """The study's withdrawal audit lines."""
     return httpx.get(f"{url}/api/researcher/withdrawals/audit", params={"study_id": BROWSER_STUDY},
-                     headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}, timeout=30).json()
+                     headers={"Authorization": f"Bearer {ADMIN_TOKEN}"},
+                     timeout=patience(30)).json()
 
 
 def shown_verdicts(page, url: str) -> None:
     """The page lists, per world, the primary test's sentence the dashboard API gives (the
     report's, analysis/verdicts.py), or says there is none yet."""
     board = httpx.get(f"{url}/api/researcher/dashboard", params={"study_id": BROWSER_STUDY},
-                      headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}, timeout=30).json()
+                      headers={"Authorization": f"Bearer {ADMIN_TOKEN}"},
+                      timeout=patience(30)).json()
     verdicts = board["alignment"]["verdicts"]
     page.wait_for_selector("#verdicts li")
     items = page.locator("#verdicts li")

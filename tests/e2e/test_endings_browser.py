@@ -21,7 +21,7 @@ import httpx
 import pytest
 import yaml
 
-from tests.conftest import SmallStudy, build_bundle_of, free_port, start_server
+from tests.conftest import SmallStudy, build_bundle_of, free_port, patience, start_server
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
     VIEWPORT,
@@ -69,7 +69,7 @@ def to_survey_failing_checks(page, base_url: str, study: SmallStudy, study_id: s
     """Answer every trial of the page's session over HTTP, attention checks the wrong way;
     reload the page at the survey. Returns the session token."""
     token = page_token(page, study_id)
-    with httpx.Client(base_url=base_url, timeout=30) as http:
+    with httpx.Client(base_url=base_url, timeout=patience(30)) as http:
         fail_attention_checks(ApiParticipant(http, study_id, token=token),
                               bank_of(study, study_id))
     page.reload()
@@ -174,7 +174,7 @@ def mturk_server(browser_study, turk_submit_to, tmp_path_factory):
     proc = start_server(study, f"sqlite:///{db_path}", port, log=root / "server.log")
     yield study, f"http://127.0.0.1:{port}", db_path
     proc.terminate()
-    proc.wait(timeout=10)
+    proc.wait(timeout=patience(10))
 
 
 def participants(db_path: Path) -> int:

@@ -12,7 +12,7 @@ from sqlalchemy import create_engine, func, select
 from analysis.contracts import COARSE_OBSERVERS
 from app.pilot.bots import run_bots
 from app.server.tables import PredictionRow
-from tests.conftest import TOMSTUDY, free_port, start_server, stop_server
+from tests.conftest import TOMSTUDY, free_port, patience, start_server, stop_server
 
 pytestmark = pytest.mark.slow
 KINDS = ("coarse", "precise", "random")
@@ -37,7 +37,7 @@ def test_bots_take_the_recorded_study_and_every_predictor_is_compared(
     for kind in KINDS:
         results = asyncio.run(asyncio.wait_for(
             run_bots(url, interaction_study.study_id, kind, BOTS, concurrency=BOTS,
-                     bank_path=bank), 120))
+                     bank_path=bank), patience(120)))
         assert [r.error for r in results if r.error] == [] and all(r.completion_code
                                                                     for r in results)
     with create_engine(db_url).connect() as conn:
@@ -50,7 +50,7 @@ def test_bots_take_the_recorded_study_and_every_predictor_is_compared(
                     "--database-url", db_url, "--out", str(out),
                     "--waive", "failed_attention_check"],
                    env=interaction_study.env(db_url), check=True, capture_output=True,
-                   timeout=300)
+                   timeout=patience(300))
     pairwise = pd.read_csv(out / "pairwise.csv")
     assert set(pairwise["world"]) == {"roundabout", "intersection"}
     pairs = {frozenset((a, b)) for a, b in zip(pairwise["a"], pairwise["b"], strict=True)}

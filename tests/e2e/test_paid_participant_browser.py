@@ -22,7 +22,14 @@ import yaml
 
 from app.layout import Layout
 from app.prediction_view import TARGET_STEP_PX, prediction_view
-from tests.conftest import ADMIN_TOKEN, SmallStudy, free_port, freeze_bundle_of, start_server
+from tests.conftest import (
+    ADMIN_TOKEN,
+    SmallStudy,
+    free_port,
+    freeze_bundle_of,
+    patience,
+    start_server,
+)
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
     JS,
@@ -186,7 +193,7 @@ def test_a_second_tab_is_told_and_takes_over_only_when_asked(fresh, browser_serv
 
 def test_reopening_a_finished_link_shows_its_code_again(fresh, browser_server, browser_study):
     recruitment = prolific("finished-" + new_id())
-    with httpx.Client(base_url=browser_server.url, timeout=30) as http:
+    with httpx.Client(base_url=browser_server.url, timeout=patience(30)) as http:
         p = Participant(http, BROWSER_STUDY)
         p.start(**recruitment)
         p.pass_intro()
@@ -236,7 +243,7 @@ def refusing_server(browser_study, tmp_path_factory):
         assert first.consent().status_code == 200  # a session counts from its consent
     yield url
     proc.terminate()
-    proc.wait(timeout=10)
+    proc.wait(timeout=patience(10))
 
 
 def _started_elsewhere(base: str) -> str:
@@ -291,7 +298,7 @@ def test_every_refusal_is_a_plain_page(fresh, browser_server, request, case):
 
 def answer_part_over_http(base: str, token: str, part: int, bank: dict) -> None:
     """Answer what is left of `part` over HTTP (the page's session), as the page would."""
-    with httpx.Client(base_url=base, timeout=30) as http:
+    with httpx.Client(base_url=base, timeout=patience(30)) as http:
         p = Participant(http, BROWSER_STUDY, token=token)
         state = p.state()
         while state["phase"] != "world_intro" or state["step"]["part"] == part:
@@ -432,7 +439,7 @@ def test_the_dashboard_counts_a_declined_session_fits_and_explains_its_timings(
     page.click("#consent-decline")
     visible(page, "done")
     declined = page_public_id(page, browser_server)
-    with httpx.Client(base_url=browser_server.url, timeout=30) as http:
+    with httpx.Client(base_url=browser_server.url, timeout=patience(30)) as http:
         answered = Participant(http, BROWSER_STUDY)
         answered.start()
         answered.pass_intro()

@@ -9,7 +9,7 @@ import yaml
 from playwright.sync_api import expect
 
 from app.layout import Layout
-from tests.conftest import SmallStudy, free_port, freeze_bundle_of, start_server
+from tests.conftest import SmallStudy, free_port, freeze_bundle_of, patience, start_server
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import VIEWPORT, fresh_recruitment, visible
 from tests.study.flow import Participant, new_id, prolific
@@ -35,7 +35,7 @@ def capped_server(browser_study, tmp_path_factory):
     proc = start_server(study, f"sqlite:///{root / 'study.db'}", port, log=root / "server.log")
     yield f"http://127.0.0.1:{port}"
     proc.terminate()
-    proc.wait(timeout=10)
+    proc.wait(timeout=patience(10))
 
 
 def test_a_consent_waiting_for_room_says_so_then_goes_on(chromium, capped_server):

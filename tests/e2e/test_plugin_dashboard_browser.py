@@ -7,7 +7,7 @@ import pytest
 
 from analysis.contracts import model_color
 from app.pilot.bots import run_bots
-from tests.conftest import free_port, start_server
+from tests.conftest import free_port, patience, start_server
 from tests.e2e.pages import researcher_page
 from tests.e2e.test_dashboard_browser import CANVAS_COLOURS
 
@@ -47,7 +47,7 @@ def plugin_server(ctrv_study, tmp_path_factory):
     assert [r.error for r in results if r.error] == []
     yield url
     proc.terminate()
-    proc.wait(timeout=10)
+    proc.wait(timeout=patience(10))
 
 
 def test_the_dashboard_shows_every_predictor_and_replays_the_plugin(plugin_server, chromium):

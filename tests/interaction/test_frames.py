@@ -63,8 +63,10 @@ def test_sensitivity_row_appears_in_summary_and_report(tmp_path):
 
     data = tmp_path / "data"
     generate(data, SCENARIO, "v1.2", train_s=60.0, val_s=24.0, seed=5)
-    summary = run_command(data, SCENARIO, Layout(tmp_path / "var"), seeds=2, max_epochs=2,
-                          frame_seeds=2, out_dir=tmp_path / "out")
+    config = tmp_path / "interaction.yaml"  # one levels cell: the row, not the grid, is tested
+    config.write_text("code_levels:\n  levels: [[3, 3]]\n")
+    summary = run_command(data, SCENARIO, Layout(tmp_path / "var"), config=config, seeds=2,
+                          max_epochs=2, frame_seeds=2, out_dir=tmp_path / "out")
     primary = summary["paper_protocol"]
     row = summary["sensitivity"]["human_relative_frame"]
     assert row["frame"] == "human_relative" and row["seeds"] == 2

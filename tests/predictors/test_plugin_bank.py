@@ -14,7 +14,7 @@ from app.predictors.builtin import CheckpointPredictor, ConstantVelocity
 from app.predictors.ctrv import CTRV
 from app.predictors.protocol import ask
 from app.study.trials import NO_SEED, TrialBank
-from tests.conftest import TOMSTUDY, freeze_bundle_of
+from tests.conftest import TOMSTUDY, freeze_bundle_of, patience
 from tests.study.test_bundle import bundle_root, copied
 
 
@@ -82,7 +82,7 @@ def refrozen(study, change) -> None:
 def verify(study) -> subprocess.CompletedProcess:
     return subprocess.run([TOMSTUDY, "bundle", "verify", "--study", study.study_id],
                           env=study.env("sqlite://"), capture_output=True, text=True,
-                          timeout=120)
+                          timeout=patience(120))
 
 
 def test_a_server_refuses_plugin_answers_it_does_not_reproduce(ctrv_study, tmp_path):

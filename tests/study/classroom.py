@@ -18,6 +18,7 @@ import httpx
 
 from app.server.sessions import SESSION_HEADER
 from app.server.tabs import TAB_HEADER
+from tests.conftest import patience
 from tests.study.flow import DEVICE, draft_body, new_id, prediction_body
 
 MAX_DELAY_S = 8.0  # api.js sendUntilAcknowledged's maxDelayMs
@@ -101,7 +102,7 @@ async def classroom(base_url: str, study_id: str, size: int, click_s: float = 0.
                     recruitment=None) -> list[Pupil]:
     """`size` participants at once from this machine's one address; each answers a trial."""
     limits = httpx.Limits(max_connections=size)
-    async with httpx.AsyncClient(base_url=base_url, timeout=60, limits=limits) as client:
+    async with httpx.AsyncClient(base_url=base_url, timeout=patience(60), limits=limits) as client:
         pupils = [Pupil(client, study_id, click_s) for _ in range(size)]
         await asyncio.gather(*(p.take_part(recruitment(i) if recruitment else prolific_link())
                                for i, p in enumerate(pupils)))

@@ -26,7 +26,15 @@ from app.pilot.bots import run_bots
 from app.researcher.archive import ARCHIVE_MANIFEST, pseudonymous
 from app.server.tables import Participant
 from app.settings import get_settings
-from tests.conftest import REPO, SmallStudy, free_port, local_client, start_server, stop_server
+from tests.conftest import (
+    REPO,
+    SmallStudy,
+    free_port,
+    local_client,
+    patience,
+    start_server,
+    stop_server,
+)
 
 BOTS = 8
 FREE_TEXT = "I watched where the robot was heading."  # every bot's answer to a text question
@@ -257,12 +265,13 @@ def test_serve_archive_serves_the_study_from_the_archive_only(pilot, archived, t
 
 
 def wait_for_page(proc: subprocess.Popen, url: str, log: Path) -> httpx.Response:
-    """The page at `url` once the server answers 200 (60 s at most)."""
-    for _ in range(300):
+    """The page at `url` once the server answers 200 (60 s on a quiet machine)."""
+    deadline = time.monotonic() + patience(60)
+    while time.monotonic() < deadline:
         if proc.poll() is not None:
             raise AssertionError(f"serve exited {proc.returncode}: {log.read_text()}")
         try:
-            page = httpx.get(url, timeout=1)
+            page = httpx.get(url, timeout=patience(1))
             if page.status_code == 200:
                 return page
         except httpx.TransportError:

@@ -19,6 +19,7 @@ from tests.conftest import (
     free_port,
     freeze_bundle_of,
     local_client,
+    patience,
     start_server,
 )
 from tests.study.flow import TOKEN, Participant, make_client, new_id
@@ -92,7 +93,7 @@ def test_serve_refuses_a_changed_bank_unless_allowed(small_study, rebuilt, tmp_p
     old = run_sessions(small_study, db_url, n=3)
     run = subprocess.run([TOMSTUDY, "serve", "--port", "1",
                           "--study", rebuilt.study_id], env=rebuilt.env(db_url),
-                         capture_output=True, text=True, timeout=120)
+                         capture_output=True, text=True, timeout=patience(120))
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert f"{rebuilt.study_id}: the trial bank changed" in run.stderr
     assert f"3 ran bank {old[:12]}" in run.stderr
@@ -100,10 +101,10 @@ def test_serve_refuses_a_changed_bank_unless_allowed(small_study, rebuilt, tmp_p
     proc = start_server(rebuilt, db_url, port, log=tmp_path / "server.log",
                         args=("--allow-bank-change",))
     try:
-        assert httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=5).status_code == 200
+        assert httpx.get(f"http://127.0.0.1:{port}/healthz", timeout=patience(5)).status_code == 200
     finally:
         proc.terminate()
-        proc.wait(timeout=10)
+        proc.wait(timeout=patience(10))
 
 
 def test_sessions_of_a_replaced_bank_are_told_plainly_and_finished_ones_keep_their_code(

@@ -20,7 +20,14 @@ from app.configio import load_yaml_model
 from app.layout import Layout
 from app.settings import Settings
 from app.study.config import StudyConfig, load_study_config
-from tests.conftest import REPO, SMALL_SEEDS, TOMSTUDY, SmallStudy, freeze_bundle_of
+from tests.conftest import (
+    REPO,
+    SMALL_SEEDS,
+    TOMSTUDY,
+    SmallStudy,
+    freeze_bundle_of,
+    patience,
+)
 
 
 def copied(study: SmallStudy, tmp_path) -> SmallStudy:
@@ -86,7 +93,7 @@ def test_the_server_refuses_a_bundle_whose_config_shapes_another_bank(small_stud
         load_bundle(config_of(study), study.study_id, study.configs_dir, study.layout)
     run = subprocess.run([TOMSTUDY, "serve", "--port", "1", "--study", study.study_id],
                          env=study.env(f"sqlite:///{tmp_path / 'x.db'}"), capture_output=True,
-                         text=True, timeout=120)
+                         text=True, timeout=patience(120))
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "what shapes the trial bank: bank_seed, models" in run.stderr
 
@@ -94,7 +101,7 @@ def test_the_server_refuses_a_bundle_whose_config_shapes_another_bank(small_stud
 def test_serving_without_a_bundle_says_how_to_build_it(small_study, tmp_path):
     env = small_study.env(f"sqlite:///{tmp_path / 'x.db'}", TOMSTUDY_DATA_DIR=str(tmp_path))
     run = subprocess.run([TOMSTUDY, "serve", "--port", "1", "--study", small_study.study_id],
-                         env=env, capture_output=True, text=True, timeout=120)
+                         env=env, capture_output=True, text=True, timeout=patience(120))
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "no bundle of study small_study" in run.stderr
     assert "tomstudy bundle build --study small_study" in run.stderr
@@ -134,7 +141,8 @@ def test_model_answers_refuse_stored_answers_their_checkpoint_does_not_give(smal
     with pytest.raises(BankMismatch, match="obstacle/vae seed 1: answers differ"):
         ModelAnswers(bundle)
     run = subprocess.run([TOMSTUDY, "bundle", "verify", "--study", study.study_id],
-                         env=study.env("sqlite://"), capture_output=True, text=True, timeout=120)
+                         env=study.env("sqlite://"), capture_output=True, text=True,
+                         timeout=patience(120))
     assert run.returncode == 1
     rows = [line.split() for line in run.stdout.splitlines()]
     verdicts = {(r[0], r[1], r[2]): r[-1] for r in rows if len(r) == 8 and r[2].isdigit()}
@@ -145,7 +153,7 @@ def test_model_answers_refuse_stored_answers_their_checkpoint_does_not_give(smal
 def test_bundle_verify_recomputes_every_seed_of_every_model(small_study):
     run = subprocess.run([TOMSTUDY, "bundle", "verify", "--study", small_study.study_id],
                          env=small_study.env("sqlite://"), capture_output=True, text=True,
-                         timeout=120)
+                         timeout=patience(120))
     assert run.returncode == 0, run.stderr
     rows = [line.split() for line in run.stdout.splitlines()]
     checked = [r for r in rows if len(r) == 8 and r[2].isdigit()]
@@ -234,7 +242,7 @@ def test_the_paper_studys_shipped_bundle_verifies_on_this_machine():
     assert sum(f["bytes"] for f in json.loads((root / MANIFEST).read_text())[
         "files"].values()) < 8 * 2 ** 20
     run = subprocess.run([TOMSTUDY, "bundle", "verify", "--study", "paper_study"],
-                         capture_output=True, text=True, timeout=300, cwd=REPO)
+                         capture_output=True, text=True, timeout=patience(300), cwd=REPO)
     assert run.returncode == 0, run.stdout + run.stderr
     checked = [r for r in (line.split() for line in run.stdout.splitlines())
                if len(r) == 8 and r[2].isdigit()]

@@ -5,7 +5,7 @@ meets no 429 (issue 32 item 4)."""
 import asyncio
 
 from app.settings import Settings
-from tests.conftest import free_port, start_server
+from tests.conftest import free_port, patience, start_server
 from tests.study.classroom import classroom
 
 CLASS_SIZE = 30
@@ -23,7 +23,7 @@ def test_a_classroom_behind_one_address_answers_a_trial_without_a_429(small_stud
                                        CLASS_SIZE))
     finally:
         proc.terminate()
-        proc.wait(timeout=10)
+        proc.wait(timeout=patience(10))
     assert sum(p.answered for p in pupils) == CLASS_SIZE
     assert [r for p in pupils for r in p.refused] == []
     assert min(p.requests for p in pupils) >= 20  # the page's traffic, not a shortcut

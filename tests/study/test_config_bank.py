@@ -38,7 +38,7 @@ from app.study.config import (
     load_study_config,
 )
 from app.study.trials import TrialBank, clip_sha256
-from tests.conftest import REPO, TOMSTUDY, SmallStudy, build_bundle_of, local_client
+from tests.conftest import REPO, TOMSTUDY, SmallStudy, build_bundle_of, local_client, patience
 from tests.study import flow
 from tests.study.flow import ADMIN, new_id, prediction_body, prolific
 
@@ -373,7 +373,7 @@ def test_production_mode_refuses_an_unset_or_old_default_token(small_study, tmp_
     env = small_study.env(f"sqlite:///{tmp_path / 'x.db'}", TOMSTUDY_PRODUCTION="1",
                           TOMSTUDY_ADMIN_TOKEN=token)
     run = subprocess.run([TOMSTUDY, "serve", "--port", "1"],
-                         env=env, capture_output=True, text=True, timeout=60)
+                         env=env, capture_output=True, text=True, timeout=patience(60))
     assert run.returncode == 2 and "refusing to start" in run.stderr
 
 

@@ -14,7 +14,7 @@ from sqlalchemy.engine import make_url
 from app.cli import cli
 from app.server.limitstore import LimitStore
 from app.settings import Settings
-from tests.conftest import REPO
+from tests.conftest import REPO, patience
 
 COMPOSE = yaml.safe_load((REPO / "compose.yaml").read_text())
 SERVER = COMPOSE["services"]["server"]
@@ -174,7 +174,7 @@ def run_entrypoint(tmp_path):
         env = dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}",
                    TOMSTUDY_DATA_DIR=str(data_dir), TOMSTUDY_HEALTHZ_FILE=str(run.healthz))
         done = subprocess.run(["sh", str(ENTRYPOINT), *args], env=env, capture_output=True,
-                              text=True, timeout=10, check=True)
+                              text=True, timeout=patience(10), check=True)
         return done.stdout.splitlines()
 
     run.data_dir = data_dir

@@ -22,7 +22,7 @@ from app.study.estimate import (
     player_timing,
     study_estimate,
 )
-from tests.conftest import REPO, TOMSTUDY
+from tests.conftest import REPO, TOMSTUDY, patience
 
 
 @pytest.fixture(scope="module")
@@ -109,7 +109,7 @@ def test_the_cli_prints_both_paces_the_advertised_time_and_the_pay(paper):
     config, bank = paper
     found = study_estimate(config, bank)
     run = subprocess.run([TOMSTUDY, "estimate", "--study", "paper_study"], capture_output=True,
-                         text=True, timeout=120, cwd=REPO)
+                         text=True, timeout=patience(120), cwd=REPO)
     assert run.returncode == 0, run.stderr
     out = run.stdout
     assert "median participant (230 words/min, 2.5 s per click" in out
@@ -123,6 +123,6 @@ def test_the_cli_prints_both_paces_the_advertised_time_and_the_pay(paper):
 
 def test_the_cli_names_a_missing_study_in_one_line():
     run = subprocess.run([TOMSTUDY, "estimate", "--study", "no_such_study"], capture_output=True,
-                         text=True, timeout=60, cwd=REPO)
+                         text=True, timeout=patience(60), cwd=REPO)
     assert run.returncode == 2 and run.stderr.count("\n") == 1
     assert "no_such_study" in run.stderr

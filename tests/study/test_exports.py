@@ -27,7 +27,7 @@ from app.cli import cli
 from app.researcher.exports import export_table
 from app.server.tables import Participant, TrialResponse, utcnow
 from app.settings import get_settings
-from tests.conftest import TOMSTUDY
+from tests.conftest import TOMSTUDY, patience
 from tests.study.flow import ADMIN, at_first_trial, new_id, prolific
 
 FORMULA = '=HYPERLINK("http://x","y")'
@@ -184,7 +184,7 @@ def test_tomstudy_analyze_reads_the_predictions_export_unchanged(client, small_s
     done = subprocess.run(
         [TOMSTUDY, "analyze", "--study",
          small_study.study_id, "--csv", str(path), "--out", str(out)],
-        env=small_study.env(db_url), capture_output=True, text=True, timeout=300)
+        env=small_study.env(db_url), capture_output=True, text=True, timeout=patience(300))
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert {res["n"] for res in summary["ours_vs_vae"].values()} == {3}

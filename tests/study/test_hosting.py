@@ -27,7 +27,7 @@ from app.server.preflight import (
     worker_environment,
 )
 from app.settings import Settings, get_settings, is_loopback
-from tests.conftest import ADMIN_TOKEN, REPO, TOMSTUDY, free_port, local_client
+from tests.conftest import ADMIN_TOKEN, REPO, TOMSTUDY, free_port, local_client, patience
 from tests.study.flow import ADMIN, Participant
 
 STRONG_TOKEN = "x" * 40
@@ -46,7 +46,7 @@ def run_serve(small_study, tmp_path, *args: str, **env: str) -> subprocess.Compl
     environment = small_study.env(f"sqlite:///{tmp_path / 'serve.db'}", **env)
     return subprocess.run([TOMSTUDY, "serve", "--port", str(free_port()), "--study",
                            small_study.study_id, *args], env=environment, cwd=REPO,
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=patience(60))
 
 
 # ---------------------------------------------------------------- researcher token
@@ -333,7 +333,7 @@ def test_a_database_of_an_older_schema_is_refused_with_what_to_do(small_study, t
     run = subprocess.run([TOMSTUDY, "serve", "--port", "1",
                           "--study", small_study.study_id],
                          env=small_study.env(f"sqlite:///{db}"), capture_output=True, text=True,
-                         timeout=120)
+                         timeout=patience(120))
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "older tomstudy" in run.stderr and "`tomstudy db upgrade`" in run.stderr
 
@@ -362,15 +362,15 @@ def test_a_loopback_server_without_a_token_makes_one_and_the_old_default_opens_n
         assert made.status_code == 200 and made.text.startswith("export_version,study_id,")
     finally:
         proc.terminate()
-        proc.wait(timeout=10)
+        proc.wait(timeout=patience(10))
 
 
 def wait_for(base: str) -> None:
     """Until the server at `base` answers /healthz (60 s at most)."""
-    deadline = time.monotonic() + 60
+    deadline = time.monotonic() + patience(60)
     while time.monotonic() < deadline:
         try:
-            if httpx.get(f"{base}/healthz", timeout=1).status_code == 200:
+            if httpx.get(f"{base}/healthz", timeout=patience(1)).status_code == 200:
                 return
         except httpx.TransportError:
             pass

@@ -16,7 +16,7 @@ from sqlmodel import SQLModel
 
 from app.server import migrate
 from app.server.db import create_tables, make_engine
-from tests.conftest import TOMSTUDY, fresh_database
+from tests.conftest import TOMSTUDY, fresh_database, patience
 from tests.study.flow import Participant, make_client
 
 FIXTURE = Path(__file__).parent / "fixtures" / "db_9c39751.sql"
@@ -90,7 +90,7 @@ def cli(*args: str, db_url: str) -> subprocess.CompletedProcess:
     """Run `tomstudy args...` against `db_url`."""
     env = dict(os.environ, DATABASE_URL=db_url)
     return subprocess.run([TOMSTUDY, *args], env=env, capture_output=True, text=True,
-                          timeout=120)
+                          timeout=patience(120))
 
 
 # ---------------------------------------------------------------- the schema itself
@@ -351,7 +351,8 @@ def test_the_server_refuses_an_unknown_revision(db_url):
 def test_serve_refuses_an_unversioned_database_naming_the_command(small_study, tmp_path):
     url = load_fixture(tmp_path / "study.db")
     run = subprocess.run([TOMSTUDY, "serve", "--port", "1", "--study", small_study.study_id],
-                         env=small_study.env(url), capture_output=True, text=True, timeout=120)
+                         env=small_study.env(url), capture_output=True, text=True,
+                         timeout=patience(120))
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "before schema migrations" in run.stderr and "`tomstudy db upgrade`" in run.stderr
 

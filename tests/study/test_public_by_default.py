@@ -10,7 +10,7 @@ import pytest
 from app.main import UnsafeSettings, create_app
 from app.server.preflight import NotServable, forwarded_allow_ips
 from app.settings import Settings
-from tests.conftest import REPO, TOMSTUDY, free_port, local_client, start_server
+from tests.conftest import REPO, TOMSTUDY, free_port, local_client, patience, start_server
 from tests.study.flow import ADMIN, prolific
 
 STRONG = "x" * 40
@@ -51,7 +51,7 @@ def test_serve_on_loopback_with_a_public_name_refuses_a_weak_token(small_study, 
                           TOMSTUDY_ALLOWED_HOSTS="study.example.org")
     run = subprocess.run([TOMSTUDY, "serve", "--host", "127.0.0.1", "--port", "1", "--study",
                           small_study.study_id], env=env, cwd=REPO, capture_output=True,
-                         text=True, timeout=60)
+                         text=True, timeout=patience(60))
     assert run.returncode == 2 and "Traceback" not in run.stderr
     assert "public name in TOMSTUDY_ALLOWED_HOSTS" in run.stderr
     assert "TOMSTUDY_ADMIN_TOKEN has 3 characters" in run.stderr
@@ -110,11 +110,12 @@ def test_a_client_cannot_pick_its_rate_key_behind_a_proxy_that_appends(small_stu
         def start(name: str, forwarded: str) -> int:
             return httpx.post(url, json={"study_id": small_study.study_id,
                                          "recruitment": prolific(name)},
-                              headers={"X-Forwarded-For": forwarded}, timeout=30).status_code
+                              headers={"X-Forwarded-For": forwarded},
+                              timeout=patience(30)).status_code
 
         forged = [start(f"p{i}", f"198.51.100.{i}, 203.0.113.50") for i in range(5)]
         assert forged == [201, 201, 201, 429, 429]
         assert start("other", "203.0.113.51") == 201  # another real client
     finally:
         proc.terminate()
-        proc.wait(timeout=10)
+        proc.wait(timeout=patience(10))

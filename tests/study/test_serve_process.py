@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 from app.server.plan import PART_PHASES, TRIAL_PHASES
-from tests.conftest import free_port, fresh_database, start_server
+from tests.conftest import free_port, fresh_database, patience, start_server
 from tests.study.flow import ADMIN, Participant, new_id, prediction_body, prolific
 
 pytestmark = pytest.mark.slow
@@ -34,14 +34,14 @@ def test_sigkill_mid_session_loses_no_acknowledged_submission(small_study, tmp_p
     base = f"http://127.0.0.1:{port}"
     proc = start_server(small_study, db_url, port, log=tmp_path / "server.log")
     try:
-        with httpx.Client(base_url=base, timeout=10) as client:
+        with httpx.Client(base_url=base, timeout=patience(10)) as client:
             p = Participant(client, small_study.study_id)
             p.start(**prolific("killed"))
             p.pass_intro()
             acknowledged = [p.answer_trial()["phase"] for _ in range(3)]
             current = p.state()["step"]["trial_id"]
             proc.send_signal(signal.SIGKILL)  # right after the last 201, no clean shutdown
-            proc.wait(timeout=10)
+            proc.wait(timeout=patience(10))
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -49,7 +49,7 @@ def test_sigkill_mid_session_loses_no_acknowledged_submission(small_study, tmp_p
 
     proc = start_server(small_study, db_url, port, log=tmp_path / "server.log")
     try:
-        with httpx.Client(base_url=base, timeout=10) as client:
+        with httpx.Client(base_url=base, timeout=patience(10)) as client:
             again = Participant(client, small_study.study_id)
             body = again.start(**prolific("killed"))
             assert again.status == 200 and body["resumed"] and again.token == p.token
@@ -62,7 +62,7 @@ def test_sigkill_mid_session_loses_no_acknowledged_submission(small_study, tmp_p
             again.finish()
     finally:
         proc.terminate()
-        proc.wait(timeout=10)
+        proc.wait(timeout=patience(10))
 
 
 def test_sigkill_under_load_keeps_every_acknowledged_submission(small_study, tmp_path):
@@ -76,7 +76,7 @@ def test_sigkill_under_load_keeps_every_acknowledged_submission(small_study, tmp
     stop = threading.Event()
 
     def keep_submitting(i: int) -> None:
-        with httpx.Client(base_url=base, timeout=5) as client:
+        with httpx.Client(base_url=base, timeout=patience(5)) as client:
             p = Participant(client, small_study.study_id)
             p.start(**prolific(f"load{i}"))
             p.pass_intro()
@@ -100,11 +100,11 @@ def test_sigkill_under_load_keeps_every_acknowledged_submission(small_study, tmp
             assert any(t.is_alive() for t in threads), "every participant stopped before 6 answers"
             time.sleep(0.02)
         proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=10)
+        proc.wait(timeout=patience(10))
     finally:
         stop.set()
         for t in threads:
-            t.join(timeout=30)
+            t.join(timeout=patience(30))
         if proc.poll() is None:
             proc.kill()
 
@@ -112,7 +112,7 @@ def test_sigkill_under_load_keeps_every_acknowledged_submission(small_study, tmp
     try:
         frame = export(base, small_study.study_id)
         stored = set(frame["submission_id"])
-        with httpx.Client(base_url=base, timeout=10) as client:
+        with httpx.Client(base_url=base, timeout=patience(10)) as client:
             for token, ids in acknowledged.items():
                 assert set(ids) <= stored  # nothing acknowledged was lost
                 state = client.get("/api/session/state",
@@ -122,7 +122,7 @@ def test_sigkill_under_load_keeps_every_acknowledged_submission(small_study, tmp
         assert frame.groupby("submission_id").size().eq(15).all()
     finally:
         proc.terminate()
-        proc.wait(timeout=10)
+        proc.wait(timeout=patience(10))
 
 
 @pytest.mark.postgres
@@ -134,7 +134,7 @@ def test_two_workers_on_postgres_serve_concurrent_participants(small_study, post
     proc = start_server(small_study, db_url, port, workers=2, log=tmp_path / "server.log")
 
     def one(i: int) -> int:
-        with httpx.Client(base_url=base, timeout=30) as client:
+        with httpx.Client(base_url=base, timeout=patience(30)) as client:
             p = Participant(client, small_study.study_id)
             p.start(**prolific(f"w2-{i}"))
             p.pass_intro()
@@ -153,13 +153,13 @@ def test_two_workers_on_postgres_serve_concurrent_participants(small_study, post
         assert frame.groupby("participant_id")["submission_id"].nunique().eq(2).all()
     finally:
         proc.terminate()
-        proc.wait(timeout=15)
+        proc.wait(timeout=patience(15))
 
 
 
 def wait_for_log(log, pattern: str, count: int, timeout_s: float = 60) -> list[str]:
     """The first `count` matches of `pattern` in the server's log, once it holds them."""
-    deadline = time.monotonic() + timeout_s
+    deadline = time.monotonic() + patience(timeout_s)
     while True:
         found = re.findall(pattern, log.read_text())
         if len(found) >= count or time.monotonic() > deadline:
@@ -181,7 +181,7 @@ def test_worker_starts_and_replacements_are_logged(small_study, postgres_url, tm
         assert f"Child process [{pids[0]}] died" in log.read_text()
     finally:
         proc.terminate()
-        proc.wait(timeout=15)
+        proc.wait(timeout=patience(15))
     assert "GET /s/" not in log.read_text()  # no access log: client addresses stay out
 
 
@@ -212,7 +212,8 @@ def test_many_concurrent_participants_on_one_sqlite_worker(small_study, live_ser
 
     async def run() -> list[int]:
         limits = httpx.Limits(max_connections=crowd)
-        async with httpx.AsyncClient(base_url=live_server, timeout=20, limits=limits) as client:
+        async with httpx.AsyncClient(base_url=live_server, timeout=patience(20),
+                                     limits=limits) as client:
             return await asyncio.gather(*(one(client, i) for i in range(crowd)))
 
     assert asyncio.run(run()) == [2] * crowd

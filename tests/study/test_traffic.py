@@ -18,7 +18,7 @@ from app.server.ratelimit import SESSIONS_PER_ADDRESS
 from app.server.recruitment import preview_key
 from app.server.sessions import SESSION_HEADER
 from app.server.tables import Participant, utcnow
-from tests.conftest import free_port, local_client, start_server
+from tests.conftest import free_port, local_client, patience, start_server
 from tests.study.flow import TOKEN, new_id, prolific
 from tests.study.flow import Participant as Client
 
@@ -101,7 +101,7 @@ def test_the_limit_follows_the_address_a_local_proxy_forwards(small_study, tmp_p
         assert starts("192.0.2.11") == [201, 201, 429]
     finally:
         proc.terminate()
-        proc.wait(timeout=10)
+        proc.wait(timeout=patience(10))
 
 
 def test_production_refuses_to_run_without_rate_limits(small_study, tmp_path):
@@ -212,7 +212,7 @@ def test_each_worker_sweeps_stale_sessions_in_the_background(client, small_study
 
     async def sweep_a_little() -> None:
         task = asyncio.create_task(balance.sweep_stale(engine, [ctx], interval_s=0.05))
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + patience(10)
         while counted_sessions(engine) and time.monotonic() < deadline:
             await asyncio.sleep(0.05)
         task.cancel()

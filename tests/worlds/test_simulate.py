@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from app.cli import cli
 from app.fileio import sha256_file
 from app.settings import REPO_ROOT, get_settings
-from tests.conftest import TOMSTUDY
+from tests.conftest import TOMSTUDY, patience
 
 CONFIG = REPO_ROOT / "study_configs" / "worlds" / "obstacle.yaml"
 
@@ -104,7 +104,7 @@ def test_interrupted_run_leaves_no_trajectories(data_dir, tmp_path):
     try:
         _wait_for_progress(proc, log)
         proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=60)
+        proc.wait(timeout=patience(60))
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -114,7 +114,7 @@ def test_interrupted_run_leaves_no_trajectories(data_dir, tmp_path):
 
 def _wait_for_progress(proc: subprocess.Popen, log: Path, timeout_s: float = 120) -> None:
     """Block until the progress bar counts finished trajectories (the pool is running)."""
-    deadline = time.monotonic() + timeout_s
+    deadline = time.monotonic() + patience(timeout_s)
     while time.monotonic() < deadline:
         done = [int(k) for k in re.findall(r"(\d+)/2000", log.read_text(errors="replace"))]
         if done and max(done) > 0:
