@@ -44,9 +44,13 @@ data: $(STAMP)
 serve: $(RUNTIME_STAMP)
 	$(BIN)/tomstudy serve --prepare --study paper_study $(SERVE_ARGS)
 
+# the suite on TEST_WORKERS processes (pytest-xdist, a file per process at a time: a file's
+# fixtures and order stay together), then the few `serial` tests xdist cannot run
+TEST_WORKERS ?= 2
 test: $(STAMP) $(AXE)
 	$(BIN)/ruff check app analysis tests benchmarks
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not serial"
+	$(BIN)/pytest -q -m serial
 
 # Pilot end to end on a fresh database: serve STUDY, KIND bots (coarse|coarse_scene|
 # coarse_momentum|coarse_relative|precise|random), analyze. The database is app/layout.py's pilot_database(KIND) under the default data

@@ -229,7 +229,7 @@ def test_participant_completes_the_study_by_clicking(chromium, browser_server, b
     replays = {r["trial_id"]: int(r["replays"]) for r in mine}
     assert replays[trial_ids[2]] == 1 and sum(replays.values()) == 1
     assert sum(r["trial_id"] == trial_ids[3] for r in mine) == per_trial  # retried, stored once
-    events = stored_events(browser_server.db_path)
+    events = stored_events(browser_server.db_path, PID)
     assert sum(kind == "clip_finished" for kind, _ in events) >= len(trial_ids)
     assert [bank_ids[data["trial_id"]] for kind, data in events
             if kind == "replay"] == [trial_ids[2]]
@@ -333,10 +333,13 @@ def trial_durations(db_path: Path, external_id: str) -> list[tuple[float, float,
             "WHERE external_id = ?", (external_id,)).fetchall()
 
 
-def stored_events(db_path: Path) -> list[tuple[str, dict]]:
-    """(kind, data) of every telemetry event the server stored."""
+def stored_events(db_path: Path, external_id: str) -> list[tuple[str, dict]]:
+    """(kind, data) of every telemetry event the server stored of one participant (the
+    server is shared with other tests, which may run first)."""
     with closing(sqlite3.connect(db_path)) as db:
-        rows = db.execute("SELECT kind, data FROM event").fetchall()
+        rows = db.execute("SELECT kind, data FROM event JOIN participant "
+                          "ON participant.id = event.participant_id WHERE external_id = ?",
+                          (external_id,)).fetchall()
     return [(kind, json.loads(data)) for kind, data in rows]
 
 

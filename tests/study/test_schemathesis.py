@@ -25,6 +25,10 @@ from app.settings import Settings
 from tests.conftest import local_client
 from tests.study.flow import ADMIN, TOKEN, Participant, new_id, prolific
 
+# one generated item per operation, all under one node id: pytest-xdist would run only the
+# first (test_cases_ran_on_every_operation notices), so `make test` runs this file alone
+pytestmark = pytest.mark.serial
+
 MAX_EXAMPLES = int(os.environ.get("SCHEMATHESIS_MAX_EXAMPLES", "15"))
 MIN_CASES = int(os.environ.get("SCHEMATHESIS_MIN_CASES", "100"))
 # A session write valid per the schema may still break a study rule the schema does not
