@@ -32,9 +32,9 @@ from tests.conftest import (  # noqa: E402
     start_cluster,
     start_server,
     stop_server,
+    wait_for_log,
 )
 from tests.study.starts import send_starts  # noqa: E402
-from tests.study.test_serve_process import wait_for_log  # noqa: E402
 
 CASES = (("1 server, 2 workers", 1, 2), ("2 servers on 2 ports, 1 worker each", 2, 1))
 

@@ -3,6 +3,7 @@ servers."""
 
 import hashlib
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -378,6 +379,16 @@ def start_server(study: SmallStudy, db_url: str, port: int, workers: int = 1,
         time.sleep(0.2)
     proc.kill()
     raise RuntimeError(f"server did not answer within {bound_s:.0f} s; see {log or 'its output'}")
+
+
+def wait_for_log(log: Path, pattern: str, count: int, timeout_s: float = 60) -> list[str]:
+    """The first `count` matches of `pattern` in the server's log, once it holds them."""
+    deadline = time.monotonic() + patience(timeout_s)
+    while True:
+        found = re.findall(pattern, log.read_text())
+        if len(found) >= count or time.monotonic() > deadline:
+            return found
+        time.sleep(0.2)
 
 
 def stop_server(proc: subprocess.Popen, grace_s: float = 10) -> None:

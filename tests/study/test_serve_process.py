@@ -3,7 +3,6 @@
 import asyncio
 import io
 import os
-import re
 import signal
 import threading
 import time
@@ -14,7 +13,7 @@ import pandas as pd
 import pytest
 
 from app.server.plan import PART_PHASES, TRIAL_PHASES
-from tests.conftest import free_port, fresh_database, patience, start_server
+from tests.conftest import free_port, fresh_database, patience, start_server, wait_for_log
 from tests.study.flow import ADMIN, Participant, new_id, prediction_body, prolific
 
 pytestmark = pytest.mark.slow
@@ -155,16 +154,6 @@ def test_two_workers_on_postgres_serve_concurrent_participants(small_study, post
         proc.terminate()
         proc.wait(timeout=patience(15))
 
-
-
-def wait_for_log(log, pattern: str, count: int, timeout_s: float = 60) -> list[str]:
-    """The first `count` matches of `pattern` in the server's log, once it holds them."""
-    deadline = time.monotonic() + patience(timeout_s)
-    while True:
-        found = re.findall(pattern, log.read_text())
-        if len(found) >= count or time.monotonic() > deadline:
-            return found
-        time.sleep(0.2)
 
 
 @pytest.mark.postgres

@@ -8,10 +8,16 @@ import pytest
 
 from app.server.limitstore import RETRY_S
 from app.server.preflight import check_rate_limit_storage
-from tests.conftest import ADMIN_TOKEN, free_port, fresh_database, start_server, stop_server
+from tests.conftest import (
+    ADMIN_TOKEN,
+    free_port,
+    fresh_database,
+    start_server,
+    stop_server,
+    wait_for_log,
+)
 from tests.study.starts import researcher_status, send_starts, start_once
 from tests.study.test_hosting import run_serve
-from tests.study.test_serve_process import wait_for_log
 
 STARTS_PER_MINUTE = 20
 SENT = 45
