@@ -14,7 +14,7 @@ RUNTIME_STAMP := $(VENV)/.installed-runtime
 # wheel sources (an unpinned resolve pulls gigabytes of CUDA wheels), and uv keeps it.
 UV := $(BIN)/uv pip install -q --python $(BIN)/python
 
-.PHONY: install serve test lint data bench pilot screens screens-recorded fuzz lock clean
+.PHONY: install serve test test-parallel lint data bench pilot screens screens-recorded fuzz lock clean
 
 $(RUNTIME_STAMP): pyproject.toml $(RUNTIME_LOCK)
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -44,10 +44,15 @@ data: $(STAMP)
 serve: $(RUNTIME_STAMP)
 	$(BIN)/tomstudy serve --prepare --study paper_study $(SERVE_ARGS)
 
-# the suite on TEST_WORKERS processes (pytest-xdist, a file per process at a time: a file's
-# fixtures and order stay together), then the few `serial` tests xdist cannot run
-TEST_WORKERS ?= 2
 test: $(STAMP) $(AXE)
+	$(BIN)/ruff check app analysis tests benchmarks
+	$(BIN)/pytest -q
+
+# the suite on TEST_WORKERS processes (pytest-xdist, a file per process at a time), then the
+# `serial` tests xdist cannot run: ~14.5 min instead of ~25 on 2 cores, but not yet the
+# default: browser tests sharing one server still race on it under xdist (issue 35 notes)
+TEST_WORKERS ?= 2
+test-parallel: $(STAMP) $(AXE)
 	$(BIN)/ruff check app analysis tests benchmarks
 	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not serial"
 	$(BIN)/pytest -q -m serial
