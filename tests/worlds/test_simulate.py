@@ -100,7 +100,8 @@ def test_interrupted_run_leaves_no_trajectories(data_dir, tmp_path):
     log = tmp_path / "stderr.log"
     with open(log, "wb") as err:  # a file, not a pipe: a full pipe would block the child
         proc = subprocess.Popen([TOMSTUDY, "simulate", "obstacle", "--n", "2000"],
-                                env=env, stdout=subprocess.DEVNULL, stderr=err, cwd=REPO_ROOT)
+                                env=env, stdout=subprocess.DEVNULL, stderr=err, cwd=REPO_ROOT,
+                                preexec_fn=_hear_ctrl_c)
     try:
         _wait_for_progress(proc, log)
         proc.send_signal(signal.SIGINT)
@@ -110,6 +111,13 @@ def test_interrupted_run_leaves_no_trajectories(data_dir, tmp_path):
             proc.kill()
     assert proc.returncode != 0
     assert leftover_files(data_dir) == []
+
+
+def _hear_ctrl_c() -> None:
+    """Let the child hear SIGINT even when the suite runs as a background job."""
+    # a shell without job control starts `cmd &` with SIGINT ignored, and a Python started
+    # with it ignored never raises KeyboardInterrupt: the run would finish instead of stopping
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _wait_for_progress(proc: subprocess.Popen, log: Path, timeout_s: float = 120) -> None:
