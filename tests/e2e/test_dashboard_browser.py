@@ -115,7 +115,8 @@ def test_withdrawal_from_the_dashboard_asks_first_and_shows_the_audit_line(
         "api", "external_id", 1)
     assert f"audit line {line['id']}" in page.text_content("#withdraw-message")
     page.wait_for_selector(row, state="detached")  # the table was refreshed
-    assert page.locator("#withdraw-audit tbody tr").count() == 1
+    # the audit table is re-read after the sessions table: wait for it, do not count at once
+    expect(page.locator("#withdraw-audit tbody tr")).to_have_count(1)
     assert errors == []
     page.close()
 
