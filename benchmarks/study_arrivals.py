@@ -2,7 +2,7 @@
 passes 100 ms: p50, p99 and requests/s per route beside a bare endpoint's, and what saturates.
 
 Each participant, from its own loopback address (127.1.x.y), does what the page does
-(frontend/static/js/app.js, api.js): starts a session, reads the state, claims its tab and
+(frontend/static/js/app.js and its modules): starts a session, reads the state, claims its tab and
 then sends a tab heartbeat every `heartbeat_s` the server hands out; consents, reads the
 instructions, goes on from each part's screens (world_intro, practice_over), and in every
 practice and main trial watches the clips (the player's own timing), posts the clip_finished
@@ -99,7 +99,7 @@ THINK_S = {Phase.CONSENT: (10, 20), Phase.INSTRUCTIONS: (20, 40), Phase.WORLD_IN
 CLICK_S = (0.5 * MEDIAN_PACE.seconds_per_click, 1.5 * MEDIAN_PACE.seconds_per_click)
 FEEDBACK_S = (1, 3)  # per start state, reading a practice trial's feedback
 BARE_PER_S = 5.0
-TELEMETRY_FLUSH_S = 1.0  # the page posts its events a second after the last one (app.js)
+TELEMETRY_FLUSH_S = 1.0  # the page posts its events a second after the last one (telemetry.js)
 PLAYER = player_timing()
 SERVER_READY_S = 300  # each worker verifies the bundle on start: slow on a busy machine
 
@@ -133,7 +133,7 @@ def clip_seconds(trial: dict) -> float:
 
 def page_drafts(trial: dict, body: dict) -> list[dict]:
     """The drafts the page saves while `body` is placed: on "Make predictions", after every
-    click and on every next start state (app.js TrialScreen.changed), numbered by `seq`."""
+    click and on every next start state (trial.js TrialScreen.changed), numbered by `seq`."""
     per_click = drafts(trial, body)
     steps, blank = trial["steps_to_predict"], [[] for _ in body["points"]]
     saved = [per_click[0] | {"points": blank, "click_times_ms": blank}]

@@ -24,7 +24,7 @@ from sqlmodel import SQLModel
 USER_AGENT_MAX_CHARS = 512  # the page cuts navigator.userAgent to this
 HISTORY_MAX_ENTRIES = 500  # undo and reset presses kept with a trial (the newest)
 EVENTS_PER_REQUEST = 100  # telemetry events in one POST .../events
-ScreenOutReason = Literal["touch_only", "window_too_small"]  # app.js checks each on the device
+ScreenOutReason = Literal["touch_only", "window_too_small"]  # device.js checks each on the device
 EventKind = Literal["visibility_hidden", "visibility_shown", "resize", "clip_finished", "replay"]
 ClickInput = Literal["mouse", "keyboard", "touch"]  # the device a click was placed with
 

@@ -19,7 +19,7 @@ from app.study.trials import TrialBank
 from app.study.words import participant_texts
 
 PLAYER_JS = REPO_ROOT / "frontend" / "static" / "js" / "player.js"
-# what the trial screen asks before the prediction prompt, read once per part (app.js `watch`);
+# what the trial screen asks before the prediction prompt, read once per part (trial.js `watch`);
 # the prompts that name an agent are the study's own (app/study/words.py participant_texts)
 WATCH_PROMPTS = ("Watch the clips closely. Press the button to make your predictions, or watch "
                  "the clips again.")

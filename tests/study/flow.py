@@ -14,10 +14,11 @@ from app.main import create_app
 from app.pilot.bots import segment_key
 from app.server.plan import PART_PHASES, TRIAL_PHASES
 from app.server.sessions import SESSION_HEADER, SESSION_PATH
-from tests.conftest import ADMIN_TOKEN, local_client
+from tests.conftest import ADMIN_TOKEN, REPO, local_client
 
 TOKEN = ADMIN_TOKEN
 ADMIN = {"Authorization": f"Bearer {TOKEN}"}
+JS = REPO / "frontend" / "static" / "js"
 DEVICE = {"screen_w": 1600, "screen_h": 900, "touch_only": False, "user_agent": "pytest"}
 
 
@@ -272,3 +273,14 @@ def page_json(html: str, element_id: str):
                       html, re.S)
     assert block, f"no #{element_id} on the page"
     return json.loads(block.group(1))
+
+
+def participant_scripts(entry: str = "app.js") -> dict[str, str]:
+    """The study page's scripts by name: `entry` and every module it imports, however deep."""
+    scripts, wanted = {}, [entry]
+    while wanted:
+        name = wanted.pop()
+        if name not in scripts:
+            scripts[name] = (JS / name).read_text()
+            wanted += re.findall(r'from "\./([\w-]+\.js)";', scripts[name])
+    return scripts

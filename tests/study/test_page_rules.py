@@ -29,9 +29,15 @@ from app.server.schemas import (
 from app.study.clicks import MAX_STEP_TOLERANCE
 from app.study.config import SurveyQuestion
 from tests.conftest import REPO
-from tests.study.flow import at_first_trial, page_json, prediction_body, straight_clicks
+from tests.study.flow import (
+    JS,
+    at_first_trial,
+    page_json,
+    participant_scripts,
+    prediction_body,
+    straight_clicks,
+)
 
-JS = REPO / "frontend" / "static" / "js"
 CSS = REPO / "frontend" / "static" / "css" / "style.css"
 
 
@@ -41,13 +47,13 @@ def schema_of(body, field: str) -> dict:
 
 
 def study_rules(client, study_id: str) -> dict:
-    """The rules the study page hands app.js."""
+    """The rules the study page hands its scripts (app.js and its modules)."""
     return page_json(client.get(f"/s/{study_id}").text, "page-rules")
 
 
 def table_keys(source: str, name: str) -> list[str]:
-    """The top-level keys of the object literal `const name = {...};` in a script."""
-    table = re.search(rf"^const {name} = \{{\n(.*?)^\}};", source, re.M | re.S)
+    """The top-level keys of the object literal `[export] const name = {...};` in a script."""
+    table = re.search(rf"^(?:export )?const {name} = \{{\n(.*?)^\}};", source, re.M | re.S)
     assert table, f"{name} table not found"
     return re.findall(r"^  (\w+): ", table.group(1), re.M)
 
@@ -102,13 +108,18 @@ def test_the_instructions_count_the_served_studys_clicks_and_start_positions(cli
     assert "When all 2 positions are placed" in page and "(4 in each trial)" in page
 
 
-def test_app_js_has_one_device_check_per_screen_out_reason():
-    keys = table_keys((JS / "app.js").read_text(), "DEVICE_CHECKS")
+def participant_source() -> str:
+    """The study page's scripts (app.js and every module it imports) as one text."""
+    return "\n".join(participant_scripts().values())
+
+
+def test_the_study_page_has_one_device_check_per_screen_out_reason():
+    keys = table_keys(participant_source(), "DEVICE_CHECKS")
     assert keys == schema_of(ScreenOutCreate, "reason")["enum"]
 
 
-def test_app_js_has_one_input_per_survey_question_kind():
-    keys = table_keys((JS / "app.js").read_text(), "QUESTION_INPUTS")
+def test_the_study_page_has_one_input_per_survey_question_kind():
+    keys = table_keys(participant_source(), "QUESTION_INPUTS")
     assert keys == schema_of(SurveyQuestion, "kind")["enum"]
 
 
@@ -121,8 +132,8 @@ def test_predict_js_records_exactly_the_click_inputs_the_server_takes():
     assert recorded == set(get_args(ClickInput))
 
 
-def test_app_js_logs_exactly_the_event_kinds_the_server_takes():
-    calls = re.findall(r"telemetry\.log\(([^,)]*)", (JS / "app.js").read_text())
+def test_the_study_page_logs_exactly_the_event_kinds_the_server_takes():
+    calls = re.findall(r"telemetry\.log\(([^,)]*)", participant_source())
     logged = {kind for call in calls for kind in re.findall(r'"(\w+)"', call)}
     assert logged == set(schema_of(EventIn, "kind")["enum"])
 

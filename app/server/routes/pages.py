@@ -29,9 +29,9 @@ from app.study.words import page_words
 
 router = APIRouter(tags=["pages"], include_in_schema=False)
 # Every rule the participant page applies, from the server's one definition of it (study.html
-# hands it to app.js as #page-rules). app.js keeps one handler per phase, one device check
-# per screen-out reason and one input per survey question kind; a trial's own limits (steps,
-# reach, scene) come with the trial.
+# hands it to app.js as #page-rules). app.js keeps one handler per phase, device.js one check
+# per screen-out reason and survey.js one input per survey question kind; a trial's own limits
+# (steps, reach, scene) come with the trial.
 PAGE_RULES = {
     "phases": [phase.value for phase in Phase],
     "screen_out_phases": [phase.value for phase in BEFORE_TRIALS],
