@@ -11,10 +11,15 @@ from pydantic import ValidationError
 
 from app.configio import ConfigError
 from app.settings import get_settings
+from app.worlds.registry import simulated_world_names
 
 if TYPE_CHECKING:
     from app.bank.served import SimulationInputs
 
+# the help of every command taking a world; recorded worlds are whatever YAML says so
+SIMULATED_HELP = f"a simulated world: {simulated_world_names()}"
+WORLD_DATA_HELP = (f"{simulated_world_names()}, or a recorded world (kind: recorded); reads "
+                   "var/data/<world>/")
 # seconds a serve worker may take to answer uvicorn's supervisor before it is replaced
 WORKER_HEALTHCHECK_S = 60
 cli = typer.Typer(add_completion=False, no_args_is_help=True,
@@ -34,7 +39,7 @@ def fail(message: str, code: int = 2) -> None:
 
 @cli.command()
 def simulate(
-    world: Annotated[str, typer.Argument(help="highway or obstacle")],
+    world: Annotated[str, typer.Argument(help=SIMULATED_HELP)],
     n: Annotated[int, typer.Option("--n", min=1, help="trajectories to keep")] = 2000,
     seed: Annotated[int, typer.Option(min=0)] = 0,
     config: Annotated[Path | None, typer.Option(help="world YAML (default: study_configs)")] = None,
@@ -110,7 +115,7 @@ def generate_recordings_cmd(
 
 @cli.command()
 def train(
-    world: Annotated[str, typer.Option(help="highway or obstacle (reads var/data/<world>/)")],
+    world: Annotated[str, typer.Option(help=WORLD_DATA_HELP)],
     model: Annotated[str, typer.Option(help="ours or vae")] = "ours",
     seed: Annotated[int, typer.Option(min=0)] = 0,
     config: Annotated[Path | None, typer.Option(help="training YAML (default: study_configs)")]
@@ -146,7 +151,7 @@ def train(
 
 @cli.command()
 def sweep(
-    world: Annotated[str, typer.Option(help="highway or obstacle (reads var/data/<world>/)")],
+    world: Annotated[str, typer.Option(help=WORLD_DATA_HELP)],
     out: Annotated[Path | None, typer.Option(help="folder holding <world>/ (default "
                                              "var/models/sweep)")] = None,
     ceiling: Annotated[bool, typer.Option("--ceiling", help="only the supervised ceiling per "
@@ -165,7 +170,7 @@ def sweep(
 
 @cli.command("select")
 def select_cmd(
-    world: Annotated[str, typer.Option(help="highway or obstacle (reads var/data/<world>/)")],
+    world: Annotated[str, typer.Option(help=WORLD_DATA_HELP)],
     config: Annotated[Path | None, typer.Option(help="selection YAML (default: "
                                                 "study_configs/model_selection.yaml)")] = None,
     train_config: Annotated[Path | None, typer.Option(help="training YAML (default: "

@@ -22,7 +22,8 @@ from app.predictors.registry import check_names
 from app.settings import Settings
 from app.study.words import DEFAULT_DEMO, DemoName, ParticipantWords
 
-# a simulated world (highway, obstacle) or a recorded one: study_configs/worlds/<name>.yaml
+# a simulated world (app/worlds/registry.py SIMULATED_WORLDS) or a recorded one:
+# study_configs/worlds/<name>.yaml
 WorldName = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]{0,31}$")]
 # where a study's frozen bundle is (app/bank/bundle.py): `shipped` in the configs dir (in git,
 # served as it is), `built` in the data dir (made by `tomstudy bundle build`)

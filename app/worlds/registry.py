@@ -1,11 +1,13 @@
 """The `World` protocol every world implements, the worlds' names, and how to build each one
 from its YAML config (the Obstacle world's SAC policy is wired in here).
 
-Two kinds: the simulated worlds (Highway, Obstacle: code, rolled out by simulate.py) and
-recorded worlds (any study_configs/worlds/<name>.yaml with `kind: recorded`: recordings
-imported by app/recordings/importer.py, app/worlds/recorded.py)."""
+Two kinds: the simulated worlds (Highway, Obstacle: code, rolled out by simulate.py, each
+registered in SIMULATED_WORLDS below; docs/extend/add-a-world.md adds one) and recorded worlds
+(any study_configs/worlds/<name>.yaml with `kind: recorded`: recordings imported by
+app/recordings/importer.py, app/worlds/recorded.py)."""
 
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
@@ -18,7 +20,6 @@ from app.data.trajectory import Covered, Episode
 from app.layout import Layout
 from app.settings import get_settings
 
-SIMULATED_WORLDS = ("highway", "obstacle")
 POLICIES = ("mpc", "sac")
 RECORDED_KIND = "recorded"
 WORLD_NAME = re.compile(r"[a-z][a-z0-9_]{0,31}")  # names folders under the data dir
@@ -97,16 +98,22 @@ def is_recorded(world: str, config_path: Path | None = None) -> bool:
     path = Path(config_path or default_config_path(world))
     if not path.is_file():
         raise ConfigError(f"world: unknown world {world!r}; choose one of "
-                          f"{', '.join(SIMULATED_WORLDS)}, or describe a recorded world in "
+                          f"{simulated_world_names()}, or describe a recorded world in "
                           f"{path} (kind: {RECORDED_KIND})")
     try:
         kind = (yaml.safe_load(path.read_text()) or {}).get("kind")
     except (yaml.YAMLError, AttributeError):
         kind = None
     if kind != RECORDED_KIND:
-        raise ConfigError(f"{path}: kind: a world other than {', '.join(SIMULATED_WORLDS)} "
-                          f"must be `kind: {RECORDED_KIND}`")
+        raise ConfigError(f"world: {world!r} is not a simulated world (those are "
+                          f"{simulated_world_names()}, registered in SIMULATED_WORLDS of "
+                          f"app/worlds/registry.py), so {path} must be `kind: {RECORDED_KIND}`")
     return True
+
+
+def simulated_world_names() -> str:
+    """The registered simulated worlds, for help texts and errors ("highway, obstacle")."""
+    return ", ".join(SIMULATED_WORLDS)
 
 
 def build_world(world: str, config_path: Path | None = None, policy: str = "mpc") -> World:
@@ -121,13 +128,21 @@ def build_world(world: str, config_path: Path | None = None, policy: str = "mpc"
         from app.worlds.recorded import RecordedWorld
 
         return RecordedWorld.from_yaml(world, path)
-    if world == "highway":
-        if policy != "mpc":
-            raise ConfigError("policy: highway supports only 'mpc'")
-        from app.worlds.highway import HighwayWorld
+    return SIMULATED_WORLDS[world](path, policy)
 
-        return HighwayWorld.from_yaml(path)
-    return build_obstacle_world(path, policy)
+
+def require_mpc(world: str, policy: str) -> None:
+    """ConfigError unless `policy` is the sampling MPC, the only policy most worlds have."""
+    if policy != "mpc":
+        raise ConfigError(f"policy: {world} supports only 'mpc'")
+
+
+def build_highway_world(path: Path, policy: str) -> World:
+    """The Highway world: both cars on the sampling MPC."""
+    require_mpc("highway", policy)
+    from app.worlds.highway import HighwayWorld
+
+    return HighwayWorld.from_yaml(path)
 
 
 def build_obstacle_world(path: Path, policy: str) -> World:
@@ -140,3 +155,12 @@ def build_obstacle_world(path: Path, policy: str) -> World:
     from app.worlds.sac import SACPolicy
 
     return ObstacleWorld(config, agent_policy=SACPolicy(config))
+
+
+# Every simulated world: its name (the CLI's and study configs' `world`, the folder under the
+# data dir) -> the function that builds it from its YAML path and policy. A builder imports its
+# world's module itself, so only the world in use loads (highway-env, torch for SAC).
+SIMULATED_WORLDS: dict[str, Callable[[Path, str], World]] = {
+    "highway": build_highway_world,
+    "obstacle": build_obstacle_world,
+}

@@ -2,7 +2,9 @@
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
+from app.cli import cli
 from app.configio import ConfigError
 from app.data.trajectory import Covered
 from app.worlds.registry import SIMULATED_WORLDS, World, build_world
@@ -21,6 +23,23 @@ def test_every_world_implements_the_whole_protocol(worlds):
 def test_highway_has_no_sac_policy():
     with pytest.raises(ConfigError, match="highway supports only 'mpc'"):
         build_world("highway", policy="sac")
+
+
+def test_an_unknown_world_with_a_yaml_is_refused_naming_the_registered_ones(tmp_path):
+    path = tmp_path / "third.yaml"
+    # a name in the old tuple of simulated worlds without a branch of its own was built as
+    # Obstacle; now only a registered builder builds a simulated world
+    path.write_text("dt_s: 0.5\n")
+    with pytest.raises(ConfigError, match=r"'third' is not a simulated world \(those are "
+                                          r"highway, obstacle"):
+        build_world("third", path)
+
+
+def test_help_texts_list_the_registered_worlds():
+    for command in (["simulate"], ["train"], ["sweep"], ["select"]):
+        output = CliRunner().invoke(cli, [*command, "--help"], terminal_width=200).output
+        assert ", ".join(SIMULATED_WORLDS) in output, command
+        assert "highway or obstacle" not in output
 
 
 def test_highway_segments_end_during_the_lane_change(worlds):
