@@ -62,6 +62,8 @@ RUN pip install pip==26.3 \
  && pip install -r requirements/runtime.txt dumb-init==1.2.5.post1
 
 COPY pyproject.toml README.md ./
+# `tomstudy prereg` shows the departures from the paper from this page, as it did from the README
+COPY docs/reproduce/departures.md ./docs/reproduce/departures.md
 COPY app ./app
 COPY analysis ./analysis
 COPY frontend ./frontend

@@ -14,7 +14,7 @@ RUNTIME_STAMP := $(VENV)/.installed-runtime
 # wheel sources (an unpinned resolve pulls gigabytes of CUDA wheels), and uv keeps it.
 UV := $(BIN)/uv pip install -q --python $(BIN)/python
 
-.PHONY: install serve test test-parallel lint data bench pilot screens screens-recorded fuzz lock clean
+.PHONY: install serve test test-parallel lint docs data bench pilot screens screens-recorded fuzz lock clean
 
 $(RUNTIME_STAMP): pyproject.toml $(RUNTIME_LOCK)
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -44,8 +44,15 @@ data: $(STAMP)
 serve: $(RUNTIME_STAMP)
 	$(BIN)/tomstudy serve --prepare --study paper_study $(SERVE_ARGS)
 
+# the documentation site (mkdocs.yml, docs/) into site/; --strict: a broken link, anchor or nav
+# entry fails, so `make test` (which builds it first) catches it
+MKDOCS := NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+docs: $(STAMP)
+	$(MKDOCS)
+
 test: $(STAMP) $(AXE)
 	$(BIN)/ruff check app analysis tests benchmarks
+	$(MKDOCS)
 	$(BIN)/pytest -q
 
 # the suite on TEST_WORKERS processes (pytest-xdist, a file per process at a time), then the
@@ -54,6 +61,7 @@ test: $(STAMP) $(AXE)
 TEST_WORKERS ?= 2
 test-parallel: $(STAMP) $(AXE)
 	$(BIN)/ruff check app analysis tests benchmarks
+	$(MKDOCS)
 	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not serial"
 	$(BIN)/pytest -q -m serial
 
@@ -109,4 +117,4 @@ lock:
 	rm -rf $(VENV)-lock
 
 clean:
-	rm -rf var .pytest_cache .ruff_cache
+	rm -rf var site .pytest_cache .ruff_cache

@@ -24,7 +24,8 @@ from app.prereg.sources import (
 from app.settings import Settings
 from app.study.config import StudyConfig, load_study_config, study_config_path
 
-README = REPO_ROOT / "README.md"
+# the table of departures from the paper, kept once in the docs and shown as it is
+DEPARTURES = REPO_ROOT / "docs" / "reproduce" / "departures.md"
 
 
 @dataclass(frozen=True)
@@ -60,7 +61,7 @@ class Inputs:
     power: dict[str, RunResult]
     stats: Source  # analysis/stats.py: ALPHA
     contracts: Source  # analysis/contracts.py: the default SESOI, the export columns
-    readme: Source | None
+    departures: Source | None
     ledger: Ledger = field(default_factory=Ledger)
 
     def setting(self, key: str, what: str):
@@ -104,7 +105,7 @@ def gather(settings: Settings, study_id: str) -> Inputs:
                                 f"tomstudy power --study {study_id} --kind {kind}")
                for kind in COARSE_VARIANTS},
         stats=module_source(analysis.stats), contracts=module_source(analysis.contracts),
-        readme=read_source(README) if README.is_file() else None)
+        departures=read_source(DEPARTURES) if DEPARTURES.is_file() else None)
 
 
 def run_result(name: str, path: Path, bank_sha256: str, command: str) -> RunResult:

@@ -1,5 +1,5 @@
-"""A Markdown table of the README, read by its heading (the deviations from the paper are kept
-there once, and the preregistration shows them as they are)."""
+"""A Markdown table of a documentation page, read by its heading (the deviations from the paper
+are kept once, in docs/reproduce/departures.md, and the preregistration shows them as they are)."""
 
 import re
 
@@ -8,15 +8,15 @@ from app.prereg.document import Table
 _CELL_BORDER = re.compile(r"(?<!\\)\|")
 
 
-def readme_table(text: str, heading: str) -> Table:
-    """The first table after the line `heading`; ValueError naming the heading if none."""
+def readme_table(text: str, heading: str, source: str = "docs/reproduce/departures.md") -> Table:
+    """The first table after the line `heading`; ValueError naming the file and heading if none."""
     lines = text.splitlines()
     if heading not in lines:
-        raise ValueError(f"README.md: no heading {heading!r}")
+        raise ValueError(f"{source}: no heading {heading!r}")
     after = lines[lines.index(heading) + 1:]
     start = next((i for i, line in enumerate(after) if line.startswith(("|", "## "))), None)
     if start is None or not after[start].startswith("|"):
-        raise ValueError(f"README.md: no table under {heading!r}")
+        raise ValueError(f"{source}: no table under {heading!r}")
     block = []
     for line in after[start:]:
         if not line.startswith("|"):

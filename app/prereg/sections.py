@@ -18,7 +18,7 @@ from app.study.config import config_sha256, stored_predictors
 # from the paper" lists how this platform tests it)
 PAPER_HYPOTHESIS = ("Ours will more accurately match the predictions made by human "
                     "participants as compared to VAE.")
-DEVIATIONS_HEADING = "## Where this implementation departs from the paper"
+DEVIATIONS_HEADING = "# Where this implementation departs from the paper"
 # the export columns a preregistration names as measured (analysis/contracts.py has them all)
 # the predictions export's columns the analysis reads; their meaning is the codebook's
 MEASURED_COLUMNS = (
@@ -519,15 +519,16 @@ def sourced_parameters(data: dict, prefix: str = "") -> list[tuple[str, str]]:
 
 
 def deviations(inputs: Inputs) -> Section:
-    """The README's table of departures from the paper."""
-    if inputs.readme is None:
+    """The docs' table of departures from the paper (docs/reproduce/departures.md)."""
+    if inputs.departures is None:
         return Section("Deviations from the paper", (
-            "README.md is not beside the code, so its table of departures cannot be shown.",))
-    table = readme_table(inputs.readme.data, DEVIATIONS_HEADING)
-    inputs.ledger.cite(inputs.readme, f'table under "{DEVIATIONS_HEADING.lstrip("# ")}"',
+            "docs/reproduce/departures.md is not beside the code, so its table of departures "
+            "cannot be shown.",))
+    table = readme_table(inputs.departures.data, DEVIATIONS_HEADING)
+    inputs.ledger.cite(inputs.departures, f'table under "{DEVIATIONS_HEADING.lstrip("# ")}"',
                        "deviations from the paper", f"{len(table.rows)} rows")
     return Section("Deviations from the paper", (
-        "Where this platform departs from the paper (the README's table, with why and what "
+        "Where this platform departs from the paper (the documentation's table, with why and what "
         "checks each; its rows on worlds and trials are the paper study's). This study's own "
         "worlds, trials and sample are in Design and Sampling plan.", table))
 

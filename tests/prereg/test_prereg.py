@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 
 from app.cli import cli
 from app.prereg.document import Table
-from app.prereg.inputs import README
+from app.prereg.inputs import DEPARTURES
 from app.prereg.readme import readme_table
 from app.prereg.sections import DEVIATIONS_HEADING, MEASURED_COLUMNS
 from app.prereg.write import write_prereg
@@ -128,8 +128,8 @@ def test_measured_columns_are_export_columns_described_by_the_codebook():
     assert "coarse observer coarse_scene" in rows["coarse_scene_vx"][1]
 
 
-def test_the_readme_deviations_table_is_read_by_its_heading():
-    table = readme_table(README.read_text(), DEVIATIONS_HEADING)
+def test_the_departures_table_is_read_by_its_heading():
+    table = readme_table(DEPARTURES.read_text(), DEVIATIONS_HEADING)
     assert isinstance(table, Table)
     assert table.header == ("departure", "the paper", "here", "why", "checked by")
     assert {row[0] for row in table.rows} >= {"Obstacle data", "participants", "analysis"}

@@ -299,9 +299,9 @@ def test_role_pairs_on_generated_logs_are_robot_then_human(logs):
         assert np.linalg.norm(pair.positions[:, 0] - pair.positions[:, 1], axis=-1).min() <= 4.0
 
 
-def test_the_readme_example_reads_as_documented(tmp_path):
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    section = readme.split("### Your own robot logs (generic CSV)")[1]
+def test_the_documented_example_reads_as_documented(tmp_path):
+    page = Path(__file__).resolve().parents[2] / "docs" / "extend" / "robot-logs.md"
+    section = page.read_text().split("# Your own robot logs (generic CSV)")[1]
     example = section.split("```csv\n")[1].split("```")[0]
     assert len(example.splitlines()) == 5
     (tmp_path / "hall.csv").write_text(example)

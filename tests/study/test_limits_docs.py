@@ -1,5 +1,5 @@
 """The limits' defaults are written once in app/server/API.md, and they are app/settings.py's;
-the README's bullet quotes the same values."""
+the hosting page's bullet (docs/run/hosting.md) quotes the same values."""
 
 import re
 
@@ -25,9 +25,9 @@ def test_the_api_page_states_each_limit_once_with_the_settings_default():
         assert current.count(f"`TOMSTUDY_{name.upper()}`") == 1, name
 
 
-def test_the_readme_quotes_the_same_defaults():
-    readme = (REPO / "README.md").read_text()
-    bullet = readme[readme.index("**Anonymous traffic is bounded"):][:1200]
+def test_the_hosting_page_quotes_the_same_defaults():
+    page = (REPO / "docs" / "run" / "hosting.md").read_text()
+    bullet = page[page.index("**Anonymous traffic is bounded"):][:1200]
     for name in ("rate_limit_starts", "rate_limit_requests"):
         quoted = re.search(rf"`TOMSTUDY_{name.upper()}`[^`]*?\(default\s+`([^`]+)`", bullet, re.S)
         assert quoted and quoted.group(1) == Settings.model_fields[name].default, name
