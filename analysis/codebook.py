@@ -2,13 +2,13 @@
 
 `data_package` describes one export CSV as a Frictionless Data Package
 (https://specs.frictionlessdata.io/): each column's type (from the contracts in
-analysis/contracts.py), description, unit and constraints (the closed sets below as enums,
+app/core/contracts.py), description, unit and constraints (the closed sets below as enums,
 hashes as patterns), the export version and the study's hashes as the rows carry them, and
 the CSV's path, sha256, size and row count. `frictionless validate FILE.datapackage.json`
 then checks the CSV against it. A contract column without an entry here is an error
 (tests/analysis/test_codebook.py), so the codebook cannot fall behind the exports.
 
-Like analysis/contracts.py, this module imports neither `app` nor pandas.
+It imports nothing from `app` but app/core/contracts.py, and not pandas.
 """
 
 import hashlib
@@ -16,7 +16,7 @@ import re
 from dataclasses import dataclass
 from datetime import UTC, datetime
 
-from analysis.contracts import (
+from app.core.contracts import (
     COARSE_OBSERVERS,
     EXPORT_VERSION,
     PILOT,
@@ -84,7 +84,7 @@ def one_of(values, separator: str) -> str:
 
 SESSION = {
     "export_version": Column(
-        f"The export's version (EXPORT_VERSION in analysis/contracts.py): {EXPORT_VERSION} "
+        f"The export's version (EXPORT_VERSION in app/core/contracts.py): {EXPORT_VERSION} "
         "since the participant's columns were renamed (app/server/API.md, Changes); an "
         "export without the column is version 1.", values=(EXPORT_VERSION,), required=True),
     "study_id": Column("The study's id (its config study_configs/<study_id>.yaml).",

@@ -9,7 +9,6 @@ from typing import Annotated, Literal
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 
-from analysis.contracts import COARSE_OBSERVERS, SMALLEST_EFFECT_OF_INTEREST, ExclusionRules
 from app.configio import (
     ConfigError,
     StrictModel,
@@ -18,6 +17,7 @@ from app.configio import (
     omitted_when_default,
     omitted_when_empty,
 )
+from app.core.contracts import COARSE_OBSERVERS, SMALLEST_EFFECT_OF_INTEREST, ExclusionRules
 from app.predictors.registry import check_names
 from app.settings import Settings
 from app.study.words import DEFAULT_DEMO, DemoName, ParticipantWords

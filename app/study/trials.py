@@ -22,7 +22,7 @@ from functools import cached_property
 from pathlib import Path
 
 from app.configio import StrictModel, omitted_when_empty
-from app.fileio import read_bytes, sha256_bytes
+from app.core.files import read_bytes, sha256_bytes
 from app.layout import Layout
 
 # what the participant is shown, and so what every model and baseline answers from
