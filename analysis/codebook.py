@@ -8,10 +8,9 @@ the CSV's path, sha256, size and row count. `frictionless validate FILE.datapack
 then checks the CSV against it. A contract column without an entry here is an error
 (tests/analysis/test_codebook.py), so the codebook cannot fall behind the exports.
 
-It imports nothing from `app` but app/core/contracts.py, and not pandas.
+It imports nothing from `app` but app/core/ (contracts, hashes), and not pandas.
 """
 
-import hashlib
 import re
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -26,6 +25,7 @@ from app.core.contracts import (
     WHAT,
     column_kinds,
 )
+from app.core.files import sha256_bytes
 
 # The closed sets of values (tests/analysis/test_codebook.py checks each against the code
 # that writes it, so a new value cannot miss the codebook)
@@ -371,7 +371,7 @@ def data_package(what: str, columns, csv: bytes, path: str, rows: int, study_id:
         "resources": [{
             "name": what, "path": path, "profile": "tabular-data-resource",
             "format": "csv", "mediatype": "text/csv", "encoding": "utf-8",
-            "bytes": len(csv), "hash": "sha256:" + hashlib.sha256(csv).hexdigest(),
+            "bytes": len(csv), "hash": "sha256:" + sha256_bytes(csv),
             "rows": rows,
             "description": _resource_note(what),
             "dialect": {"delimiter": ",", "quoteChar": '"', "doubleQuote": True,

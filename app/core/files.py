@@ -76,6 +76,12 @@ def sha256_bytes(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
+def json_sha256(data: object) -> str:
+    """Hex SHA-256 of `data` as canonical JSON (sorted keys, no spaces): key order and
+    layout do not count."""
+    return sha256_bytes(json.dumps(data, sort_keys=True, separators=(",", ":")).encode())
+
+
 def write_gzip(path: Path, data: bytes) -> None:
     """Gzip `data` into `path` atomically and byte-reproducibly (no name, mtime 0)."""
     with atomic_path(path) as tmp:
