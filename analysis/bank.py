@@ -9,8 +9,6 @@ family of one.
 Shape legend: K start states, n steps; an answer's `actions` is [K, n, 2] (m/s).
 """
 
-import gzip
-import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.stats import PAIR
+from app.core.files import read_bytes, sha256_bytes
 
 ANSWER_KEYS = ["world", "trial_id", "start_index", "step"]
 
@@ -40,10 +39,8 @@ def read_bank(path: Path) -> Bank | None:
     path = Path(path)
     if not path.is_file():
         return None
-    raw = path.read_bytes()
-    if path.suffix == ".gz":
-        raw = gzip.decompress(raw)
-    return Bank(json.loads(raw), hashlib.sha256(raw).hexdigest())
+    raw = read_bytes(path)
+    return Bank(json.loads(raw), sha256_bytes(raw))
 
 
 def family(answers: list | dict) -> list[dict]:

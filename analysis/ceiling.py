@@ -20,8 +20,8 @@ scored against, so with few participants per cell it lies far below the lower on
 import numpy as np
 import pandas as pd
 
-from analysis.alignment import alignment_error
 from analysis.stats import mean_ci95
+from app.core.alignment import alignment_error
 
 CELL = ["world", "trial_id", "start_index", "step"]
 SPLITS = 50

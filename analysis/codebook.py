@@ -2,21 +2,20 @@
 
 `data_package` describes one export CSV as a Frictionless Data Package
 (https://specs.frictionlessdata.io/): each column's type (from the contracts in
-analysis/contracts.py), description, unit and constraints (the closed sets below as enums,
+app/core/contracts.py), description, unit and constraints (the closed sets below as enums,
 hashes as patterns), the export version and the study's hashes as the rows carry them, and
 the CSV's path, sha256, size and row count. `frictionless validate FILE.datapackage.json`
 then checks the CSV against it. A contract column without an entry here is an error
 (tests/analysis/test_codebook.py), so the codebook cannot fall behind the exports.
 
-Like analysis/contracts.py, this module imports neither `app` nor pandas.
+It imports nothing from `app` but app/core/ (contracts, hashes), and not pandas.
 """
 
-import hashlib
 import re
 from dataclasses import dataclass
 from datetime import UTC, datetime
 
-from analysis.contracts import (
+from app.core.contracts import (
     COARSE_OBSERVERS,
     EXPORT_VERSION,
     PILOT,
@@ -26,6 +25,7 @@ from analysis.contracts import (
     WHAT,
     column_kinds,
 )
+from app.core.files import sha256_bytes
 
 # The closed sets of values (tests/analysis/test_codebook.py checks each against the code
 # that writes it, so a new value cannot miss the codebook)
@@ -84,7 +84,7 @@ def one_of(values, separator: str) -> str:
 
 SESSION = {
     "export_version": Column(
-        f"The export's version (EXPORT_VERSION in analysis/contracts.py): {EXPORT_VERSION} "
+        f"The export's version (EXPORT_VERSION in app/core/contracts.py): {EXPORT_VERSION} "
         "since the participant's columns were renamed (app/server/API.md, Changes); an "
         "export without the column is version 1.", values=(EXPORT_VERSION,), required=True),
     "study_id": Column("The study's id (its config study_configs/<study_id>.yaml).",
@@ -371,7 +371,7 @@ def data_package(what: str, columns, csv: bytes, path: str, rows: int, study_id:
         "resources": [{
             "name": what, "path": path, "profile": "tabular-data-resource",
             "format": "csv", "mediatype": "text/csv", "encoding": "utf-8",
-            "bytes": len(csv), "hash": "sha256:" + hashlib.sha256(csv).hexdigest(),
+            "bytes": len(csv), "hash": "sha256:" + sha256_bytes(csv),
             "rows": rows,
             "description": _resource_note(what),
             "dialect": {"delimiter": ",", "quoteChar": '"', "doubleQuote": True,

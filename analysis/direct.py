@@ -3,7 +3,7 @@ than with the precise one?
 
 The observers (app/observers/family.py) answer every trial once, with no model seeds. The
 export holds each coarse variant's answers as a plug-in predictor's columns
-(analysis/contracts.py `plugin_columns`: `coarse`, `coarse_scene`, `coarse_momentum`); the
+(app/core/contracts.py `plugin_columns`: `coarse`, `coarse_scene`, `coarse_momentum`); the
 precise observer is the world's own policy (`policy_vx`, `policy_vy`). Pre-registered rule,
 per world, on the kept rows (the rows every other comparison reads):
 
@@ -25,10 +25,10 @@ test; a world where no variant has answers is skipped.
 import numpy as np
 import pandas as pd
 
-from analysis.contracts import COARSE_OBSERVERS, plugin_names
 from analysis.crossed import crossed_standard_error, crossed_test, crossed_verdicts
 from analysis.equivalence import t_interval
 from analysis.stats import holm, plain_records
+from app.core.contracts import COARSE_OBSERVERS, plugin_names
 
 PRECISE = "policy"  # the precise observer answers as the world's policy moves
 CELL = ["participant_id", "trial_id"]

@@ -4,7 +4,7 @@
 `survey`, `events` and `participants`; each column has one of five types:
 text (pandas `str`, "" when absent), int (int64, -1 when not applicable), float
 (float64, NaN when absent), bool, and time (datetime64[us, UTC], NaT when absent;
-ISO 8601 in the CSV). Text cells are spreadsheet-safe in the CSV (analysis/csvsafe.py); the reader
+ISO 8601 in the CSV). Text cells are spreadsheet-safe in the CSV (app/core/csvsafe.py); the reader
 gives back the text as stored.
 """
 
@@ -14,9 +14,9 @@ from typing import IO
 import numpy as np
 import pandas as pd
 
-from analysis.contracts import ADDED_COLUMNS, SCHEMAS
-from analysis.csvsafe import restore_text
 from analysis.load import load_csv
+from app.core.contracts import ADDED_COLUMNS, SCHEMAS
+from app.core.csvsafe import restore_text
 
 
 def typed(frame: pd.DataFrame, schema: dict[str, str]) -> pd.DataFrame:

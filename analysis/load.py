@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.contracts import (
+from app.core.contracts import (
     ADDED_COLUMNS,
     COARSE_OBSERVERS,
     EXPORT_COLUMNS,
@@ -28,7 +28,7 @@ from analysis.contracts import (
     column_kinds,
     plugin_columns,
 )
-from analysis.csvsafe import restore_text
+from app.core.csvsafe import restore_text
 
 
 class DataError(ValueError):

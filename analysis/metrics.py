@@ -1,8 +1,8 @@
 """Alignment errors over the predictions table, per-participant means, exclusions, and the
 subsets (world, selection arm) a comparison is read in.
 
-The metric is defined once in analysis/alignment.py, the exclusion rules in
-analysis/contracts.py. Rows where a vector is shorter than ZERO_SPEED_MPS are counted as
+The metric is defined once in app/core/alignment.py, the exclusion rules in
+app/core/contracts.py. Rows where a vector is shorter than ZERO_SPEED_MPS are counted as
 `zero_vectors`, so a report can say how often the error fell back to 1. Only numpy and
 pandas: the researcher dashboard imports these for its running numbers.
 """
@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from analysis.alignment import alignment_error, has_direction
-from analysis.contracts import (
+from app.core.alignment import alignment_error, has_direction
+from app.core.contracts import (
     MODELS,
     PILOT,
     PROLIFIC_UNCONFIRMED,

@@ -10,7 +10,6 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
-from analysis.contracts import MODEL_COLORS, MODEL_LABELS, model_color, model_label  # noqa: E402
 from analysis.fields import (  # noqa: E402
     FIELD_MODELS,
     arrow_length,
@@ -20,8 +19,9 @@ from analysis.fields import (  # noqa: E402
     state_table,
     unit,
 )
-from analysis.scene_plot import draw_scene  # noqa: E402
 from analysis.stats import PairedResult, mean_ci95  # noqa: E402
+from app.core.contracts import MODEL_COLORS, MODEL_LABELS, model_color, model_label  # noqa: E402
+from app.core.scene_plot import draw_scene  # noqa: E402
 
 
 def save(fig, base: Path) -> list[Path]:

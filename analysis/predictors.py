@@ -22,10 +22,10 @@ from itertools import combinations
 import numpy as np
 import pandas as pd
 
-from analysis.contracts import plugin_names
 from analysis.metrics import POOLED, participant_means
 from analysis.stats import PAIR, holm, mean_ci95, paired_comparison, verdicts
 from analysis.trial_effects import crossed_mixed_model, trial_cells
+from app.core.contracts import plugin_names
 
 BUILT_IN = ("ours", "vae", "cv")
 REFERENCE = "policy"

@@ -15,19 +15,15 @@ does the comparison of every predictor (plug-ins too) with the people (analysis/
 """
 
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from analysis.atomic import write_json
 from analysis.bank import Bank, family_hashes, read_bank
 from analysis.ceiling import ceiling_table, explainable_share
-from analysis.contracts import MODELS, SMALLEST_EFFECT_OF_INTEREST, ExclusionRules
 from analysis.crossed import primary_table
-from analysis.csvsafe import write_csv
 from analysis.direct import direct_summary, direct_table
 from analysis.html import render_page
 from analysis.load import data_hash, load_csv
@@ -72,23 +68,20 @@ from analysis.verdicts import (
     primary_sentence,
     primary_sentences,
 )
+from app.core.contracts import (
+    MODELS,
+    SMALLEST_EFFECT_OF_INTEREST,
+    ExclusionRules,
+    StudyInputs,
+)
+from app.core.csvsafe import write_csv
+from app.core.files import write_json
 
 WAIVABLE = ("failed_attention_check", "incomplete", "too_fast")
 
 
 class AnalysisError(ValueError):
     """The analysis cannot run as asked; the message names the option or says why."""
-
-
-@dataclass(frozen=True)
-class StudyInputs:
-    """What the analysis takes from the study besides its rows, as plain values and paths."""
-
-    config: dict  # the study config as plain data, recorded in meta.json
-    rules: ExclusionRules
-    models: dict  # the bundle manifest's {world: {model: {seed (str): content_hash}}}
-    bank: Path  # the trial bank (bank.json or a bundle's bank.json.gz; may be absent): every
-    #             seed's answers and each world's scene
 
 
 def waive_rules(rules: ExclusionRules, waive: tuple[str, ...]) -> ExclusionRules:

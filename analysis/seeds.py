@@ -16,10 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from analysis.alignment import alignment_error
 from analysis.bank import ANSWER_KEYS, Bank, seed_answers
 from analysis.metrics import participant_means
 from analysis.stats import PAIR, breakdown, with_verdicts
+from app.core.alignment import alignment_error
 
 ROW_KEYS = ["participant_id", "world", "trial_id", "arm", "start_index", "step"]
 PRIMARY_TOLERANCE = 1e-6  # m/s: the export's primary answers vs the bank's, after float I/O

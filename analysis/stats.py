@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from analysis.contracts import MODELS
 from analysis.metrics import UNIT_KEYS, answer_subsets, participant_means
+from app.core.contracts import MODELS
 
 ALPHA = 0.01  # the preregistered significance level of every Ours-vs-VAE test
 PAIR = ("ours", "vae")  # the two models every paired comparison contrasts

@@ -735,8 +735,8 @@ def export_cmd(
     codebook (a Frictionless Data Package) beside it."""
     from sqlmodel import Session
 
-    from analysis.contracts import WHAT
-    from analysis.csvsafe import write_csv
+    from app.core.contracts import WHAT
+    from app.core.csvsafe import write_csv
     from app.researcher.exports import export_table
 
     if what not in WHAT:
@@ -982,13 +982,13 @@ def interaction(
     """Ours vs VAE vs constant velocity on INTERACTION pairs; report in var/reports/interaction/."""
     from app.interaction.dataset import InteractionError
     from app.interaction.experiment import run_command
-    from app.interaction.lanelet_map import MapError
     from app.interaction.report import frame_verdict, verdict
-    from app.interaction.tracks import TrackFileError
+    from app.recordings.lanelet_map import MapError
+    from app.recordings.tracks import TrackFileError
 
     try:
         if generate:
-            from app.interaction.synthetic import generate as write_generated
+            from app.recordings.synthetic_tracks import generate as write_generated
 
             write_generated(data, scenario, generate)
         summary = run_command(data, scenario, get_settings().layout, config, train_config,

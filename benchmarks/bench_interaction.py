@@ -26,10 +26,10 @@ from pathlib import Path
 from app.interaction.config import InteractionConfig
 from app.interaction.dataset import load_scenario_data
 from app.interaction.experiment import experiment_train_config, run_command
-from app.interaction.synthetic import generate
 from app.layout import Layout
 from app.learning.config import load_train_config
 from app.learning.train import train_and_save
+from app.recordings.synthetic_tracks import generate
 
 TARGET_S = 120.0
 WORKERS = (1, 2)

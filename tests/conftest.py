@@ -64,8 +64,8 @@ SMALL_TRAJECTORIES = 70
 PIPELINE_SOURCES = ["app/worlds", "app/data", "app/learning", "app/predictors",
                     "app/bank/build.py", "app/bank/start_states.py", "app/study/trials.py",
                     "app/study/config.py", "app/bank/bundle.py", "app/bank/freeze.py",
-                    "app/bank/verify.py", "app/bank/training_report.py", "app/fileio.py",
-                    "analysis/atomic.py", "study_configs",
+                    "app/bank/verify.py", "app/bank/training_report.py", "app/core",
+                    "study_configs",
                     # the attention checks and the discriminability rule read the observers
                     "app/bank/attention.py", "app/observers", "app/prediction_view.py",
                     "app/study/clicks.py", "app/study/trial_payload.py", "analysis/crossed.py"]

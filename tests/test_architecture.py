@@ -12,10 +12,55 @@ def test_no_import_cycles_between_files_or_packages():
     assert found == {"files": [], "packages": [], "top level": []}
 
 
-def test_analysis_imports_nothing_from_app():
-    upward = {src: sorted(t for t in targets if t.split(".")[0] == "app")
-              for src, targets in file_graph().items() if src.split(".")[0] == "analysis"}
-    assert {src: t for src, t in upward.items() if t} == {}
+def imports_from(importers: str, imported) -> dict[str, list[str]]:
+    """Each module under `importers` (a dotted prefix) and the modules it imports for which
+    `imported(name)` holds; modules importing none are left out."""
+    found = {src: sorted(t for t in targets if imported(t))
+             for src, targets in file_graph().items() if within(src, importers)}
+    return {src: targets for src, targets in found.items() if targets}
+
+
+def within(module: str, prefix: str) -> bool:
+    """True if `module` is `prefix` or inside it (app.core.files is within app.core)."""
+    return module == prefix or module.startswith(prefix + ".")
+
+
+def test_the_foundations_import_neither_app_nor_analysis():
+    """app.core is the ground floor: only the standard library and third-party packages."""
+    assert imports_from("app.core", lambda t: not within(t, "app.core")) == {}
+
+
+def test_analysis_imports_from_app_only_the_foundations():
+    assert imports_from("analysis", lambda t: within(t, "app") and not within(t, "app.core")) == {}
+
+
+# the server, the pipeline and everything they import run without the analysis package
+NEVER_ANALYSIS = ("app.server", "app.learning", "app.worlds", "app.bank", "app.recordings",
+                  "app.study", "app.data", "app.predictors", "app.pilot", "app.core")
+# the modules whose job is running an analysis or rendering its results
+RUNS_ANALYSES = {
+    "app.cli",  # `analyze`, and `archive` and `reproduce`, which run it on an archive
+    "app.interaction.experiment", "app.interaction.horizons", "app.interaction.report",
+    "app.observers.design_goal", "app.observers.instrument_grid",
+    "app.observers.simulated_study",
+    "app.prereg.inputs", "app.prereg.sections", "app.prereg.write",
+    "app.researcher.archive", "app.researcher.dashboard", "app.researcher.exports",
+    "app.researcher.progress",
+}
+
+
+def test_the_server_and_the_pipeline_never_import_analysis():
+    for package in NEVER_ANALYSIS:
+        assert imports_from(package, lambda t: within(t, "analysis")) == {}, package
+
+
+def test_only_modules_running_an_analysis_import_it():
+    assert set(imports_from("app", lambda t: within(t, "analysis"))) == RUNS_ANALYSES
+
+
+def test_recordings_never_import_the_interaction_experiment():
+    """app.recordings reads recorded data; app.interaction is one experiment run on it."""
+    assert imports_from("app.recordings", lambda t: within(t, "app.interaction")) == {}
 
 
 OFFLINE = ("worlds", "data", "learning", "interaction", "recordings", "observers", "study",

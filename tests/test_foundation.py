@@ -3,11 +3,10 @@
 import numpy as np
 import pytest
 
-from analysis.atomic import atomic_path
 from app.configio import ConfigError, StrictModel, load_yaml_model
+from app.core.files import atomic_path, sha256_file, write_npz
 from app.data.scene import AgentShape, Bounds, Scene
 from app.data.trajectory import Episode, TrajectorySet
-from app.fileio import sha256_file, write_npz
 from app.worlds.mpc import SamplingMPC
 
 

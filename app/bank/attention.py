@@ -25,7 +25,7 @@ import numpy as np
 from scipy.special import ndtr
 from tqdm import tqdm
 
-from analysis.alignment import ZERO_SPEED_MPS
+from app.core.alignment import ZERO_SPEED_MPS
 from app.observers.config import ObserversConfig
 from app.observers.family import GOAL_VARIANTS, angles, click_sd_rad, observer_options
 from app.prediction_view import view_click_sd_deg

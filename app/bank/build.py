@@ -24,8 +24,6 @@ import numpy as np
 from tqdm import tqdm
 
 import app
-from analysis.alignment import alignment_error
-from analysis.atomic import write_json
 from app.bank.attention import choose_checks
 from app.bank.start_states import (
     NoStartStates,
@@ -34,8 +32,9 @@ from app.bank.start_states import (
     covered_states,
     start_states,
 )
+from app.core.alignment import alignment_error
+from app.core.files import sha256_file, write_json
 from app.data.trajectory import HUMAN, ROBOT, Covered, TrajectorySet
-from app.fileio import sha256_file
 from app.layout import Layout
 from app.observers.config import default_observers
 from app.observers.predictor import observer_predictors
@@ -101,12 +100,8 @@ def build_trials(config: StudyConfig, study_id: str, layout: Layout) -> Path:
 
 def load_inputs(config: StudyConfig, name: str, layout: Layout) -> WorldInputs:
     """The world, its trajectories, every seed's checkpoints and the test split they share."""
-    from app.learning.checkpoint import (
-        CheckpointError,
-        check_matches_data,
-        load_model,
-        trajectory_hash,
-    )
+    from app.core.files import trajectory_hash
+    from app.learning.checkpoint import CheckpointError, check_matches_data, load_model
 
     npz_path = layout.trajectories(name)
     if not npz_path.is_file():

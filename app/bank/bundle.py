@@ -29,8 +29,8 @@ missing, altered or unlisted file and a live config that shapes the bank otherwi
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from analysis.contracts import COARSE_OBSERVERS
 from app.configio import load_yaml_model
+from app.core.contracts import COARSE_OBSERVERS
 from app.layout import Layout
 from app.observers.config import OBSERVERS_FILE, load_observers
 from app.observers.predictor import ObserverPredictor

@@ -36,10 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.atomic import write_json
 from app.bank.bundle import BANK_META
+from app.core.files import read_bytes, write_json
 from app.data.trajectory import ROBOT, TrajectorySet, wrap_angle
-from app.fileio import read_bytes
 from app.layout import Layout
 from app.prediction_view import (
     OUTLINE_REACH_SHARE,

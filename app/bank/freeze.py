@@ -16,8 +16,6 @@ from pathlib import Path
 import numpy as np
 
 import app
-from analysis.atomic import write_json
-from analysis.contracts import COARSE_OBSERVERS
 from app.bank.bundle import (
     BANK,
     BANK_META,
@@ -31,7 +29,8 @@ from app.bank.bundle import (
 )
 from app.bank.training_report import checkpoint_stopping, unconverged
 from app.bank.verify import open_bundle
-from app.fileio import sha256_bytes, sha256_file, write_gzip
+from app.core.contracts import COARSE_OBSERVERS
+from app.core.files import sha256_bytes, sha256_file, write_gzip, write_json
 from app.layout import Layout
 from app.predictors.registry import distribution
 from app.study.config import StudyConfig

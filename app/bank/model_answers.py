@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from analysis.alignment import ZERO_SPEED_MPS
+from app.core.alignment import ZERO_SPEED_MPS
 from app.predictors.protocol import ask
 from app.predictors.registry import UnknownPredictor, distribution
 from app.study.trial_payload import predictor_inputs

@@ -20,7 +20,7 @@ from app.bank.bundle import MANIFEST, Bundle, bundle_dir, shipped_dir
 from app.bank.freeze import freeze
 from app.bank.training_report import cap_warning
 from app.bank.verify import open_bundle
-from app.fileio import sha256_file
+from app.core.files import sha256_file
 from app.layout import Layout
 from app.settings import Settings
 from app.study.config import StudyConfig, bank_design, load_study_config

@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING
 
 from app.bank.bundle import BANK, Bundle, BundleError
 from app.bank.verify import load_bundle
+from app.core.contracts import StudyInputs
 from app.settings import Settings
 from app.study.config import StudyConfig, load_study_config
 
 if TYPE_CHECKING:
-    from analysis.report import StudyInputs
     from app.observers.config import ObserversConfig
 
 
@@ -32,7 +32,7 @@ def served_bank(settings: Settings, study_id: str) -> Path:
 
 
 def analysis_inputs(settings: Settings, study_id: str,
-                    warn: Callable[[str], None] = print) -> "StudyInputs":
+                    warn: Callable[[str], None] = print) -> StudyInputs:
     """What `analyze` takes from the study config and its bundle, as plain values and paths
     (without a bundle on this machine the analysis runs on the export alone, and `warn`s)."""
     config = load_study_config(settings, study_id)
@@ -44,15 +44,14 @@ def analysis_inputs(settings: Settings, study_id: str,
     return bundle_inputs(config, bundle)
 
 
-def bundle_inputs(config: StudyConfig, bundle: Bundle) -> "StudyInputs":
+def bundle_inputs(config: StudyConfig, bundle: Bundle) -> StudyInputs:
     """What `analyze` takes from a study config and the verified bundle it is served from."""
     return study_inputs(config, bundle.manifest["models"], bundle.root / BANK)
 
 
-def study_inputs(config: StudyConfig, models: dict, bank: Path) -> "StudyInputs":
+def study_inputs(config: StudyConfig, models: dict, bank: Path) -> StudyInputs:
     """The analysis's inputs as plain values and paths: the config, its exclusion rules, the
     model family's content hashes and the trial bank's file."""
-    from analysis.report import StudyInputs
 
     return StudyInputs(config=config.model_dump(mode="json"), rules=config.exclusions,
                        models=models, bank=bank)

@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 
 from app.bank.bundle import metrics_file
-from app.fileio import read_bytes
+from app.core.files import read_bytes
 from app.learning.convergence import stopping_of
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import yaml
 
 from app.bank.bundle import BANK, FORMAT, MANIFEST, Bundle, BundleError, bundle_dir
-from app.fileio import sha256_file
+from app.core.files import sha256_file
 from app.layout import Layout
 from app.study.config import StudyConfig, bank_design
 from app.study.trials import TrialBank

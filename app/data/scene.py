@@ -1,6 +1,6 @@
 """One JSON-able description of a world's geometry, shared by plots, trial bank and browser.
 
-Plots draw it from its JSON form with analysis.scene_plot.draw_scene.
+Plots draw it from its JSON form with app.core.scene_plot.draw_scene.
 """
 
 from pydantic import Field
@@ -97,7 +97,7 @@ class Scene(StrictModel):
 
 
 # Okabe-Ito colours (distinguishable for colour-blind readers); label colours for plots are
-# in analysis/scene_plot.py. Plots and each scene's `agents[].color` use these.
+# in app/core/scene_plot.py. Plots and each scene's `agents[].color` use these.
 ROBOT_COLOR = "#0072B2"
 HUMAN_COLOR = "#E69F00"
 
@@ -109,7 +109,7 @@ HUMAN_COLOR = "#E69F00"
 #   ignores a scene's `agents[].color` and draws the robot and the person with these;
 # - the road is light enough for both agents (dark asphalt left the blue robot at 1.2:1);
 # - goal rings are distinct from both agents, each >= 5:1 on the field, where plots cycle
-#   through analysis/scene_plot.py LABEL_COLORS on white;
+#   through app/core/scene_plot.py LABEL_COLORS on white;
 # - a recorded scene (`map`) reads as a road map: a pale green field, the driven area a light
 #   asphalt grey that reads as a band on it by its hue more than its lightness (1.14:1) and
 #   is light enough for both agents (robot 4.0:1, person 3.6:1; under the reach disc's tint

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from app.core.files import write_npz
 from app.data.scene import Scene
-from app.fileio import write_npz
 
 ROBOT, HUMAN = 0, 1
 

@@ -6,7 +6,7 @@ from typing import Literal
 from pydantic import Field, field_validator
 
 from app.configio import StrictModel, omitted_when_default
-from app.interaction.tracks import FRAME_MS
+from app.recordings.tracks import FRAME_MS
 
 
 class SecondaryConfig(StrictModel):

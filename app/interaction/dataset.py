@@ -1,9 +1,10 @@
 """A scenario's pairs as trajectories: splits, labels, the scene box, the map and val windows.
 
-Pairs (pairs.py) are downsampled 10 Hz -> 5 Hz into a TrajectorySet per split; each pair is
-labelled with the robot's turn over the window (`robot_turn`, from its motion, always) and,
-when the generator's sidecar exists, the robot's manoeuvre labels at every kept step
-(`entry_arm`, `exit_arm`, `turn`, and `phase` on a roundabout; synthetic.LABEL_VALUES).
+Pairs (app/recordings/pairs.py) are downsampled 10 Hz -> 5 Hz into a TrajectorySet per
+split; each pair is labelled with the robot's turn over the window (`robot_turn`, from its
+motion, always) and, when the generator's sidecar exists, the robot's manoeuvre labels at
+every kept step (`entry_arm`, `exit_arm`, `turn`, and `phase` on a roundabout;
+synthetic_tracks.LABEL_VALUES).
 """
 
 from dataclasses import dataclass
@@ -12,17 +13,17 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from app.core.files import sha256_file
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR, AgentShape, Bounds, Scene
 from app.data.trajectory import ROBOT, TrajectorySet
 from app.data.windows import Windows, make_windows
-from app.fileio import sha256_file
-from app.interaction import pairs as px
-from app.interaction import tracks as tx
 from app.interaction.config import InteractionConfig
-from app.interaction.lanelet_map import LaneLine, MapError, read_lanelet_map
-from app.interaction.synthetic import LABEL_VALUES, read_manoeuvre_labels
+from app.recordings import pairs as px
+from app.recordings import tracks as tx
+from app.recordings.lanelet_map import LaneLine, MapError, read_lanelet_map
+from app.recordings.pairs import TURN_NAMES, turn_label
+from app.recordings.synthetic_tracks import LABEL_VALUES, read_manoeuvre_labels
 
-TURN_NAMES = ["left", "straight", "right"]
 HEADING_NAMES = ["east", "north", "west", "south"]
 
 
@@ -63,22 +64,6 @@ def _manoeuvre_lookup(data_dir: Path, scenario: str) -> dict | None:
     for path in files:
         table.update(read_manoeuvre_labels(path))
     return table
-
-
-def turn_label(track: np.ndarray, threshold_deg: float) -> int:
-    """Index into TURN_NAMES of a map-frame track's [W, 2] travel direction change over its
-    moving steps (a map's y points up, so a positive change is a left turn)."""
-    moves = np.diff(track, axis=0)
-    moving = np.linalg.norm(moves, axis=1) > 0.05
-    if moving.sum() < 2:
-        return TURN_NAMES.index("straight")
-    angles = np.unwrap(np.arctan2(moves[moving, 1], moves[moving, 0]))
-    change = np.degrees(angles[-1] - angles[0])
-    if change > threshold_deg:
-        return TURN_NAMES.index("left")
-    if change < -threshold_deg:
-        return TURN_NAMES.index("right")
-    return TURN_NAMES.index("straight")
 
 
 def _pair_step_labels(pair: px.Pair, lookup: dict, names: list[str], step: int) -> np.ndarray:

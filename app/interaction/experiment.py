@@ -1,9 +1,10 @@
 """The paper's real-data test: Ours vs VAE vs constant velocity on INTERACTION pairs.
 
 Procedure (one command, `tomstudy interaction`):
-1. Load the scenario's train and val track files (tracks.py), cut 4 s windows,
-   pair each car with its nearest interacting car (rule in pairs.py). Choose Ours' FSQ
-   levels on validation loss of the train pairs (codes.py), before anything is scored.
+1. Load the scenario's train and val track files (app/recordings/tracks.py), cut 4 s
+   windows, pair each car with its nearest interacting car (rule in app/recordings/pairs.py).
+   Choose Ours' FSQ levels on validation loss of the train pairs (codes.py), before anything
+   is scored.
 2. Downsample 10 Hz -> 5 Hz (every 2nd frame): the observed 1 s (10 frame intervals) is a
    segment of 5 steps of 0.2 s, the study's segment length; the models predict the robot's
    next 3 actions (0.6 s).
@@ -33,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 import app
-from analysis.atomic import write_json
+from app.core.files import write_json
 from app.data.windows import Windows
 from app.interaction.codes import (
     CEILING,
@@ -101,7 +102,7 @@ def score_model(model, windows: Windows, scored: np.ndarray,
                 frame: Frame = "absolute") -> dict:
     """Alignment errors [W] of the next action, displacement errors, codes; the model sees
     the windows in its `frame` and is scored against the same true actions in every frame."""
-    from analysis.alignment import alignment_error
+    from app.core.alignment import alignment_error
     from app.learning.model_metrics import trajectory_errors
 
     seen = in_frame(windows, frame)
@@ -127,7 +128,7 @@ def protocol_scores(model, on: "Scoring", min_code_share: float,
 
 def score_constant_velocity(windows: Windows, scored: np.ndarray) -> dict:
     """The baseline: the last observed robot velocity, kept for all n steps."""
-    from analysis.alignment import alignment_error
+    from app.core.alignment import alignment_error
     from app.learning.model_metrics import constant_velocity, trajectory_errors
 
     pred = constant_velocity(windows)

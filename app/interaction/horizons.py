@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.alignment import alignment_error
 from analysis.stats import holm
+from app.core.alignment import alignment_error
 from app.data.trajectory import HUMAN, ROBOT
 from app.data.windows import Windows, make_windows
 from app.interaction.config import SecondaryConfig

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.atomic import atomic_path, write_json
 from analysis.html import render_page
-from analysis.scene_plot import LABEL_COLORS
+from app.core.files import atomic_path, write_json
+from app.core.scene_plot import LABEL_COLORS
 from app.data.scene import HUMAN_COLOR, ROBOT_COLOR
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 from app.data.windows import Windows
-from app.interaction.lanelet_map import LaneLine
+from app.recordings.lanelet_map import LaneLine
 
 MODEL_NAMES = {"ours": "Ours", "vae": "VAE", "cv": "constant velocity"}
 
@@ -46,7 +46,7 @@ def models_of(summary: dict) -> list[str]:
 
 
 def _axes_over_scene(ax, inputs: FigureInputs) -> None:
-    from app.interaction.lanelet_map import draw_lane_lines
+    from app.recordings.lanelet_map import draw_lane_lines
 
     b = inputs.train.scene.bounds
     draw_lane_lines(ax, inputs.lane_lines)

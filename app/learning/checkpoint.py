@@ -22,10 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.atomic import atomic_path
-from app.data.trajectory import TrajectorySet
+from app.core.files import atomic_path, read_bytes
 from app.data.windows import segment_features
-from app.fileio import read_bytes
 from app.learning.fsq import codes_to_indices, indices_to_codes, mixed_radix_basis, quantize
 from app.learning.networks import Normaliser
 
@@ -64,18 +62,6 @@ def save_checkpoint(path: Path, payload: dict) -> str:
     with atomic_path(Path(path)) as tmp:
         torch.save(payload, tmp)
     return payload["content_hash"]
-
-
-def trajectory_hash(trajs: TrajectorySet) -> str:
-    """sha256 hex of a TrajectorySet's arrays: ties a checkpoint to its training data (and,
-    for a recorded world, to the recordings it held out)."""
-    digest = hashlib.sha256()
-    labels = trajs.labels
-    for array in (trajs.positions, trajs.lengths, *(labels[k] for k in sorted(labels))):
-        digest.update(np.ascontiguousarray(array).tobytes())
-    if trajs.held_out is not None:
-        digest.update(np.ascontiguousarray(trajs.held_out, dtype=bool).tobytes())
-    return digest.hexdigest()
 
 
 def _numpy_layers(state_dict: dict, prefix: str) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.atomic import atomic_path, write_json
-from analysis.scene_plot import draw_scene
+from app.core.files import atomic_path, write_json
+from app.core.scene_plot import draw_scene
 from app.data.scene import HUMAN_COLOR, Scene
 from app.learning.checkpoint import TrainedModel, load_model
 

@@ -33,11 +33,11 @@ import numpy as np
 import torch
 from pydantic import Field
 
-from analysis.atomic import atomic_path, write_json
 from app.configio import StrictModel, load_yaml_model
+from app.core.files import atomic_path, trajectory_hash, write_json
 from app.data.trajectory import TrajectorySet
 from app.layout import Layout
-from app.learning.checkpoint import model_from_payload, trajectory_hash
+from app.learning.checkpoint import model_from_payload
 from app.learning.config import TrainConfig, WorldSelection, load_train_config
 from app.learning.convergence import stopping_record
 from app.learning.jobs import JobPool, job_pool

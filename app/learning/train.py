@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from analysis.atomic import atomic_path, write_json
+from app.core.files import atomic_path, trajectory_hash, write_json
 from app.data.trajectory import ROBOT, TrajectorySet
 from app.data.windows import Windows, make_windows, segment_features, split_by_trajectory
 from app.layout import CHECKPOINT_FILE, Layout
@@ -24,7 +24,6 @@ from app.learning.checkpoint import (
     load_model,
     model_from_payload,
     save_checkpoint,
-    trajectory_hash,
 )
 from app.learning.config import MODELS, TrainConfig
 from app.learning.convergence import EarlyStopping, stopping_record

@@ -221,7 +221,7 @@ def run_goal_report(bank_path, design: Design, observers, held_out: list[int],
     """The design goal on a bank file at the view's click noise; goal.json and goal.csv."""
     from pathlib import Path
 
-    from analysis.atomic import write_json
+    from app.core.files import write_json
     from app.prediction_view import view_click_sd_deg
 
     bank = TrialBank.read(Path(bank_path))

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.alignment import has_direction
-from analysis.contracts import COARSE_OBSERVERS
+from app.core.alignment import has_direction
+from app.core.contracts import COARSE_OBSERVERS
 from app.observers import inverse_planning as ip
 from app.observers.config import NoiseConfig, ObserversConfig
 from app.study.clicks import clicks_to_actions, robot_starts

@@ -27,7 +27,7 @@ import pandas as pd
 from scipy import stats
 from tqdm import tqdm
 
-from analysis.alignment import alignment_error
+from app.core.alignment import alignment_error
 from app.observers.config import ObserversConfig
 from app.observers.simulated_study import (
     INSTRUMENT_POPULATIONS,
@@ -253,8 +253,8 @@ def run_instrument_grid(bank_path, trials_per_world: int, out_dir, observers: Ob
     grid.json and grid.png; return grid.json's content."""
     from pathlib import Path
 
-    from analysis.atomic import write_json
     from analysis.plots import plot_grid_pass_rates
+    from app.core.files import write_json
     from app.observers.simulated_study import load_bank
     from app.prediction_view import view_click_sd_deg
 

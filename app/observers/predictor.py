@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.contracts import COARSE_OBSERVERS
+from app.core.contracts import COARSE_OBSERVERS
 from app.observers.config import ObserversConfig
 from app.observers.family import coarse_options
 from app.predictors.protocol import PredictorAnswer, code_hash

@@ -26,13 +26,13 @@ import pandas as pd
 from scipy import stats
 from tqdm import tqdm
 
-from analysis.alignment import alignment_error
-from analysis.atomic import write_json
-from analysis.contracts import EXPORT_COLUMNS, EXPORT_VERSION, RENAMED_COLUMNS
 from analysis.load import normalise
 from analysis.metrics import add_alignment_errors, participant_means
 from analysis.plots import plot_power, plot_trial_contrast
 from app.assignment import least_used, pick_by_arm
+from app.core.alignment import alignment_error
+from app.core.contracts import EXPORT_COLUMNS, EXPORT_VERSION, RENAMED_COLUMNS
+from app.core.files import write_json
 from app.observers import inverse_planning
 from app.observers.config import ObserversConfig, default_observers
 from app.study.clicks import check_points, clicks_to_actions, robot_starts

@@ -32,7 +32,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 
-from app.fileio import read_bytes
+from app.core.files import read_bytes
 from app.observers.inverse_planning import PRESETS, predict
 from app.server.plan import PART_PHASES, TRIAL_PHASES, Phase
 from app.server.sessions import SESSION_HEADER, SESSION_PATH

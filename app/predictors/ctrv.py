@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.alignment import ZERO_SPEED_MPS
+from app.core.alignment import ZERO_SPEED_MPS
 from app.data.trajectory import ROBOT, wrap_angle
 from app.predictors.protocol import PredictorAnswer, code_hash
 

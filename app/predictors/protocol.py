@@ -18,12 +18,12 @@ every answer, and a server recomputes the answers at start-up and refuses a bank
 hash or actions its installed predictor does not reproduce (app/bank/model_answers.py).
 """
 
-import hashlib
-import json
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+
+from app.core.files import json_sha256
 
 NO_CODE = -1  # the code of a predictor without discrete codes
 
@@ -52,9 +52,7 @@ class Predictor(Protocol):
 
 def code_hash(name: str, version: str, params: dict) -> str:
     """sha256 hex of a code predictor's name, version and parameters (canonical JSON)."""
-    text = json.dumps({"name": name, "version": version, "params": params}, sort_keys=True,
-                      separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
+    return json_sha256({"name": name, "version": version, "params": params})
 
 
 def checked_answer(predictor: Predictor, answer: PredictorAnswer, k: int,

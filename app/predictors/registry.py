@@ -11,7 +11,7 @@ observers are the study's own columns and cannot be taken by a plug-in.
 import re
 from importlib.metadata import EntryPoint, entry_points
 
-from analysis.contracts import COARSE_OBSERVERS, MODELS
+from app.core.contracts import COARSE_OBSERVERS, MODELS
 from app.predictors.protocol import Predictor
 
 GROUP = "tomstudy.predictors"

@@ -5,8 +5,8 @@ simulation's; each read once as a Source (app/prereg/sources.py)."""
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import analysis.contracts
 import analysis.stats
+import app.core.contracts
 from app.bank.bundle import BANK_META, MANIFEST
 from app.bank.served import served_bundle
 from app.observers.config import OBSERVERS_FILE
@@ -60,7 +60,7 @@ class Inputs:
     goal: RunResult
     power: dict[str, RunResult]
     stats: Source  # analysis/stats.py: ALPHA
-    contracts: Source  # analysis/contracts.py: the default SESOI, the export columns
+    contracts: Source  # app/core/contracts.py: the default SESOI, the export columns
     departures: Source | None
     ledger: Ledger = field(default_factory=Ledger)
 
@@ -104,7 +104,7 @@ def gather(settings: Settings, study_id: str) -> Inputs:
                                 / "power.json", bank,
                                 f"tomstudy power --study {study_id} --kind {kind}")
                for kind in COARSE_VARIANTS},
-        stats=module_source(analysis.stats), contracts=module_source(analysis.contracts),
+        stats=module_source(analysis.stats), contracts=module_source(app.core.contracts),
         departures=read_source(DEPARTURES) if DEPARTURES.is_file() else None)
 
 

@@ -19,7 +19,7 @@ from app.study.config import config_sha256, stored_predictors
 PAPER_HYPOTHESIS = ("Ours will more accurately match the predictions made by human "
                     "participants as compared to VAE.")
 DEVIATIONS_HEADING = "# Where this implementation departs from the paper"
-# the export columns a preregistration names as measured (analysis/contracts.py has them all)
+# the export columns a preregistration names as measured (app/core/contracts.py has them all)
 # the predictions export's columns the analysis reads; their meaning is the codebook's
 MEASURED_COLUMNS = (
     "participant_vx", "participant_vy", "participant_click_x", "participant_click_y",
@@ -428,7 +428,7 @@ def analysis_plan(inputs: Inputs) -> Section:
 
 def sesoi_value(inputs: Inputs) -> float:
     """The config's smallest effect of interest, cited where it is set (its default otherwise:
-    analysis/contracts.py SMALLEST_EFFECT_OF_INTEREST)."""
+    app/core/contracts.py SMALLEST_EFFECT_OF_INTEREST)."""
     if "smallest_effect_of_interest" in inputs.raw_config:
         return inputs.setting("smallest_effect_of_interest", "smallest effect of interest")
     return inputs.ledger.take(inputs.contracts, "SMALLEST_EFFECT_OF_INTEREST",

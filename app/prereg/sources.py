@@ -14,7 +14,7 @@ from typing import Any
 
 import yaml
 
-from app.fileio import sha256_file
+from app.core.files import sha256_file
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 MAX_SHOWN = 80  # a longer text value is cut in the Sources table (the document has it whole)

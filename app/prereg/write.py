@@ -6,8 +6,8 @@ from pathlib import Path
 
 from markupsafe import Markup, escape
 
-from analysis.atomic import atomic_path
 from analysis.html import render_page
+from app.core.files import atomic_path
 from app.prereg.document import Document, Items, Table, to_markdown
 from app.prereg.inputs import gather
 from app.prereg.sections import preregistration

@@ -1,7 +1,7 @@
 """A recorded world's typed config (study_configs/worlds/<world>.yaml with `kind: recorded`).
 
 A recorded world is read from recordings instead of simulated: the INTERACTION dataset's
-track files (v1.0 or v1.2 layout, app/interaction/tracks.py) or a lab's own CSV logs
+track files (v1.0 or v1.2 layout, app/recordings/tracks.py) or a lab's own CSV logs
 (app/recordings/csv_logs.py). `source.path` is relative to the recordings dir
 (TOMSTUDY_RECORDINGS_DIR, default <data dir>/recordings): the lab's licensed download or its
 own logs stay on its machine and never enter git.

@@ -33,10 +33,10 @@ from typing import NamedTuple
 import numpy as np
 from tqdm import tqdm
 
-from app.fileio import sha256_file
-from app.interaction.lanelet_map import LaneLine
-from app.interaction.tracks import Recording, Track, TrackFileError, csv_reader
+from app.core.files import sha256_file
+from app.recordings.lanelet_map import LaneLine
 from app.recordings.scene import LINE_KINDS
+from app.recordings.tracks import Recording, Track, TrackFileError, csv_reader
 
 LEADING = "recording"
 COLUMNS = ("agent_id", "time_s", "x_m", "y_m", "vx_mps", "vy_mps", "role")

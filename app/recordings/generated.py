@@ -1,14 +1,14 @@
 """GENERATED, NOT REAL DATA: the interaction study's two scenarios as INTERACTION-format files.
 
-For demos, tests and labs that have not downloaded the dataset yet: app/interaction/
-synthetic.py's generated traffic, a roundabout in the v1.2 layout and an intersection in the
+For demos, tests and labs that have not downloaded the dataset yet: app/recordings/
+synthetic_tracks.py's generated traffic, a roundabout in the v1.2 layout and an intersection in the
 v1.0 layout, each with its lanelet2-style map, where study_configs/worlds/roundabout.yaml and
 intersection.yaml look for the real download. Nothing here is a recording.
 """
 
 from pathlib import Path
 
-from app.interaction.synthetic import (
+from app.recordings.synthetic_tracks import (
     REAL_SIZE_ARRIVALS_PER_ARM_MIN,
     generate,
     generate_recordings,

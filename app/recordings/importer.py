@@ -2,7 +2,7 @@
 
 The recorded world's counterpart of `simulate`: read and validate every recording of the
 config's source (a format error names file, line and column), cut robot/human pairs over
-fixed windows (app/interaction/pairs.py), drop the pairs whose two agents' centres ever come
+fixed windows (app/recordings/pairs.py), drop the pairs whose two agents' centres ever come
 closer than the mean of their two widths (side by side, touching: tracking errors, or the
 generator's cars passing through each other: no clip may show two cars on top of each other;
 meta.json counts them), sample them every `dt_s`, keep each agent's recorded length and width
@@ -25,15 +25,14 @@ import numpy as np
 from tqdm import tqdm
 
 import app
-from analysis.atomic import write_json
+from app.core.files import sha256_file, write_json
 from app.data.trajectory import Episode, TrajectorySet
-from app.fileio import sha256_file
-from app.interaction import pairs as px
-from app.interaction import tracks as tx
-from app.interaction.dataset import TURN_NAMES, turn_label
-from app.interaction.lanelet_map import LaneLine, MapError, read_lanelet_map
 from app.layout import Layout
+from app.recordings import pairs as px
+from app.recordings import tracks as tx
 from app.recordings.config import CsvSource, InteractionSource, RecordedConfig
+from app.recordings.lanelet_map import LaneLine, MapError, read_lanelet_map
+from app.recordings.pairs import TURN_NAMES, turn_label
 from app.recordings.scene import SceneFrame, frame_around, recorded_scene
 
 LABEL_NAMES = {"robot_turn": TURN_NAMES, "human_turn": TURN_NAMES}

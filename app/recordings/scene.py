@@ -20,8 +20,8 @@ from app.data.scene import (
     RecordedScene,
     Scene,
 )
-from app.interaction.lanelet_map import LaneLine
 from app.recordings.config import RecordedConfig
+from app.recordings.lanelet_map import LaneLine
 
 LINE_DECIMALS = 2  # lines are drawn, never scored: centimetres are plenty
 SIMPLIFY_M = 0.15  # a line point this close to the straight line through its neighbours goes

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from analysis.atomic import atomic_path
+from app.core.files import atomic_path
 from app.recordings.csv_logs import COLUMNS, HUMAN, LEADING, ROBOT, TRAILING
 
 ROOM_M = (12.0, 8.0)

@@ -34,17 +34,16 @@ import pandas as pd
 from sqlalchemy.engine import Engine
 from sqlmodel import Session
 
-from analysis.atomic import atomic_path, write_json
-from analysis.contracts import WHAT
-from analysis.csvsafe import write_csv
 from analysis.exports import read_export
 from analysis.load import load_csv
-from analysis.report import StudyInputs, analyze
+from analysis.report import analyze
 from app import __version__
 from app.bank.served import bundle_inputs, served_bundle
 from app.bank.verify import open_bundle
 from app.configio import load_yaml_model
-from app.fileio import sha256_file
+from app.core.contracts import WHAT, StudyInputs
+from app.core.csvsafe import write_csv
+from app.core.files import atomic_path, sha256_file, write_json
 from app.prereg.write import write_prereg
 from app.researcher.archive_registry import read_registry, record_archive
 from app.researcher.exports import export_table, write_export_package

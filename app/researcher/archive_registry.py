@@ -10,7 +10,7 @@ registry stops the withdrawal (named) instead of hiding an archive.
 import json
 from pathlib import Path
 
-from analysis.atomic import write_json
+from app.core.files import write_json
 from app.layout import Layout
 
 ENTRY_KEYS = ("path", "sha256", "study_id", "created_at", "participant_ids")

@@ -199,9 +199,9 @@ def primary_verdicts(kept: pd.DataFrame, ctx: StudyContext) -> dict[str, str]:
 
 def alignment(frame: pd.DataFrame, ctx: StudyContext, rule_set: str) -> dict:
     """Exclusions, the primary test's verdict per world in words, per-world error CIs of every
-    predictor (with their colours and labels, one definition: analysis/contracts.py) and field
+    predictor (with their colours and labels, one definition: app/core/contracts.py) and field
     panels under one rule set, on the study's predictions export `frame`."""
-    from analysis.contracts import model_style
+    from app.core.contracts import model_style
 
     names = every_predictor(ctx)
     out = {"rules": rule_set, "predictors": names, "style": model_style(names)}

@@ -24,9 +24,10 @@ import pandas as pd
 from sqlalchemy import func, select
 from sqlmodel import Session
 
-from analysis.atomic import write_json
 from analysis.codebook import StudyTerms, data_package
-from analysis.contracts import (
+from analysis.exports import typed
+from analysis.load import expand_plugins, normalise, stored_columns
+from app.core.contracts import (
     DEVICE,
     EVENTS,
     EXPORT_COLUMNS,
@@ -37,9 +38,8 @@ from analysis.contracts import (
     WHAT,
     ExclusionRules,
 )
-from analysis.csvsafe import write_csv
-from analysis.exports import typed
-from analysis.load import expand_plugins, normalise, stored_columns
+from app.core.csvsafe import write_csv
+from app.core.files import write_json
 from app.server.balance import exclusion_reasons, trial_speeds
 from app.server.places import Cutoffs, status_cutoffs
 from app.server.plan import trial_steps
@@ -64,7 +64,7 @@ def export_table(db: Session, config: StudyConfig, study_id: str, what: str) -> 
 
 def export_csv(db: Session, config: StudyConfig, study_id: str, what: str) -> str:
     """An export as CSV text; text cells a spreadsheet would run as a formula start with a
-    quote (analysis/csvsafe.py), which analysis.exports.read_export removes."""
+    quote (app/core/csvsafe.py), which analysis.exports.read_export removes."""
     return csv_text(export_table(db, config, study_id, what))
 
 

@@ -73,7 +73,7 @@ def start_replays(rows: list[PredictionRow], dt_s: float,
                   plugins: list[str] = ()) -> list[dict]:
     """Per start state: its clicks in step order and each predictor's rolled-out positions
     (the models', the baselines' and each plug-in's)."""
-    from analysis.alignment import alignment_error
+    from app.core.alignment import alignment_error
 
     starts: dict[int, list[PredictionRow]] = {}
     for row in sorted(rows, key=lambda r: (r.start_index, r.step)):

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 from app.bank.bundle import bundle_dir
-from app.fileio import sha256_bytes, sha256_file
+from app.core.files import sha256_bytes, sha256_file
 from app.researcher.archive import (
     ANALYSIS,
     ARCHIVE_MANIFEST,

@@ -21,7 +21,7 @@ from sqlalchemy import String, bindparam, case, func, literal, select, text, uni
 from sqlalchemy.engine import Engine
 from sqlmodel import Session
 
-from analysis.contracts import PROLIFIC_UNCONFIRMED, ExclusionRules, too_fast_share_exceeds
+from app.core.contracts import PROLIFIC_UNCONFIRMED, ExclusionRules, too_fast_share_exceeds
 from app.server.context import StudyContext
 from app.server.db import insert_skipping_duplicates
 from app.server.plan import TrialStep, Usage, parse_plan, world_orders

@@ -9,7 +9,7 @@ with the step's advance (crud.advance), so a 2xx means the answer is kept.
 import numpy as np
 from sqlmodel import Session
 
-from analysis.contracts import PLUGIN_FIELDS, plugin_columns
+from app.core.contracts import PLUGIN_FIELDS, plugin_columns
 from app.server.context import StudyContext
 from app.server.crud import advance, replay_if_stored
 from app.server.drafts import discard_draft

@@ -8,7 +8,7 @@ simulated study runs every simulated answer through the same check.
 
 import numpy as np
 
-from analysis.alignment import alignment_error
+from app.core.alignment import alignment_error
 from app.study.config import AttentionChecks
 from app.study.errors import Refused
 from app.study.trials import TrialRecord, WorldBank

@@ -1,7 +1,5 @@
 """The typed study definition (study_configs/<study>.yaml): text, design, recruitment, models."""
 
-import hashlib
-import json
 import math
 from functools import lru_cache
 from pathlib import Path
@@ -9,7 +7,6 @@ from typing import Annotated, Literal
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 
-from analysis.contracts import COARSE_OBSERVERS, SMALLEST_EFFECT_OF_INTEREST, ExclusionRules
 from app.configio import (
     ConfigError,
     StrictModel,
@@ -18,6 +15,8 @@ from app.configio import (
     omitted_when_default,
     omitted_when_empty,
 )
+from app.core.contracts import COARSE_OBSERVERS, SMALLEST_EFFECT_OF_INTEREST, ExclusionRules
+from app.core.files import json_sha256
 from app.predictors.registry import check_names
 from app.settings import Settings
 from app.study.words import DEFAULT_DEMO, DemoName, ParticipantWords
@@ -497,8 +496,7 @@ def live_session_cap(config: StudyConfig) -> int:
 
 def config_sha256(config: StudyConfig) -> str:
     """SHA-256 of the validated config as canonical JSON: comments and key order do not count."""
-    text = json.dumps(config.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
+    return json_sha256(config.model_dump(mode="json"))
 
 
 def study_config_path(settings: Settings, study_id: str) -> Path:

@@ -16,13 +16,12 @@ Shape legend per trial: E examples, L segment steps, K start states, n steps to 
   predictor of the study config (app/predictors/)
 """
 
-import json
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
 from app.configio import StrictModel, omitted_when_empty
-from app.fileio import read_bytes, sha256_bytes
+from app.core.files import json_sha256, read_bytes, sha256_bytes
 from app.layout import Layout
 
 # what the participant is shown, and so what every model and baseline answers from
@@ -139,7 +138,7 @@ class BankFile(StrictModel):
 def clip_sha256(scene: dict, dt_s: float, payload: dict) -> str:
     """SHA-256 of exactly what a participant is shown (canonical JSON)."""
     shown = {"scene": scene, "dt_s": dt_s, **payload}
-    return sha256_bytes(json.dumps(shown, sort_keys=True, separators=(",", ":")).encode())
+    return json_sha256(shown)
 
 
 @dataclass

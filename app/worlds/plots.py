@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.scene_plot import LABEL_COLORS, draw_scene
+from app.core.scene_plot import LABEL_COLORS, draw_scene
 from app.data.scene import HUMAN_COLOR
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
 from app.layout import Layout

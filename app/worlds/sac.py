@@ -20,9 +20,8 @@ from stable_baselines3 import SAC
 from stable_baselines3.common.callbacks import BaseCallback
 from tqdm import tqdm
 
-from analysis.atomic import atomic_path, write_json
+from app.core.files import atomic_path, sha256_bytes, write_json
 from app.data.trajectory import HUMAN, ROBOT, Rejected
-from app.fileio import sha256_bytes
 from app.layout import Layout
 from app.settings import get_settings
 from app.worlds.obstacle import ObstacleConfig, ObstacleWorld

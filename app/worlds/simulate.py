@@ -12,10 +12,9 @@ import numpy as np
 from tqdm import tqdm
 
 import app
-from analysis.atomic import write_json
 from app.configio import ConfigError
+from app.core.files import sha256_file, write_json
 from app.data.trajectory import Episode, Rejected, TrajectorySet
-from app.fileio import sha256_file
 from app.layout import Layout
 from app.worlds.registry import SimulatedWorld, World, build_world
 

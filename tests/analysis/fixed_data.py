@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pandas as pd
 
-from analysis.contracts import EXPORT_COLUMNS, EXPORT_VERSION
 from analysis.load import normalise
+from app.core.contracts import EXPORT_COLUMNS, EXPORT_VERSION
 from app.study.trials import TrialBank
 
 DT_S = 0.5

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.atomic import write_json
+from app.core.files import write_json
 
 
 def test_write_json_gives_equal_bytes_for_equal_data_and_plain_numpy_values(tmp_path):

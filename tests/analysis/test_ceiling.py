@@ -5,8 +5,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.alignment import alignment_error
 from analysis.ceiling import ceiling_table, cell_errors, explainable_share, split_half
+from app.core.alignment import alignment_error
 
 
 def rows_from(directions: np.ndarray, world: str = "highway") -> pd.DataFrame:

@@ -12,7 +12,7 @@ from analysis.codebook import (
     data_package,
     table_schema,
 )
-from analysis.contracts import (
+from app.core.contracts import (
     COARSE_OBSERVERS,
     EXPORT_COLUMNS,
     PLUGIN_FIELDS,

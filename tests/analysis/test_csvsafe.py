@@ -5,7 +5,7 @@ import io
 import pandas as pd
 import pytest
 
-from analysis.csvsafe import restore_cell, restore_text, safe_cell, write_csv
+from app.core.csvsafe import restore_cell, restore_text, safe_cell, write_csv
 
 FORMULAS = ['=HYPERLINK("http://x","y")', "+1+2", "-2+3", "@SUM(A1:A9)", "\t=1", "\r=1"]
 

@@ -5,7 +5,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.contracts import plugin_columns
 from analysis.crossed import crossed_test
 from analysis.direct import (
     COARSE_OBSERVERS,
@@ -16,6 +15,7 @@ from analysis.direct import (
 )
 from analysis.metrics import add_alignment_errors
 from analysis.report import run_analyze
+from app.core.contracts import plugin_columns
 from tests.analysis.test_report import inputs, simulated_export  # noqa: F401 (a fixture)
 
 ALPHA = 0.01

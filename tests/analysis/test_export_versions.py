@@ -6,10 +6,10 @@ import io
 import pandas as pd
 import pytest
 
-from analysis.contracts import EXPORT_VERSION, RENAMED_COLUMNS, SURVEY
 from analysis.exports import read_export
 from analysis.load import DataError, load_csv
 from analysis.report import run_analyze
+from app.core.contracts import EXPORT_VERSION, RENAMED_COLUMNS, SURVEY
 from tests.analysis.fixed_data import fixed_predictions
 from tests.analysis.test_report import inputs, simulated_export  # noqa: F401 (a fixture)
 

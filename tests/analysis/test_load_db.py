@@ -6,9 +6,9 @@ import pandas as pd
 from sqlalchemy import insert
 from sqlmodel import Session
 
-from analysis.contracts import STORED_NAMES
-from analysis.csvsafe import write_csv
 from analysis.load import load_csv, load_database
+from app.core.contracts import STORED_NAMES
+from app.core.csvsafe import write_csv
 from app.researcher.exports import predictions_frame
 from app.server.db import create_tables, make_engine
 from app.server.tables import Participant, PredictionRow, TrialResponse

@@ -6,8 +6,6 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from analysis.alignment import alignment_error
-from analysis.contracts import ExclusionRules
 from analysis.load import load_csv
 from analysis.metrics import apply_exclusions, participant_means
 from analysis.stats import (
@@ -18,6 +16,8 @@ from analysis.stats import (
     mean_ci95,
     paired_comparison,
 )
+from app.core.alignment import alignment_error
+from app.core.contracts import ExclusionRules
 from tests.analysis.fixed_data import DT_S, cos_distance, fixed_predictions, holm_by_hand
 
 

@@ -9,13 +9,13 @@ import pytest
 from scipy import stats
 
 from analysis import predictors
-from analysis.contracts import EXPORT_COLUMNS, model_color, model_label, plugin_columns
 from analysis.load import load_csv, normalise
 from analysis.metrics import add_alignment_errors
 from analysis.predictors import pairwise_table, predictor_means, predictor_names, primary_fits
 from analysis.report import run_analyze
 from analysis.stats import ALPHA
 from analysis.trial_effects import mixed_model_table
+from app.core.contracts import EXPORT_COLUMNS, model_color, model_label, plugin_columns
 from tests.analysis.fixed_data import cos_distance, fixed_predictions, holm_by_hand
 from tests.analysis.test_report import inputs, simulated_export  # noqa: F401 (a fixture)
 

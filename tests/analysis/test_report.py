@@ -11,17 +11,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.contracts import SMALLEST_EFFECT_OF_INTEREST, ExclusionRules
 from analysis.metrics import add_alignment_errors
 from analysis.report import (
     AnalysisError,
-    StudyInputs,
     render_html,
     run_analyze,
     smallest_effect,
     start_kind_table,
 )
 from analysis.verdicts import EXPLORATORY, direct_sentence, primary_sentence
+from app.core.contracts import SMALLEST_EFFECT_OF_INTEREST, ExclusionRules, StudyInputs
 from app.observers.simulated_study import simulate_participants
 from tests.analysis.fixed_data import fixed_predictions, small_bank, trial_bank, with_seeds
 

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 from sqlalchemy import create_engine, func, select
 
-from analysis.contracts import COARSE_OBSERVERS
+from app.core.contracts import COARSE_OBSERVERS
 from app.pilot.bots import run_bots
 from app.server.tables import PredictionRow
 from tests.conftest import TOMSTUDY, free_port, patience, start_server, stop_server

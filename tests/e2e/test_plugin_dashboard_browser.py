@@ -5,7 +5,7 @@ import asyncio
 
 import pytest
 
-from analysis.contracts import model_color
+from app.core.contracts import model_color
 from app.pilot.bots import run_bots
 from tests.conftest import free_port, patience, start_server
 from tests.e2e.pages import researcher_page

@@ -11,7 +11,8 @@ from app.data.trajectory import ROBOT
 from app.interaction import config as ic
 from app.interaction import dataset as ds
 from app.interaction import experiment as ie
-from app.interaction.synthetic import generate
+from app.recordings.pairs import TURN_NAMES
+from app.recordings.synthetic_tracks import generate
 
 SCENARIO = "DR_USA_Intersection_EP0"
 
@@ -42,7 +43,7 @@ def test_pairs_become_downsampled_trajectories_with_labels(small_data):
     # the turn label derived from motion agrees with the generator's route label for
     # pairs that actually turn by more than 60 degrees
     names = trajs.label_names["turn"]
-    turn = [ds.TURN_NAMES[k] for k in trajs.labels["robot_turn"]]
+    turn = [TURN_NAMES[k] for k in trajs.labels["robot_turn"]]
     route = [names[k] for k in trajs.labels["turn"]]
     turned = [(t, r) for t, r in zip(turn, route, strict=True) if t != "straight"]
     assert turned and np.mean([t == r for t, r in turned]) > 0.9

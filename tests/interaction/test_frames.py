@@ -9,8 +9,8 @@ from app.data.trajectory import HUMAN, ROBOT
 from app.data.windows import Windows
 from app.interaction import config as ic
 from app.interaction import frames
-from app.interaction.synthetic import generate
 from app.layout import Layout
+from app.recordings.synthetic_tracks import generate
 
 SCENARIO = "DR_USA_Intersection_EP0"
 

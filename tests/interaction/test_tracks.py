@@ -6,11 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.interaction import pairs as px
-from app.interaction import synthetic as syn
-from app.interaction import tracks as ix
-from app.interaction.lanelet_map import OriginProjector, read_lanelet_map
-from app.interaction.synthetic import generate, lane_lines, read_manoeuvre_labels
+from app.recordings import pairs as px
+from app.recordings import synthetic_tracks as syn
+from app.recordings import tracks as ix
+from app.recordings.lanelet_map import OriginProjector, read_lanelet_map
+from app.recordings.synthetic_tracks import generate, lane_lines, read_manoeuvre_labels
 
 HEADER = ",".join(ix.VEHICLE_COLUMNS)
 
@@ -228,7 +228,7 @@ def test_generated_map_round_trips_through_lat_lon(generated):
 
 
 def test_unreadable_map_is_a_clear_error(tmp_path):
-    from app.interaction.lanelet_map import MapError
+    from app.recordings.lanelet_map import MapError
 
     bad = _write(tmp_path / "m.osm", "<osm><node id='1' lat='x' lon='0'/></osm>")
     with pytest.raises(MapError, match="node 1 lacks a numeric lat/lon"):

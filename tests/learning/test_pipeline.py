@@ -8,8 +8,8 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from analysis.atomic import write_json
 from app.cli import cli
+from app.core.files import write_json
 from app.layout import Layout
 from app.learning.checkpoint import load_model
 from app.learning.config import TrainConfig

@@ -5,9 +5,9 @@ answer is the observer's expected move, not a noisy draw."""
 import numpy as np
 import pytest
 
-from analysis.contracts import COARSE_OBSERVERS
 from app.bank.model_answers import BankMismatch, ModelAnswers, trial_inputs
 from app.bank.verify import open_bundle
+from app.core.contracts import COARSE_OBSERVERS
 from app.observers.config import ObserversConfig, default_observers
 from app.observers.family import coarse_options
 from app.observers.predictor import ObserverPredictor, observer_predictors

@@ -7,9 +7,9 @@ import subprocess
 import numpy as np
 import pytest
 
-from analysis.contracts import COARSE_OBSERVERS
 from app.bank.model_answers import BankMismatch, ModelAnswers, trial_inputs
 from app.bank.verify import open_bundle
+from app.core.contracts import COARSE_OBSERVERS
 from app.predictors.builtin import CheckpointPredictor, ConstantVelocity
 from app.predictors.ctrv import CTRV
 from app.predictors.protocol import ask

@@ -117,7 +117,7 @@ def test_the_html_page_is_self_contained_and_has_every_section(paper):
 
 
 def test_measured_columns_are_export_columns_described_by_the_codebook():
-    from analysis.contracts import EXPORT_COLUMNS, plugin_columns
+    from app.core.contracts import EXPORT_COLUMNS, plugin_columns
     from app.prereg.sections import measured_rows
 
     known = {*EXPORT_COLUMNS, *(c for name in ("coarse", "coarse_scene", "coarse_momentum")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.interaction import pairs as px
+from app.recordings import pairs as px
 from app.recordings.csv_logs import RecordingError, read_line_file, read_logs
 from app.recordings.synthetic_logs import generate_logs
 

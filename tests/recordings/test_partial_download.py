@@ -7,11 +7,11 @@ import pytest
 from typer.testing import CliRunner
 
 from app.cli import cli
-from app.interaction import tracks as tx
 from app.interaction.config import InteractionConfig
-from app.interaction.synthetic import generate
 from app.layout import Layout
+from app.recordings import tracks as tx
 from app.recordings.importer import import_recordings
+from app.recordings.synthetic_tracks import generate
 from app.settings import get_settings
 from tests.recordings.test_recorded_world import config
 

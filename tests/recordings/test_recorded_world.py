@@ -14,10 +14,6 @@ from app.configio import ConfigError
 from app.data.scene import Bounds, Scene
 from app.data.trajectory import ROBOT, Covered, TrajectorySet
 from app.data.windows import split_by_trajectory
-from app.interaction.dataset import turn_label
-from app.interaction.lanelet_map import LaneLine
-from app.interaction.pairs import Pair
-from app.interaction.tracks import TrackFileError
 from app.layout import Layout
 from app.recordings.config import RecordedConfig
 from app.recordings.generated import generate_study_recordings
@@ -27,7 +23,10 @@ from app.recordings.importer import (
     agent_sizes,
     import_recordings,
 )
+from app.recordings.lanelet_map import LaneLine
+from app.recordings.pairs import Pair, turn_label
 from app.recordings.scene import SceneFrame, row_runs, scene_lines, simplify
+from app.recordings.tracks import TrackFileError
 from app.study.trials import TrialRecord
 from app.worlds.recorded import RecordedWorld
 from app.worlds.registry import World, build_world

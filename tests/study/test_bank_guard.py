@@ -7,7 +7,7 @@ import subprocess
 import httpx
 import pytest
 
-from app.fileio import sha256_file
+from app.core.files import sha256_file
 from app.layout import Layout
 from app.main import create_app
 from app.server.bank_guard import BankChanged, banks_run

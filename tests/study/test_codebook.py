@@ -24,9 +24,9 @@ from analysis.codebook import (
     RECRUITMENTS,
     START_KINDS,
 )
-from analysis.contracts import EXPORT_VERSION, PILOT, WHAT
 from analysis.exports import read_export
 from app.cli import cli
+from app.core.contracts import EXPORT_VERSION, PILOT, WHAT
 from app.pilot.bots import run_bots
 from app.server.completion_codes import OUTCOMES as SERVED_OUTCOMES
 from app.server.recruitment import preview_key

@@ -14,7 +14,6 @@ import yaml
 from sqlalchemy.pool import StaticPool
 from sqlmodel import Session, create_engine, select
 
-from analysis.contracts import SMALLEST_EFFECT_OF_INTEREST
 from app.bank.build import (
     build_trials,
     main_trials,
@@ -22,7 +21,8 @@ from app.bank.build import (
 )
 from app.bank.start_states import NoStartStates, take_turns
 from app.configio import ConfigError, load_yaml_model
-from app.fileio import sha256_file
+from app.core.contracts import SMALLEST_EFFECT_OF_INTEREST
+from app.core.files import sha256_file
 from app.layout import Layout
 from app.main import UnsafeSettings, create_app
 from app.observers.family import GOAL_VARIANTS
@@ -356,7 +356,7 @@ def test_models_disagree_keeps_the_most_controversial_trials_per_label(small_stu
 
 
 def test_family_disagreement_is_the_mean_over_every_ours_and_vae_seed(bank):
-    from analysis.alignment import alignment_error
+    from app.core.alignment import alignment_error
 
     trial = bank.trials_of("highway", "main")[0]
     pairs = [alignment_error(np.asarray(o.actions), np.asarray(v.actions)).mean()

@@ -11,12 +11,12 @@ from scipy import stats
 from sqlalchemy import update
 
 from analysis.bank import read_bank
-from analysis.contracts import COARSE_OBSERVERS
 from analysis.load import load_csv
 from analysis.metrics import add_alignment_errors, apply_exclusions
 from analysis.report import preregistered_primary
 from analysis.seeds import seed_results
 from analysis.verdicts import EXPLORATORY, primary_sentences
+from app.core.contracts import COARSE_OBSERVERS
 from app.server.tables import Participant, TrialResponse
 from app.study.config import load_study_config
 from tests.study.flow import ADMIN, at_first_trial, prediction_body, straight_clicks

@@ -12,7 +12,10 @@ from sqlalchemy import update
 from sqlmodel import Session
 from typer.testing import CliRunner
 
-from analysis.contracts import (
+from analysis.exports import read_export
+from analysis.load import load_csv, load_database
+from app.cli import cli
+from app.core.contracts import (
     BOOL_COLUMNS,
     COARSE_OBSERVERS,
     EXPORT_COLUMNS,
@@ -21,9 +24,6 @@ from analysis.contracts import (
     WHAT,
     plugin_columns,
 )
-from analysis.exports import read_export
-from analysis.load import load_csv, load_database
-from app.cli import cli
 from app.researcher.exports import export_table
 from app.server.tables import Participant, TrialResponse, utcnow
 from app.settings import get_settings

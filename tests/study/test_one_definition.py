@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from sqlalchemy import select
 
-from analysis.contracts import COARSE_OBSERVERS
 from app.bank.model_answers import ACTION_TOLERANCE_MPS
+from app.core.contracts import COARSE_OBSERVERS
 from app.layout import Layout
 from app.observers import inverse_planning
 from app.observers.simulated_study import answer_columns, check_answer, simulated_payload

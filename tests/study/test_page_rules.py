@@ -12,7 +12,7 @@ from typing import get_args
 
 import pytest
 
-from analysis.contracts import MODEL_COLORS, MODEL_LABELS
+from app.core.contracts import MODEL_COLORS, MODEL_LABELS
 from app.data.scene import BROWSER_PALETTE
 from app.prediction_view import MIN_WINDOW_PX
 from app.server.endings import FINISHED

@@ -11,15 +11,15 @@ import pytest
 from sqlalchemy import select
 from sqlmodel import Session
 
-from analysis.alignment import alignment_error
-from analysis.contracts import (
+from analysis.load import load_csv, load_database
+from app.core.alignment import alignment_error
+from app.core.contracts import (
     COARSE_OBSERVERS,
     EXPORT_COLUMNS,
     MODEL_COLORS,
     model_color,
     plugin_columns,
 )
-from analysis.load import load_csv, load_database
 from app.predictors.ctrv import CTRV
 from app.predictors.protocol import ask
 from app.server.db import make_engine

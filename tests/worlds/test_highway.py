@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from app.configio import ConfigError
+from app.core.files import sha256_file
 from app.data.scene import Scene
 from app.data.trajectory import HUMAN, ROBOT, TrajectorySet
-from app.fileio import sha256_file
 from app.layout import Layout
 from app.worlds.highway import LANE_SHIFT, HighwayWorld
 from app.worlds.registry import build_world, default_config_path

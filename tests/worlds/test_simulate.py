@@ -14,7 +14,7 @@ import yaml
 from typer.testing import CliRunner
 
 from app.cli import cli
-from app.fileio import sha256_file
+from app.core.files import sha256_file
 from app.settings import REPO_ROOT, get_settings
 from tests.conftest import TOMSTUDY, patience
 

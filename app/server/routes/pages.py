@@ -5,7 +5,7 @@ from typing import get_args
 from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse, Response
 
-from analysis.contracts import MODEL_COLORS, MODEL_LABELS
+from app.core.contracts import MODEL_COLORS, MODEL_LABELS
 from app.data.scene import BROWSER_PALETTE
 from app.prediction_view import MIN_WINDOW_PX
 from app.server import notices

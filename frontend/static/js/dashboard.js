@@ -1,7 +1,7 @@
 // Researcher dashboard views: sessions table, study versions, error plots (SVG), field panels.
 import { drawBackground, prepareCanvas } from "./scene.js";
 
-// The analysis' figures' names and colours (analysis/contracts.py), as the page carries them;
+// The analysis' figures' names and colours (app/core/contracts.py), as the page carries them;
 // a study's plug-in predictors arrive with its alignment summary (useStyle).
 const MODEL_STYLE = JSON.parse(document.getElementById("model-style").textContent);
 export const MODEL_COLORS = MODEL_STYLE.colors;

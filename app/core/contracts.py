@@ -3,13 +3,16 @@
 - the export columns and their types (predictions, survey, events, participants);
 - the exclusion rules a study config names and the analysis applies;
 - how the figures and the researcher dashboard name and colour each model (and plug-in).
+- what the analysis takes from a study besides its rows (`StudyInputs`).
 
-The metric itself, alignment error, is in analysis/alignment.py. Both `app` and `analysis`
+The metric itself, alignment error, is in app/core/alignment.py. Both `app` and `analysis`
 import this module; it imports neither, so the packages depend one way. Only numpy and
 pydantic.
 """
 
 import hashlib
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -191,3 +194,14 @@ def too_fast_share_exceeds(n_fast, n_trials, rules: ExclusionRules) -> np.ndarra
     n_trials = np.asarray(n_trials, dtype=np.float64)
     share = np.where(n_trials > 0, n_fast / np.maximum(n_trials, 1.0), 0.0)
     return share > rules.too_fast_max_fraction
+
+
+@dataclass(frozen=True)
+class StudyInputs:
+    """What the analysis takes from the study besides its rows, as plain values and paths."""
+
+    config: dict  # the study config as plain data, recorded in meta.json
+    rules: ExclusionRules
+    models: dict  # the bundle manifest's {world: {model: {seed (str): content_hash}}}
+    bank: Path  # the trial bank (bank.json or a bundle's bank.json.gz; may be absent): every
+    #             seed's answers and each world's scene

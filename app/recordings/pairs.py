@@ -15,9 +15,10 @@ import numpy as np
 from tqdm import tqdm
 
 from app.data.trajectory import Episode
-from app.interaction import tracks as tx
-from app.interaction.tracks import CAR_TYPES, Recording, Track
+from app.recordings import tracks as tx
+from app.recordings.tracks import CAR_TYPES, Recording, Track
 
+TURN_NAMES = ["left", "straight", "right"]  # a track's turn label, index = turn_label
 
 @dataclass(frozen=True)
 class PairRule:
@@ -168,3 +169,19 @@ def time_split(recordings: list[Recording], train_fraction: float) -> dict[str, 
         ranges["train"][rec.name] = (lo, cut - 1)
         ranges["val"][rec.name] = (cut, hi)
     return ranges
+
+
+def turn_label(track: np.ndarray, threshold_deg: float) -> int:
+    """Index into TURN_NAMES of a map-frame track's [W, 2] travel direction change over its
+    moving steps (a map's y points up, so a positive change is a left turn)."""
+    moves = np.diff(track, axis=0)
+    moving = np.linalg.norm(moves, axis=1) > 0.05
+    if moving.sum() < 2:
+        return TURN_NAMES.index("straight")
+    angles = np.unwrap(np.arctan2(moves[moving, 1], moves[moving, 0]))
+    change = np.degrees(angles[-1] - angles[0])
+    if change > threshold_deg:
+        return TURN_NAMES.index("left")
+    if change < -threshold_deg:
+        return TURN_NAMES.index("right")
+    return TURN_NAMES.index("straight")

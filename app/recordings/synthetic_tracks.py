@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from app.interaction.lanelet_map import OriginProjector
-from app.interaction.tracks import CASE_COLUMNS, FRAME_MS, PEDESTRIAN_COLUMNS, VEHICLE_COLUMNS
+from app.recordings.lanelet_map import OriginProjector
+from app.recordings.tracks import CASE_COLUMNS, FRAME_MS, PEDESTRIAN_COLUMNS, VEHICLE_COLUMNS
 
 ORIGIN_M = np.array([1000.0, 1000.0])
 DT_S = FRAME_MS / 1000
