@@ -7,13 +7,16 @@ from typing import Literal
 from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, Response
 
-from app.researcher import exports, payments, progress, withdrawal
+from app.core.contracts import WHAT
+from app.researcher import payments, withdrawal
 from app.researcher.archive_registry import RegistryError, read_registry
 from app.server.deps import AdminDep, SessionDep, study_context
 from app.server.schemas import PaymentActionCreate, WithdrawalCreate
 from app.study.errors import Refused
 
 router = APIRouter(prefix="/api/researcher", tags=["researcher"])
+# progress and exports (pandas and the analysis code, ~1 s of imports) load on the first
+# researcher request, not in every worker's start: participants never need them
 
 CSV = {200: {"content": {"text/csv": {}}}}
 
@@ -21,11 +24,13 @@ CSV = {200: {"content": {"text/csv": {}}}}
 @router.get("/summary")
 def read_summary(study_id: str, request: Request, db: SessionDep, _: AdminDep) -> dict:
     """Progress, completions, exclusions and running mean alignment error per model and world."""
+    from app.researcher import progress
+
     return progress.summary(db, study_context(request, study_id))
 
 
 @router.get("/export/{what}.csv", response_class=Response, responses=CSV)
-def read_export(what: Literal[exports.WHAT], study_id: str, request: Request, db: SessionDep,
+def read_export(what: Literal[WHAT], study_id: str, request: Request, db: SessionDep,
                 _: AdminDep) -> Response:
     """One export (predictions, survey, events, participants); columns in app/server/API.md."""
     return _csv(request, db, study_id, what)
@@ -39,7 +44,7 @@ def read_predictions_export(study_id: str, request: Request, db: SessionDep,
 
 
 @router.get("/export/{what}.datapackage.json")
-def read_export_package(what: Literal[exports.WHAT], study_id: str, request: Request,
+def read_export_package(what: Literal[WHAT], study_id: str, request: Request,
                         db: SessionDep, _: AdminDep) -> JSONResponse:
     """The codebook of one export: a Frictionless Data Package describing the CSV the sibling
     route serves now (its columns, units, allowed values, sha256 and rows)."""
@@ -54,12 +59,16 @@ def read_predictions_package(study_id: str, request: Request, db: SessionDep,
 
 
 def _csv(request: Request, db: SessionDep, study_id: str, what: str) -> Response:
+    from app.researcher import exports
+
     config = study_context(request, study_id).config
     return Response(exports.export_csv(db, config, study_id, what), media_type="text/csv",
                     headers=_attachment(exports.export_filename(study_id, what)))
 
 
 def _package(request: Request, db: SessionDep, study_id: str, what: str) -> JSONResponse:
+    from app.researcher import exports
+
     config = study_context(request, study_id).config
     frame = exports.export_table(db, config, study_id, what)
     csv_name = exports.export_filename(study_id, what)

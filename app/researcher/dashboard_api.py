@@ -4,7 +4,7 @@ from typing import Literal
 
 from fastapi import APIRouter, Request
 
-from app.researcher import dashboard, replay
+from app.researcher import replay
 from app.server.deps import AdminDep, SessionDep, study_context
 from app.server.openapi import ErrorDetail
 
@@ -18,6 +18,8 @@ def read_dashboard(study_id: str, request: Request, db: SessionDep, _: AdminDep,
                    rules: Literal["kept", "live"] = "kept", external_ids: bool = False) -> dict:
     """Every session, sessions per config/bank hash, and alignment error CIs and fields
     under the study's exclusion rules (`live`: incomplete sessions kept)."""
+    from app.researcher import dashboard  # pandas: on the first request, not at every start
+
     return dashboard.dashboard(db, study_context(request, study_id), rules, external_ids)
 
 
