@@ -14,7 +14,7 @@ RUNTIME_STAMP := $(VENV)/.installed-runtime
 # wheel sources (an unpinned resolve pulls gigabytes of CUDA wheels), and uv keeps it.
 UV := $(BIN)/uv pip install -q --python $(BIN)/python
 
-.PHONY: install serve test test-parallel lint docs data bench pilot screens screens-recorded fuzz lock clean
+.PHONY: install serve test lint docs data bench pilot screens screens-recorded fuzz lock clean
 
 $(RUNTIME_STAMP): pyproject.toml $(RUNTIME_LOCK)
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -50,16 +50,10 @@ MKDOCS := NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 docs: $(STAMP)
 	$(MKDOCS)
 
-test: $(STAMP) $(AXE)
-	$(BIN)/ruff check app analysis tests benchmarks
-	$(MKDOCS)
-	$(BIN)/pytest -q
-
-# the suite on TEST_WORKERS processes (pytest-xdist, a file per process at a time), then the
-# `serial` tests xdist cannot run: ~14.5 min instead of ~25 on 2 cores, but not yet the
-# default: browser tests sharing one server still race on it under xdist (issue 35 notes)
+# the suite on TEST_WORKERS processes (pytest-xdist, one file per process at a time, so a
+# file's session fixtures stay in one process), then the `serial` tests xdist cannot run
 TEST_WORKERS ?= 2
-test-parallel: $(STAMP) $(AXE)
+test: $(STAMP) $(AXE)
 	$(BIN)/ruff check app analysis tests benchmarks
 	$(MKDOCS)
 	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not serial"
