@@ -51,7 +51,7 @@ docs: $(STAMP)
 	$(MKDOCS)
 
 test: $(STAMP) $(AXE)
-	$(BIN)/ruff check app analysis tests benchmarks
+	$(BIN)/ruff check app analysis tests tools benchmarks
 	$(MKDOCS)
 	$(BIN)/pytest -q
 
@@ -60,7 +60,7 @@ test: $(STAMP) $(AXE)
 # default: browser tests sharing one server still race on it under xdist (issue 35 notes)
 TEST_WORKERS ?= 2
 test-parallel: $(STAMP) $(AXE)
-	$(BIN)/ruff check app analysis tests benchmarks
+	$(BIN)/ruff check app analysis tests tools benchmarks
 	$(MKDOCS)
 	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not serial"
 	$(BIN)/pytest -q -m serial

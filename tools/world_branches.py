@@ -1,6 +1,6 @@
 """Branches on a study world outside app/worlds/: the World protocol should make them needless.
 
-    python -m tests.world_branches
+    python -m tools.world_branches
 
 A branch is an `if`, conditional expression, comprehension filter, `while` or `match`
 whose condition mentions a world's name or a world-only piece of geometry (lanes, goals,

@@ -1,6 +1,6 @@
 """The project's import graph: cycles between files and between packages, and upward imports.
 
-    python -m tests.import_graph
+    python -m tools.import_graph
 
 Every `import` statement counts, also those inside functions: a lazy import hides a cycle
 from the interpreter, not from a reader. Prints each cycle found (exit 1 if any).

@@ -1,6 +1,6 @@
 """Hashes that a refactor must not change: fixed-seed trajectories, the trial bank, bot clicks.
 
-    python -m tests.fingerprint [--n 16] [--seed 3]
+    python -m tools.fingerprint [--n 16] [--seed 3]
 
 Simulates both worlds with a fixed seed into a scratch data dir, builds the paper study's
 bank there from the checkpoints under var/models (and the trajectories under var/data), and

@@ -1,6 +1,6 @@
 """A package as a tree, one line per module: its name and what its docstring says first.
 
-    python -m tests.module_tree [app]
+    python -m tools.module_tree [app]
 """
 
 import ast
