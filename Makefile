@@ -54,7 +54,7 @@ docs: $(STAMP)
 # file's session fixtures stay in one process), then the `serial` tests xdist cannot run
 TEST_WORKERS ?= 2
 test: $(STAMP) $(AXE)
-	$(BIN)/ruff check app analysis tests benchmarks
+	$(BIN)/ruff check app analysis tests tools benchmarks
 	$(MKDOCS)
 	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not serial"
 	$(BIN)/pytest -q -m serial
@@ -93,7 +93,7 @@ screens-recorded: $(STAMP)
 # Schemathesis with every check on the study API: at least 5,000 cases, 0 failures (issue 10)
 fuzz: $(STAMP)
 	SCHEMATHESIS_MAX_EXAMPLES=600 SCHEMATHESIS_MIN_CASES=5000 \
-	  $(BIN)/pytest tests/study/test_schemathesis.py -q -s -p no:cacheprovider
+	  $(BIN)/pytest tests/server/test_schemathesis.py -q -s -p no:cacheprovider
 
 bench: $(STAMP)
 	for f in benchmarks/[!_]*.py; do $(BIN)/python $$f || exit 1; done

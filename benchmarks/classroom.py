@@ -1,5 +1,5 @@
 """A classroom of --size participants behind one address (127.0.0.1), each starting,
-consenting and answering its first trial the way the page does (tests/study/classroom.py:
+consenting and answering its first trial the way the page does (tests/server/classroom.py:
 the page's requests and retries), against a real `tomstudy serve` of the small study at the
 default rate limits. Prints the 429s seen (retried by the page, or reaching it), the
 requests, and how long until every participant had started and had answered.
@@ -23,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from app.settings import Settings  # noqa: E402
 from tests.conftest import cached_small_study, free_port, start_server  # noqa: E402
-from tests.study.classroom import NOT_RETRIED, classroom  # noqa: E402
+from tests.server.classroom import NOT_RETRIED, classroom  # noqa: E402
 
 
 def main() -> None:

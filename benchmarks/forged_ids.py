@@ -9,7 +9,7 @@ all from one address (127.0.0.1), against a real `tomstudy serve` of the small s
     then a real participant: their start and their consent.
 (c) With `recruitment.max_counted_sessions: 22`, 22 forged starts, then a real participant.
 (d) With a Prolific API token and the local stand-in of Prolific's API as Prolific
-    (tests/prolific_standin.py; the live Prolific cannot be reached from here), 220 forged
+    (tests/server/prolific_standin.py; the live Prolific cannot be reached from here), 220 forged
     starts whose SESSION_ID Prolific does not know, then a participant whose submission it
     knows: how many forged sessions were stored or count, and the real one's start, consent and
     counted flag.
@@ -39,8 +39,8 @@ from app.server.sessions import SESSION_HEADER  # noqa: E402
 from app.server.tables import Participant  # noqa: E402
 from app.settings import Settings  # noqa: E402
 from tests.conftest import SmallStudy, cached_small_study, free_port, start_server  # noqa: E402
-from tests.prolific_standin import ProlificStandIn, serve  # noqa: E402
-from tests.study.flow import DEVICE, new_id  # noqa: E402
+from tests.server.flow import DEVICE, new_id  # noqa: E402
+from tests.server.prolific_standin import ProlificStandIn, serve  # noqa: E402
 
 FORGED_STUDY_ID = "f" * 24
 

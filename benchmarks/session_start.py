@@ -36,7 +36,7 @@ from app.main import create_app  # noqa: E402
 from app.server.balance import STALE_BATCH, release_stale_batch  # noqa: E402
 from app.server.tables import Participant, utcnow  # noqa: E402
 from tests.conftest import cached_small_study  # noqa: E402
-from tests.study.flow import make_client, prolific  # noqa: E402
+from tests.server.flow import make_client, prolific  # noqa: E402
 
 
 def seed(client, study_id: str, n: int, completed: bool = True) -> None:

@@ -34,7 +34,7 @@ from tests.conftest import (  # noqa: E402
     stop_server,
     wait_for_log,
 )
-from tests.study.starts import send_starts  # noqa: E402
+from tests.server.starts import send_starts  # noqa: E402
 
 CASES = (("1 server, 2 workers", 1, 2), ("2 servers on 2 ports, 1 worker each", 2, 1))
 

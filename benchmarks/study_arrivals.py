@@ -85,7 +85,7 @@ from tests.conftest import (  # noqa: E402
     start_server,
     stop_server,
 )
-from tests.study.flow import DEVICE, prediction_body  # noqa: E402
+from tests.server.flow import DEVICE, prediction_body  # noqa: E402
 
 STUDY = "paper_study"
 PEAK_PER_S = 22 / 120  # the paper study's target, all arriving within two minutes

@@ -45,7 +45,7 @@ from tests.conftest import (  # noqa: E402
     free_port,
     start_server,
 )
-from tests.study.flow import DEVICE, prediction_body  # noqa: E402
+from tests.server.flow import DEVICE, prediction_body  # noqa: E402
 
 BARE = "GET bare"
 ROUTES = ("POST sessions", "GET state", "POST consent", "POST instructions", "POST continue",

@@ -1,7 +1,10 @@
-"""Shared fixtures: a small real study pipeline, servers, and throwaway PostgreSQL and Redis
-servers."""
+"""Shared fixtures: a small real study pipeline, servers, throwaway PostgreSQL and Redis
+servers, and the study app on a fresh database of each backend (the server's, researcher's,
+bank's and study's tests all use it)."""
 
 import hashlib
+import itertools
+import json
 import os
 import re
 import shutil
@@ -23,7 +26,7 @@ PG_BIN = Path("/usr/lib/postgresql/15/bin")
 REDIS_SERVER = Path("/usr/bin/redis-server")  # Debian's redis-server (the shared rate-limit store)
 ADMIN_TOKEN = "test-token"  # the researcher token of every test server and app
 # test clients send many requests from one address (TestClient's peer is "testclient"):
-# rate limits are off unless a test turns them on (tests/study/test_traffic.py)
+# rate limits are off unless a test turns them on (tests/server/test_traffic.py)
 NO_RATE_LIMITS = {"rate_limit_starts": "", "rate_limit_requests": ""}
 TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")  # the installed CLI, for subprocesses
 
@@ -515,3 +518,49 @@ def redis_server(tmp_path_factory):
     server.start()
     yield server
     server.stop()
+
+
+# ---------------------------------------------------------------- the study app on each backend
+
+_db_counter = itertools.count()
+
+
+@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
+def db_url(request, tmp_path):
+    """A fresh empty database of each backend."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'study.db'}"
+    return fresh_database(request.getfixturevalue("postgres_url"), f"api{next(_db_counter)}")
+
+
+@pytest.fixture(scope="session")
+def served_study(small_study):
+    """The study `client` serves and `bank` reads (a test module may serve another)."""
+    return small_study
+
+
+@pytest.fixture
+def client(served_study, db_url):
+    """The app on a fresh database."""
+    from tests.server.flow import make_client  # flow imports this module
+
+    with make_client(served_study, db_url) as c:
+        yield c
+
+
+@pytest.fixture
+def codes(client, served_study) -> dict[str, str]:
+    """Each outcome's completion code as `client`'s app gives it (the study's generated ones)."""
+    from app.server.completion_codes import OUTCOMES
+
+    recruitment = client.app.state.studies[served_study.study_id].config.recruitment
+    return {outcome: recruitment.ending(outcome).completion_code for outcome in OUTCOMES}
+
+
+@pytest.fixture(scope="module")
+def bank(served_study) -> dict:
+    """Bank trials by id (the test reads the true moves for attention checks)."""
+    from app.layout import Layout
+
+    raw = json.loads(Layout(served_study.data_dir).bank(served_study.study_id).read_text())
+    return {t["trial_id"]: t for w in raw["worlds"].values() for t in w["trials"]}

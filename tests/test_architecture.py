@@ -3,8 +3,8 @@ one form of the data directory."""
 
 import ast
 
-from tests.import_graph import ROOT, file_graph, imported_names, project_modules, report
-from tests.world_branches import world_branches
+from tools.import_graph import ROOT, file_graph, imported_names, project_modules, report
+from tools.world_branches import world_branches
 
 
 def test_no_import_cycles_between_files_or_packages():

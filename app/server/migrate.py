@@ -5,7 +5,7 @@ database that is not at it; `tomstudy db upgrade` moves one there, including a d
 made before migrations existed (no alembic_version table), once its tables match a
 known revision. On PostgreSQL an advisory lock makes both safe when several processes
 start together. A schema change is a change to tables.py plus a new script in
-migrations/versions/ (tests/study/test_migrations.py fails until the two agree).
+migrations/versions/ (tests/server/test_migrations.py fails until the two agree).
 """
 
 import hashlib

@@ -8,7 +8,7 @@
 
 Every request carries `Authorization: Token <token>` (docs.prolific.com, API reference,
 Submissions). Written against Prolific's documented API and tested against a local stand-in
-(tests/prolific_standin.py) that implements these endpoints, never against the live Prolific.
+(tests/server/prolific_standin.py) that implements these endpoints, never against the live Prolific.
 A network failure, a timeout, a 5xx, a 429 or a refused token raise `ProlificUnreachable`: the
 caller decides what an unanswered question means (sessions: admit and re-check, see
 prolific_check.py).

@@ -40,7 +40,7 @@ from tests.e2e.pages import (
     wait_saved,
     watch_clips,
 )
-from tests.study.flow import served_codes
+from tests.server.flow import served_codes
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 

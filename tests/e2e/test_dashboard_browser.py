@@ -14,7 +14,7 @@ from tests.conftest import ADMIN_TOKEN, patience
 from tests.e2e.axe import axe_violations
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import SCREENSHOTS, log_in, researcher_page
-from tests.study.flow import Participant, hex24, prolific, served_codes
+from tests.server.flow import Participant, hex24, prolific, served_codes
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 

@@ -32,8 +32,8 @@ from tests.e2e.pages import (
     through_instructions,
     visible,
 )
-from tests.study.flow import Participant as ApiParticipant
-from tests.study.flow import fail_attention_checks, served_codes
+from tests.server.flow import Participant as ApiParticipant
+from tests.server.flow import fail_attention_checks, served_codes
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 

@@ -49,7 +49,7 @@ from tests.e2e.pages import (
     visible,
     wait_saved,
 )
-from tests.study.flow import Participant, new_id, prolific, served_codes
+from tests.server.flow import Participant, new_id, prolific, served_codes
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 

@@ -12,7 +12,7 @@ from app.layout import Layout
 from tests.conftest import SmallStudy, free_port, freeze_bundle_of, patience, start_server
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import VIEWPORT, fresh_recruitment, visible
-from tests.study.flow import Participant, new_id, prolific
+from tests.server.flow import Participant, new_id, prolific
 
 pytestmark = [pytest.mark.browser]
 CAPPED = "capped_study"

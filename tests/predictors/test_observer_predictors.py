@@ -13,8 +13,8 @@ from app.observers.family import coarse_options
 from app.observers.predictor import ObserverPredictor, observer_predictors
 from app.predictors.protocol import ask
 from app.study.trials import NO_SEED, TrialBank
+from tests.bank.test_bundle import bundle_root, copied
 from tests.predictors.test_plugin_bank import refrozen
-from tests.study.test_bundle import bundle_root, copied
 
 
 @pytest.fixture(scope="module")

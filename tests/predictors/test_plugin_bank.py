@@ -14,8 +14,8 @@ from app.predictors.builtin import CheckpointPredictor, ConstantVelocity
 from app.predictors.ctrv import CTRV
 from app.predictors.protocol import ask
 from app.study.trials import NO_SEED, TrialBank
+from tests.bank.test_bundle import bundle_root, copied
 from tests.conftest import TOMSTUDY, freeze_bundle_of, patience
-from tests.study.test_bundle import bundle_root, copied
 
 
 def test_the_bank_stores_ctrvs_answer_to_every_trial(ctrv_study):

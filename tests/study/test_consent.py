@@ -11,7 +11,7 @@ from app.settings import Settings
 from app.study.config import ConsentForm, StudyConfig, load_study_config
 from app.study.consent import Advert, consent_problem, consent_sections
 from tests.conftest import FILLED_CONSENT, REPO, local_client
-from tests.study.flow import Participant
+from tests.server.flow import Participant
 
 STRONG = "s" * 40
 PRODUCTION = {"production": True, "admin_token": STRONG, "rate_limit_starts": "30/minute",

@@ -14,7 +14,7 @@ from app.observers.simulated_study import answer_columns, check_answer, simulate
 from app.server.tables import PredictionRow
 from app.study.errors import Refused
 from app.study.trials import TrialBank
-from tests.study.flow import Participant, prediction_body, segment_key
+from tests.server.flow import Participant, prediction_body, segment_key
 
 # the server stores its own recomputed answers of these (the bank's are rounded to 1e-5 m/s)
 MODEL_COLUMNS = {f"{m}_{axis}" for m in ("ours", "vae", *COARSE_OBSERVERS) for axis in ("vx", "vy")}

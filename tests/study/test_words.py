@@ -26,7 +26,7 @@ from tests.conftest import (
     cached_build,
     write_small_configs,
 )
-from tests.study.flow import (
+from tests.server.flow import (
     PART_PHASES,
     TRIAL_PHASES,
     Participant,

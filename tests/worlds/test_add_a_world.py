@@ -20,7 +20,7 @@ from app.configio import ConfigError
 from app.data.trajectory import TrajectorySet
 from app.worlds import registry
 from tests.conftest import SMALL_STUDY_OVERRIDES, SmallStudy, settings_of, write_small_configs
-from tests.study.flow import at_first_trial, make_client
+from tests.server.flow import at_first_trial, make_client
 
 GUIDE = Path(__file__).resolve().parents[2] / "docs" / "extend" / "add-a-world.md"
 WORLD, STUDY = "corridor", "corridor_study"
