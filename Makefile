@@ -56,7 +56,7 @@ TEST_WORKERS ?= 2
 test: $(STAMP) $(AXE)
 	$(BIN)/ruff check app analysis tests tools benchmarks
 	$(MKDOCS)
-	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not serial"
+	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile -m "not serial" --durations=15
 	$(BIN)/pytest -q -m serial
 
 # Pilot end to end on a fresh database: serve STUDY, KIND bots (coarse|coarse_scene|
