@@ -22,12 +22,12 @@ from app.researcher.progress import (
     progress_counts,
     study_sessions,
 )
-from app.server.completion_codes import codes_table
-from app.server.context import StudyContext
-from app.server.places import Cutoffs, status_cutoffs
-from app.server.sessions import as_utc, session_status
-from app.server.state import progress_of
-from app.server.tables import Participant
+from app.server.flow.completion_codes import codes_table
+from app.server.flow.context import StudyContext
+from app.server.flow.places import Cutoffs, status_cutoffs
+from app.server.flow.sessions import as_utc, session_status
+from app.server.flow.state import progress_of
+from app.server.storage.tables import Participant
 from app.study.config import stored_predictors
 
 FIELD_CODES = 3  # most common codes per model, as the report's figures

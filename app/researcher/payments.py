@@ -15,9 +15,9 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 from sqlmodel import Session
 
+from app.server.flow.sessions import as_utc
 from app.server.prolific import ProlificClient, ProlificRefused, ProlificUnreachable
-from app.server.sessions import as_utc
-from app.server.tables import Participant, PaymentAudit
+from app.server.storage.tables import Participant, PaymentAudit
 from app.study.errors import Refused
 
 ACTIONS = ("approve", "return")

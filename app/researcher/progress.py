@@ -8,12 +8,12 @@ from sqlalchemy import select
 from sqlmodel import Session
 
 from app.researcher.exports import predictions_frame
-from app.server.completion_codes import codes_table
-from app.server.context import StudyContext
-from app.server.places import status_cutoffs
-from app.server.recruitment import preview_path
-from app.server.sessions import session_status
-from app.server.tables import Participant
+from app.server.flow.completion_codes import codes_table
+from app.server.flow.context import StudyContext
+from app.server.flow.places import status_cutoffs
+from app.server.flow.recruitment import preview_path
+from app.server.flow.sessions import session_status
+from app.server.storage.tables import Participant
 from app.study.config import stored_predictors
 
 

@@ -9,10 +9,10 @@ import numpy as np
 from sqlalchemy import func, select
 from sqlmodel import Session
 
-from app.server.context import StudyContext
-from app.server.sessions import as_utc
-from app.server.state import static_trial
-from app.server.tables import Participant, PredictionRow, TrialResponse
+from app.server.flow.context import StudyContext
+from app.server.flow.sessions import as_utc
+from app.server.flow.state import static_trial
+from app.server.storage.tables import Participant, PredictionRow, TrialResponse
 from app.study.config import stored_predictors
 from app.study.errors import Refused
 

@@ -30,11 +30,11 @@ from sqlmodel import Session
 
 from app.layout import Layout
 from app.researcher.archive_registry import archives_holding, read_registry
-from app.server import balance
-from app.server.recruitment import normalise_external_id
-from app.server.schemas import WithdrawalByExternalId, WithdrawalCreate
-from app.server.sessions import as_utc
-from app.server.tables import (
+from app.server.flow import balance
+from app.server.flow.recruitment import normalise_external_id
+from app.server.flow.sessions import as_utc
+from app.server.http.schemas import WithdrawalByExternalId, WithdrawalCreate
+from app.server.storage.tables import (
     Event,
     Participant,
     PredictionRow,
