@@ -8,12 +8,14 @@ from sqlalchemy import select
 from sqlmodel import Session
 
 from app.researcher.exports import predictions_frame
-from app.server.flow.completion_codes import codes_table
-from app.server.flow.context import StudyContext
-from app.server.flow.places import status_cutoffs
-from app.server.flow.recruitment import preview_path
-from app.server.flow.sessions import session_status
-from app.server.storage.tables import Participant
+from app.server.queries import (
+    Participant,
+    StudyContext,
+    codes_table,
+    preview_path,
+    session_status,
+    status_cutoffs,
+)
 from app.study.config import stored_predictors
 
 
