@@ -85,7 +85,7 @@ def one_of(values, separator: str) -> str:
 SESSION = {
     "export_version": Column(
         f"The export's version (EXPORT_VERSION in app/core/contracts.py): {EXPORT_VERSION} "
-        "since the participant's columns were renamed (app/server/API.md, Changes); an "
+        "since the participant's columns were renamed (app/server/http/API.md, Changes); an "
         "export without the column is version 1.", values=(EXPORT_VERSION,), required=True),
     "study_id": Column("The study's id (its config study_configs/<study_id>.yaml).",
                        required=True),
@@ -115,7 +115,7 @@ OUTCOME = Column(
 REPLACED = Column("The attempt was replaced by a newer one of the same participant; the "
                   "analysis leaves it out (false in exports made before the column).")
 PROLIFIC_CHECK = Column(
-    "Prolific's word on the session's link (app/server/prolific_check.py): confirmed, pending "
+    "Prolific's word on the session's link (app/server/flow/prolific_check.py): confirmed, pending "
     "(Prolific not reachable yet) or unknown; empty when not asked (no Prolific API token, "
     "another platform, a pilot) and in exports made before the column. The analysis "
     "excludes pending and unknown sessions (prolific_unknown).", values=PROLIFIC_CHECKS)
@@ -152,7 +152,7 @@ PREDICTIONS = {
                           "is_practice."),
     "is_practice": Column("A practice trial (answered, not scored)."),
     "attention_check": Column("An attention check (the robot's true first move is the "
-                              "answer; app/server/validation.py)."),
+                              "answer; app/server/flow/validation.py)."),
     "arm": Column("How a main trial was chosen: random, or the selection rule's arm "
                   "(models_disagree, discriminability; README \"Main trials\"); empty for "
                   "practice trials and attention checks, and in rows stored before arms "
@@ -383,7 +383,7 @@ def data_package(what: str, columns, csv: bytes, path: str, rows: int, study_id:
 
 def _resource_note(what: str) -> str:
     kinds = "; ".join(f"{FIELD_TYPES[k]}: {note}" for k, note in KIND_NOTES.items())
-    return (f"The {what} export (app/server/API.md, Exports). Cells: {kinds}. A text cell "
+    return (f"The {what} export (app/server/http/API.md, Exports). Cells: {kinds}. A text cell "
             "that would start a spreadsheet formula (=, +, -, @, tab, carriage return) or "
             "starts with ' is written with one leading ' (analysis.exports.read_export "
             "removes it).")

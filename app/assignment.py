@@ -4,7 +4,7 @@ Main trials come in selection arms (random, models_disagree: app/study/config.py
 MainTrialSelection); each participant gets every arm in proportion to its size, so every
 participant's results can be read per arm.
 
-The study server assigns world orders and trials this way (app/server/plan.py), and the
+The study server assigns world orders and trials this way (app/server/flow/plan.py), and the
 simulated studies (app/observers/simulated_study.py) assign their simulated participants'
 trials the same way, so a simulated study samples trials as the real one does.
 """

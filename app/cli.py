@@ -656,8 +656,8 @@ cli.add_typer(db_cli, name="db")
 @db_cli.command("upgrade")
 def db_upgrade() -> None:
     """Bring the database to this tomstudy's schema revision, keeping every row."""
-    from app.server.db import make_engine
-    from app.server.migrate import SchemaError, upgrade, upgrade_lines, where
+    from app.server.storage.db import make_engine
+    from app.server.storage.migrate import SchemaError, upgrade, upgrade_lines, where
 
     engine = make_engine(get_settings().resolved_database_url())
     try:
@@ -673,8 +673,8 @@ def db_upgrade() -> None:
 @db_cli.command("current")
 def db_current() -> None:
     """Print the database's schema revision and this tomstudy's newest."""
-    from app.server.db import make_engine
-    from app.server.migrate import revision_lines
+    from app.server.storage.db import make_engine
+    from app.server.storage.migrate import revision_lines
 
     engine = make_engine(get_settings().resolved_database_url())
     try:
@@ -690,7 +690,7 @@ def preview_link_cmd(
     base_url: Annotated[str, typer.Option(help="where the study is served")] = "",
 ) -> None:
     """Print the study's researcher preview link: its sessions are pilots that never count."""
-    from app.server.recruitment import preview_key, preview_path
+    from app.server.flow.recruitment import preview_key, preview_path
 
     token = get_settings().admin_token
     if not token.strip():
@@ -707,7 +707,7 @@ def codes_cmd(
     """Print each ending's completion code and its Prolific action (generated ones are made
     and kept in the data dir on first use)."""
     from app.configio import ConfigError
-    from app.server.completion_codes import codes_table, served_config
+    from app.server.flow.completion_codes import codes_table, served_config
     from app.study.config import load_study_config
 
     settings = get_settings()
@@ -797,7 +797,7 @@ def withdraw(
 
     from app.researcher.archive_registry import RegistryError
     from app.researcher.withdrawal import withdraw_and_erase
-    from app.server.schemas import WithdrawalByExternalId, WithdrawalByParticipantId
+    from app.server.http.schemas import WithdrawalByExternalId, WithdrawalByParticipantId
     from app.study.errors import Refused
 
     if (external_id is None) == (participant_id is None):
@@ -931,8 +931,8 @@ def prolific_recheck(study: StudyOption) -> None:
     """Ask Prolific again about the sessions it could not be asked about at their start."""
     import asyncio
 
+    from app.server.flow.prolific_check import recheck_pending
     from app.server.prolific import client_from
-    from app.server.prolific_check import recheck_pending
 
     client = client_from(get_settings())
     if client is None:
@@ -948,8 +948,8 @@ def prolific_recheck(study: StudyOption) -> None:
 def study_database(study: str):
     """(study config, engine on DATABASE_URL) for a study's stored data; exit 2 naming the
     option or variable to fix."""
-    from app.server.db import NoDatabase, open_existing
-    from app.server.migrate import SchemaError
+    from app.server.storage.db import NoDatabase, open_existing
+    from app.server.storage.migrate import SchemaError
     from app.study.config import load_study_config
 
     settings = get_settings()

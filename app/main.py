@@ -30,16 +30,19 @@ from app.bank.prepare import prepare_study
 from app.bank.verify import load_bundle
 from app.researcher import api as researcher
 from app.researcher import dashboard_api as dashboard
-from app.server import health
-from app.server.balance import ensure_rows, sweep_stale
 from app.server.bank_guard import check_bank_unchanged
-from app.server.completion_codes import PublicCode, refuse_public_codes, served_config
-from app.server.context import StudyContext
-from app.server.db import create_tables, make_engine
-from app.server.headers import MTURK_FRAMERS, SecurityHeaders
-from app.server.limitstore import LimitStore
-from app.server.lockout import TokenLockout
-from app.server.openapi import declare_error_responses
+from app.server.flow.balance import ensure_rows, sweep_stale
+from app.server.flow.completion_codes import PublicCode, refuse_public_codes, served_config
+from app.server.flow.context import StudyContext
+from app.server.flow.prolific_check import recheck_loop
+from app.server.flow.recruitment import preview_key
+from app.server.http import health
+from app.server.http.headers import MTURK_FRAMERS, SecurityHeaders
+from app.server.http.limitstore import LimitStore
+from app.server.http.lockout import TokenLockout
+from app.server.http.openapi import declare_error_responses
+from app.server.http.ratelimit import RateLimit, parse_limit
+from app.server.http.routes import pages, participant
 from app.server.preflight import (
     STUDY_ENV,
     NotServable,
@@ -53,10 +56,7 @@ from app.server.preflight import (
     with_generated_token,
 )
 from app.server.prolific import client_from
-from app.server.prolific_check import recheck_loop
-from app.server.ratelimit import RateLimit, parse_limit
-from app.server.recruitment import preview_key
-from app.server.routes import pages, participant
+from app.server.storage.db import create_tables, make_engine
 from app.settings import REPO_ROOT, Settings, get_settings
 from app.study.config import StudyConfig, config_sha256, load_study_config
 from app.study.consent import consent_problem
@@ -193,7 +193,8 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
         app.state.engine.dispose()
 
     app = FastAPI(title="tomstudy", lifespan=lifespan, **docs_urls(settings),
-                  description="Online study of how people predict a robot (app/server/API.md).")
+                  description="Online study of how people predict a robot "
+                              "(app/server/http/API.md).")
     app.state.settings = settings
     app.state.prolific = client_from(settings)  # None: no token, Prolific is not asked
     store = limit_store(settings)  # one per worker: the middleware and the lockout share it

@@ -1,6 +1,6 @@
 """The prediction screen's scale: how many CSS pixels one scene metre spans, per world.
 
-One rule, applied where a trial is served (app/server/state.py hands `view` to the page,
+One rule, applied where a trial is served (app/server/flow/state.py hands `view` to the page,
 which draws with it) and where clicks are simulated (the instrument reads the same
 resolution). The scale makes the world policy's median true step, from the main trials'
 start states, span TARGET_STEP_PX: a click one pixel off then turns the move by

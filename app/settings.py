@@ -33,7 +33,7 @@ class Settings(BaseSettings):
     database_password_file: Path | None = None
     # comma-separated public host names of the study (e.g. study.example.org)
     allowed_hosts: str = ""
-    # where the rate limits and the researcher lockout count (app/server/limitstore.py): a
+    # where the rate limits and the researcher lockout count (app/server/http/limitstore.py): a
     # `limits` storage URI. memory:// counts in each worker process (one worker: SQLite);
     # redis://host:6379/0 shares the counts between every worker and host
     rate_limit_storage: str = "memory://"
@@ -60,7 +60,7 @@ class Settings(BaseSettings):
     # serve a study although sessions ran another trial bank (app/server/bank_guard.py)
     allow_bank_change: bool = False
     # Prolific's researcher API (app/server/prolific.py): with a token, a Prolific session counts
-    # only once Prolific confirms its SESSION_ID (app/server/prolific_check.py)
+    # only once Prolific confirms its SESSION_ID (app/server/flow/prolific_check.py)
     prolific_token: str = ""
     prolific_token_file: Path | None = None
     prolific_api_url: str = "https://api.prolific.com/api/v1/"

@@ -35,8 +35,8 @@ from sqlalchemy import create_engine, func, select
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from app.server.sessions import SESSION_HEADER  # noqa: E402
-from app.server.tables import Participant  # noqa: E402
+from app.server.flow.sessions import SESSION_HEADER  # noqa: E402
+from app.server.storage.tables import Participant  # noqa: E402
 from app.settings import Settings  # noqa: E402
 from tests.conftest import SmallStudy, cached_small_study, free_port, start_server  # noqa: E402
 from tests.server.flow import DEVICE, new_id  # noqa: E402

@@ -33,8 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from fastapi.testclient import TestClient  # noqa: E402
 
 from app.main import create_app  # noqa: E402
-from app.server.balance import STALE_BATCH, release_stale_batch  # noqa: E402
-from app.server.tables import Participant, utcnow  # noqa: E402
+from app.server.flow.balance import STALE_BATCH, release_stale_batch  # noqa: E402
+from app.server.storage.tables import Participant, utcnow  # noqa: E402
 from tests.conftest import cached_small_study  # noqa: E402
 from tests.server.flow import make_client, prolific  # noqa: E402
 

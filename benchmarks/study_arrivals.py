@@ -9,7 +9,7 @@ practice and main trial watches the clips (the player's own timing), posts the c
 event a second later (the page's telemetry flush), saves a draft on "Make predictions", after
 every click and on every next start state (PUT .../draft, one at a time), and submits; the
 survey, then done, where the tab is closed (POST .../tab/release). Writes name the tab
-(X-Tab-Id) as the page's do. The phases answered are checked against app/server/plan.py's
+(X-Tab-Id) as the page's do. The phases answered are checked against app/server/flow/plan.py's
 Phase before anything runs, and a participant meeting a phase the benchmark cannot answer
 fails the whole run (exit code 1, the phase named).
 
@@ -61,9 +61,9 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from app.pilot.bots import survey_answers  # noqa: E402
-from app.server.plan import Phase  # noqa: E402
-from app.server.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
-from app.server.tabs import TAB_HEADER  # noqa: E402
+from app.server.flow.plan import Phase  # noqa: E402
+from app.server.flow.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
+from app.server.flow.tabs import TAB_HEADER  # noqa: E402
 from app.settings import Settings  # noqa: E402
 from app.study.estimate import MEDIAN_PACE, player_timing  # noqa: E402
 from benchmarks._rawhttp import RawClient  # noqa: E402
@@ -118,7 +118,7 @@ class RequestRefused(RuntimeError):
 
 
 def check_phases(handlers: dict) -> None:
-    """UnansweredPhase naming every phase of app/server/plan.py without a handler."""
+    """UnansweredPhase naming every phase of app/server/flow/plan.py without a handler."""
     missing = [phase.value for phase in Phase if phase is not Phase.DONE and phase not in handlers]
     if missing:
         raise UnansweredPhase(", ".join(missing))

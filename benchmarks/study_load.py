@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from app.bank.bundle import MANIFEST, shipped_dir  # noqa: E402
 from app.pilot.bots import survey_answers  # noqa: E402
-from app.server.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
+from app.server.flow.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
 from benchmarks._rawhttp import RawClient  # noqa: E402
 from tests.conftest import (  # noqa: E402
     REPO,
@@ -50,7 +50,7 @@ from tests.server.flow import DEVICE, prediction_body  # noqa: E402
 BARE = "GET bare"
 ROUTES = ("POST sessions", "GET state", "POST consent", "POST instructions", "POST continue",
           "POST events", "PUT draft", "POST predictions", "POST survey")
-PART_PHASES = ("world_intro", "practice_over")  # a part's screens (app/server/plan.py)
+PART_PHASES = ("world_intro", "practice_over")  # a part's screens (app/server/flow/plan.py)
 EXPECTED_STATUS = {"POST sessions": (201,), "POST events": (202,), "POST predictions": (201,),
                    BARE: (200, 404)}  # any other route: (200,)
 MAX_STEPS = 200  # a participant that has not finished after this many steps is stuck

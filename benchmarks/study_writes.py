@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from app.server.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
+from app.server.flow.sessions import SESSION_HEADER, SESSION_PATH  # noqa: E402
 from benchmarks._rawhttp import RawClient  # noqa: E402
 from tests.conftest import cached_small_study, free_port, start_server  # noqa: E402
 from tests.server.flow import new_id, prediction_body, prolific  # noqa: E402

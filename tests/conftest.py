@@ -551,7 +551,7 @@ def client(served_study, db_url):
 @pytest.fixture
 def codes(client, served_study) -> dict[str, str]:
     """Each outcome's completion code as `client`'s app gives it (the study's generated ones)."""
-    from app.server.completion_codes import OUTCOMES
+    from app.server.flow.completion_codes import OUTCOMES
 
     recruitment = client.app.state.studies[served_study.study_id].config.recruitment
     return {outcome: recruitment.ending(outcome).completion_code for outcome in OUTCOMES}

@@ -105,3 +105,24 @@ def called_name(func: ast.expr) -> str:
     if isinstance(func, ast.Attribute):
         return func.attr
     return func.id if isinstance(func, ast.Name) else ""
+
+
+# the researcher's two route modules declare the server's HTTP dependencies and bodies
+RESEARCHER_ROUTES = {"app.researcher.api", "app.researcher.dashboard_api"}
+HTTP_FOR_ROUTES = {"app.server.http.deps", "app.server.http.schemas", "app.server.http.openapi"}
+
+
+def test_the_researcher_side_reads_the_server_through_its_query_interface():
+    """app.researcher imports from app.server only app.server.queries (its routes also the
+    HTTP dependencies), so the server's rooms can change behind that one module."""
+    allowed = {name: {"app.server.queries"} | (HTTP_FOR_ROUTES if name in RESEARCHER_ROUTES
+                                              else set())
+               for name in file_graph() if within(name, "app.researcher")}
+    found = imports_from("app.researcher", lambda t: within(t, "app.server"))
+    assert {src: [t for t in targets if t not in allowed[src]]
+            for src, targets in found.items() if set(targets) - allowed[src]} == {}
+
+
+def test_the_server_stands_without_the_researcher_side():
+    """app.main mounts the researcher's routes; the server itself never imports them."""
+    assert imports_from("app.server", lambda t: within(t, "app.researcher")) == {}

@@ -16,7 +16,7 @@ PACKAGES = ("app", "analysis")
 
 
 def module_name(path: Path) -> str:
-    """app/server/crud.py -> app.server.crud; app/study/__init__.py -> app.study."""
+    """app/server/storage/crud.py -> app.server.storage.crud; app/study/__init__.py -> app.study."""
     parts = list(path.relative_to(ROOT).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()

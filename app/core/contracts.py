@@ -156,7 +156,7 @@ def model_style(names) -> dict[str, dict[str, str]]:
 
 PILOT = "pilot"  # the recruitment of a researcher's preview session
 # a session's prolific_check values Prolific has not confirmed: it answered it does not know the
-# submission, or it could not be asked since the session started (app/server/prolific_check.py)
+# submission, or it could not be asked since the session started (app/server/flow/prolific_check.py)
 PROLIFIC_UNCONFIRMED = ("unknown", "pending")
 
 # The study config's `smallest_effect_of_interest` unless it sets one, in alignment-error units:

@@ -34,8 +34,8 @@ import numpy as np
 
 from app.core.files import read_bytes
 from app.observers.inverse_planning import PRESETS, predict
-from app.server.plan import PART_PHASES, TRIAL_PHASES, Phase
-from app.server.sessions import SESSION_HEADER, SESSION_PATH
+from app.server.flow.plan import PART_PHASES, TRIAL_PHASES, Phase
+from app.server.flow.sessions import SESSION_HEADER, SESSION_PATH
 
 THINK_MEDIAN_S = 2.5
 MAX_STEPS = 200  # no study has this many phases; a bot that gets here is stuck

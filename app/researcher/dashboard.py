@@ -22,12 +22,16 @@ from app.researcher.progress import (
     progress_counts,
     study_sessions,
 )
-from app.server.completion_codes import codes_table
-from app.server.context import StudyContext
-from app.server.places import Cutoffs, status_cutoffs
-from app.server.sessions import as_utc, session_status
-from app.server.state import progress_of
-from app.server.tables import Participant
+from app.server.queries import (
+    Cutoffs,
+    Participant,
+    StudyContext,
+    as_utc,
+    codes_table,
+    progress_of,
+    session_status,
+    status_cutoffs,
+)
 from app.study.config import stored_predictors
 
 FIELD_CODES = 3  # most common codes per model, as the report's figures

@@ -40,12 +40,21 @@ from app.core.contracts import (
 )
 from app.core.csvsafe import write_csv
 from app.core.files import write_json
-from app.server.balance import exclusion_reasons, trial_speeds
-from app.server.places import Cutoffs, status_cutoffs
-from app.server.plan import trial_steps
-from app.server.schemas import SERVER_EVENTS
-from app.server.sessions import as_utc, session_status
-from app.server.tables import Event, Participant, PredictionRow, Submission, TrialResponse
+from app.server.queries import (
+    SERVER_EVENTS,
+    Cutoffs,
+    Event,
+    Participant,
+    PredictionRow,
+    Submission,
+    TrialResponse,
+    as_utc,
+    exclusion_reasons,
+    session_status,
+    status_cutoffs,
+    trial_speeds,
+    trial_steps,
+)
 from app.study.config import StudyConfig, stored_predictors
 
 

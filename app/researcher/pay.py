@@ -3,10 +3,7 @@ study advertises (app/study/estimate.py), and the hourly pay that median really 
 
 import statistics
 
-from app.server.context import StudyContext
-from app.server.endings import FINISHED
-from app.server.sessions import as_utc
-from app.server.tables import Participant
+from app.server.queries import FINISHED, Participant, StudyContext, as_utc
 from app.study.consent import money
 
 OVERRUN_LIMIT = 0.10  # a median more than 10% over the advertised time is flagged

@@ -15,9 +15,14 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 from sqlmodel import Session
 
-from app.server.prolific import ProlificClient, ProlificRefused, ProlificUnreachable
-from app.server.sessions import as_utc
-from app.server.tables import Participant, PaymentAudit
+from app.server.queries import (
+    Participant,
+    PaymentAudit,
+    ProlificClient,
+    ProlificRefused,
+    ProlificUnreachable,
+    as_utc,
+)
 from app.study.errors import Refused
 
 ACTIONS = ("approve", "return")

@@ -8,12 +8,14 @@ from sqlalchemy import select
 from sqlmodel import Session
 
 from app.researcher.exports import predictions_frame
-from app.server.completion_codes import codes_table
-from app.server.context import StudyContext
-from app.server.places import status_cutoffs
-from app.server.recruitment import preview_path
-from app.server.sessions import session_status
-from app.server.tables import Participant
+from app.server.queries import (
+    Participant,
+    StudyContext,
+    codes_table,
+    preview_path,
+    session_status,
+    status_cutoffs,
+)
 from app.study.config import stored_predictors
 
 

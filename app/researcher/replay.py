@@ -9,10 +9,14 @@ import numpy as np
 from sqlalchemy import func, select
 from sqlmodel import Session
 
-from app.server.context import StudyContext
-from app.server.sessions import as_utc
-from app.server.state import static_trial
-from app.server.tables import Participant, PredictionRow, TrialResponse
+from app.server.queries import (
+    Participant,
+    PredictionRow,
+    StudyContext,
+    TrialResponse,
+    as_utc,
+    static_trial,
+)
 from app.study.config import stored_predictors
 from app.study.errors import Refused
 

@@ -30,11 +30,7 @@ from sqlmodel import Session
 
 from app.layout import Layout
 from app.researcher.archive_registry import archives_holding, read_registry
-from app.server import balance
-from app.server.recruitment import normalise_external_id
-from app.server.schemas import WithdrawalByExternalId, WithdrawalCreate
-from app.server.sessions import as_utc
-from app.server.tables import (
+from app.server.queries import (
     Event,
     Participant,
     PredictionRow,
@@ -42,6 +38,12 @@ from app.server.tables import (
     TrialDraft,
     TrialResponse,
     WithdrawalAudit,
+    WithdrawalByExternalId,
+    WithdrawalCreate,
+    as_utc,
+    lock_study,
+    normalise_external_id,
+    release_counts,
 )
 from app.study.errors import Refused
 
@@ -69,13 +71,13 @@ def withdraw(db: Session, study_id: str, who: WithdrawalCreate, platform: str,
     none. `platform` (the study's) says how an external id is spelled."""
     kind, given = id_given(who, platform)
     try:
-        balance.lock_study(db, study_id)  # no consent of this study reads the counts meanwhile
+        lock_study(db, study_id)  # no consent of this study reads the counts meanwhile
         sessions = _sessions_of(db, study_id, kind, given)
         if not sessions:
             raise Refused(404, f"{kind}: no session of this id in study {study_id!r}")
         public_ids = sorted(p.public_id for p in sessions)
         for session in sessions:
-            balance.release(db, session)
+            release_counts(db, session)
         salt = secrets.token_hex(16)
         audit = WithdrawalAudit(study_id=study_id, id_kind=kind, salt=salt,
                                 id_sha256=id_hash(salt, given), via=via,

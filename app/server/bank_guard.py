@@ -8,7 +8,7 @@ one analysis without the researcher deciding so (setting `allow_bank_change`).
 from sqlalchemy import func, select
 from sqlalchemy.engine import Engine
 
-from app.server.tables import Participant
+from app.server.storage.tables import Participant
 
 SHORT = 12  # hex characters of a bank hash in messages
 

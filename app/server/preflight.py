@@ -13,11 +13,11 @@ from collections.abc import Callable
 
 from app.layout import Layout
 from app.server.bank_guard import BankChanged, check_bank_unchanged
-from app.server.context import StudyContext
-from app.server.db import create_tables, is_sqlite, make_engine
-from app.server.limitstore import SETTING as STORAGE_SETTING
-from app.server.limitstore import LimitStore, reachable, shown
-from app.server.migrate import SchemaError
+from app.server.flow.context import StudyContext
+from app.server.http.limitstore import SETTING as STORAGE_SETTING
+from app.server.http.limitstore import LimitStore, reachable, shown
+from app.server.storage.db import create_tables, is_sqlite, make_engine
+from app.server.storage.migrate import SchemaError
 from app.settings import Settings, get_settings
 
 STUDY_ENV = "TOMSTUDY_STUDY"  # the studies a worker serves (comma-separated ids)

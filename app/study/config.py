@@ -131,7 +131,7 @@ Platform = Literal["prolific", "mturk", "open"]
 _REDIRECT_FIELDS = ("prolific_redirect_url", "mturk_redirect_url", "open_redirect_url")
 ENDING_NAMES = ("failed_checks", "excluded", "declined_consent", "screened_out")
 # `pinned`: the codes are the config's; `generated`: the server makes one random code per
-# ending and keeps it in the data dir (app/server/completion_codes.py)
+# ending and keeps it in the data dir (app/server/flow/completion_codes.py)
 CodeSource = Literal["pinned", "generated"]
 
 
@@ -210,7 +210,7 @@ class RecruitmentConfig(StrictModel):
                                        "endings": endings})
 
     def ending(self, outcome: str) -> Ending:
-        """The code and message of `outcome` (one of app/server/endings.py's OUTCOMES)."""
+        """The code and message of `outcome` (one of app/server/flow/endings.py's OUTCOMES)."""
         if outcome == "completed":
             return Ending(completion_code=self.completion_code)
         chosen = getattr(self.endings, outcome)

@@ -2,7 +2,7 @@
 beside every predictor's action, the models' codes and checkpoints, and each plug-in
 predictor's action, code and content hash (`<name>_vx`, `_vy`, `_code`, `_sha256`).
 
-The server stores these rows (app/server/predictions.py adds who answered and when each click
+The server stores these rows (app/server/flow/predictions.py adds who answered and when each click
 came); the simulated study builds its export rows from the same columns, so the instrument
 scores exactly what a live participant's answer stores.
 """

@@ -10,8 +10,8 @@ from analysis.load import load_csv, load_database
 from app.core.contracts import STORED_NAMES
 from app.core.csvsafe import write_csv
 from app.researcher.exports import predictions_frame
-from app.server.db import create_tables, make_engine
-from app.server.tables import Participant, PredictionRow, TrialResponse
+from app.server.storage.db import create_tables, make_engine
+from app.server.storage.tables import Participant, PredictionRow, TrialResponse
 from tests.analysis.fixed_data import fixed_predictions
 
 

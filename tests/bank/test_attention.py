@@ -14,7 +14,7 @@ from app.bank.bundle import shipped_dir
 from app.bank.verify import check_design, open_bundle
 from app.observers.family import GOAL_VARIANTS, click_sd_rad, observer_options
 from app.prediction_view import VIEW_FIELDS, click_direction_sd_deg
-from app.server.validation import attention_passed
+from app.server.flow.validation import attention_passed
 from app.settings import Settings
 from app.study.config import AttentionChecks, bank_design, load_study_config
 from app.study.trial_payload import world_trial_payload

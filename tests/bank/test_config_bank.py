@@ -26,9 +26,9 @@ from app.core.files import sha256_file
 from app.layout import Layout
 from app.main import UnsafeSettings, create_app
 from app.observers.family import GOAL_VARIANTS
-from app.server.db import create_tables
-from app.server.deps import get_db
-from app.server.tables import Participant
+from app.server.http.deps import get_db
+from app.server.storage.db import create_tables
+from app.server.storage.tables import Participant
 from app.settings import Settings
 from app.study.config import (
     MainTrialSelection,

@@ -5,7 +5,7 @@ import asyncio
 
 import pytest
 
-from app.server.plan import Phase
+from app.server.flow.plan import Phase
 from benchmarks import study_arrivals
 from benchmarks.study_arrivals import (
     HANDLERS,

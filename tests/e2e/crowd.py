@@ -13,7 +13,7 @@ from sqlalchemy import create_engine, func, select, text
 
 from analysis.load import load_csv, load_database
 from app.pilot.bots import run_bots
-from app.server.tables import Participant, PredictionRow, Submission, TrialResponse
+from app.server.storage.tables import Participant, PredictionRow, Submission, TrialResponse
 from tests.conftest import ADMIN_TOKEN, SmallStudy, patience
 
 

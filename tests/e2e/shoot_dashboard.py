@@ -17,7 +17,7 @@ from pathlib import Path
 import httpx
 
 from app.layout import DEFAULT_DATA_DIR, Layout
-from app.server.recruitment import preview_key
+from app.server.flow.recruitment import preview_key
 from tests.conftest import REPO, TOMSTUDY, patience
 from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS
 

@@ -11,7 +11,7 @@ from sqlalchemy import create_engine, func, select
 
 from app.core.contracts import COARSE_OBSERVERS
 from app.pilot.bots import run_bots
-from app.server.tables import PredictionRow
+from app.server.storage.tables import PredictionRow
 from tests.conftest import TOMSTUDY, free_port, patience, start_server, stop_server
 
 pytestmark = pytest.mark.slow

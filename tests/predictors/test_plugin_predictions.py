@@ -22,8 +22,8 @@ from app.core.contracts import (
 )
 from app.predictors.ctrv import CTRV
 from app.predictors.protocol import ask
-from app.server.db import make_engine
-from app.server.tables import PredictionRow
+from app.server.storage.db import make_engine
+from app.server.storage.tables import PredictionRow
 from app.study.trials import TrialBank
 from tests.server.flow import ADMIN, at_first_trial, prolific
 

@@ -24,7 +24,7 @@ from app.cli import cli
 from app.main import create_app
 from app.pilot.bots import run_bots
 from app.researcher.archive import ARCHIVE_MANIFEST, pseudonymous
-from app.server.tables import Participant
+from app.server.storage.tables import Participant
 from app.settings import get_settings
 from tests.conftest import (
     REPO,

@@ -17,7 +17,7 @@ from analysis.report import preregistered_primary
 from analysis.seeds import seed_results
 from analysis.verdicts import EXPLORATORY, primary_sentences
 from app.core.contracts import COARSE_OBSERVERS
-from app.server.tables import Participant, TrialResponse
+from app.server.storage.tables import Participant, TrialResponse
 from app.study.config import load_study_config
 from tests.server.flow import ADMIN, at_first_trial, prediction_body, straight_clicks
 from tests.server.flow import Participant as Person

@@ -25,7 +25,7 @@ from app.core.contracts import (
     plugin_columns,
 )
 from app.researcher.exports import export_table
-from app.server.tables import Participant, TrialResponse, utcnow
+from app.server.storage.tables import Participant, TrialResponse, utcnow
 from app.settings import get_settings
 from tests.conftest import TOMSTUDY, patience
 from tests.server.flow import ADMIN, at_first_trial, new_id, prolific

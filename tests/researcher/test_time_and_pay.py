@@ -7,7 +7,7 @@ from datetime import timedelta
 import pytest
 from sqlalchemy import update
 
-from app.server.tables import Participant
+from app.server.storage.tables import Participant
 from tests.server.flow import ADMIN, at_first_trial
 
 

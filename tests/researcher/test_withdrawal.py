@@ -11,10 +11,10 @@ from typer.testing import CliRunner
 from app.cli import cli
 from app.main import create_app
 from app.researcher.withdrawal import id_hash
-from app.server import balance
-from app.server.plan import Phase
-from app.server.recruitment import preview_key
-from app.server.tables import (
+from app.server.flow import balance
+from app.server.flow.plan import Phase
+from app.server.flow.recruitment import preview_key
+from app.server.storage.tables import (
     Event,
     Participant,
     PredictionRow,

@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 
 import httpx
 
-from app.server.sessions import SESSION_HEADER
-from app.server.tabs import TAB_HEADER
+from app.server.flow.sessions import SESSION_HEADER
+from app.server.flow.tabs import TAB_HEADER
 from tests.conftest import patience
 from tests.server.flow import DEVICE, draft_body, new_id, prediction_body
 

@@ -12,8 +12,8 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.pilot.bots import segment_key
-from app.server.plan import PART_PHASES, TRIAL_PHASES
-from app.server.sessions import SESSION_HEADER, SESSION_PATH
+from app.server.flow.plan import PART_PHASES, TRIAL_PHASES
+from app.server.flow.sessions import SESSION_HEADER, SESSION_PATH
 from tests.conftest import ADMIN_TOKEN, REPO, local_client
 
 TOKEN = ADMIN_TOKEN
@@ -258,7 +258,7 @@ def served_codes(study, study_id: str | None = None) -> dict[str, str]:
     """Each outcome's completion code a server of `study` gives (its generated codes, made in
     its data dir on first use, or the config's pinned ones)."""
     from app.configio import load_yaml_model
-    from app.server.completion_codes import OUTCOMES, served_config
+    from app.server.flow.completion_codes import OUTCOMES, served_config
     from app.study.config import StudyConfig
 
     study_id = study_id or study.study_id

@@ -10,8 +10,8 @@ from sqlalchemy import select
 
 from analysis.load import load_csv
 from app.configio import load_yaml_model
-from app.server.plan import Phase
-from app.server.tables import PredictionRow
+from app.server.flow.plan import Phase
+from app.server.storage.tables import PredictionRow
 from app.study.config import StudyConfig
 from tests.server.flow import (
     ADMIN,
@@ -198,8 +198,8 @@ def test_world_orders_and_trials_are_assigned_in_balance(client, small_study, ba
 def test_excluded_completions_do_not_count_for_balance(client, small_study, bank):
     from sqlmodel import Session, select
 
-    from app.server import balance
-    from app.server.tables import Participant as Row
+    from app.server.flow import balance
+    from app.server.storage.tables import Participant as Row
 
     valid = at_first_trial(client, small_study.study_id, **prolific("valid"))
     valid.finish(bank)
@@ -288,7 +288,7 @@ def test_bad_predictions_get_a_4xx_naming_the_field(client, small_study, bank):
 
 
 def _plan(client, participant: Participant) -> list[dict]:
-    from app.server.tables import Participant as Row
+    from app.server.storage.tables import Participant as Row
 
     with client.app.state.engine.connect() as conn:
         return conn.execute(Row.__table__.select().where(

@@ -11,8 +11,8 @@ from app.core.files import sha256_file
 from app.layout import Layout
 from app.main import create_app
 from app.server.bank_guard import BankChanged, banks_run
-from app.server.db import make_engine
-from app.server.recruitment import preview_key
+from app.server.flow.recruitment import preview_key
+from app.server.storage.db import make_engine
 from tests.conftest import (
     TOMSTUDY,
     SmallStudy,

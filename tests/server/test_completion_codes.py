@@ -15,7 +15,7 @@ import yaml
 from app.configio import ConfigError, load_yaml_model
 from app.layout import Layout
 from app.main import UnsafeSettings, create_app
-from app.server.completion_codes import (
+from app.server.flow.completion_codes import (
     OUTCOMES,
     PublicCode,
     public_codes,

@@ -7,8 +7,8 @@ import io
 from sqlmodel import Session, select
 
 from analysis.exports import read_export
-from app.server.plan import Phase
-from app.server.tables import Event, Participant, Submission, TrialResponse
+from app.server.flow.plan import Phase
+from app.server.storage.tables import Event, Participant, Submission, TrialResponse
 from tests.server.flow import (
     ADMIN,
     fail_attention_checks,

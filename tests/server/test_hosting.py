@@ -19,13 +19,13 @@ from app.main import (
     check_production,
     create_app,
 )
-from app.server.db import CONNECT_TIMEOUT_S, make_engine, server_connect_args
 from app.server.preflight import (
     STUDY_ENV,
     hand_to_workers,
     serve_settings,
     worker_environment,
 )
+from app.server.storage.db import CONNECT_TIMEOUT_S, make_engine, server_connect_args
 from app.settings import Settings, get_settings, is_loopback
 from tests.conftest import ADMIN_TOKEN, REPO, TOMSTUDY, free_port, local_client, patience
 from tests.server.flow import ADMIN, Participant
@@ -313,7 +313,7 @@ def test_schema_declares_the_error_statuses_and_bodies():
 
 
 def test_an_mturk_study_may_be_framed_by_mturk_only():
-    from app.server.headers import MTURK_FRAMERS, SecurityHeaders
+    from app.server.http.headers import MTURK_FRAMERS, SecurityHeaders
 
     framed = dict(SecurityHeaders(None, framed_by=MTURK_FRAMERS).app_headers)
     policy = framed[b"content-security-policy"].decode()

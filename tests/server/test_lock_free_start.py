@@ -10,9 +10,10 @@ from concurrent.futures import ThreadPoolExecutor
 from sqlalchemy import func, select
 from sqlmodel import Session
 
-from app.server import crud, sessions
-from app.server.schemas import ConsentCreate, SessionCreate
-from app.server.tables import Participant
+from app.server.flow import sessions
+from app.server.http.schemas import ConsentCreate, SessionCreate
+from app.server.storage import crud
+from app.server.storage.tables import Participant
 from app.study.errors import Refused
 from tests.server.flow import Participant as Person
 from tests.server.flow import prolific

@@ -14,8 +14,8 @@ from alembic.runtime.migration import MigrationContext
 from sqlalchemy import MetaData, inspect, select, text
 from sqlmodel import SQLModel
 
-from app.server import migrate
-from app.server.db import create_tables, make_engine
+from app.server.storage import migrate
+from app.server.storage.db import create_tables, make_engine
 from tests.conftest import TOMSTUDY, fresh_database, patience
 from tests.server.flow import Participant, make_client
 
@@ -105,8 +105,8 @@ def test_tables_py_and_the_head_revision_agree(db_url):
                         "compare_server_default": migrate.server_default_differs})
         assert migrate.current(conn) == migrate.head()
         differences = compare_metadata(context, SQLModel.metadata)
-    assert differences == [], (f"tables.py differs from revision {migrate.head()}: add a "
-                               f"revision to app/server/migrations/versions/ ({differences})")
+    assert differences == [], (f"tables.py differs from revision {migrate.head()}: add a revision "
+                               f"to app/server/storage/migrations/versions/ ({differences})")
     engine.dispose()
 
 

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from app.prediction_view import TARGET_STEP_PX, click_resolution_deg, prediction_view
-from app.server.plan import TRIAL_PHASES, Phase
+from app.server.flow.plan import TRIAL_PHASES, Phase
 from tests.server.flow import (
     ADMIN,
     Participant,

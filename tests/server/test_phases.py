@@ -1,12 +1,12 @@
-"""Phases are spelled once (app/server/plan.py) and the participant page follows the server."""
+"""Phases are spelled once (app/server/flow/plan.py) and the participant page follows the server."""
 
 import json
 import re
 
 from sqlmodel import Session, select
 
-from app.server.plan import BEFORE_TRIALS, Phase, dump_plan, parse_plan
-from app.server.tables import Participant
+from app.server.flow.plan import BEFORE_TRIALS, Phase, dump_plan, parse_plan
+from app.server.storage.tables import Participant
 from tests.conftest import REPO
 from tests.server.flow import at_first_trial, page_json, participant_scripts
 

@@ -1,6 +1,6 @@
 """A session takes a place in the study (live cap, "full", balance, progress) from consent
 on: made-up Prolific ids that never consent hold nothing, and free their id after
-consent_timeout_min (app/server/places.py)."""
+consent_timeout_min (app/server/flow/places.py)."""
 
 import dataclasses
 import secrets
@@ -10,9 +10,9 @@ from datetime import timedelta
 from sqlalchemy import update
 from sqlmodel import Session, select
 
-from app.server import balance
-from app.server.recruitment import preview_key
-from app.server.tables import Participant, utcnow
+from app.server.flow import balance
+from app.server.flow.recruitment import preview_key
+from app.server.storage.tables import Participant, utcnow
 from tests.server.flow import TOKEN, new_id, with_recruitment
 from tests.server.flow import Participant as Client
 

@@ -18,10 +18,10 @@ from analysis.exports import read_export
 from analysis.load import load_csv
 from analysis.metrics import apply_exclusions
 from app.cli import cli
-from app.server import balance
+from app.server.flow import balance
+from app.server.flow.prolific_check import recheck_pending
 from app.server.prolific import CONFIRMED, PENDING, UNKNOWN, ProlificClient
-from app.server.prolific_check import recheck_pending
-from app.server.tables import Participant, PaymentAudit
+from app.server.storage.tables import Participant, PaymentAudit
 from tests.conftest import free_port, local_client
 from tests.server.flow import ADMIN, prolific
 from tests.server.flow import Participant as Browser

@@ -10,10 +10,10 @@ from sqlalchemy import update
 from sqlmodel import Session, select
 
 from analysis.load import load_csv
-from app.server import balance
-from app.server.plan import TRIAL_PHASES
-from app.server.recruitment import preview_key
-from app.server.tables import BalanceCount, Participant, TrialResponse, utcnow
+from app.server.flow import balance
+from app.server.flow.plan import TRIAL_PHASES
+from app.server.flow.recruitment import preview_key
+from app.server.storage.tables import BalanceCount, Participant, TrialResponse, utcnow
 from tests.server.flow import (
     ADMIN,
     TOKEN,

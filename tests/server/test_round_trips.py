@@ -12,7 +12,7 @@ import os
 from pathlib import Path
 
 from app.main import create_app
-from app.server.plan import TRIAL_PHASES
+from app.server.flow.plan import TRIAL_PHASES
 from tests.conftest import local_client
 from tests.server.flow import Participant, new_id, prolific
 from tests.server.round_trips import RouteCounter, format_table

@@ -19,8 +19,8 @@ from hypothesis import HealthCheck, settings
 from schemathesis.config import SchemathesisConfig
 
 from app.main import create_app
-from app.server.plan import PART_PHASES, TRIAL_PHASES, Phase
-from app.server.recruitment import preview_key
+from app.server.flow.plan import PART_PHASES, TRIAL_PHASES, Phase
+from app.server.flow.recruitment import preview_key
 from app.settings import Settings
 from tests.conftest import local_client
 from tests.server.flow import ADMIN, TOKEN, Participant, new_id, prolific

@@ -12,7 +12,7 @@ import httpx
 import pandas as pd
 import pytest
 
-from app.server.plan import PART_PHASES, TRIAL_PHASES
+from app.server.flow.plan import PART_PHASES, TRIAL_PHASES
 from tests.conftest import free_port, fresh_database, patience, start_server, wait_for_log
 from tests.server.flow import ADMIN, Participant, new_id, prediction_body, prolific
 

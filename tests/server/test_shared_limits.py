@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from app.server.limitstore import RETRY_S
+from app.server.http.limitstore import RETRY_S
 from app.server.preflight import check_rate_limit_storage
 from tests.conftest import (
     ADMIN_TOKEN,

@@ -2,7 +2,7 @@
 
 import json
 
-from app.server.plan import Phase
+from app.server.flow.plan import Phase
 from tests.server.flow import DEVICE, Participant, at_first_trial, new_id, prediction_body
 
 SURROGATE = "\ud800"  # valid JSON ("\ud800"), but no UTF-8 encodes it

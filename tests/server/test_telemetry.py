@@ -9,12 +9,12 @@ from sqlalchemy import func, select
 from sqlmodel import Session
 
 from analysis.exports import read_export
-from app.server import telemetry
-from app.server.plan import Phase
-from app.server.schemas import EVENT_DATA, EventsCreate
-from app.server.sessions import participant_by_token
-from app.server.tables import Event
-from app.server.tables import Participant as ParticipantRow
+from app.server.flow import telemetry
+from app.server.flow.plan import Phase
+from app.server.flow.sessions import participant_by_token
+from app.server.http.schemas import EVENT_DATA, EventsCreate
+from app.server.storage.tables import Event
+from app.server.storage.tables import Participant as ParticipantRow
 from app.study.errors import Refused
 from tests.conftest import REPO
 from tests.server.flow import ADMIN, DEVICE, Participant, at_first_trial, new_id

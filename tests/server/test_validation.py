@@ -5,7 +5,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from app.server.validation import attention_passed
+from app.server.flow.validation import attention_passed
 from app.study.config import AttentionChecks
 
 RULE = AttentionChecks(max_angle_deg=45.0, min_passing_starts=4)

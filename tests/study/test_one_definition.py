@@ -11,7 +11,7 @@ from app.core.contracts import COARSE_OBSERVERS
 from app.layout import Layout
 from app.observers import inverse_planning
 from app.observers.simulated_study import answer_columns, check_answer, simulated_payload
-from app.server.tables import PredictionRow
+from app.server.storage.tables import PredictionRow
 from app.study.errors import Refused
 from app.study.trials import TrialBank
 from tests.server.flow import Participant, prediction_body, segment_key

@@ -1,4 +1,4 @@
-// Thin client for the study HTTP API (app/server/API.md). No state beyond the token.
+// Thin client for the study HTTP API (app/server/http/API.md). No state beyond the token.
 
 /**
  * An HTTP answer outside 2xx, with the server's `detail` message and, for refusals a
@@ -83,7 +83,7 @@ const enc = encodeURIComponent;
  * The participant side of the API, bound to one session token once it is known. The token
  * travels in the X-Session-Token header, never in a URL (proxies and history keep URLs).
  * Writes also name this page's tab (`tabId`, header X-Tab-Id), so the server refuses them
- * once another tab has taken the session over (app/server/tabs.py).
+ * once another tab has taken the session over (app/server/flow/tabs.py).
  */
 export class StudyApi {
   constructor(studyId) {

@@ -12,7 +12,7 @@ import { Telemetry, watchPage } from "./telemetry.js";
 import { TrialScreen, showPause } from "./trial.js";
 
 /**
- * One handler per phase the server sends (app/server/plan.py `Phase`; the page lists them in
+ * One handler per phase the server sends (app/server/flow/plan.py `Phase`; the page lists them in
  * its rules). `show` resolves with the next state once the participant's answer is
  * stored (or with null: read the state again); `ends` marks the phase that ends the session,
  * `beforeConsent` the one before which nothing is recorded.
@@ -35,7 +35,7 @@ function entriesFor(table, names, what) {
   return new Map(names.map((name) => [name, table[name]]));
 }
 
-/** The rules the server hands this page (app/server/routes/pages.py `PAGE_RULES`). */
+/** The rules the server hands this page (app/server/http/routes/pages.py `PAGE_RULES`). */
 function pageRules() {
   return JSON.parse($("page-rules").textContent);
 }

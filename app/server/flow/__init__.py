@@ -1,0 +1,1 @@
+"""The server's session flow: plans, sessions, steps, answers, places, balance and endings."""

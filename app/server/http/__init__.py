@@ -1,0 +1,1 @@
+"""The server's HTTP room: the routes, their dependencies, wire bodies, headers and limits."""

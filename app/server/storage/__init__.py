@@ -1,0 +1,1 @@
+"""The server's storage room: the tables, the engine, schema migrations and the transactions."""
