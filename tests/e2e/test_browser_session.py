@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from app.server.http.routes.pages import PAGE_RULES
-from tests.conftest import ADMIN_TOKEN
+from tests.conftest import ADMIN_TOKEN, patience
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
     SCREENSHOTS,
@@ -286,7 +286,8 @@ def test_enter_alone_answers_nothing_and_keyboard_clicks_are_recorded(chromium, 
     assert {(i, j): device for i, j, device in stored} == expected
     export = httpx.get(f"{browser_server.url}/api/researcher/export/predictions.csv"
                       f"?study_id={BROWSER_STUDY}",
-                      headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}).text
+                      headers={"Authorization": f"Bearer {ADMIN_TOKEN}"},
+                      timeout=patience(30)).text
     mine = public_id_of(browser_server.db_path, pid)
     rows = [r for r in csv.DictReader(io.StringIO(export)) if r["participant_id"] == mine]
     assert {(int(r["start_index"]), int(r["step"])): r["click_input"] for r in rows} == expected

@@ -93,7 +93,8 @@ def shoot(page, name: str) -> None:
 def researcher_export(base: str, what: str) -> pd.DataFrame:
     """One export, as the researcher downloads it."""
     csv = httpx.get(f"{base}/api/researcher/export/{what}.csv?study_id={BROWSER_STUDY}",
-                    headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}).text
+                    headers={"Authorization": f"Bearer {ADMIN_TOKEN}"},
+                    timeout=patience(30)).text
     return pd.read_csv(io.StringIO(csv), keep_default_na=False)
 
 
@@ -237,7 +238,8 @@ def refusing_server(browser_study, tmp_path_factory):
     proc = start_server(study, f"sqlite:///{root / 'study.db'}", port, log=root / "server.log",
                         args=("--study", f"{CLOSED},{FULL}"))
     url = f"http://127.0.0.1:{port}"
-    with httpx.Client(base_url=url) as http:  # the one counted session the full study holds
+    # the one counted session the full study holds
+    with httpx.Client(base_url=url, timeout=patience(30)) as http:
         first = Participant(http, FULL)
         assert first.start(**prolific("first-in"))["resumed"] is False
         assert first.consent().status_code == 200  # a session counts from its consent
@@ -249,7 +251,7 @@ def refusing_server(browser_study, tmp_path_factory):
 def _started_elsewhere(base: str) -> str:
     """A link whose person has another attempt running."""
     params = prolific("running-" + new_id())
-    with httpx.Client(base_url=base) as http:
+    with httpx.Client(base_url=base, timeout=patience(30)) as http:
         Participant(http, BROWSER_STUDY).start(**params)
     return "&".join(f"{k}={v}" for k, v in (params | {"SESSION_ID": "another"}).items())
 
@@ -257,7 +259,7 @@ def _started_elsewhere(base: str) -> str:
 def _taken_part(base: str) -> str:
     """A link whose person ended the study (declined) under another attempt."""
     params = prolific("declined-" + new_id())
-    with httpx.Client(base_url=base) as http:
+    with httpx.Client(base_url=base, timeout=patience(30)) as http:
         p = Participant(http, BROWSER_STUDY)
         p.start(**params)
         p.post("decline", {"submission_id": new_id()})

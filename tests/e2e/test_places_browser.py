@@ -42,7 +42,7 @@ def test_a_consent_waiting_for_room_says_so_then_goes_on(chromium, capped_server
     page = chromium.new_context(viewport=VIEWPORT).new_page()
     page.goto(f"{capped_server}/s/{CAPPED}?{fresh_recruitment()}")
     visible(page, "consent")  # a start takes no place
-    with httpx.Client(base_url=capped_server) as http:
+    with httpx.Client(base_url=capped_server, timeout=patience(30)) as http:
         first = Participant(http, CAPPED)
         first.start(**prolific("first-" + new_id()))
         assert first.consent().status_code == 200  # the study's one place, taken meanwhile

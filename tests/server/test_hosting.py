@@ -356,9 +356,11 @@ def test_a_loopback_server_without_a_token_makes_one_and_the_old_default_opens_n
         printed = re.findall(r"researcher token for this run .*: (\S+)", out.read_text())
         assert len(printed) == 1 and len(printed[0]) >= 40  # printed once, 32 random bytes
         sheet = f"{base}/api/researcher/export/participants.csv?study_id={small_study.study_id}"
-        old = httpx.get(sheet, headers={"Authorization": f"Bearer {OLD_DEFAULT_TOKEN}"})
+        old = httpx.get(sheet, headers={"Authorization": f"Bearer {OLD_DEFAULT_TOKEN}"},
+                        timeout=patience(30))
         assert old.status_code == 403
-        made = httpx.get(sheet, headers={"Authorization": f"Bearer {printed[0]}"})
+        made = httpx.get(sheet, headers={"Authorization": f"Bearer {printed[0]}"},
+                         timeout=patience(30))
         assert made.status_code == 200 and made.text.startswith("export_version,study_id,")
     finally:
         proc.terminate()

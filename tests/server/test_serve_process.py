@@ -22,7 +22,7 @@ pytestmark = pytest.mark.slow
 def export(base_url: str, study_id: str, what: str = "predictions") -> pd.DataFrame:
     """One researcher export as a DataFrame."""
     r = httpx.get(f"{base_url}/api/researcher/export/{what}.csv?study_id={study_id}",
-                  headers=ADMIN)
+                  headers=ADMIN, timeout=patience(30))
     assert r.status_code == 200, r.text
     return pd.read_csv(io.StringIO(r.text), dtype={"participant_id": str, "external_id": str})
 

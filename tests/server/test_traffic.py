@@ -94,7 +94,8 @@ def test_the_limit_follows_the_address_a_local_proxy_forwards(small_study, tmp_p
             return [httpx.post(f"http://127.0.0.1:{port}/api/sessions",
                                headers={"X-Forwarded-For": address},
                                json={"study_id": small_study.study_id,
-                                     "recruitment": prolific(new_id())}).status_code
+                                     "recruitment": prolific(new_id())},
+                               timeout=patience(30)).status_code
                     for _ in range(3)]
 
         assert starts("192.0.2.10") == [201, 201, 429]
