@@ -73,29 +73,30 @@ def models_in(annotation) -> list[type[BaseModel]]:
 
 def model_table(model: type[BaseModel]) -> str:
     """One model's heading, docstring and a row per field."""
-    notes = source_comments(model)
-    rows = [f"| `{name}` | {type_name(field.annotation)} | {default_text(field)} | "
-            f"{cell(field.description or notes.get(name, ''))} |"
-            for name, field in model.model_fields.items()]
-    where = f"`{model.__module__}.{model.__qualname__}`"
-    doc = cell(inspect.getdoc(model) or "")
+    keys = {name: f"`{name}`" for name in model.model_fields}
     return "\n".join([f"### {model.__name__} {{ #{anchor(model)} }}", "",
-                      f"{doc} ({where})", "",
-                      "| key | type | default | description |", "|---|---|---|---|", *rows])
+                      field_table(model, "key", keys)])
 
 
 def settings_table(model: type[BaseModel]) -> str:
     """A settings model's environment variables (prefix and aliases as it reads them)."""
     prefix = model.model_config.get("env_prefix", "")
+    variables = {name: f"`{alias if isinstance(alias, str) else (prefix + name).upper()}`"
+                 for name, field in model.model_fields.items()
+                 for alias in [field.validation_alias]}
+    return field_table(model, "variable", variables)
+
+
+def field_table(model: type[BaseModel], first: str, names: dict[str, str]) -> str:
+    """The model's docstring and where it lives, then a row per field: `names[field]`, its
+    type, default and description."""
     notes = source_comments(model)
-    rows = []
-    for name, field in model.model_fields.items():
-        env = field.validation_alias if isinstance(field.validation_alias, str) else None
-        rows.append(f"| `{env or (prefix + name).upper()}` | {type_name(field.annotation)} | "
-                    f"{default_text(field)} | {cell(field.description or notes.get(name, ''))} |")
+    rows = [f"| {names[name]} | {type_name(field.annotation)} | {default_text(field)} | "
+            f"{cell(field.description or notes.get(name, ''))} |"
+            for name, field in model.model_fields.items()]
     return "\n".join([f"{cell(inspect.getdoc(model) or '')} "
                       f"(`{model.__module__}.{model.__qualname__}`)", "",
-                      "| variable | type | default | description |", "|---|---|---|---|", *rows])
+                      f"| {first} | type | default | description |", "|---|---|---|---|", *rows])
 
 
 def source_comments(model: type[BaseModel]) -> dict[str, str]:
