@@ -85,7 +85,7 @@ def one_of(values, separator: str) -> str:
 SESSION = {
     "export_version": Column(
         f"The export's version (EXPORT_VERSION in app/core/contracts.py): {EXPORT_VERSION} "
-        "since the participant's columns were renamed (app/server/http/API.md, Changes); an "
+        "since the participant's columns were renamed (app/http/API.md, Changes); an "
         "export without the column is version 1.", values=(EXPORT_VERSION,), required=True),
     "study_id": Column("The study's id (its config study_configs/<study_id>.yaml).",
                        required=True),
@@ -383,7 +383,7 @@ def data_package(what: str, columns, csv: bytes, path: str, rows: int, study_id:
 
 def _resource_note(what: str) -> str:
     kinds = "; ".join(f"{FIELD_TYPES[k]}: {note}" for k, note in KIND_NOTES.items())
-    return (f"The {what} export (app/server/http/API.md, Exports). Cells: {kinds}. A text cell "
+    return (f"The {what} export (app/http/API.md, Exports). Cells: {kinds}. A text cell "
             "that would start a spreadsheet formula (=, +, -, @, tab, carriage return) or "
             "starts with ' is written with one leading ' (analysis.exports.read_export "
             "removes it).")

@@ -1,7 +1,7 @@
 """Read the study's predictions, from the exported CSV or straight from the database.
 
 Both readers return the same tidy DataFrame: one row per (participant, trial, start state,
-step), the columns of the export contract (app/server/http/API.md) with fixed dtypes, then each
+step), the columns of the export contract (app/http/API.md) with fixed dtypes, then each
 plug-in predictor's four columns (`<name>_vx`, `_vy`, `_code`, `_sha256`), sorted by
 participant, trial, start state and step. An older export reads under the current column
 names, its own `export_version` kept. `participant_id` is the session's random

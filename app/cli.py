@@ -584,8 +584,8 @@ def serve(
     """Serve the study (participant app, API, researcher dashboard) with uvicorn."""
     import uvicorn
 
+    from app.http.preflight import NotServable, forwarded_allow_ips, hand_to_workers
     from app.main import ready_to_serve
-    from app.server.preflight import NotServable, forwarded_allow_ips, hand_to_workers
 
     with ExitStack() as cleanup:
         if archive is not None:
@@ -797,7 +797,7 @@ def withdraw(
 
     from app.researcher.archive_registry import RegistryError
     from app.researcher.withdrawal import withdraw_and_erase
-    from app.server.http.schemas import WithdrawalByExternalId, WithdrawalByParticipantId
+    from app.server.schemas import WithdrawalByExternalId, WithdrawalByParticipantId
     from app.study.errors import Refused
 
     if (external_id is None) == (participant_id is None):

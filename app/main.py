@@ -28,22 +28,11 @@ from app.bank.bundle import BundleError
 from app.bank.model_answers import BankMismatch, ModelAnswers
 from app.bank.prepare import prepare_study
 from app.bank.verify import load_bundle
-from app.researcher import api as researcher
-from app.researcher import dashboard_api as dashboard
-from app.server.bank_guard import check_bank_unchanged
-from app.server.flow.balance import ensure_rows, sweep_stale
-from app.server.flow.completion_codes import PublicCode, refuse_public_codes, served_config
-from app.server.flow.context import StudyContext
-from app.server.flow.prolific_check import recheck_loop
-from app.server.flow.recruitment import preview_key
-from app.server.http import health
-from app.server.http.headers import MTURK_FRAMERS, SecurityHeaders
-from app.server.http.limitstore import LimitStore
-from app.server.http.lockout import TokenLockout
-from app.server.http.openapi import declare_error_responses
-from app.server.http.ratelimit import RateLimit, parse_limit
-from app.server.http.routes import pages, participant
-from app.server.preflight import (
+from app.http.headers import MTURK_FRAMERS, SecurityHeaders
+from app.http.limitstore import LimitStore
+from app.http.lockout import TokenLockout
+from app.http.openapi import declare_error_responses
+from app.http.preflight import (
     STUDY_ENV,
     NotServable,
     check_data_dir_writable,
@@ -55,6 +44,14 @@ from app.server.preflight import (
     serve_settings,
     with_generated_token,
 )
+from app.http.ratelimit import RateLimit, parse_limit
+from app.http.routes import dashboard, health, pages, participant, researcher
+from app.server.bank_guard import check_bank_unchanged
+from app.server.flow.balance import ensure_rows, sweep_stale
+from app.server.flow.completion_codes import PublicCode, refuse_public_codes, served_config
+from app.server.flow.context import StudyContext
+from app.server.flow.prolific_check import recheck_loop
+from app.server.flow.recruitment import preview_key
 from app.server.prolific import client_from
 from app.server.storage.db import create_tables, make_engine
 from app.settings import REPO_ROOT, Settings, get_settings
@@ -194,7 +191,7 @@ def create_app(settings: Settings | None = None, studies: list[str] | None = Non
 
     app = FastAPI(title="tomstudy", lifespan=lifespan, **docs_urls(settings),
                   description="Online study of how people predict a robot "
-                              "(app/server/http/API.md).")
+                              "(app/http/API.md).")
     app.state.settings = settings
     app.state.prolific = client_from(settings)  # None: no token, Prolific is not asked
     store = limit_store(settings)  # one per worker: the middleware and the lockout share it

@@ -33,7 +33,7 @@ class Settings(BaseSettings):
     database_password_file: Path | None = None
     # comma-separated public host names of the study (e.g. study.example.org)
     allowed_hosts: str = ""
-    # where the rate limits and the researcher lockout count (app/server/http/limitstore.py): a
+    # where the rate limits and the researcher lockout count (app/http/limitstore.py): a
     # `limits` storage URI. memory:// counts in each worker process (one worker: SQLite);
     # redis://host:6379/0 shares the counts between every worker and host
     rate_limit_storage: str = "memory://"

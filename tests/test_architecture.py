@@ -65,8 +65,8 @@ def test_recordings_never_import_the_interaction_experiment():
 
 OFFLINE = ("worlds", "data", "learning", "interaction", "recordings", "observers", "study",
            "bank", "predictors", "prereg")
-WEB = ("fastapi", "sqlmodel", "sqlalchemy", "starlette", "app.server", "app.researcher",
-       "app.pilot", "app.main")
+WEB = ("fastapi", "sqlmodel", "sqlalchemy", "starlette", "app.http", "app.server",
+       "app.researcher", "app.pilot", "app.main")
 
 
 def test_offline_packages_stay_out_of_the_web_room():
@@ -107,22 +107,32 @@ def called_name(func: ast.expr) -> str:
     return func.id if isinstance(func, ast.Name) else ""
 
 
-# the researcher's two route modules declare the server's HTTP dependencies and bodies
-RESEARCHER_ROUTES = {"app.researcher.api", "app.researcher.dashboard_api"}
-HTTP_FOR_ROUTES = {"app.server.http.deps", "app.server.http.schemas", "app.server.http.openapi"}
-
-
 def test_the_researcher_side_reads_the_server_through_its_query_interface():
-    """app.researcher imports from app.server only app.server.queries (its routes also the
-    HTTP dependencies), so the server's rooms can change behind that one module."""
-    allowed = {name: {"app.server.queries"} | (HTTP_FOR_ROUTES if name in RESEARCHER_ROUTES
-                                              else set())
-               for name in file_graph() if within(name, "app.researcher")}
+    """app.researcher imports from app.server only app.server.queries, so the server's rooms
+    can change behind that one module."""
     found = imports_from("app.researcher", lambda t: within(t, "app.server"))
-    assert {src: [t for t in targets if t not in allowed[src]]
-            for src, targets in found.items() if set(targets) - allowed[src]} == {}
+    assert {src: [t for t in targets if t != "app.server.queries"]
+            for src, targets in found.items() if set(targets) != {"app.server.queries"}} == {}
 
 
 def test_the_server_stands_without_the_researcher_side():
-    """app.main mounts the researcher's routes; the server itself never imports them."""
+    """The researcher side reads the server; the server never imports it."""
     assert imports_from("app.server", lambda t: within(t, "app.researcher")) == {}
+
+
+# the web layer is the top floor: only the app that mounts it and the CLI's `serve` import it
+WEB_LAYER_IMPORTERS = {"app.main", "app.cli"}
+
+
+def test_nothing_below_the_web_layer_imports_it():
+    """app.server, app.researcher and the offline packages run without the HTTP layer."""
+    importers = imports_from("app", lambda t: within(t, "app.http"))
+    assert {src for src in importers if not within(src, "app.http")} == WEB_LAYER_IMPORTERS
+
+
+def test_every_route_is_declared_in_the_routes_package():
+    """Participant and researcher routes live in one place: app/http/routes/."""
+    routers = [name for name, path in project_modules().items()
+               for node in ast.walk(ast.parse(path.read_text(), filename=str(path)))
+               if isinstance(node, ast.Call) and called_name(node.func) == "APIRouter"]
+    assert routers and [name for name in routers if not within(name, "app.http.routes")] == []

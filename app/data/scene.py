@@ -102,7 +102,7 @@ ROBOT_COLOR = "#0072B2"
 HUMAN_COLOR = "#E69F00"
 
 # What the browser draws a scene with (frontend/static/js/scene.js; the pages get it from
-# app/server/http/routes/pages.py, which also serves the legend's two as CSS). Every agent, trace,
+# app/http/routes/pages.py, which also serves the legend's two as CSS). Every agent, trace,
 # marker and goal is at least 3:1 against the ground it is drawn on (WCAG 2.1 SC 1.4.11;
 # tests/e2e measures it on the canvas), which a plot on white paper does not have to meet:
 # - the person is a darker orange than HUMAN_COLOR, which is 2.2:1 on white; the browser

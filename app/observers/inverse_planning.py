@@ -1,6 +1,6 @@
 """Inverse-planning observers: what a simulated participant clicks for one trial payload.
 
-A trial payload is the `step` the server sends in a trial (app/server/http/API.md): scene,
+A trial payload is the `step` the server sends in a trial (app/http/API.md): scene,
 dt_s, example clips, segment positions, start states, steps_to_predict, min/max step
 length. Each observer preset returns clicked robot positions [starts, steps, 2] that the
 server accepts (inside the scene bounds, every move within [min_step_m, max_step_m]).

@@ -1,1 +1,2 @@
-"""The researcher side: dashboard, exports, replay, withdrawal and progress (behind the token)."""
+"""The researcher side: dashboard, exports, replay, withdrawal and progress (served behind the
+token by app/http/routes)."""

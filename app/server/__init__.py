@@ -1,1 +1,2 @@
-"""The participant server: session flow, storage, validation, recruitment and endings."""
+"""The study's server behind the web layer: session flow, storage, the wire bodies, and the
+queries the researcher side reads."""

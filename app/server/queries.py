@@ -16,8 +16,8 @@ from app.server.flow.plan import trial_steps
 from app.server.flow.recruitment import normalise_external_id, preview_path
 from app.server.flow.sessions import as_utc, session_status
 from app.server.flow.state import progress_of, static_trial
-from app.server.http.schemas import SERVER_EVENTS, WithdrawalByExternalId, WithdrawalCreate
 from app.server.prolific import ProlificClient, ProlificRefused, ProlificUnreachable
+from app.server.schemas import SERVER_EVENTS, WithdrawalByExternalId, WithdrawalCreate
 from app.server.storage.tables import (
     Event,
     Participant,

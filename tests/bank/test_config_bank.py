@@ -23,10 +23,10 @@ from app.bank.start_states import NoStartStates, take_turns
 from app.configio import ConfigError, load_yaml_model
 from app.core.contracts import SMALLEST_EFFECT_OF_INTEREST
 from app.core.files import sha256_file
+from app.http.deps import get_db
 from app.layout import Layout
 from app.main import UnsafeSettings, create_app
 from app.observers.family import GOAL_VARIANTS
-from app.server.http.deps import get_db
 from app.server.storage.db import create_tables
 from app.server.storage.tables import Participant
 from app.settings import Settings

@@ -16,7 +16,7 @@ import httpx
 import pytest
 import yaml
 
-from app.server.http.routes.pages import PAGE_RULES
+from app.http.routes.pages import PAGE_RULES
 from tests.conftest import ADMIN_TOKEN, patience
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (

@@ -330,8 +330,8 @@ def test_the_hallway_example_imports_generated_lab_logs(tmp_path):
 
 
 def test_serve_prepare_without_recordings_says_where_they_go(tmp_path):
+    from app.http.preflight import NotServable
     from app.main import ready_to_serve
-    from app.server.preflight import NotServable
     from app.settings import REPO_ROOT, Settings
 
     settings = Settings(data_dir=tmp_path / "var", configs_dir=REPO_ROOT / "study_configs",

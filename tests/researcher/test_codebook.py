@@ -30,7 +30,7 @@ from app.core.contracts import EXPORT_VERSION, PILOT, WHAT
 from app.pilot.bots import run_bots
 from app.server.flow.completion_codes import OUTCOMES as SERVED_OUTCOMES
 from app.server.flow.recruitment import preview_key
-from app.server.http.schemas import EVENT_DATA, SERVER_EVENTS, ClickInput, HistoryEntry
+from app.server.schemas import EVENT_DATA, SERVER_EVENTS, ClickInput, HistoryEntry
 from app.study.config import MainTrialSelection, Platform, SurveyQuestion
 from app.study.trials import TrialBank
 from tests.conftest import REPO

@@ -12,7 +12,7 @@ import yaml
 from sqlalchemy.engine import make_url
 
 from app.cli import cli
-from app.server.http.limitstore import LimitStore
+from app.http.limitstore import LimitStore
 from app.settings import Settings
 from tests.conftest import REPO, patience
 

@@ -11,6 +11,12 @@ import pytest
 from sqlalchemy import event
 from sqlalchemy.engine import make_url
 
+from app.http.preflight import (
+    STUDY_ENV,
+    hand_to_workers,
+    serve_settings,
+    worker_environment,
+)
 from app.main import (
     FRONTEND_DIR,
     MAX_BODY_BYTES,
@@ -18,12 +24,6 @@ from app.main import (
     app_from_env,
     check_production,
     create_app,
-)
-from app.server.preflight import (
-    STUDY_ENV,
-    hand_to_workers,
-    serve_settings,
-    worker_environment,
 )
 from app.server.storage.db import CONNECT_TIMEOUT_S, make_engine, server_connect_args
 from app.settings import Settings, get_settings, is_loopback
@@ -313,7 +313,7 @@ def test_schema_declares_the_error_statuses_and_bodies():
 
 
 def test_an_mturk_study_may_be_framed_by_mturk_only():
-    from app.server.http.headers import MTURK_FRAMERS, SecurityHeaders
+    from app.http.headers import MTURK_FRAMERS, SecurityHeaders
 
     framed = dict(SecurityHeaders(None, framed_by=MTURK_FRAMERS).app_headers)
     policy = framed[b"content-security-policy"].decode()

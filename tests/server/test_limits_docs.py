@@ -1,4 +1,4 @@
-"""The limits' defaults are written once in app/server/http/API.md, and they are app/settings.py's;
+"""The limits' defaults are written once in app/http/API.md, and they are app/settings.py's;
 the hosting page's bullet (docs/run/hosting.md) quotes the same values."""
 
 import re
@@ -6,7 +6,7 @@ import re
 from app.settings import Settings
 from tests.conftest import REPO
 
-API = (REPO / "app" / "server" / "http" / "API.md").read_text()
+API = (REPO / "app" / "http" / "API.md").read_text()
 LIMITS = ("rate_limit_starts", "rate_limit_requests", "researcher_lockout")
 
 

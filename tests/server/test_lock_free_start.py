@@ -11,7 +11,7 @@ from sqlalchemy import func, select
 from sqlmodel import Session
 
 from app.server.flow import sessions
-from app.server.http.schemas import ConsentCreate, SessionCreate
+from app.server.schemas import ConsentCreate, SessionCreate
 from app.server.storage import crud
 from app.server.storage.tables import Participant
 from app.study.errors import Refused

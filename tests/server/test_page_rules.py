@@ -1,6 +1,6 @@
 """Every rule the browser applies comes from the server's one definition, as phases do.
 
-The pages carry the rules (app/server/http/routes/pages.py: `PAGE_RULES` as #page-rules on the
+The pages carry the rules (app/http/routes/pages.py: `PAGE_RULES` as #page-rules on the
 study page, the scene palette as #scene-palette on every page that draws a scene and as
 /palette.css for the legend, the models' names and colours as #model-style on the
 dashboard) and the scripts in frontend/static/js keep no copy of them.
@@ -16,7 +16,7 @@ from app.core.contracts import MODEL_COLORS, MODEL_LABELS
 from app.data.scene import BROWSER_PALETTE
 from app.prediction_view import MIN_WINDOW_PX
 from app.server.flow.endings import FINISHED
-from app.server.http.schemas import (
+from app.server.schemas import (
     ClickInput,
     ClientInfo,
     DraftSave,

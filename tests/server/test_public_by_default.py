@@ -7,8 +7,8 @@ import subprocess
 import httpx
 import pytest
 
+from app.http.preflight import NotServable, forwarded_allow_ips
 from app.main import UnsafeSettings, create_app
-from app.server.preflight import NotServable, forwarded_allow_ips
 from app.settings import Settings
 from tests.conftest import REPO, TOMSTUDY, free_port, local_client, patience, start_server
 from tests.server.flow import ADMIN, prolific

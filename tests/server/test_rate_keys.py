@@ -5,7 +5,7 @@ import asyncio
 
 from limits import parse
 
-from app.server.http.ratelimit import RateLimit, client_key
+from app.http.ratelimit import RateLimit, client_key
 
 
 def test_an_ipv6_client_is_keyed_by_its_64():

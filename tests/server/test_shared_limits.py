@@ -6,8 +6,8 @@ import time
 
 import pytest
 
-from app.server.http.limitstore import RETRY_S
-from app.server.preflight import check_rate_limit_storage
+from app.http.limitstore import RETRY_S
+from app.http.preflight import check_rate_limit_storage
 from tests.conftest import (
     ADMIN_TOKEN,
     free_port,

@@ -12,7 +12,7 @@ from analysis.exports import read_export
 from app.server.flow import telemetry
 from app.server.flow.plan import Phase
 from app.server.flow.sessions import participant_by_token
-from app.server.http.schemas import EVENT_DATA, EventsCreate
+from app.server.schemas import EVENT_DATA, EventsCreate
 from app.server.storage.tables import Event
 from app.server.storage.tables import Participant as ParticipantRow
 from app.study.errors import Refused

@@ -12,11 +12,11 @@ import pytest
 from sqlalchemy import func, select, update
 from sqlmodel import Session
 
+from app.http.ratelimit import SESSIONS_PER_ADDRESS
 from app.main import create_app
 from app.server.flow import balance
 from app.server.flow.recruitment import preview_key
 from app.server.flow.sessions import SESSION_HEADER
-from app.server.http.ratelimit import SESSIONS_PER_ADDRESS
 from app.server.storage.tables import Participant, utcnow
 from tests.conftest import free_port, local_client, patience, start_server
 from tests.server.flow import TOKEN, new_id, prolific

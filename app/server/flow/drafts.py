@@ -15,7 +15,7 @@ from sqlmodel import Session
 
 from app.server.flow.context import StudyContext
 from app.server.flow.plan import TrialStep, current_step, expect_trial
-from app.server.http.schemas import DraftSave
+from app.server.schemas import DraftSave
 from app.server.storage.db import upsert
 from app.server.storage.tables import Participant, TrialDraft, utcnow
 from app.study.errors import Refused

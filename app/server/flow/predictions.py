@@ -15,7 +15,7 @@ from app.server.flow.drafts import discard_draft
 from app.server.flow.plan import Phase, TrialStep, expect_trial
 from app.server.flow.sessions import as_utc
 from app.server.flow.validation import attention_passed, validate_points
-from app.server.http.schemas import PredictionCreate
+from app.server.schemas import PredictionCreate
 from app.server.storage.crud import advance, replay_if_stored
 from app.server.storage.tables import Participant, PredictionRow, TrialResponse, utcnow
 from app.study.prediction_rows import as_rows, prediction_columns

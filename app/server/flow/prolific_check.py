@@ -27,7 +27,6 @@ from app.server.flow.context import StudyContext
 from app.server.flow.plan import has_consented
 from app.server.flow.recruitment import identify
 from app.server.flow.sessions import as_utc, has_ended, live_participant
-from app.server.http.schemas import SessionCreate
 from app.server.prolific import (
     CONFIRMED,
     PENDING,
@@ -36,6 +35,7 @@ from app.server.prolific import (
     ProlificRefused,
     ProlificUnreachable,
 )
+from app.server.schemas import SessionCreate
 from app.server.storage.tables import Participant
 from app.study.config import StudyConfig
 from app.study.errors import Refused

@@ -12,7 +12,7 @@ import re
 from dataclasses import dataclass, field
 
 from app.server.flow import notices
-from app.server.http.schemas import SessionCreate, UrlParams
+from app.server.schemas import SessionCreate, UrlParams
 from app.study.config import StudyConfig
 from app.study.errors import Refused
 

@@ -30,7 +30,7 @@ from app.server.flow import balance, notices, places
 from app.server.flow.context import StudyContext
 from app.server.flow.plan import assign_plan, dump_plan, has_consented
 from app.server.flow.recruitment import ATTEMPT_KEYS, Identity, identify
-from app.server.http.schemas import SessionCreate
+from app.server.schemas import SessionCreate
 from app.server.storage.tables import Participant, utcnow
 from app.study.errors import Refused
 

@@ -19,7 +19,7 @@ from app.server.flow import notices, telemetry
 from app.server.flow.drafts import current_draft
 from app.server.flow.plan import TrialStep, current_step
 from app.server.flow.sessions import as_utc
-from app.server.http.schemas import PAGE_OPENED, TAB_TAKEOVER, TabClaim, TabRelease
+from app.server.schemas import PAGE_OPENED, TAB_TAKEOVER, TabClaim, TabRelease
 from app.server.storage.tables import Participant, keep_loaded, utcnow
 from app.study.errors import Refused
 

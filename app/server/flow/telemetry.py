@@ -15,7 +15,7 @@ from sqlmodel import Session
 
 from app.server.flow.plan import has_consented
 from app.server.flow.sessions import has_ended
-from app.server.http.schemas import EventsCreate
+from app.server.schemas import EventsCreate
 from app.server.storage.db import insert_skipping_duplicates
 from app.server.storage.tables import Event, Participant, keep_loaded, utcnow
 from app.study.errors import Refused

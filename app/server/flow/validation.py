@@ -8,7 +8,7 @@ passes is its rule too, shared with the bank that chooses the checks.
 
 import numpy as np
 
-from app.server.http.schemas import PredictionCreate
+from app.server.schemas import PredictionCreate
 from app.study.clicks import check_passed, check_points, robot_starts, step_moves
 from app.study.config import AttentionChecks, SurveyQuestion
 from app.study.errors import Refused

@@ -20,7 +20,7 @@ from app.server.flow import balance, endings, places
 from app.server.flow.context import StudyContext
 from app.server.flow.plan import BEFORE_TRIALS, Phase, expect_phase, has_consented
 from app.server.flow.validation import validate_survey
-from app.server.http.schemas import (
+from app.server.schemas import (
     ConsentCreate,
     ContinueCreate,
     DeclineCreate,

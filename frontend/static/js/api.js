@@ -1,4 +1,4 @@
-// Thin client for the study HTTP API (app/server/http/API.md). No state beyond the token.
+// Thin client for the study HTTP API (app/http/API.md). No state beyond the token.
 
 /**
  * An HTTP answer outside 2xx, with the server's `detail` message and, for refusals a

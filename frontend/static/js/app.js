@@ -35,7 +35,7 @@ function entriesFor(table, names, what) {
   return new Map(names.map((name) => [name, table[name]]));
 }
 
-/** The rules the server hands this page (app/server/http/routes/pages.py `PAGE_RULES`). */
+/** The rules the server hands this page (app/http/routes/pages.py `PAGE_RULES`). */
 function pageRules() {
   return JSON.parse($("page-rules").textContent);
 }

@@ -3,7 +3,7 @@ import { prefersReducedMotion } from "./player.js";
 import { $, STUDY_SCREENS, show, shownScreen } from "./page.js";
 
 /**
- * One check per reason the server takes for a screen-out (app/server/http/schemas.py
+ * One check per reason the server takes for a screen-out (app/server/schemas.py
  * `ScreenOutReason`; the page lists them in its rules): given the smallest window the
  * server's prediction view is made for, why this device cannot run the study, or null.
  */

@@ -73,7 +73,7 @@ function availableHeight(canvas) {
 /**
  * Collects `steps_to_predict` clicks for each start state of a trial.
  * Calls `onChange(input)` after every change and `onMessage(text, kind)` for feedback.
- * `rules` are the server's for every trial (app/server/http/routes/pages.py PAGE_RULES
+ * `rules` are the server's for every trial (app/http/routes/pages.py PAGE_RULES
  * `predictions`); a trial's own limits (steps, reach, scene bounds) come with the trial.
  *
  * The view is drawn at the server's scale for this world (`trial.view.px_per_m`,

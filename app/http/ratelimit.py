@@ -23,7 +23,7 @@ from fastapi.responses import JSONResponse
 from limits import RateLimitItem, parse
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from app.server.http.limitstore import LimitStore
+from app.http.limitstore import LimitStore
 
 PARTICIPANT_PREFIX = "/api/session"  # /api/sessions (starts) and /api/session/... (a session)
 START_PATH = "/api/sessions"

@@ -8,10 +8,10 @@ from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, Response
 
 from app.core.contracts import WHAT
+from app.http.deps import AdminDep, SessionDep, study_context
 from app.researcher import payments, withdrawal
 from app.researcher.archive_registry import RegistryError, read_registry
-from app.server.http.deps import AdminDep, SessionDep, study_context
-from app.server.http.schemas import PaymentActionCreate, WithdrawalCreate
+from app.server.schemas import PaymentActionCreate, WithdrawalCreate
 from app.study.errors import Refused
 
 router = APIRouter(prefix="/api/researcher", tags=["researcher"])
@@ -32,7 +32,7 @@ def read_summary(study_id: str, request: Request, db: SessionDep, _: AdminDep) -
 @router.get("/export/{what}.csv", response_class=Response, responses=CSV)
 def read_export(what: Literal[WHAT], study_id: str, request: Request, db: SessionDep,
                 _: AdminDep) -> Response:
-    """One export (predictions, survey, events, participants); columns in app/server/http/API.md."""
+    """One export (predictions, survey, events, participants); columns in app/http/API.md."""
     return _csv(request, db, study_id, what)
 
 

@@ -7,13 +7,13 @@ from fastapi.responses import HTMLResponse, Response
 
 from app.core.contracts import MODEL_COLORS, MODEL_LABELS
 from app.data.scene import BROWSER_PALETTE
+from app.http.deps import study_context
 from app.prediction_view import MIN_WINDOW_PX
 from app.server.flow import notices
 from app.server.flow.endings import FINISHED
 from app.server.flow.plan import BEFORE_TRIALS, Phase
 from app.server.flow.recruitment import MTURK_PREVIEW
-from app.server.http.deps import study_context
-from app.server.http.schemas import (
+from app.server.schemas import (
     EVENTS_PER_REQUEST,
     HISTORY_MAX_ENTRIES,
     USER_AGENT_MAX_CHARS,

@@ -6,11 +6,11 @@ URL: request lines end up in proxy access logs and browser history.
 
 from fastapi import APIRouter, Request, Response, status
 
+from app.http.deps import ContextDep, ParticipantDep, SessionDep, WriterDep, study_context
 from app.server.flow import drafts, predictions, prolific_check, sessions, tabs, telemetry
 from app.server.flow.sessions import SESSION_PATH
 from app.server.flow.state import state_json
-from app.server.http.deps import ContextDep, ParticipantDep, SessionDep, WriterDep, study_context
-from app.server.http.schemas import (
+from app.server.schemas import (
     ConsentCreate,
     ContinueCreate,
     DeclineCreate,
@@ -28,7 +28,7 @@ from app.server.http.schemas import (
 from app.server.storage import crud
 
 router = APIRouter(tags=["participant"])
-STATE_DOC = "`{phase, progress: {done, total}, step}` (app/server/http/API.md)"
+STATE_DOC = "`{phase, progress: {done, total}, step}` (app/http/API.md)"
 
 
 def state_response(ctx, participant, status_code: int = 200, draft: dict | None = None

@@ -4,9 +4,9 @@ from typing import Literal
 
 from fastapi import APIRouter, Request
 
+from app.http.deps import AdminDep, SessionDep, study_context
+from app.http.openapi import ErrorDetail
 from app.researcher import replay
-from app.server.http.deps import AdminDep, SessionDep, study_context
-from app.server.http.openapi import ErrorDetail
 
 router = APIRouter(prefix="/api/researcher", tags=["researcher"])
 NOT_IN_BANK = {409: {"model": ErrorDetail, "description": "clip_sha256: the trial bank this "

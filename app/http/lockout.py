@@ -12,7 +12,7 @@ itself is the guard.
 
 from limits import RateLimitItem
 
-from app.server.http.limitstore import LimitStore
+from app.http.limitstore import LimitStore
 from app.study.errors import Refused
 
 WHAT = "researcher token failures"

@@ -20,7 +20,7 @@ from pydantic import (
 from pydantic import Field as PydField
 from sqlmodel import SQLModel
 
-# Limits the participant page applies too (app/server/http/routes/pages.py hands them over).
+# Limits the participant page applies too (app/http/routes/pages.py hands them over).
 USER_AGENT_MAX_CHARS = 512  # the page cuts navigator.userAgent to this
 HISTORY_MAX_ENTRIES = 500  # undo and reset presses kept with a trial (the newest)
 EVENTS_PER_REQUEST = 100  # telemetry events in one POST .../events

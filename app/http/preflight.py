@@ -11,11 +11,11 @@ import secrets
 import tempfile
 from collections.abc import Callable
 
+from app.http.limitstore import SETTING as STORAGE_SETTING
+from app.http.limitstore import LimitStore, reachable, shown
 from app.layout import Layout
 from app.server.bank_guard import BankChanged, check_bank_unchanged
 from app.server.flow.context import StudyContext
-from app.server.http.limitstore import SETTING as STORAGE_SETTING
-from app.server.http.limitstore import LimitStore, reachable, shown
 from app.server.storage.db import create_tables, is_sqlite, make_engine
 from app.server.storage.migrate import SchemaError
 from app.settings import Settings, get_settings

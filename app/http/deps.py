@@ -17,11 +17,11 @@ from typing import Annotated
 from fastapi import Depends, Header, Request
 from sqlmodel import Session
 
+from app.http.lockout import TokenLockout
+from app.http.ratelimit import client_key
 from app.server.flow import notices, tabs
 from app.server.flow.context import StudyContext
 from app.server.flow.sessions import SESSION_HEADER, check_can_continue, participant_by_token
-from app.server.http.lockout import TokenLockout
-from app.server.http.ratelimit import client_key
 from app.server.storage.tables import Participant
 from app.settings import Settings
 from app.study.errors import Refused

@@ -1,1 +1,0 @@
-"""The server's HTTP room: the routes, their dependencies, wire bodies, headers and limits."""
