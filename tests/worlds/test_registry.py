@@ -25,6 +25,20 @@ def test_highway_has_no_sac_policy():
         build_world("highway", policy="sac")
 
 
+def test_obstacle_names_its_two_policies():
+    with pytest.raises(ConfigError, match="unknown policy 'rrt' for obstacle; choose mpc or sac"):
+        build_world("obstacle", policy="rrt")
+
+
+def test_a_registered_world_decides_its_own_policies(monkeypatch):
+    """A world with a policy no other world has is built from its builder alone (the guide's
+    promise); there is no second, global list of policies to extend."""
+    built = {}
+    monkeypatch.setitem(SIMULATED_WORLDS, "corridor",
+                        lambda path, policy: built.setdefault("policy", policy))
+    assert build_world("corridor", policy="rule") == "rule"
+
+
 def test_an_unknown_world_with_a_yaml_is_refused_naming_the_registered_ones(tmp_path):
     path = tmp_path / "third.yaml"
     # a name in the old tuple of simulated worlds without a branch of its own was built as
