@@ -32,6 +32,8 @@ def tree_lines(folder: Path, depth: int = 0) -> list[str]:
 def main() -> None:
     """Print the tree of the package named on the command line (default: app)."""
     package = sys.argv[1] if len(sys.argv) > 1 else "app"
+    if not (ROOT / package / "__init__.py").is_file():
+        sys.exit(f"package: {package!r} is not a package under {ROOT} (e.g. app, analysis)")
     print(f"{package}/")
     print("\n".join("  " + line for line in tree_lines(ROOT / package)))
 
