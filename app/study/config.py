@@ -147,8 +147,8 @@ class Endings(StrictModel):
     declined_consent: Ending = Ending(message="You chose not to take part. Please return "
                                               "the study on the recruiting platform so "
                                               "that your place goes to someone else.")
-    # the device check turned the participant away (no mouse or touchpad): the study ends before any
-    # trial
+    # the page found a device that cannot run the study (e.g. no mouse or touchpad): the study
+    # ends before any trial
     screened_out: Ending = Ending(message="This study needs a laptop or desktop computer "
                                           "with a mouse or touchpad. Please return the "
                                           "study on the recruiting platform.")
