@@ -21,15 +21,22 @@ class Settings(BaseSettings):
 
     model_config = SettingsConfigDict(env_prefix="TOMSTUDY_", extra="ignore")
 
+    # where everything generated lives (simulated data, models, built bundles, the SQLite database);
+    # default var/ in the repository
     data_dir: Path = Field(default=DEFAULT_DATA_DIR)
+    # the folder of study configs the commands and the server read (study_configs/ in the
+    # repository)
     configs_dir: Path = Field(default=REPO_ROOT / "study_configs")
     # a lab's recordings (recorded worlds' sources); default <data dir>/recordings
     recordings_dir: Path | None = None
+    # the study database's SQLAlchemy URL (DATABASE_URL, e.g. postgresql+psycopg://...); '' = SQLite
+    # under the data dir
     database_url: str = Field(default="", validation_alias="DATABASE_URL")
     # no default anywhere: `serve` generates one when unset (app/main.py)
     admin_token: str = ""
     # secrets as files (compose secrets, /run/secrets/...): read when set
     admin_token_file: Path | None = None
+    # a file holding the database password, set into DATABASE_URL when present
     database_password_file: Path | None = None
     # comma-separated public host names of the study (e.g. study.example.org)
     allowed_hosts: str = ""
@@ -62,8 +69,11 @@ class Settings(BaseSettings):
     # Prolific's researcher API (app/server/prolific.py): with a token, a Prolific session counts
     # only once Prolific confirms its SESSION_ID (app/server/flow/prolific_check.py)
     prolific_token: str = ""
+    # a file holding the Prolific API token (read instead of TOMSTUDY_PROLIFIC_TOKEN)
     prolific_token_file: Path | None = None
+    # the base URL of Prolific's researcher API
     prolific_api_url: str = "https://api.prolific.com/api/v1/"
+    # seconds (> 0) one request to Prolific's API may take
     prolific_timeout_s: float = Field(default=5.0, gt=0)
     # how often each worker asks Prolific again about sessions it could not check at start
     prolific_recheck_s: float = Field(default=60.0, gt=0)

@@ -177,9 +177,14 @@ class ExclusionRules(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
+    # true: a participant who failed an attention check is excluded from the analysis
     failed_attention_check: bool = True
+    # true: a participant who did not complete the study is excluded
     incomplete: bool = True
+    # a scored trial answered in less than this many milliseconds (>= 0) is too fast: dropped from
+    # the analysis of a kept participant
     too_fast_trial_ms: float = Field(default=4000.0, ge=0)
+    # a participant with more than this share (0-1) of scored trials too fast is excluded
     too_fast_max_fraction: float = Field(default=0.25, ge=0, le=1)
 
     def too_fast(self, duration_ms):

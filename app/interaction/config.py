@@ -27,12 +27,14 @@ class CodeLevelsConfig(StrictModel):
     (the rule of study_configs/model_selection.yaml), fixed before any purity is computed."""
 
     levels: list[list[int]] = Field([[2, 2], [2, 2, 2], [3, 3], [4, 4], [5, 3], [3, 3, 3],
-                                     [5, 5]], min_length=1)
+                                     [5, 5]], min_length=1,
+                                    description="the FSQ levels lists tried, one Ours training "
+                                    "each; the rule picks the one every seed trains with")
     min_used_fraction: float = Field(0.5, ge=0, le=1, description="eligible: used codes at "
                                      "least this share of the codebook")
     loss_tolerance: float = Field(0.05, ge=0, description="relative; of the cells this close "
                                   "to the lowest eligible loss, the fewest used codes")
-    seed: int = Field(0, ge=0)
+    seed: int = Field(0, ge=0, description="the training seed of every levels cell")
 
 
 class FrameSensitivityConfig(StrictModel):
@@ -59,7 +61,8 @@ class InteractionConfig(StrictModel):
     observed_frames: int = Field(10, ge=2, description="observed segment: 10 intervals = 1 s")
     downsample: int = Field(2, ge=1, description="keep every k-th frame (k=2: dt 0.2 s)")
     predict_steps: int = Field(3, ge=1, description="n actions predicted (ADE/FDE horizon)")
-    pair_max_distance_m: float = Field(30.0, gt=0)
+    pair_max_distance_m: float = Field(30.0, gt=0, description="a robot/human pair is kept "
+                                       "when they come this close (m) in the window")
     min_speed_mps: float = Field(0.5, ge=0, description="true next speed needed to score")
     turn_threshold_deg: float = Field(30.0, gt=0, description="heading change = a turn")
     v10_train_fraction: float = Field(0.8, gt=0, lt=1,
@@ -67,15 +70,21 @@ class InteractionConfig(StrictModel):
     v10_validation_list: Literal["use", "ignore"] = Field(
         "use", description="v1.0: hold out the devkit's validation list's recordings ('use'), "
         "or ignore the list and split every recording in time ('ignore')")
-    seeds: int = Field(10, ge=2)
+    seeds: int = Field(10, ge=2, description="training seeds 0..k-1 (>= 2) of Ours and the "
+                       "VAE in the primary protocol; --seeds overrides it")
     max_train_pairs: int = Field(700, ge=0, description="an even subsample beyond this "
                                  "(fixed from the time budget); 0 = every pair")
-    eval_windows_per_pair: int = Field(20, ge=1)
+    eval_windows_per_pair: int = Field(20, ge=1, description="evenly spaced windows scored "
+                                       "per val pair")
     field_grid: int = Field(25, ge=5, description="grid points per side of a vector field")
     field_codes: int = Field(6, ge=1, description="most used codes drawn per model")
-    secondary: SecondaryConfig = Field(default_factory=SecondaryConfig)
-    code_levels: CodeLevelsConfig = Field(default_factory=CodeLevelsConfig)
-    frame_sensitivity: FrameSensitivityConfig = Field(default_factory=FrameSensitivityConfig)
+    secondary: SecondaryConfig = Field(default_factory=SecondaryConfig,
+                                       description="the secondary analyses")
+    code_levels: CodeLevelsConfig = Field(default_factory=CodeLevelsConfig,
+                                          description="how Ours' FSQ levels are chosen")
+    frame_sensitivity: FrameSensitivityConfig = Field(default_factory=FrameSensitivityConfig,
+                                                      description="the other-frame sensitivity "
+                                                      "row")
     _without_new_keys = omitted_when_default("v10_validation_list")
 
     @property

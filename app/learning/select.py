@@ -61,24 +61,35 @@ VAE_RULE = "lowest validation task loss (prediction + reconstruction MSE, no KL 
 class VaeGrid(StrictModel):
     """VAE cells: every beta_kl x latent_dim pair."""
 
+    # the KL weights tried (each cell trains one beta_kl x latent_dim pair)
     beta_kl: list[float] = Field(min_length=1)
+    # the latent sizes tried
     latent_dim: list[int] = Field(min_length=1)
 
 
 class OursGrid(StrictModel):
     """Ours cells (one per levels list) and the parameters of the selection rule."""
 
+    # the FSQ levels lists tried, one cell each
     levels: list[list[int]] = Field(min_length=1)
+    # a cell is eligible when its used codes are at least this share (0-1) of its codebook
     min_used_fraction: float = Field(0.5, ge=0, le=1)
+    # relative (>= 0): among eligible cells this close to the lowest eligible validation loss, the
+    # one with the fewest used codes wins
     loss_tolerance: float = Field(0.05, ge=0)
 
 
 class SelectionConfig(StrictModel):
     """study_configs/model_selection.yaml."""
 
+    # training seed (>= 0) of every grid cell
     seed: int = Field(0, ge=0)
+    # the VAE's grid
     vae: VaeGrid
+    # Ours' grid and its selection rule
     ours: OursGrid
+    # fsq_noise_fraction (0-1) of the sensitivity row: the chosen Ours retrained with this
+    # quantiser, reported, never chosen
     sensitivity_fsq_noise_fraction: float = Field(0.0, ge=0, le=1)
 
 

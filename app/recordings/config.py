@@ -23,11 +23,14 @@ class InteractionSource(StrictModel):
     devkit's validation list names (unless `validation_list: ignore`), else the last
     `held_out_fraction` of each recording."""
 
-    format: Literal["interaction"]
+    format: Literal["interaction"] = Field(description="`interaction`: the INTERACTION "
+                                           "dataset's track files")
     path: str = Field(min_length=1, description="the download's folder, relative to the "
                       "recordings dir (or absolute)")
     scenario: str = Field(min_length=1, description="e.g. DR_USA_Roundabout_FT")
-    held_out_fraction: float = Field(0.2, gt=0, lt=1)
+    held_out_fraction: float = Field(0.2, gt=0, lt=1, description="v1.0 without the "
+                                     "validation list: the last this share (0-1) of each "
+                                     "recording, in time, is held out")
     validation_list: Literal["use", "ignore"] = Field(
         "use", description="v1.0: hold out the devkit's validation list's recordings, or "
         "ignore the list (a partial download) and hold out each recording's last part")
@@ -42,25 +45,34 @@ class CsvSource(StrictModel):
     optional CSV of lines to draw under the agents (line_id, kind, dashed, x_m, y_m), relative
     to the recordings dir like `path` (not inside a folder of logs: each .csv there is a log)."""
 
-    format: Literal["csv"]
-    path: str = Field(min_length=1)
-    lines: str = ""
-    held_out_fraction: float = Field(0.25, gt=0, lt=1)
+    format: Literal["csv"] = Field(description="`csv`: the generic robot-log CSV format")
+    path: str = Field(min_length=1, description="a .csv log or a folder of them, relative to "
+                      "the recordings dir (or absolute)")
+    lines: str = Field("", description="a CSV of lines drawn under the agents, relative to the "
+                       "recordings dir; '' = none")
+    held_out_fraction: float = Field(0.25, gt=0, lt=1, description="share (0-1) of the "
+                                     "recordings held out for the trials, evenly spaced by "
+                                     "name (one recording: its last part in time)")
 
 
 class AgentLook(StrictModel):
     """How the robot and the human are drawn (both alike)."""
 
-    kind: Literal["car", "disc"] = "car"
-    length_m: float = Field(4.6, gt=0)
-    width_m: float = Field(1.9, gt=0)
+    kind: Literal["car", "disc"] = Field("car", description="the agents' drawn shape: a "
+                                         "rectangle along the heading, or a disc")
+    length_m: float = Field(4.6, gt=0, description="drawn length (m, > 0), and the size of an "
+                            "agent whose recording gives none")
+    width_m: float = Field(1.9, gt=0, description="drawn width (m, > 0), likewise")
 
 
 class RecordedConfig(StrictModel):
     """How recordings become a world's trajectories, trials and start states."""
 
-    kind: Literal["recorded"]
-    source: Annotated[InteractionSource | CsvSource, Field(discriminator="format")]
+    kind: Literal["recorded"] = Field(description="`recorded`: this world is read from "
+                                      "recordings, not simulated")
+    source: Annotated[InteractionSource | CsvSource, Field(
+        discriminator="format", description="where the recordings are and what is held out, "
+        "by `format`")]
     dt_s: float = Field(0.4, gt=0, description="one step of the clips and the predictions; a "
                         "whole number of the recordings' time steps")
     window_s: float = Field(4.0, gt=0, description="one interaction: a robot/human pair over "
@@ -83,12 +95,13 @@ class RecordedConfig(StrictModel):
     policy_radius_m: float = Field(4.0, gt=0, description="the recorded future from a start: "
                                    "the nearest recorded robot state within this, heading "
                                    "within the tolerance")
-    agent: AgentLook = AgentLook()
+    agent: AgentLook = Field(AgentLook(), description="how the robot and the human are drawn")
     view_span_m: float = Field(60.0, gt=0, description="the clip view: a square this wide "
                                "that follows the robot")
     driven_cell_m: float = Field(2.0, gt=0, description="cell size of the driven area drawn "
                                  "under the clips")
-    scene_margin_m: float = Field(5.0, ge=0)
+    scene_margin_m: float = Field(5.0, ge=0, description="space (m, >= 0) the scene's bounds "
+                                  "leave around every pair's positions")
 
     @model_validator(mode="after")
     def _windows_hold_a_trial(self) -> "RecordedConfig":

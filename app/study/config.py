@@ -32,7 +32,11 @@ BundleSource = Literal["shipped", "built"]
 class SegmentSteps(StrictModel):
     """How many steps of the partial interaction a participant watches (inclusive range)."""
 
+    # fewest steps of the partial interaction a trial shows (>= 2); each bank segment's length is
+    # drawn uniformly from min..max, so changing it rebuilds the bank
     min: int = Field(ge=2)
+    # most steps a trial shows (>= min); a longer segment shows the participant more of the
+    # interaction before they predict
     max: int = Field(ge=2)
 
     @model_validator(mode="after")
@@ -57,10 +61,19 @@ class AttentionChecks(StrictModel):
     configs and bundles written before still validate.
     """
 
+    # attention check trials per world in each participant's plan (0: none); the bank holds this
+    # many checks per world
     per_world: int = Field(default=1, ge=0)
+    # a start state passes when the first clicked move is within this angle (degrees, 0-180] of the
+    # world policy's first move; larger is more lenient
     max_angle_deg: float = Field(default=45.0, gt=0, le=180)
+    # start states of a check that must pass for the check to pass (1..start_states)
     min_passing_starts: int = Field(default=4, ge=1)
+    # retired (issue 30): read by no rule; accepted (degrees, 0-180] so older configs and bundles
+    # validate
     candidate_max_angle_deg: float = Field(default=15.0, gt=0, le=180)
+    # the probability (0-1] with which every attentive simulated observer of the family must pass
+    # a segment for the bank to pick it as a check; higher asks for easier checks
     min_attentive_pass_rate: float = Field(default=0.95, gt=0, le=1)
 
     # a config at the default rate dumps as before the key existed (same config hash)
@@ -70,13 +83,24 @@ class AttentionChecks(StrictModel):
 class SurveyQuestion(StrictModel):
     """One closing question; likert answers are integers in [scale_min, scale_max]."""
 
+    # the answer's column name in the exports: lower case letters, digits and _, unique in the
+    # survey
     key: str = Field(pattern=r"^[a-z][a-z0-9_]*$")
+    # the question as the participant reads it
     text: str
+    # `likert`: a whole number on scale_min..scale_max; `choice`: one of `options`; `text`: free
+    # text of at most max_chars
     kind: Literal["likert", "text", "choice"]
+    # true: the survey cannot be sent without an answer (422 naming the question); false: it may be
+    # left empty
     required: bool = True
+    # likert only: the lowest answer accepted
     scale_min: int = 1
+    # likert only: the highest answer accepted
     scale_max: int = 7
+    # choice only: the answers offered; any other answer is refused
     options: list[str] = []
+    # the longest answer accepted, in characters (>= 1); a longer one is refused
     max_chars: int = Field(default=2000, ge=1)
 
 
@@ -88,7 +112,10 @@ class Ending(StrictModel):
     redirect, only the message.
     """
 
+    # the code this ending gives the participant and puts in the redirect URL (letters, digits, _
+    # and -, at most 64); '' = no code of its own (see Endings for the fallback)
     completion_code: str = Field(default="", max_length=64, pattern=r"^[A-Za-z0-9_-]*$")
+    # what the closing page says for this ending
     message: str = ""
 
 
@@ -105,14 +132,23 @@ class Endings(StrictModel):
     consent and device screen-outs end before any trial.
     """
 
+    # a completed study with at least min_failed failed attention checks (marked for manual review);
+    # code '' = the completed code
     failed_checks: Ending = Ending(message="Thank you. Your submission will be reviewed "
                                            "by the researchers.")
+    # failed attention checks (>= 1) that make a completed session end as failed_checks; Prolific
+    # allows a rejection only from 2
     min_failed: int = Field(default=2, ge=1)
+    # a completed study the `exclusions` rules remove without min_failed failed checks; code '' =
+    # failed_checks' code
     excluded: Ending = Ending(message="Thank you. Your submission will be reviewed by the "
                                       "researchers.")
+    # the participant declined consent: the study ends before any trial
     declined_consent: Ending = Ending(message="You chose not to take part. Please return "
                                               "the study on the recruiting platform so "
                                               "that your place goes to someone else.")
+    # the page found a device that cannot run the study (e.g. no mouse or touchpad): the study
+    # ends before any trial
     screened_out: Ending = Ending(message="This study needs a laptop or desktop computer "
                                           "with a mouse or touchpad. Please return the "
                                           "study on the recruiting platform.")
@@ -122,6 +158,7 @@ class HourlyPay(StrictModel):
     """What the study pays per hour; the advertised pay is this times the estimated time
     (app/study/estimate.py)."""
 
+    # pay per hour in `currency` (0-1000]; the advertised pay is this times the estimated duration
     amount: float = Field(gt=0, le=1000)
     currency: str = Field(pattern=r"^[A-Z]{3}$")  # ISO 4217, e.g. GBP, USD, EUR
 
@@ -153,18 +190,33 @@ class RecruitmentConfig(StrictModel):
     the data dir; `pinned` (the default) uses the codes written here.
     """
 
+    # `prolific`, `mturk` or `open` (anonymous lab visitors): which URL parameters a session must
+    # start with
     platform: Platform = "prolific"
+    # `pinned`: the completion codes written here; `generated`: the server makes one random code per
+    # ending and keeps it in the data dir (leave every code out)
     codes: CodeSource = "pinned"
     closed: bool = False  # true: new participants are turned away (the study is closed)
     # the study is full once this many sessions count (in progress or completed validly)
     max_counted_sessions: int | None = Field(default=None, ge=1)
+    # Prolific's study id (up to 24 hex digits); when set, a session whose STUDY_ID differs is
+    # refused; '' = not checked
     prolific_study_id: str = Field(default="", pattern=r"^[0-9a-fA-F]{0,24}$")
+    # the code a validly completed session gets (letters, digits, _ and -, at most 64); required
+    # with `codes: pinned`
     completion_code: str = Field(default="", max_length=64, pattern=r"^[A-Za-z0-9_-]*$")
+    # where a Prolific participant is sent at the end; https:// only, {completion_code} is the one
+    # placeholder
     prolific_redirect_url: str = "https://app.prolific.com/submissions/complete?cc={completion_code}"
+    # where an MTurk worker is sent at the end ('' = no redirect: the page shows the code); https://
+    # only, {completion_code} the one placeholder
     mturk_redirect_url: str = ""
+    # where an `open` (lab) participant is sent at the end ('' = none: the page shows the code);
+    # https:// only, {completion_code} the one placeholder
     open_redirect_url: str = ""
     # where an MTurk completion may post its form (turkSubmitTo must be one of these)
     mturk_submit_hosts: list[str] = list(MTURK_SUBMIT_HOSTS)
+    # the codes and messages of the endings other than a valid completion
     endings: Endings = Endings()
     hourly_pay: HourlyPay | None = None  # None: the pay is stated on the platform only
 
@@ -241,7 +293,11 @@ class PredictionInput(StrictModel):
     pixel and the circle does not invite moves several times the robot's step.
     """
 
+    # the reach circle's radius as a multiple (> 0) of the robot's 99.5th-percentile step in the
+    # bank data; a click beyond it is refused
     max_step_factor: float = Field(default=1.1, gt=0)
+    # the shortest move accepted, as a fraction (0-1) of the reach radius; a shorter click is
+    # refused (the bank's min_step_m)
     min_step_fraction: float = Field(default=0.1, gt=0, lt=1)
 
 
@@ -255,6 +311,8 @@ class ModelFamily(StrictModel):
     app.layout's `checkpoint(world, model, seed)`.
     """
 
+    # training seeds (distinct, >= 0, 1-32 of them) of Ours and the VAE; seeds[0] is the primary;
+    # each seed is trained in `tomstudy bundle build`, so changing them rebuilds the bank
     seeds: list[int] = Field(default_factory=lambda: [0], min_length=1, max_length=32)
 
     @model_validator(mode="after")
@@ -290,9 +348,17 @@ class MainTrialSelection(StrictModel):
     the models' answers of the selection seeds, never a participant's.
     """
 
+    # `random`: every main trial in the random arm; `models_disagree` or `discriminability`: a
+    # second arm chosen by that rule (see above); changing it rebuilds the bank
     rule: Literal["random", "models_disagree", "discriminability"] = "random"
+    # candidate segments built per second-arm trial (1-8; 1 with rule random); more candidates let
+    # the rule pick more extreme ones
     candidates_per_trial: int = Field(default=1, ge=1, le=8)
+    # with a second-arm rule: how many of bank_trials_per_world stay in the random arm
+    # (0..bank_trials_per_world)
     random_arm_trials: int = Field(default=0, ge=0)
+    # with rule discriminability only: the model seeds the rule reads (some, not all, of
+    # models.seeds); the others confirm the design
     selection_seeds: list[int] = Field(default_factory=list)
 
     # a selection without selection seeds dumps as before the key existed (same config hash)
@@ -332,8 +398,10 @@ _EMAIL_OR_PLACEHOLDER = rf"^({PLACEHOLDER}|[^@\s]+@[^@\s]+\.[^@\s]+)$"
 class Investigator(StrictModel):
     """A researcher the participant can contact."""
 
+    # the researcher's name (1-120 characters)
     name: str = Field(min_length=1, max_length=120)
     role: str = Field(default="", max_length=120)  # e.g. "principal investigator"
+    # their contact address (an email, or a [PLACEHOLDER] that production refuses)
     email: str = Field(pattern=_EMAIL_OR_PLACEHOLDER, max_length=200)
 
 
@@ -341,33 +409,42 @@ class ConsentForm(StrictModel):
     """The consent page's typed sections (app/study/consent.py renders them, with the time and
     pay from the estimate). Production refuses a form that still holds a [PLACEHOLDER]."""
 
+    # the institution running the study, as the consent page names it
     institution: str = Field(min_length=1)
+    # the researchers a participant can contact (at least one)
     investigators: list[Investigator] = Field(min_length=1)
     ethics_approval: str = Field(min_length=1)  # the review board and its approval id
     purpose: str = Field(min_length=1)  # what the study is about and what the participant does
     recorded: str = Field(min_length=1)  # what is recorded, and what is not
     retention: str = Field(min_length=1)  # how long data are kept, where, and who they go to
+    # that taking part is voluntary, in the study's own words
     voluntary: str = Field(min_length=1)
     withdrawal: str = Field(min_length=1)  # how to stop, and to have one's data removed
+    # the risks and discomforts of taking part (or that there are none beyond everyday use of a
+    # computer)
     risks: str = Field(min_length=1)
 
 
 class WorldIntro(StrictModel):
     """The screen before a world's practice: its name for participants and what is in it."""
 
+    # the world's name as participants see it on its opening screen (1-80 characters)
     title: str = Field(min_length=1, max_length=80)
+    # what is in the world and what its parts mean (goals, obstacles, lanes)
     text: str = Field(min_length=1)
 
 
 class StudyConfig(StrictModel):
     """Everything that defines one online study."""
 
+    # the study's name on every page, the consent and instructions headings, and the MTurk preview
     title: str
     # what the MTurk HIT preview shows (default: the title only); {duration} and {pay} are
     # rendered from the estimate (app/study/estimate.py), so no time is typed by hand
     description: str = ""
     consent: ConsentForm | None = None  # the consent page's typed sections
     consent_text: str = ""  # before the typed form: free text, shown only without `consent`
+    # the instructions page's text, shown after consent and before the first world
     instructions_text: str
     # per world: the screen that opens its part (what goals, obstacles or lanes mean)
     world_intros: dict[WorldName, WorldIntro]
@@ -375,23 +452,48 @@ class StudyConfig(StrictModel):
     # instructions page is shared by its worlds; default the paper study's robot and person
     words: ParticipantWords = ParticipantWords()
     demo: DemoName = DEFAULT_DEMO  # the instructions' illustration: `obstacle` or `road`
+    # the worlds each participant sees (each once): a simulated world or a recorded one with
+    # study_configs/worlds/<name>.yaml; changing it rebuilds the bank
     worlds: list[WorldName] = Field(min_length=1)
+    # true: every order of `worlds` is used, each new participant getting the least-used one; false:
+    # every participant sees them in the order listed
     counterbalance_world_order: bool = True
+    # scored main trials per world in each participant's plan (>= 1, at most bank_trials_per_world),
+    # the least-exposed ones of the bank
     trials_per_world: int = Field(ge=1)
+    # complete example interactions shown before each trial's segment (>= 0); changing it rebuilds
+    # the bank
     examples_per_trial: int = Field(ge=0)
+    # the range of steps of the partial interaction a trial shows
     segment_steps: SegmentSteps
     start_states: int = Field(ge=1)  # per trial: own + data-covered (bank/start_states.py)
+    # moves the participant clicks per start state (>= 1), one per step of the world; changing it
+    # rebuilds the bank
     steps_to_predict: int = Field(ge=1)
     practice_trials: int = Field(default=1, ge=0)  # per world, before its scored trials
+    # main trials the bank holds per world (>= trials_per_world); participants draw from them, so
+    # more trials spread the exposures
     bank_trials_per_world: int = Field(ge=1)
+    # seed (>= 0) of the bank's random draws (segments, their lengths, examples, start states),
+    # mixed with the world's index; a new seed gives a different bank
     bank_seed: int = Field(default=0, ge=0)
+    # which held-out segments become main trials, and in which arm
     main_trial_selection: MainTrialSelection = MainTrialSelection()
+    # the attention check trials and the rule that makes them fair
     attention_checks: AttentionChecks = AttentionChecks()
+    # how long a clicked move may be, relative to the robot's own steps
     prediction_input: PredictionInput = PredictionInput()
+    # the closing questions, in order (keys unique); [] = none
     survey: list[SurveyQuestion] = []
+    # where participants come from, what a session must start with, and where they go at the end
     recruitment: RecruitmentConfig
+    # the planned number of participants (>= 1): the preregistration's N, the dashboard's progress
+    # and the base of the live-session cap
     target_sample_size: int = Field(ge=1)
+    # the rules that exclude a participant or drop a trial in the analysis and the endings
     exclusions: ExclusionRules = ExclusionRules()
+    # minutes (> 0) without an update after which an unfinished session is stale: it stops counting
+    # toward the balance and the places (a stale session that completes validly counts again)
     in_progress_timeout_min: float = Field(default=90.0, gt=0)
     # a session that has not consented this long after its start holds nothing: its external
     # id may start again (it never counted: a session counts from consent on, places.py)
@@ -399,10 +501,13 @@ class StudyConfig(StrictModel):
     # at most this x target_sample_size unfinished sessions run at once (pilots aside): a
     # bound on what anonymous traffic can make the server hold (sessions.py)
     max_live_sessions_per_target: float = Field(default=10.0, ge=1)
+    # which training seeds of Ours and the VAE the bank answers with
     models: ModelFamily = ModelFamily()
     # plug-in predictors (app/predictors/registry.py) whose answers the bank stores beside
     # Ours', the VAE's and constant velocity's: installed entry point names, never code
     predictors: list[str] = []
+    # `built`: the bundle is made in the data dir by `tomstudy bundle build`; `shipped`: the bundle
+    # in study_configs/bundles/ (in git) is served as it is
     bundle: BundleSource = "built"
     # worlds whose design cannot meet the design goal (`tomstudy instrument`): world -> what it
     # can and cannot test; reported as exploratory, never as a test of the hypothesis

@@ -31,11 +31,19 @@ class ParticipantWords(StrictModel):
     instructions' legend describes its drawing (the colours are the scene palette's).
     """
 
+    # the agent whose moves are predicted, as every page names it (lower case noun, said as "the
+    # <noun>")
     agent: str = Field(default="robot", pattern=_NOUN)
+    # the agent beside it, named the same way (must differ from agent)
     other: str = Field(default="person", pattern=_NOUN)
+    # the agent's one-letter tag on the canvas and in the legends (an upper-case letter)
     agent_key: str = Field(default="R", pattern=_KEY)
+    # the other agent's one-letter tag (an upper-case letter, not agent_key)
     other_key: str = Field(default="H", pattern=_KEY)
+    # how the instructions' legend describes the agent's drawing (1-40 characters; the colours are
+    # the scene palette's)
     agent_look: str = Field(default="blue, solid", min_length=1, max_length=40)
+    # how the legend describes the other agent's drawing (1-40 characters)
     other_look: str = Field(default="orange, striped", min_length=1, max_length=40)
 
     @model_validator(mode="after")

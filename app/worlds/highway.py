@@ -50,53 +50,104 @@ RangeI = tuple[int, int]
 class MpcSettings(StrictModel):
     """Sampling-MPC sizes; the prediction integrates the bicycle model in sub-steps."""
 
+    # policy steps (>= 1) each car's MPC plans ahead; longer plans see merges coming earlier and
+    # cost more time
     horizon_steps: int = Field(6, ge=1)
+    # candidate control sequences (>= 4) drawn per MPC iteration
     n_samples: int = Field(64, ge=4)
+    # cross-entropy refinements (>= 1) of the sampling distribution per policy step
     iterations: int = Field(2, ge=1)
+    # sub-steps (>= 1) of the bicycle model per policy step inside the MPC's prediction
     prediction_substeps: int = Field(2, ge=1)
+    # the sampling spread around the warm start, as a fraction (> 0) of each control's range
     init_std_fraction: float = Field(0.1, gt=0)
 
 
 class RewardWeights(StrictModel):
     """Per-step cost weights (the reward is their negative sum)."""
 
+    # weight (>= 0) of (speed - target speed)^2, per (m/s)^2
     speed_per_mps2: float = Field(0.5, ge=0)
+    # weight (>= 0) of (y - target lane centre)^2, per m^2: pulls the car into its target lane
     lane_lateral_per_m2: float = Field(1.0, ge=0)
+    # weight (>= 0) of heading^2, per rad^2: keeps the car parallel to the road
     heading_per_rad2: float = Field(20.0, ge=0)
+    # weight (>= 0) of acceleration^2, per (m/s^2)^2 (comfort)
     acceleration_per_mps2_sq: float = Field(0.05, ge=0)
+    # weight (>= 0) of steering^2, per rad^2 (comfort)
     steering_per_rad2: float = Field(10.0, ge=0)
+    # weight (>= 0) of the squared change of acceleration between steps (smoothness)
     acceleration_rate: float = Field(0.1, ge=0)
+    # weight (>= 0) of the squared change of steering between steps (smoothness)
     steering_rate: float = Field(50.0, ge=0)
+    # weight (>= 0) of the two cars' overlap area, m^2 (the predicted rectangles with a small
+    # margin)
     collision: float = Field(2000.0, ge=0)
+    # weight (>= 0) of the intrusion area, m^2, into the other car's clearance box
+    # (clearance_longitudinal_m x clearance_lateral_m)
     clearance: float = Field(20.0, ge=0)
+    # weight (>= 0) of the squared headway shortfall, m^2, of whichever car follows in the same lane
     headway: float = Field(5.0, ge=0)
+    # weight (>= 0) of how far, in m, the car's body reaches beyond the road's outer edges
     offroad: float = Field(2000.0, ge=0)
 
 
 class HighwayConfig(StrictModel):
     """Everything that shapes a Highway rollout; units in the key names."""
 
+    # lanes of the straight road (>= 3), 4 m wide each, lane 0 on top
     lanes_count: int = Field(3, ge=3)
+    # seconds (> 0) between two policy steps: the time step of the stored trajectories and of a
+    # participant's clicks
     policy_dt_s: float = Field(0.5, gt=0)
+    # highway-env's integration rate; policy_dt_s x this must be a whole number of sub-steps
     simulation_frequency_hz: int = Field(10, ge=1)
+    # policy steps (>= 2) per rollout: the length of every stored trajectory
     episode_steps: int = Field(16, ge=2)
+    # speed (m/s, >= 0) of the moving frame the positions are stored in; plus min_display_speed_mps
+    # it must stay below the slowest car so cars drive forward on screen
     frame_speed_mps: float = Field(19.0, ge=0)
+    # where the moving frame's origin starts, in m along the road relative to the cars' initial
+    # midpoint (negative: behind them)
     frame_start_x_m: float = Field(-26.0)
+    # slowest on-screen forward speed (m/s, >= 0) a car may show; a rollout with a slower car is
+    # rejected as slow_on_screen
     min_display_speed_mps: float = Field(1.0, ge=0)
+    # [low, high] range (m/s, >= 0) each car's start speed is drawn from, uniformly
     initial_speed_mps: RangeF = (22.5, 25.5)
+    # [low, high] range (m/s, >= 0) each car's MPC target speed is drawn from, uniformly
     target_speed_mps: RangeF = (23.0, 25.0)
+    # [low, high] range (m) of the robot's start x minus the human's, drawn uniformly
     initial_gap_m: RangeF = (-20.0, 20.0)
+    # smallest start gap (m, >= 0) of two cars in the same lane; a smaller drawn gap is redrawn
+    # beyond it
     min_same_lane_gap_m: float = Field(14.0, ge=0)
+    # probability (0-1) that the human starts in the lane a merging robot aims for (else a random
+    # lane)
     human_in_robot_target_lane_prob: float = Field(0.5, ge=0, le=1)
+    # [low, high] range (policy steps, >= 0) each car waits before steering to its target lane,
+    # drawn uniformly
     merge_delay_steps: RangeI = (0, 2)
+    # largest acceleration or braking (m/s^2, > 0) the MPC may command
     max_acceleration_mps2: float = Field(3.0, gt=0)
+    # largest steering angle (rad, > 0) the MPC may command
     max_steering_rad: float = Field(0.08, gt=0)
+    # extra length (m, >= 0) beyond the car's own of the clearance box the reward keeps free
     clearance_longitudinal_m: float = Field(4.0, ge=0)
+    # extra width (m, >= 0) beyond the car's own of the clearance box; also how close laterally
+    # counts as the same lane for headway
     clearance_lateral_m: float = Field(1.0, ge=0)
+    # the time gap (s, >= 0) a following car keeps: a gap shorter than this x its speed is penalised
     headway_time_s: float = Field(0.8, ge=0)
+    # half the view's length along the road (m, > 0); a rollout where a car leaves it is rejected as
+    # out_of_view
     view_half_length_m: float = Field(45.0, gt=0)
+    # how far (m, >= 0) a car may stray outside its start-to-target lane corridor before the rollout
+    # is rejected as swerve
     max_lane_excursion_m: float = Field(1.0, ge=0)
+    # the sampling MPC's sizes, the same for both cars
     mpc: MpcSettings = MpcSettings()
+    # the per-step cost weights both cars' MPC minimises
     reward: RewardWeights = RewardWeights()
 
     @model_validator(mode="after")

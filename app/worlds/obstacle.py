@@ -28,92 +28,151 @@ COLLISION_SUBSTEPS = 4  # check each step's straight segment at 4 points, not ju
 class GoalConfig(StrictModel):
     """A goal's centre [m] and name."""
 
+    # the goal centre's x (m from the scene's left edge)
     x_m: float
+    # the goal centre's y (m from the top edge; y grows downwards)
     y_m: float
+    # the goal's name, carried in the scene the pages draw
     label: str
 
 
 class ObstacleCircle(StrictModel):
     """A static circular obstacle [m]."""
 
+    # the obstacle centre's x (m from the left edge)
     x_m: float
+    # the obstacle centre's y (m from the top edge)
     y_m: float
+    # the obstacle's radius (m, > 0); the agents' discs may not touch it
     radius_m: float = Field(gt=0)
 
 
 class StartConfig(StrictModel):
     """How random start positions are drawn (rejection sampling)."""
 
+    # shortest path-around-obstacles distance (m, > 0) from a start to its agent's goal
     min_goal_distance_m: float = Field(gt=0)
+    # longest such distance (m, >= min_goal_distance_m): longer starts give longer episodes
     max_goal_distance_m: float = Field(gt=0)
+    # smallest distance (m, >= 0) between the two agents' start centres
     min_separation_m: float = Field(ge=0)
+    # free space (m, >= 0) a start keeps between the agent's disc and every obstacle and wall
     obstacle_margin_m: float = Field(ge=0)
+    # free space (m, >= 0) a start keeps between the agent's disc and every goal circle
     goal_margin_m: float = Field(ge=0)
 
 
 class RewardConfig(StrictModel):
     """Weights of the per-step reward both agents optimise."""
 
+    # weight (>= 0) of progress along the distance-to-goal field, scaled so a full-speed step
+    # downhill counts 1
     progress_weight: float = Field(ge=0)
+    # clearance (m, >= 0) from obstacles and walls below which the squared shortfall is penalised
     obstacle_clearance_m: float = Field(ge=0)
+    # weight (>= 0) of the squared obstacle clearance shortfall, per m^2
     obstacle_weight: float = Field(ge=0)
+    # clearance (m, >= 0) from the other agent's disc below which the squared shortfall is penalised
     agent_clearance_m: float = Field(ge=0)
+    # weight (>= 0) of the squared agent clearance shortfall, per m^2
     agent_weight: float = Field(ge=0)
+    # weight (>= 0) of the squared wall clearance shortfall (against obstacle_clearance_m), per m^2
     bounds_weight: float = Field(ge=0)
+    # penalty (>= 0) for each obstacle, agent or wall the disc overlaps at a step
     collision_penalty: float = Field(ge=0)
+    # weight (>= 0) of (speed / max_speed_mps)^2: effort
     effort_weight: float = Field(ge=0)
+    # weight (>= 0) of (change of velocity / max_speed_mps)^2 between steps: smoothness
     smoothness_weight: float = Field(ge=0)
+    # reward (>= 0) at the step an agent first enters its goal
     goal_bonus: float = Field(ge=0)
+    # per-step discount (0-1] of the MPC's reward over its horizon
     discount: float = Field(gt=0, le=1)
 
 
 class GeodesicConfig(StrictModel):
     """Grid on which the distance-to-goal fields around the obstacles are computed."""
 
+    # grid spacing (m, 0-1] of the distance-to-goal fields; finer grids follow the obstacles more
+    # closely and take longer to build
     grid_step_m: float = Field(gt=0, le=1)
+    # extra margin (m, >= 0) each obstacle is grown by, beyond the agent's radius, when the fields
+    # are computed
     inflation_m: float = Field(ge=0)
+    # how many times (>= 1) longer an edge touching a blocked grid node is: how strongly paths avoid
+    # the grown obstacles
     blocked_cost_factor: float = Field(ge=1)
 
 
 class MPCConfig(StrictModel):
     """Sampling MPC size."""
 
+    # steps (>= 1) each agent's sampling MPC plans ahead (the other agent predicted at constant
+    # velocity)
     horizon_steps: int = Field(ge=1)
+    # candidate velocity sequences (>= 4) drawn per MPC iteration
     n_samples: int = Field(ge=4)
+    # cross-entropy refinements (>= 1) of the sampling distribution per step
     iterations: int = Field(ge=1)
 
 
 class SACConfig(StrictModel):
     """Soft actor-critic training of the goal-conditioned agent policy."""
 
+    # environment steps (>= 1) of SAC training; read only when the world is built with policy sac
     total_timesteps: int = Field(ge=1)
+    # the SAC optimiser's learning rate (> 0)
     learning_rate: float = Field(gt=0)
+    # width of each hidden layer of the actor and critic networks (one entry per layer)
     hidden_units: list[int] = Field(min_length=1)
+    # transitions (>= 1) per gradient step
     batch_size: int = Field(ge=1)
+    # transitions (>= 1) the replay buffer holds
     buffer_size: int = Field(ge=1)
+    # environment steps (>= 0) collected before training begins
     learning_starts: int = Field(ge=0)
+    # the discount (0-1] of SAC's return
     gamma: float = Field(gt=0, le=1)
+    # CPU threads (1-2) torch uses while training
     torch_threads: int = Field(ge=1, le=2)
+    # episodes (>= 1) run after training to report the kept and rejection rates in the policy's
+    # meta.json
     eval_episodes: int = Field(ge=1)
+    # seed (>= 0) of the SAC training and its environment
     seed: int = Field(ge=0)
 
 
 class ObstacleConfig(StrictModel):
     """Everything that defines the Obstacle world."""
 
+    # seconds (> 0) per step: the time step of the stored trajectories and of a participant's clicks
     dt_s: float = Field(gt=0)
+    # steps (>= 1) a rollout may take; one where the robot has not reached its goal by then is
+    # rejected
     max_steps: int = Field(ge=1)
+    # the scene's width (m, > 0)
     width_m: float = Field(gt=0)
+    # the scene's height (m, > 0)
     height_m: float = Field(gt=0)
+    # each agent's disc radius (m, > 0), for collisions, clearances and drawing
     agent_radius_m: float = Field(gt=0)
+    # the fastest an agent may move (m/s, > 0); faster commands are scaled down
     max_speed_mps: float = Field(gt=0)
+    # radius (m, > 0) of a goal circle: an agent whose centre is inside it has arrived and stops
     goal_radius_m: float = Field(gt=0)
+    # the goals (at least 2); each episode gives the two agents distinct goals at random
     goals: list[GoalConfig] = Field(min_length=2)
+    # the static circular obstacles
     obstacles: list[ObstacleCircle]
+    # how start positions are drawn
     start: StartConfig
+    # the per-step reward both agents maximise
     reward: RewardConfig
+    # the grid of the distance-to-goal fields the reward's progress is measured on
     geodesic: GeodesicConfig
+    # the sampling MPC's sizes (the default policy)
     mpc: MPCConfig
+    # the soft actor-critic training, used only when the world is built with policy sac
     sac: SACConfig
 
     @model_validator(mode="after")

@@ -3,8 +3,9 @@
 A page line `::: config-model app.study.config:StudyConfig` becomes a table per model (the
 model, then each nested model it uses): key, type, default and description. The description
 is the field's `description=`, else the code comment on or just above the field's line, so
-the reference is the code's own words and cannot drift from it. `::: env-settings
-app.settings:Settings` renders the environment variables of a pydantic-settings model."""
+the reference is the code's own words and cannot drift from it; a field with neither fails the
+build, naming the model and the field. `::: env-settings app.settings:Settings` renders the
+environment variables of a pydantic-settings model."""
 
 import importlib
 import inspect
@@ -14,6 +15,7 @@ import types
 import typing
 from pathlib import Path
 
+from mkdocs.exceptions import PluginError
 from pydantic import BaseModel
 from pydantic_core import PydanticUndefined
 
@@ -92,11 +94,22 @@ def field_table(model: type[BaseModel], first: str, names: dict[str, str]) -> st
     type, default and description."""
     notes = source_comments(model)
     rows = [f"| {names[name]} | {type_name(field.annotation)} | {default_text(field)} | "
-            f"{cell(field.description or notes.get(name, ''))} |"
+            f"{cell(description(model, name, notes))} |"
             for name, field in model.model_fields.items()]
     return "\n".join([f"{cell(inspect.getdoc(model) or '')} "
                       f"(`{model.__module__}.{model.__qualname__}`)", "",
                       f"| {first} | type | default | description |", "|---|---|---|---|", *rows])
+
+
+def description(model: type[BaseModel], name: str, notes: dict[str, str]) -> str:
+    """A field's `description=`, else its code comment; PluginError naming the field if neither
+    (a reader would have to read the code to learn what the key does)."""
+    text = model.model_fields[name].description or notes.get(name, "")
+    if not text.strip():
+        raise PluginError(f"config reference: {model.__module__}.{model.__qualname__}.{name} "
+                          "has no description: give it Field(description=...) or a comment on "
+                          "or just above its line (the unit, the range, what it changes)")
+    return text
 
 
 def source_comments(model: type[BaseModel]) -> dict[str, str]:
