@@ -20,8 +20,8 @@
 # start without a TOMSTUDY_ADMIN_TOKEN of at least 32 characters (or TOMSTUDY_ADMIN_TOKEN_FILE),
 # answers only the Host names 127.0.0.1, localhost and TOMSTUDY_ALLOWED_HOSTS, and /docs,
 # /redoc and /openapi.json answer 404. It speaks plain HTTP: publish the port on 127.0.0.1
-# and put a reverse proxy that terminates HTTPS in front of it (README, "Hosting on the
-# internet"); never publish it on a public address as is.
+# and put a reverse proxy that terminates HTTPS in front of it (docs/run/hosting.md, "Hosting
+# on the internet"); never publish it on a public address as is.
 #
 # Client addresses (rate limits, the researcher lockout) come from X-Forwarded-For only when
 # the peer is a proxy named in TOMSTUDY_TRUSTED_PROXIES (addresses or networks; default
@@ -31,8 +31,8 @@
 #     -f '{{(index .IPAM.Config 0).Gateway}}')" >> tomstudy.env
 # Without it every participant shares the gateway's address, and so one rate-limit key.
 #
-# compose.yaml runs this image with PostgreSQL (README, "Going live"). Without DATABASE_URL
-# the server uses SQLite in the mounted var/ (one worker only). With a PostgreSQL
+# compose.yaml runs this image with PostgreSQL (docs/run/go-live.md, "Going live"). Without
+# DATABASE_URL the server uses SQLite in the mounted var/ (one worker only). With a PostgreSQL
 # DATABASE_URL (psycopg 3), e.g. a line
 # DATABASE_URL=postgresql+psycopg://tomstudy:<password>@db-host:5432/tomstudy in the env
 # file, and a shared rate-limit store (TOMSTUDY_RATE_LIMIT_STORAGE=redis://redis-host:6379/0:
@@ -40,9 +40,9 @@
 # workers: append `--workers 4` to the run command (arguments are serve options, see
 # app/server/entrypoint.sh). The paper's study is served from the frozen
 # bundle in study_configs/bundles/ (copied in below), so the first start trains nothing; a
-# study of your own with `bundle: built` is built into var/ on its first start (minutes, see
-# the README). HEALTHCHECK asks /healthz (which checks the database) on the host and port the
-# server was given; its start period covers such a first build.
+# study of your own with `bundle: built` is built into var/ on its first start (minutes;
+# docs/run/go-live.md, "Going live"). HEALTHCHECK asks /healthz (which checks the database)
+# on the host and port the server was given; its start period covers such a first build.
 ARG PYTHON_IMAGE=python:3.11-slim
 FROM ${PYTHON_IMAGE}
 
@@ -73,6 +73,10 @@ COPY study_configs ./study_configs
 RUN pip install --no-deps --no-build-isolation -e . \
  && useradd --uid 10001 --create-home tomstudy \
  && install -d -m 700 -o tomstudy /app/var
+# the project's own bytecode, made once here: PYTHONDONTWRITEBYTECODE=1 (and a root-owned /app)
+# keeps every worker from writing it, so each start would compile the app again (pip compiled
+# site-packages already; an editable install compiles nothing)
+RUN python -m compileall -q app analysis
 USER 10001
 
 EXPOSE 8000

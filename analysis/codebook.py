@@ -154,9 +154,9 @@ PREDICTIONS = {
     "attention_check": Column("An attention check (the robot's true first move is the "
                               "answer; app/server/flow/validation.py)."),
     "arm": Column("How a main trial was chosen: random, or the selection rule's arm "
-                  "(models_disagree, discriminability; README \"Main trials\"); empty for "
-                  "practice trials and attention checks, and in rows stored before arms "
-                  "existed.", values=ARMS),
+                  "(models_disagree, discriminability; docs/reproduce/trial-bank.md, \"Main "
+                  "trials\"); empty for practice trials and attention checks, and in rows "
+                  "stored before arms existed.", values=ARMS),
     "clip_sha256": Column("SHA-256 of the clip as shown (scene, time step and the trial's "
                           "browser payload), so a replay checks it shows the same clip.",
                           pattern=SHA256),
@@ -292,8 +292,8 @@ PLUGIN_COLUMNS = {
 }
 COARSE = ("The coarse observer {name} (app/observers/predictor.py: its expected move from what "
           "the participant was shown; empty in rows of a bank built before the observers)")
-PLUGIN = ("The plug-in predictor {name} (the study config's `predictors`; README \"Predictors: "
-          "adding your own\")")
+PLUGIN = ("The plug-in predictor {name} (the study config's `predictors`; "
+          "docs/extend/add-a-predictor.md)")
 
 
 def export_kinds(what: str, columns) -> dict[str, str]:

@@ -48,8 +48,9 @@ class Settings(BaseSettings):
     # Session starts per client address: a classroom of 30 behind one NAT starts at once,
     # reloads included
     rate_limit_starts: str = "60/minute"
-    # requests of one started session (/api/session/...), per session token: a participant
-    # makes about 31 a minute (README), its page's retries included
+    # requests of one started session (/api/session/...), per session token: a participant's
+    # page makes under half of it, leaving room for its retries (docs/run/hosting.md; counted by
+    # tests/e2e/test_page_requests_browser.py -s)
     rate_limit_requests: str = "120/minute"
     # comma-separated addresses or networks of the reverse proxy whose X-Forwarded-For names
     # the client; "" trusts only 127.0.0.1 (a proxy on this machine); "*" is refused

@@ -162,8 +162,9 @@ PROLIFIC_UNCONFIRMED = ("unknown", "pending")
 # The study config's `smallest_effect_of_interest` unless it sets one, in alignment-error units:
 # an Ours - VAE difference in mean alignment error within +-0.005 is treated as no difference.
 # It lies below the smallest difference either observer account predicts where the design goal
-# is met (Highway pilots, family, primary test: coarse -0.0070, precise +0.0104; README "The
-# design goal"), so a difference this small supports neither account.
+# is met (Highway pilots, family, primary test: coarse -0.0070, precise +0.0104;
+# docs/reproduce/instrument.md, "The design goal"), so a difference this small supports neither
+# account.
 SMALLEST_EFFECT_OF_INTEREST = 0.005
 
 

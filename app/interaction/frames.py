@@ -3,7 +3,7 @@
 `human_relative` is "from the other car's point of view": every position of a window, the
 robot's and the human's, minus the human car's position at the window's last observed step
 s^T, the moment the robot's next action is predicted. It translates and does not rotate
-(the README says why). Actions are differences of positions, so velocities -- the
+(docs/reproduce/interaction.md says why). Actions are differences of positions, so velocities -- the
 encoder's velocity inputs, the predicted and the true next actions, constant velocity --
 are the same in both frames: only the positions the models see change.
 

@@ -14,8 +14,8 @@ from app.prereg.readme import readme_table
 from app.prereg.sources import shown
 from app.study.config import config_sha256, stored_predictors
 
-# the paper's hypothesis H, as the paper states it (README "Where this implementation departs
-# from the paper" lists how this platform tests it)
+# the paper's hypothesis H, as the paper states it (docs/reproduce/departures.md, "Where this
+# implementation departs from the paper", lists how this platform tests it)
 PAPER_HYPOTHESIS = ("Ours will more accurately match the predictions made by human "
                     "participants as compared to VAE.")
 DEVIATIONS_HEADING = "# Where this implementation departs from the paper"

@@ -16,7 +16,7 @@ the lab re-issues them without it; the registry is read before anything is delet
 Deleted rows must leave the files too: SQLite overwrites them (secure_delete, db.py) and
 the write-ahead log is checkpointed and truncated right after (`erase_from_files`).
 PostgreSQL keeps them in its table files until VACUUM reuses the space, and in its WAL
-and backups until those rotate (README, "Exports and withdrawal").
+and backups until those rotate (docs/reference/exports.md).
 """
 
 import hashlib
@@ -142,7 +142,7 @@ def erase_from_files(engine: Engine) -> str:
     so the deleted rows' old pages leave the disk; what happened, in a few words."""
     if engine.dialect.name != "sqlite":
         return "postgresql: deleted rows stay in the table files until VACUUM and in WAL " \
-               "and backups until they rotate (README)"
+               "and backups until they rotate (docs/reference/exports.md)"
     for _ in range(CHECKPOINT_TRIES):
         with engine.connect() as conn:
             busy, _, _ = conn.exec_driver_sql("PRAGMA wal_checkpoint(TRUNCATE)").one()

@@ -7,8 +7,9 @@
 # Every start is `serve --prepare`, which builds nothing for a study served from the bundle
 # that ships in the image (the paper's study: it serves at once) nor for a `built` study whose
 # bundle the data volume already holds. Only a `built` study without one is built first
-# (simulate, train every seed, build the bank, freeze: minutes, README "Going live"). A bundle
-# that exists is never rebuilt here: participants must keep seeing the same trials.
+# (simulate, train every seed, build the bank, freeze: minutes; docs/run/go-live.md, "Going
+# live"). A bundle that exists is never rebuilt here: participants must keep seeing the same
+# trials.
 #
 # Files are made with umask 077: the database, the trial bank and the models are readable by
 # the container's user only. The HEALTHCHECK reads the address to ask from /tmp/tomstudy-healthz.

@@ -48,7 +48,7 @@ def test_paper_study_config_matches_the_paper():
     assert cfg.worlds == ["highway", "obstacle"] and cfg.counterbalance_world_order
     assert (cfg.trials_per_world, cfg.examples_per_trial, cfg.start_states,
             cfg.steps_to_predict) == (10, 4, 5, 3)
-    assert cfg.target_sample_size == 30  # the paper's 22 misses the design goal (README)
+    assert cfg.target_sample_size == 30  # 22 misses the design goal (docs/reproduce/instrument.md)
     assert (cfg.segment_steps.min, cfg.segment_steps.max) == (5, 7)
     assert cfg.recruitment.platform == "prolific"
 

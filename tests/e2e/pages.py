@@ -11,7 +11,7 @@ from tests.conftest import ADMIN_TOKEN, REPO, SmallStudy, patience
 from tests.e2e.conftest import BROWSER_STUDY
 
 VIEWPORT = {"width": 1280, "height": 900}
-SCREENSHOTS = REPO / "var" / "screenshots"  # git-ignored; the README's figures come from here
+SCREENSHOTS = REPO / "var" / "screenshots"  # git-ignored; for a person to look at
 JS = Path(__file__).parent / "js"
 ROBOT_EXTENT = (JS / "robot_extent.js").read_text()
 PIXEL = """([x, y]) => Array.from(document.querySelector('#trial-canvas').getContext('2d')

@@ -3,7 +3,7 @@ minute of the page's clock, against the per-session rate limit (issue 32 item 4)
 
 The page runs on Playwright's fake clock, clips fast-forwarded at their own length and
 THINK_MS between clicks (faster than the 2-3 s people take), so the rate is an upper bound.
-Run with `-s` to see the figures the README quotes.
+Run with `-s` to see the figures docs/run/hosting.md quotes.
 """
 
 from collections import Counter

@@ -79,7 +79,7 @@ def test_the_paper_studys_worlds_design_and_sample(paper):
     assert "Planned sample: **30 participants** recruited on prolific" in md
     assert "| highway | 60 | discriminability 30, random 30 | 1 | 1 |" in md
     assert "Worlds that test H: highway. Exploratory worlds (obstacle)" in md
-    assert "| participants | 22 from two universities |" in md  # the README's deviations
+    assert "| participants | 22 from two universities |" in md  # docs/reproduce/departures.md
 
 
 def test_missing_instrument_and_power_are_named_with_their_commands(paper):

@@ -202,6 +202,9 @@ def test_the_image_installs_pinned_dependencies_before_its_code_and_runs_as_a_us
     assert steps[:2] == ["COPY requirements/runtime.txt", "RUN pip"]  # no code yet
     assert "pip install -r requirements/runtime.txt" in dockerfile
     assert "pip install --no-deps --no-build-isolation -e ." in dockerfile
+    # compiled as root after the code is in, so no worker start compiles it again
+    assert steps.index("RUN python") > steps.index("COPY analysis")
+    assert "RUN python -m compileall -q app analysis" in dockerfile.split("USER 10001")[0]
     assert re.search(r"^USER 10001$", dockerfile, re.M)
     pins = [line for line in (REPO / "requirements" / "runtime.txt").read_text().splitlines()
             if line and not line.startswith(("#", " "))]

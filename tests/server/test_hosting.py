@@ -268,7 +268,7 @@ def driver_arguments(url: str) -> dict:
 
 
 def test_postgres_engines_get_a_connect_timeout(tmp_path):
-    # the README's "its connections give up after 10 s"
+    # docs/run/hosting.md's "its connections give up after 10 s"
     assert driver_arguments("postgresql://u@db/x")["connect_timeout"] == CONNECT_TIMEOUT_S == 10
     assert driver_arguments("postgresql://u@db/x?connect_timeout=3")["connect_timeout"] == "3"
     assert "connect_timeout" not in driver_arguments(f"sqlite:///{tmp_path / 'study.db'}")

@@ -258,7 +258,8 @@ def test_0008_leaves_sessions_stored_before_it_unchecked_by_prolific(db_url, tmp
 def test_db_upgrade_on_the_database_9c39751_made(tmp_path):
     url = load_fixture(tmp_path / "study.db")
     engine = make_engine(url)
-    with pytest.raises(migrate.SchemaOutdated, match="`tomstudy db upgrade`"):
+    with pytest.raises(migrate.SchemaOutdated,
+                       match=r"`tomstudy db upgrade` .*\(docs/run/upgrading\.md\)"):
         create_tables(engine)
     with engine.connect() as conn:
         plan = conn.execute(text("SELECT plan FROM participant WHERE id = 1")).scalar_one()

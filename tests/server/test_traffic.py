@@ -85,7 +85,7 @@ def test_made_up_session_tokens_share_one_ceiling_per_address(small_study, tmp_p
 
 def test_the_limit_follows_the_address_a_local_proxy_forwards(small_study, tmp_path):
     """uvicorn takes X-Forwarded-For from a proxy on 127.0.0.1 (FORWARDED_ALLOW_IPS): each
-    participant behind the README's Caddy or nginx has their own limit."""
+    participant behind docs/run/hosting.md's Caddy or nginx has their own limit."""
     port = free_port()
     proc = start_server(small_study, f"sqlite:///{tmp_path / 'proxy.db'}", port,
                         log=tmp_path / "server.log", TOMSTUDY_RATE_LIMIT_STARTS="2/minute")

@@ -30,7 +30,7 @@ OUTCOMES = ("completed", *ENDING_NAMES)
 ALPHABET = "ABCDEFGHJKMNPQRSTVWXYZ23456789"
 CODE_CHARS = 10  # 30**10: about 49 bits
 PUBLIC_CONFIGS = REPO_ROOT / "study_configs"
-# what Prolific should do with each ending's submissions (README, "Endings")
+# what Prolific should do with each ending's submissions (docs/run/go-live.md, "Endings")
 PROLIFIC_ACTIONS = {
     "completed": "approve and pay",
     "failed_checks": "manually review",

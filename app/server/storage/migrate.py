@@ -24,7 +24,7 @@ from sqlalchemy.engine import Connection, Engine
 MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
 VERSION_TABLE = "alembic_version"
 UPGRADE_HINT = ("back it up, then run `tomstudy db upgrade` with the same DATABASE_URL "
-                "(README: Upgrading tomstudy on a running study)")
+                "(docs/run/upgrading.md)")
 _LOCK_KEY = int.from_bytes(hashlib.sha256(b"tomstudy:schema").digest()[:8], "big", signed=True)
 
 
