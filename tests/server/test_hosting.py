@@ -29,6 +29,7 @@ from app.server.storage.db import CONNECT_TIMEOUT_S, make_engine, server_connect
 from app.settings import Settings, get_settings, is_loopback
 from tests.conftest import ADMIN_TOKEN, REPO, TOMSTUDY, free_port, local_client, patience
 from tests.server.flow import ADMIN, Participant
+from tests.server.serve_preflight import run_serve
 
 STRONG_TOKEN = "x" * 40
 OLD_DEFAULT_TOKEN = "change-me-researcher-token"  # the default before issue 22 removed it
@@ -39,14 +40,6 @@ PRODUCTION = {"production": True, "admin_token": STRONG_TOKEN, **LIMITS_ON}
 def study_settings(small_study, tmp_path, **overrides) -> Settings:
     """Settings of the small study on a fresh SQLite file."""
     return small_study.settings(f"sqlite:///{tmp_path / 'study.db'}", **overrides)
-
-
-def run_serve(small_study, tmp_path, *args: str, **env: str) -> subprocess.CompletedProcess:
-    """`tomstudy serve ARGS` on a fresh database; a refusal must come before it serves."""
-    environment = small_study.env(f"sqlite:///{tmp_path / 'serve.db'}", **env)
-    return subprocess.run([TOMSTUDY, "serve", "--port", str(free_port()), "--study",
-                           small_study.study_id, *args], env=environment, cwd=REPO,
-                          capture_output=True, text=True, timeout=patience(60))
 
 
 # ---------------------------------------------------------------- researcher token
