@@ -13,20 +13,12 @@ from app.pilot.bots import run_bots
 from tests.conftest import ADMIN_TOKEN, patience
 from tests.e2e.axe import axe_violations
 from tests.e2e.conftest import BROWSER_STUDY
-from tests.e2e.pages import SCREENSHOTS, log_in, researcher_page
+from tests.e2e.pages import CANVAS_COLOUR_COUNT, SCREENSHOTS, log_in, researcher_page
 from tests.server.flow import Participant, hex24, prolific, served_codes
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 BOTS = 3
-
-# Distinct colours among a grid of pixels: a blank or single-colour canvas has one or two.
-CANVAS_COLOURS = """c => {
-    const data = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
-    const seen = new Set();
-    for (let i = 0; i < data.length; i += 4 * 97) seen.add(data.slice(i, i + 4).join(","));
-    return seen.size;
-}"""
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +55,7 @@ def test_dashboard_lists_sessions_and_replays_a_trial(browser_server, bot_sessio
     assert page.locator("#replay-click-table tbody tr").count() == 15
     canvas = page.locator("#replay-canvas")
     assert canvas.get_attribute("data-clicks-drawn") == "15"
-    assert canvas.evaluate(CANVAS_COLOURS) > 10
+    assert canvas.evaluate(CANVAS_COLOUR_COUNT) > 10
     page.select_option("#replay-start", "0")
     assert canvas.get_attribute("data-clicks-drawn") == "3"
     page.fill("#replay-time", "0")
