@@ -3,7 +3,14 @@ one form of the data directory."""
 
 import ast
 
-from tools.import_graph import ROOT, file_graph, imported_names, project_modules, report
+from tools.import_graph import (
+    ROOT,
+    file_graph,
+    imported_names,
+    module_name,
+    project_modules,
+    report,
+)
 from tools.world_branches import world_branches
 
 
@@ -136,3 +143,24 @@ def test_every_route_is_declared_in_the_routes_package():
                for node in ast.walk(ast.parse(path.read_text(), filename=str(path)))
                if isinstance(node, ast.Call) and called_name(node.func) == "APIRouter"]
     assert routers and [name for name in routers if not within(name, "app.http.routes")] == []
+
+
+# the trees whose modules may import test helpers (tests/e2e/node_modules holds no project code)
+TEST_TREES = ("tests", "benchmarks", "tools")
+
+
+def imports_of_test_modules() -> dict[str, list[str]]:
+    """Each module under TEST_TREES that imports a test_*.py module, and those it imports."""
+    paths = [p for tree in TEST_TREES for p in sorted((ROOT / tree).rglob("*.py"))
+             if "node_modules" not in p.parts]
+    modules = {module_name(p): p for p in paths}
+    tests = {name for name, path in modules.items() if path.name.startswith("test_")}
+    found = {str(path.relative_to(ROOT)): sorted(imported_names(path, name) & tests - {name})
+             for name, path in modules.items()}
+    return {src: targets for src, targets in found.items() if targets}
+
+
+def test_no_module_imports_a_test_module():
+    """Shared test helpers live in helper modules and conftest.py files: importing a test_*.py
+    module copies its names (fixtures, tests) into the importer and couples two test files."""
+    assert imports_of_test_modules() == {}
