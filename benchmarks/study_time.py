@@ -23,8 +23,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import httpx
-
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from app.bank.served import served_bundle  # noqa: E402
@@ -39,7 +37,13 @@ from app.study.estimate import (  # noqa: E402
     player_timing,
     study_estimate,
 )
-from tests.conftest import ADMIN_TOKEN, REPO, SmallStudy, free_port, start_server  # noqa: E402
+from tests.conftest import (  # noqa: E402
+    REPO,
+    SmallStudy,
+    free_port,
+    researcher_get,
+    start_server,
+)
 from tests.e2e.conftest import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
 from tests.e2e.pages import (  # noqa: E402
     ONWARD,
@@ -115,8 +119,8 @@ class Walker:
 
 def server_minutes(base: str) -> float:
     """duration_min of the one finished session, from the participants export."""
-    r = httpx.get(f"{base}/api/researcher/export/participants.csv", params={"study_id": STUDY},
-                  headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}, timeout=30)
+    r = researcher_get(f"{base}/api/researcher/export/participants.csv",
+                       params={"study_id": STUDY})
     r.raise_for_status()
     rows = [row for row in csv.DictReader(io.StringIO(r.text)) if row["duration_min"]]
     return float(rows[-1]["duration_min"])

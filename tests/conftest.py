@@ -347,6 +347,14 @@ def patience(seconds: float) -> float:
     return seconds * machine_slowdown()
 
 
+def researcher_get(url: str, token: str = ADMIN_TOKEN, **kwargs) -> httpx.Response:
+    """GET a running server's researcher endpoint `url` with bearer `token`, waiting
+    patience(30) unless `timeout` is given: a first export loads pandas and the analysis code,
+    which httpx's fixed 5 s default does not wait for beside other busy processes."""
+    kwargs.setdefault("timeout", patience(30))
+    return httpx.get(url, headers={"Authorization": f"Bearer {token}"}, **kwargs)
+
+
 # ---------------------------------------------------------------- servers
 
 def free_port() -> int:

@@ -2,8 +2,16 @@
 one form of the data directory."""
 
 import ast
+from pathlib import Path
 
-from tools.import_graph import ROOT, file_graph, imported_names, project_modules, report
+from tools.import_graph import (
+    ROOT,
+    file_graph,
+    imported_names,
+    module_name,
+    project_modules,
+    report,
+)
 from tools.world_branches import world_branches
 
 
@@ -136,3 +144,44 @@ def test_every_route_is_declared_in_the_routes_package():
                for node in ast.walk(ast.parse(path.read_text(), filename=str(path)))
                if isinstance(node, ast.Call) and called_name(node.func) == "APIRouter"]
     assert routers and [name for name in routers if not within(name, "app.http.routes")] == []
+
+
+# the trees whose modules may import test helpers (tests/e2e/node_modules holds no project code)
+TEST_TREES = ("tests", "benchmarks", "tools")
+
+
+def modules_of_test_trees() -> dict[str, Path]:
+    """Every module under TEST_TREES, by dotted name."""
+    return {module_name(p): p for tree in TEST_TREES for p in sorted((ROOT / tree).rglob("*.py"))
+            if "node_modules" not in p.parts}
+
+
+def imports_of_test_modules() -> dict[str, list[str]]:
+    """Each module under TEST_TREES that imports a test_*.py module, and those it imports."""
+    modules = modules_of_test_trees()
+    tests = {name for name, path in modules.items() if path.name.startswith("test_")}
+    found = {str(path.relative_to(ROOT)): sorted(imported_names(path, name) & tests - {name})
+             for name, path in modules.items()}
+    return {src: targets for src, targets in found.items() if targets}
+
+
+def test_no_module_imports_a_test_module():
+    """Shared test helpers live in helper modules and conftest.py files: importing a test_*.py
+    module copies its names (fixtures, tests) into the importer and couples two test files."""
+    assert imports_of_test_modules() == {}
+
+
+def direct_researcher_gets() -> list[str]:
+    """file:line of each `httpx.get` of a literal /api/researcher/ URL under TEST_TREES."""
+    found = []
+    for path in modules_of_test_trees().values():
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if (isinstance(node, ast.Call) and ast.unparse(node.func) == "httpx.get"
+                    and node.args and "/api/researcher/" in ast.unparse(node.args[0])):
+                found.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    return found
+
+
+def test_researcher_gets_over_http_go_through_one_helper():
+    """tests.conftest.researcher_get sends the token and waits patience(30) by default."""
+    assert direct_researcher_gets() == []

@@ -16,7 +16,7 @@ from analysis.direct import (
 from analysis.metrics import add_alignment_errors
 from analysis.report import run_analyze
 from app.core.contracts import plugin_columns
-from tests.analysis.test_report import inputs, simulated_export  # noqa: F401 (a fixture)
+from tests.analysis.report_inputs import simulated_export
 
 ALPHA = 0.01
 # per coarse variant, how far (rad) it turns from the shared coarse direction
@@ -116,7 +116,7 @@ def test_older_exports_and_unanswered_worlds_are_skipped():
 
 
 def test_analyze_writes_the_direct_test_where_the_export_has_observers(tmp_path, capsys,
-                                                                       inputs):  # noqa: F811
+                                                                       inputs):
     frame = simulated_export("coarse", 10, seed=5)
     rng = np.random.default_rng(5)
     for name in COARSE_OBSERVERS:  # each observer: the policy's move, turned half a radian

@@ -11,7 +11,7 @@ from analysis.load import DataError, load_csv
 from analysis.report import run_analyze
 from app.core.contracts import EXPORT_VERSION, RENAMED_COLUMNS, SURVEY
 from tests.analysis.fixed_data import fixed_predictions
-from tests.analysis.test_report import inputs, simulated_export  # noqa: F401 (a fixture)
+from tests.analysis.report_inputs import simulated_export
 
 OLD_NAMES = {new: old for old, new in RENAMED_COLUMNS.items()}
 
@@ -32,7 +32,7 @@ def test_a_version_1_export_reads_under_the_new_names(tmp_path):
     assert list(back.columns) == list(frame.columns)
 
 
-def test_a_version_1_export_analyses_as_the_current_one(tmp_path, inputs):  # noqa: F811
+def test_a_version_1_export_analyses_as_the_current_one(tmp_path, inputs):
     frame = simulated_export("coarse", 8, seed=4)
     frame.to_csv(tmp_path / "new.csv", index=False)
     as_version_1(frame).to_csv(tmp_path / "old.csv", index=False)

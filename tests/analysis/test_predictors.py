@@ -17,7 +17,7 @@ from analysis.stats import ALPHA
 from analysis.trial_effects import mixed_model_table
 from app.core.contracts import EXPORT_COLUMNS, model_color, model_label, plugin_columns
 from tests.analysis.fixed_data import cos_distance, fixed_predictions, holm_by_hand
-from tests.analysis.test_report import inputs, simulated_export  # noqa: F401 (a fixture)
+from tests.analysis.report_inputs import simulated_export
 
 NAMES = ["ours", "vae", "cv", "ctrv"]
 
@@ -124,7 +124,7 @@ def test_plugins_have_a_colour_and_label_of_their_own():
     assert model_color("ctrv").startswith("#") and len(model_color("ctrv")) == 7
 
 
-def test_analyze_writes_every_predictor_side_by_side(tmp_path, inputs):  # noqa: F811
+def test_analyze_writes_every_predictor_side_by_side(tmp_path, inputs):
     frame = simulated_export("coarse", 10, seed=4)
     with_ctrv(frame).to_csv(tmp_path / "export.csv", index=False)
     out = tmp_path / "report"

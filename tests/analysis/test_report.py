@@ -1,7 +1,5 @@
 """`analyze` writes a self-contained report whose numbers match the per-participant table."""
 
-import gzip
-import hashlib
 import html as html_text
 import json
 import re
@@ -20,38 +18,9 @@ from analysis.report import (
     start_kind_table,
 )
 from analysis.verdicts import EXPLORATORY, direct_sentence, primary_sentence
-from app.core.contracts import SMALLEST_EFFECT_OF_INTEREST, ExclusionRules, StudyInputs
-from app.observers.simulated_study import simulate_participants
-from tests.analysis.fixed_data import fixed_predictions, small_bank, trial_bank, with_seeds
-
-RULES = ExclusionRules(failed_attention_check=True, incomplete=True, too_fast_trial_ms=4000,
-                       too_fast_max_fraction=0.25)
-
-
-SEEDED_BANK = with_seeds(small_bank(), n_seeds=3)
-BANK_JSON = json.dumps(SEEDED_BANK).encode()
-BANK_SHA = hashlib.sha256(BANK_JSON).hexdigest()
-MODELS = {world: {model: {str(100 + k): f"{model}-{world}-{100 + k}" for k in range(3)}
-                  for model in ("ours", "vae")} for world in ("highway", "obstacle")}
-
-
-@pytest.fixture
-def inputs(tmp_path) -> StudyInputs:
-    """The study's side of an analysis: a bundle's gzipped bank with 3 seeds per model."""
-    bank = tmp_path / "bundles" / "paper_study" / "bank.json.gz"
-    bank.parent.mkdir(parents=True)
-    bank.write_bytes(gzip.compress(BANK_JSON))
-    config = {"exclusions": RULES.model_dump(), "bundle": "shipped"}
-    return StudyInputs(config=config, rules=RULES, bank=bank, models=MODELS)
-
-
-def simulated_export(kind: str, n: int, seed: int):
-    """Simulated participants on the bank's primary answers, as the server exports them."""
-    frame = simulate_participants(trial_bank(small_bank()), kind, n, 5, seed=seed,
-                                  show_progress=False)
-    frame["arm"] = frame["trial_id"].str[-1].astype(int).mod(2).map(
-        {0: "random", 1: "models_disagree"})
-    return frame.assign(bank_sha256=BANK_SHA)
+from app.core.contracts import SMALLEST_EFFECT_OF_INTEREST, StudyInputs
+from tests.analysis.fixed_data import fixed_predictions
+from tests.analysis.report_inputs import BANK_SHA, MODELS, RULES, simulated_export
 
 
 def test_report_from_csv(tmp_path, inputs, capsys):

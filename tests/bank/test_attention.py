@@ -20,7 +20,7 @@ from app.study.config import AttentionChecks, bank_design, load_study_config
 from app.study.trial_payload import world_trial_payload
 from tests.analysis.fixed_data import trial_bank
 from tests.conftest import REPO
-from tests.observers.test_observers import CONFIG, bank_with_examples, config_with
+from tests.observers.observer_inputs import CONFIG, bank_with_examples, config_with
 
 RULE = AttentionChecks()
 STEPS = 3  # bank_with_examples' steps_to_predict

@@ -20,35 +20,19 @@ from app.configio import load_yaml_model
 from app.layout import Layout
 from app.settings import Settings
 from app.study.config import StudyConfig, load_study_config
+from tests.bank.bundles import bundle_root, copied, refrozen_with
 from tests.conftest import (
     REPO,
     SMALL_SEEDS,
     TOMSTUDY,
     SmallStudy,
-    freeze_bundle_of,
     patience,
 )
-
-
-def copied(study: SmallStudy, tmp_path) -> SmallStudy:
-    """A copy of the small study's data dir (models and data linked) and configs."""
-    data, configs = tmp_path / "var", tmp_path / "configs"
-    data.mkdir()
-    for sub in ("data", "models"):
-        (data / sub).symlink_to(study.data_dir / sub)
-    for sub in ("trials", "bundles"):
-        shutil.copytree(study.data_dir / sub, data / sub)
-    shutil.copytree(study.configs_dir, configs)
-    return SmallStudy(data, configs, study.study_id)
 
 
 def config_of(study: SmallStudy) -> StudyConfig:
     """The study's validated config, read now (load_study_config caches by path)."""
     return load_yaml_model(study.configs_dir / f"{study.study_id}.yaml", StudyConfig)
-
-
-def bundle_root(study: SmallStudy):
-    return Layout(study.data_dir).bundle_dir(study.study_id)
 
 
 def test_a_bundle_holds_every_seed_and_freezes_to_the_same_content(small_study, tmp_path):
@@ -118,15 +102,6 @@ def training_rows(stdout: str) -> dict:
         rows[(cells[0], cells[1], int(cells[2]))] = (int(cells[3]), int(cells[5]),
                                                      cells[6] == "converged")
     return rows
-
-
-def refrozen_with(study: SmallStudy, change) -> None:
-    """Change the working bank's JSON with `change` and freeze the bundle again."""
-    path = Layout(study.data_dir).bank(study.study_id)
-    raw = json.loads(path.read_text())
-    change(raw)
-    path.write_text(json.dumps(raw))
-    freeze_bundle_of(study)
 
 
 def test_model_answers_refuse_stored_answers_their_checkpoint_does_not_give(small_study,

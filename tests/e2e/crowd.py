@@ -8,13 +8,12 @@ import time
 from collections import Counter
 from pathlib import Path
 
-import httpx
 from sqlalchemy import create_engine, func, select, text
 
 from analysis.load import load_csv, load_database
 from app.pilot.bots import run_bots
 from app.server.storage.tables import Participant, PredictionRow, Submission, TrialResponse
-from tests.conftest import ADMIN_TOKEN, SmallStudy, patience
+from tests.conftest import SmallStudy, patience, researcher_get
 
 
 def crowd_in_exact_balance(study: SmallStudy, url: str, db_url: str, crowd: int,
@@ -63,9 +62,8 @@ def _count(engine, table) -> int:
 
 
 def _export(url: str, study_id: str, tmp_path: Path):
-    response = httpx.get(f"{url}/api/researcher/export.csv", params={"study_id": study_id},
-                         headers={"Authorization": f"Bearer {ADMIN_TOKEN}"},
-                         timeout=patience(60))
+    response = researcher_get(f"{url}/api/researcher/export.csv", params={"study_id": study_id},
+                              timeout=patience(60))
     response.raise_for_status()
     path = tmp_path / "export.csv"
     path.write_bytes(response.content)

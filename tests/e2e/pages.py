@@ -16,6 +16,13 @@ JS = Path(__file__).parent / "js"
 ROBOT_EXTENT = (JS / "robot_extent.js").read_text()
 PIXEL = """([x, y]) => Array.from(document.querySelector('#trial-canvas').getContext('2d')
     .getImageData(Math.round(x * devicePixelRatio), Math.round(y * devicePixelRatio), 1, 1).data)"""
+# Distinct colours among a grid of pixels: a blank or single-colour canvas has one or two.
+CANVAS_COLOUR_COUNT = """c => {
+    const data = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+    const seen = new Set();
+    for (let i = 0; i < data.length; i += 4 * 97) seen.add(data.slice(i, i + 4).join(","));
+    return seen.size;
+}"""
 ROBOT_RGB = (0x00, 0x72, 0xB2)
 CLIP_JUMP_MS = 2000  # fake-clock jump per poll while clips play
 THINK_MS = 1500  # fake-clock time between two clicks

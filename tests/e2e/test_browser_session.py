@@ -12,12 +12,11 @@ import sqlite3
 from contextlib import closing
 from pathlib import Path
 
-import httpx
 import pytest
 import yaml
 
 from app.http.routes.pages import PAGE_RULES
-from tests.conftest import ADMIN_TOKEN, patience
+from tests.conftest import researcher_get
 from tests.e2e.conftest import BROWSER_STUDY
 from tests.e2e.pages import (
     SCREENSHOTS,
@@ -284,10 +283,8 @@ def test_enter_alone_answers_nothing_and_keyboard_clicks_are_recorded(chromium, 
             (pid,)).fetchall()
     expected = {(i, j): "keyboard" if i == 0 else "mouse" for i in range(k) for j in range(n)}
     assert {(i, j): device for i, j, device in stored} == expected
-    export = httpx.get(f"{browser_server.url}/api/researcher/export/predictions.csv"
-                      f"?study_id={BROWSER_STUDY}",
-                      headers={"Authorization": f"Bearer {ADMIN_TOKEN}"},
-                      timeout=patience(30)).text
+    export = researcher_get(f"{browser_server.url}/api/researcher/export/predictions.csv",
+                            params={"study_id": BROWSER_STUDY}).text
     mine = public_id_of(browser_server.db_path, pid)
     rows = [r for r in csv.DictReader(io.StringIO(export)) if r["participant_id"] == mine]
     assert {(int(r["start_index"]), int(r["step"])): r["click_input"] for r in rows} == expected

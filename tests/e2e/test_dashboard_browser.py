@@ -10,23 +10,15 @@ import pytest
 from playwright.sync_api import expect
 
 from app.pilot.bots import run_bots
-from tests.conftest import ADMIN_TOKEN, patience
+from tests.conftest import patience, researcher_get
 from tests.e2e.axe import axe_violations
 from tests.e2e.conftest import BROWSER_STUDY
-from tests.e2e.pages import SCREENSHOTS, log_in, researcher_page
+from tests.e2e.pages import CANVAS_COLOUR_COUNT, SCREENSHOTS, log_in, researcher_page
 from tests.server.flow import Participant, hex24, prolific, served_codes
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 BOTS = 3
-
-# Distinct colours among a grid of pixels: a blank or single-colour canvas has one or two.
-CANVAS_COLOURS = """c => {
-    const data = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
-    const seen = new Set();
-    for (let i = 0; i < data.length; i += 4 * 97) seen.add(data.slice(i, i + 4).join(","));
-    return seen.size;
-}"""
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +55,7 @@ def test_dashboard_lists_sessions_and_replays_a_trial(browser_server, bot_sessio
     assert page.locator("#replay-click-table tbody tr").count() == 15
     canvas = page.locator("#replay-canvas")
     assert canvas.get_attribute("data-clicks-drawn") == "15"
-    assert canvas.evaluate(CANVAS_COLOURS) > 10
+    assert canvas.evaluate(CANVAS_COLOUR_COUNT) > 10
     page.select_option("#replay-start", "0")
     assert canvas.get_attribute("data-clicks-drawn") == "3"
     page.fill("#replay-time", "0")
@@ -155,26 +147,23 @@ def test_the_dashboard_downloads_each_export_with_its_codebook(browser_server, b
 
 def public_id(name: str, url: str) -> str:
     """The public id of the session of Prolific participant `name` (from the dashboard API)."""
-    board = httpx.get(f"{url}/api/researcher/dashboard", params={
-        "study_id": BROWSER_STUDY, "external_ids": True},
-        headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}, timeout=patience(30)).json()
+    board = researcher_get(f"{url}/api/researcher/dashboard", params={
+        "study_id": BROWSER_STUDY, "external_ids": True}).json()
     [found] = [r["public_id"] for r in board["participants"] if r.get("external_id") == hex24(name)]
     return found
 
 
 def audit(url: str) -> list[dict]:
     """The study's withdrawal audit lines."""
-    return httpx.get(f"{url}/api/researcher/withdrawals/audit", params={"study_id": BROWSER_STUDY},
-                     headers={"Authorization": f"Bearer {ADMIN_TOKEN}"},
-                     timeout=patience(30)).json()
+    return researcher_get(f"{url}/api/researcher/withdrawals/audit",
+                          params={"study_id": BROWSER_STUDY}).json()
 
 
 def shown_verdicts(page, url: str) -> None:
     """The page lists, per world, the primary test's sentence the dashboard API gives (the
     report's, analysis/verdicts.py), or says there is none yet."""
-    board = httpx.get(f"{url}/api/researcher/dashboard", params={"study_id": BROWSER_STUDY},
-                      headers={"Authorization": f"Bearer {ADMIN_TOKEN}"},
-                      timeout=patience(30)).json()
+    board = researcher_get(f"{url}/api/researcher/dashboard",
+                           params={"study_id": BROWSER_STUDY}).json()
     verdicts = board["alignment"]["verdicts"]
     page.wait_for_selector("#verdicts li")
     items = page.locator("#verdicts li")

@@ -28,6 +28,7 @@ from tests.conftest import (
     free_port,
     freeze_bundle_of,
     patience,
+    researcher_get,
     start_server,
 )
 from tests.e2e.conftest import BROWSER_STUDY
@@ -92,9 +93,8 @@ def shoot(page, name: str) -> None:
 
 def researcher_export(base: str, what: str) -> pd.DataFrame:
     """One export, as the researcher downloads it."""
-    csv = httpx.get(f"{base}/api/researcher/export/{what}.csv?study_id={BROWSER_STUDY}",
-                    headers={"Authorization": f"Bearer {ADMIN_TOKEN}"},
-                    timeout=patience(30)).text
+    csv = researcher_get(f"{base}/api/researcher/export/{what}.csv",
+                         params={"study_id": BROWSER_STUDY}).text
     return pd.read_csv(io.StringIO(csv), keep_default_na=False)
 
 
@@ -446,8 +446,8 @@ def test_the_dashboard_counts_a_declined_session_fits_and_explains_its_timings(
         answered.start()
         answered.pass_intro()
         answered.answer_trial()
-        public = http.get(f"/api/researcher/dashboard?study_id={BROWSER_STUDY}",
-                          headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}).json()
+    public = researcher_get(f"{browser_server.url}/api/researcher/dashboard",
+                            params={"study_id": BROWSER_STUDY}).json()
     sheet = researcher_export(browser_server.url, "participants").set_index("participant_id")
     assert (sheet.loc[declined, "outcome"], sheet.loc[declined, "steps_done"]) == (
         "declined_consent", 0)

@@ -8,8 +8,7 @@ import pytest
 from app.core.contracts import model_color
 from app.pilot.bots import run_bots
 from tests.conftest import free_port, patience, start_server
-from tests.e2e.pages import researcher_page
-from tests.e2e.test_dashboard_browser import CANVAS_COLOURS
+from tests.e2e.pages import CANVAS_COLOUR_COUNT, researcher_page
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -67,7 +66,7 @@ def test_the_dashboard_shows_every_predictor_and_replays_the_plugin(plugin_serve
     assert "ctrv" in page.locator("#replay-legend").inner_text()
     assert "error ctrv" in page.locator("#replay-click-table th").all_inner_texts()
     canvas = page.locator("#replay-canvas")
-    assert canvas.evaluate(CANVAS_COLOURS) > 10
+    assert canvas.evaluate(CANVAS_COLOUR_COUNT) > 10
     # the colour the page was given for the plug-in (its error-plot dots above), on the replay
     assert canvas.evaluate(COLOUR_PIXELS, [rgb(model_color("ctrv")), COLOUR_TOLERANCE]) > 0
     assert errors == []

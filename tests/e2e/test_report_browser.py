@@ -8,7 +8,7 @@ import pytest
 from analysis.report import render_html, run_analyze
 from analysis.verdicts import primary_sentence
 from app.core.contracts import StudyInputs
-from tests.analysis.test_report import BANK_JSON, MODELS, RULES, simulated_export
+from tests.analysis.report_inputs import BANK_JSON, MODELS, RULES, simulated_export
 from tests.conftest import REPO
 from tests.e2e.axe import axe_violations
 

@@ -23,7 +23,7 @@ from app.study.config import StudyConfig, held_out_seeds
 from app.study.trials import TrialRecord
 from app.worlds.intents import scene_routes
 from tests.analysis.fixed_data import OBSTACLE_SCENE, obstacle_segment, payload, trial_bank
-from tests.observers.test_observers import CONFIG, QUIET, bank_with_examples
+from tests.observers.observer_inputs import CONFIG, QUIET, bank_with_examples
 
 
 def crossed_sample(rng, people: int, clips: int, effect: float, clip_sd: float) -> tuple:

@@ -26,7 +26,7 @@ from app.observers.instrument_grid import (
 from app.observers.simulated_study import participant_diffs, simulate_participants
 from app.prediction_view import TARGET_STEP_PX, click_direction_sd_deg, prediction_view
 from tests.analysis.fixed_data import small_bank, trial_bank
-from tests.observers.test_observers import CONFIG, bank_with_examples
+from tests.observers.observer_inputs import CONFIG, bank_with_examples
 
 
 def test_click_noise_adds_in_quadrature_to_each_presets_own():

@@ -13,8 +13,7 @@ from app.observers.family import coarse_options
 from app.observers.predictor import ObserverPredictor, observer_predictors
 from app.predictors.protocol import ask
 from app.study.trials import NO_SEED, TrialBank
-from tests.bank.test_bundle import bundle_root, copied
-from tests.predictors.test_plugin_bank import refrozen
+from tests.bank.bundles import bundle_root, copied, refrozen_each_trial
 
 
 @pytest.fixture(scope="module")
@@ -88,6 +87,6 @@ def test_the_server_verifies_the_observers_and_refuses_altered_answers(small_stu
             for step in start:
                 step[:] = [-step[0], -step[1]]
 
-    refrozen(study, reverse)
+    refrozen_each_trial(study, reverse)
     with pytest.raises(BankMismatch, match="highway/coarse_momentum: answers differ"):
         ModelAnswers(open_bundle(bundle_root(study)))

@@ -14,8 +14,8 @@ from app.predictors.builtin import CheckpointPredictor, ConstantVelocity
 from app.predictors.ctrv import CTRV
 from app.predictors.protocol import ask
 from app.study.trials import NO_SEED, TrialBank
-from tests.bank.test_bundle import bundle_root, copied
-from tests.conftest import TOMSTUDY, freeze_bundle_of, patience
+from tests.bank.bundles import bundle_root, copied, refrozen_each_trial
+from tests.conftest import TOMSTUDY, patience
 
 
 def test_the_bank_stores_ctrvs_answer_to_every_trial(ctrv_study):
@@ -68,17 +68,6 @@ def test_the_manifest_records_the_plugin_and_the_server_recomputes_it(ctrv_study
     assert np.round(served.actions, 5).tolist() == trial.predictions["ctrv"][0].actions
 
 
-def refrozen(study, change) -> None:
-    """Change the working bank's JSON and freeze the study's bundle again."""
-    path = study.layout.bank(study.study_id)
-    raw = json.loads(path.read_text())
-    for world in raw["worlds"].values():
-        for trial in world["trials"]:
-            change(trial)
-    path.write_text(json.dumps(raw))
-    freeze_bundle_of(study)
-
-
 def verify(study) -> subprocess.CompletedProcess:
     return subprocess.run([TOMSTUDY, "bundle", "verify", "--study", study.study_id],
                           env=study.env("sqlite://"), capture_output=True, text=True,
@@ -93,7 +82,7 @@ def test_a_server_refuses_plugin_answers_it_does_not_reproduce(ctrv_study, tmp_p
             for step in start:
                 step[:] = [-step[1], step[0]]
 
-    refrozen(study, turn)
+    refrozen_each_trial(study, turn)
     with pytest.raises(BankMismatch, match="highway/ctrv: answers differ from the bank's"):
         ModelAnswers(open_bundle(bundle_root(study)))
     run = verify(study)
@@ -111,7 +100,7 @@ def test_a_server_refuses_a_bank_whose_plugin_is_not_installed(ctrv_study, tmp_p
     def rename(trial):  # the answers of a plug-in this machine does not have
         trial["predictions"]["labmove"] = trial["predictions"].pop("ctrv")
 
-    refrozen(study, rename)
+    refrozen_each_trial(study, rename)
     with pytest.raises(BankMismatch, match=r"highway/labmove: predictor labmove: not installed "
                                            r"\(no entry point 'labmove' in group "
                                            r"tomstudy.predictors; registered: ctrv\)"):

@@ -10,12 +10,12 @@ from app.cli import cli
 from app.interaction.config import InteractionConfig
 from app.layout import Layout
 from app.recordings import tracks as tx
+from app.recordings.config import RecordedConfig
 from app.recordings.importer import import_recordings
 from app.recordings.synthetic_tracks import generate
 from app.settings import get_settings
-from tests.recordings.test_recorded_world import config
+from tests.recordings.scenarios import INTERSECTION, ROUNDABOUT, recorded_config
 
-ROUNDABOUT = "DR_USA_Roundabout_FT"
 ABSENT = "vehicle_tracks_007"
 
 
@@ -25,7 +25,7 @@ def partial(tmp_path_factory) -> Path:
     validation list holding out the roundabout's 001 and a 007 that is not in the copy."""
     root = tmp_path_factory.mktemp("recordings")
     data = root / "INTERACTION"
-    for seed, scenario in enumerate((ROUNDABOUT, "DR_USA_Intersection_EP0")):
+    for seed, scenario in enumerate((ROUNDABOUT, INTERSECTION)):
         generate(data, scenario, "v1.0", train_s=60.0, val_s=60.0, seed=seed)
     (data / "recorded_trackfiles" / tx.OFFICIAL_VAL_LIST).write_text(
         f"{ROUNDABOUT}\nvehicle_tracks_001\n{ABSENT}\n")
@@ -67,13 +67,13 @@ def test_each_command_names_the_absent_files_and_what_to_do(env, partial, args, 
 
 def test_the_switch_holds_out_each_recordings_end_and_is_left_out_at_its_default(partial,
                                                                                  tmp_path):
-    ignoring = config(ROUNDABOUT).model_dump()
+    ignoring = recorded_config(ROUNDABOUT).model_dump()
     ignoring["source"]["validation_list"] = "ignore"
-    result = import_recordings("roundabout", type(config(ROUNDABOUT)).model_validate(ignoring),
+    result = import_recordings("roundabout", RecordedConfig.model_validate(ignoring),
                                Layout(tmp_path, partial))
     assert result.meta["recordings"] == {"train": 2, "val": 2}  # both split in time
     assert result.meta["config"]["source"]["validation_list"] == "ignore"
-    assert "validation_list" not in config(ROUNDABOUT).model_dump()["source"]
+    assert "validation_list" not in recorded_config(ROUNDABOUT).model_dump()["source"]
     assert "v10_validation_list" not in InteractionConfig().model_dump()
     assert InteractionConfig(v10_validation_list="ignore").model_dump()[
         "v10_validation_list"] == "ignore"
@@ -86,6 +86,6 @@ def test_a_complete_copy_keeps_the_lists_split(partial, tmp_path):
         partial / "INTERACTION" / "recorded_trackfiles" / ROUNDABOUT)
     (complete / "recorded_trackfiles" / tx.OFFICIAL_VAL_LIST).write_text(
         f"{ROUNDABOUT}\nvehicle_tracks_001\n")
-    result = import_recordings("roundabout", config(ROUNDABOUT), Layout(tmp_path / "var",
+    result = import_recordings("roundabout", recorded_config(ROUNDABOUT), Layout(tmp_path / "var",
                                                                           tmp_path))
     assert result.meta["recordings"] == {"train": 1, "val": 1}  # whole recordings

@@ -15,7 +15,6 @@ from app.data.scene import Bounds, Scene
 from app.data.trajectory import ROBOT, Covered, TrajectorySet
 from app.data.windows import split_by_trajectory
 from app.layout import Layout
-from app.recordings.config import RecordedConfig
 from app.recordings.generated import generate_study_recordings
 from app.recordings.importer import (
     LABEL_NAMES,
@@ -30,14 +29,7 @@ from app.recordings.tracks import TrackFileError
 from app.study.trials import TrialRecord
 from app.worlds.recorded import RecordedWorld
 from app.worlds.registry import World, build_world
-
-ROUNDABOUT, INTERSECTION = "DR_USA_Roundabout_FT", "DR_USA_Intersection_EP0"
-
-
-def config(scenario: str, **extra) -> RecordedConfig:
-    return RecordedConfig.model_validate({
-        "kind": "recorded", "source": {"format": "interaction", "path": "INTERACTION",
-                                       "scenario": scenario}, **extra})
+from tests.recordings.scenarios import INTERSECTION, ROUNDABOUT, recorded_config
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +46,7 @@ def imported(recordings, tmp_path_factory) -> dict:
     layout = Layout(tmp_path_factory.mktemp("var"), recordings)
     out = {"layout": layout}
     for name, scenario in (("roundabout", ROUNDABOUT), ("intersection", INTERSECTION)):
-        import_recordings(name, config(scenario), layout)
+        import_recordings(name, recorded_config(scenario), layout)
         out[name] = TrajectorySet.load(layout.trajectories(name))
         out[name + "_meta"] = json.loads(layout.trajectories_meta(name).read_text())
     return out
@@ -110,7 +102,7 @@ def test_each_pair_keeps_its_two_vehicles_recorded_sizes(imported, recordings):
 def test_a_log_without_sizes_draws_the_configs_agent():
     pair = Pair("r", 1, 2, 0, np.zeros((3, 2, 2)), np.zeros((3, 2)), np.zeros((3, 2)),
                 np.array([[np.nan, np.nan], [12.0, 2.5]]))
-    looks = config(ROUNDABOUT, agent={"kind": "car", "length_m": 4.2, "width_m": 1.8})
+    looks = recorded_config(ROUNDABOUT, agent={"kind": "car", "length_m": 4.2, "width_m": 1.8})
     assert agent_sizes(pair, looks).tolist() == [[4.2, 1.8], [12.0, 2.5]]
 
 
@@ -209,25 +201,28 @@ def test_a_malformed_recording_names_file_line_column_and_writes_nothing(recordi
     layout = Layout(tmp_path / "var", tmp_path / "rec")
     with pytest.raises(TrackFileError, match=rf"{ROUNDABOUT}_val.csv:8: column 'x': expected a "
                                              r"number, found 'east'"):
-        import_recordings("roundabout", config(ROUNDABOUT), layout)
+        import_recordings("roundabout", recorded_config(ROUNDABOUT), layout)
     assert not (tmp_path / "var").exists()
 
 
 def test_too_few_pairs_and_a_dt_off_the_recordings_grid_say_what_to_change(recordings, tmp_path):
     layout = Layout(tmp_path, recordings)
     with pytest.raises(UnusableRecordings, match="dt_s: 0.25 s is not a whole number"):
-        import_recordings("roundabout", config(ROUNDABOUT, dt_s=0.25, window_s=4.0), layout)
+        import_recordings("roundabout", recorded_config(ROUNDABOUT, dt_s=0.25, window_s=4.0),
+                          layout)
     with pytest.raises(UnusableRecordings, match="only 0 training pairs .* shorten window_s"):
-        import_recordings("roundabout", config(ROUNDABOUT, pair_max_distance_m=0.5), layout)
+        import_recordings("roundabout", recorded_config(ROUNDABOUT, pair_max_distance_m=0.5),
+                          layout)
     with pytest.raises(UnusableRecordings, match="source.path: .* does not exist"):
-        import_recordings("roundabout", config(ROUNDABOUT).model_copy(update={
-            "source": config(ROUNDABOUT).source.model_copy(update={"path": "nowhere"})}), layout)
+        nowhere = recorded_config(ROUNDABOUT).source.model_copy(update={"path": "nowhere"})
+        import_recordings("roundabout", recorded_config(ROUNDABOUT).model_copy(
+            update={"source": nowhere}), layout)
     assert not layout.trajectories("roundabout").exists()
 
 
 def test_a_window_too_short_for_a_trial_is_a_config_error():
     with pytest.raises(ValueError, match="window_s: 2 s holds 5 steps"):
-        config(ROUNDABOUT, window_s=2.0)
+        recorded_config(ROUNDABOUT, window_s=2.0)
 
 
 # ---------------------------------------------------------------- the World protocol
@@ -235,7 +230,7 @@ def test_a_window_too_short_for_a_trial_is_a_config_error():
 
 @pytest.fixture(scope="module")
 def world(imported) -> RecordedWorld:
-    built = RecordedWorld("roundabout", config(ROUNDABOUT))
+    built = RecordedWorld("roundabout", recorded_config(ROUNDABOUT))
     built.prepare(imported["layout"])
     return built
 

@@ -34,7 +34,7 @@ from app.server.schemas import EVENT_DATA, SERVER_EVENTS, ClickInput, HistoryEnt
 from app.study.config import MainTrialSelection, Platform, SurveyQuestion
 from app.study.trials import TrialBank
 from tests.conftest import REPO
-from tests.researcher.test_exports import cli_env, export, study  # noqa: F401 (fixtures)
+from tests.researcher.downloads import export
 from tests.server.flow import ADMIN, TOKEN, Participant
 
 PILOT_BOTS = 3
@@ -66,7 +66,7 @@ def errors_of(report: frictionless.Report) -> list[tuple[str, str]]:
 
 
 @pytest.fixture
-def pilot(client, small_study, study, bank):  # noqa: F811
+def pilot(client, small_study, study, bank):
     """The export tests' sessions, then the pilot bots (app/pilot/bots.py, as `make pilot`
     runs them) through the HTTP API, and one researcher's preview session."""
     transport = httpx.ASGITransport(app=client.app)
@@ -128,7 +128,7 @@ def test_the_codebook_names_the_study_hashes_the_rows_carry(client, small_study,
     ("survey", "question", "favourite_colour"),
     ("participants", "exclusion_reasons", "too_fast;bogus")])
 def test_a_value_outside_its_constraint_fails_validation_naming_its_field(
-        client, small_study, study, tmp_path, what, column, bad):  # noqa: F811
+        client, small_study, study, tmp_path, what, column, bad):
     descriptor = package(client, small_study.study_id, what)
     rows = list(csv.reader(io.StringIO(export(client, small_study.study_id, what))))
     rows[1][rows[0].index(column)] = bad
@@ -143,8 +143,7 @@ def test_a_value_outside_its_constraint_fails_validation_naming_its_field(
     assert {name for _, name in errors_of(report)} == {column}
 
 
-def test_a_changed_csv_fails_on_its_sha256(client, small_study, study,  # noqa: F811
-                                           tmp_path):
+def test_a_changed_csv_fails_on_its_sha256(client, small_study, study, tmp_path):
     descriptor = package(client, small_study.study_id, "survey")
     text = export(client, small_study.study_id, "survey").replace("followed", "Followed")
     report = frictionless.validate(saved(tmp_path, descriptor, text))
@@ -152,7 +151,7 @@ def test_a_changed_csv_fails_on_its_sha256(client, small_study, study,  # noqa: 
 
 
 def test_tomstudy_export_writes_the_codebook_beside_the_csv(client, small_study, pilot,
-                                                            cli_env, tmp_path):  # noqa: F811
+                                                            cli_env, tmp_path):
     for what in WHAT:
         out = tmp_path / f"{what}.csv"
         result = cli_env.invoke(cli, ["export", "--study", small_study.study_id, "--what",

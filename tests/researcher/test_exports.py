@@ -7,10 +7,7 @@ import subprocess
 
 import numpy as np
 import pandas as pd
-import pytest
-from sqlalchemy import update
 from sqlmodel import Session
-from typer.testing import CliRunner
 
 from analysis.exports import read_export
 from analysis.load import load_csv, load_database
@@ -25,55 +22,13 @@ from app.core.contracts import (
     plugin_columns,
 )
 from app.researcher.exports import export_table
-from app.server.storage.tables import Participant, TrialResponse, utcnow
-from app.settings import get_settings
+from app.server.storage.tables import Participant
 from tests.conftest import TOMSTUDY, patience
-from tests.server.flow import ADMIN, at_first_trial, new_id, prolific
+from tests.researcher.downloads import FORMULA, export
+from tests.server.flow import ADMIN, prolific
 
-FORMULA = '=HYPERLINK("http://x","y")'
 PANDAS_DTYPES = {"text": "str", "int": np.int64, "float": np.float64, "bool": bool,
                  "time": "datetime64[us, UTC]"}
-
-
-def export(client, study_id: str, what: str) -> str:
-    """GET one export's CSV text."""
-    r = client.get(f"/api/researcher/export/{what}.csv?study_id={study_id}", headers=ADMIN)
-    assert r.status_code == 200, r.text
-    assert r.headers["content-type"].startswith("text/csv")
-    return r.text
-
-
-@pytest.fixture
-def study(client, small_study, bank):
-    """Three completed sessions (one with a formula survey answer, undo history and a
-    recorded ending), one at its first trial with telemetry; returns the public ids."""
-    done = []
-    for i in range(3):
-        p = at_first_trial(client, small_study.study_id, **prolific(f"done{i}"))
-        if i == 0:
-            ref = p.state()["step"]["trial_id"]
-            events = [{"submission_id": new_id(), "kind": "clip_finished", "t_client_ms": 5.0,
-                       "data": {"trial_id": ref, "replays": 0}},
-                      {"submission_id": new_id(), "kind": "resize", "t_client_ms": 7.0,
-                       "data": {"w": 800, "h": 600}}]
-            assert p.post("events", {"events": events}).status_code == 202
-        p.finish(bank, strategy=FORMULA if i == 0 else "followed the lanes")
-        done.append(p)
-    running = at_first_trial(client, small_study.study_id, **prolific("running"))
-    engine = client.app.state.engine
-    with engine.begin() as conn:
-        first = conn.execute(TrialResponse.__table__.select().limit(1)).mappings().one()
-        conn.execute(update(TrialResponse.__table__).where(TrialResponse.id == first["id"])
-                     .values(history=[{"action": "undo", "start_index": 2, "t_ms": 1500.0},
-                                      {"action": "reset", "start_index": 0, "t_ms": 2500.0}]))
-        conn.execute(update(Participant.__table__)
-                     .where(Participant.external_id == prolific("done0")["PROLIFIC_PID"])
-                     .values(outcome="completed", completion_code="C1TOMSTUDY",
-                             ended_at=utcnow()))
-        conn.execute(update(Participant.__table__)  # this session ran a changed config
-                     .where(Participant.external_id == prolific("done2")["PROLIFIC_PID"])
-                     .values(config_sha256="0" * 64))
-    return {"done": done, "running": running, "history_trial": first["trial_id"]}
 
 
 def public_ids(client) -> dict[str, str]:
@@ -188,16 +143,6 @@ def test_tomstudy_analyze_reads_the_predictions_export_unchanged(client, small_s
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert {res["n"] for res in summary["ours_vs_vae"].values()} == {3}
-
-
-@pytest.fixture
-def cli_env(small_study, db_url, monkeypatch):
-    """`tomstudy` run in process on the test's study and database."""
-    for key, value in small_study.env(db_url).items():
-        monkeypatch.setenv(key, value)
-    get_settings.cache_clear()
-    yield CliRunner()
-    get_settings.cache_clear()
 
 
 def test_tomstudy_export_writes_what_the_endpoint_serves(client, small_study, study, cli_env,

@@ -224,12 +224,24 @@ def start(client, study_id: str, preview: str | None = None, **params):
     return client.post("/api/sessions", json=body)
 
 
-def with_recruitment(client, study_id: str, **changes) -> None:
-    """Serve `study_id` with its recruitment section changed (the app's loaded context)."""
+def with_config(client, study_id: str, **updates) -> None:
+    """Serve `study_id` with these top-level config keys replaced (the app's loaded context)."""
     ctx = client.app.state.studies[study_id]
-    recruitment = ctx.config.recruitment.model_copy(update=changes)
-    config = ctx.config.model_copy(update={"recruitment": recruitment})
+    config = ctx.config.model_copy(update=updates)
     client.app.state.studies[study_id] = dataclasses.replace(ctx, config=config)
+
+
+def with_recruitment(client, study_id: str, **changes) -> None:
+    """Serve `study_id` with its recruitment section changed."""
+    recruitment = client.app.state.studies[study_id].config.recruitment.model_copy(
+        update=changes)
+    with_config(client, study_id, recruitment=recruitment)
+
+
+def with_cap(client, study_id: str, per_target: float, target: int) -> None:
+    """Serve `study_id` with max_live_sessions_per_target x target_sample_size changed."""
+    with_config(client, study_id, max_live_sessions_per_target=per_target,
+                target_sample_size=target)
 
 
 def at_first_trial(client, study_id: str, **recruitment) -> Participant:

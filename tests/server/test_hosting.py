@@ -27,8 +27,17 @@ from app.main import (
 )
 from app.server.storage.db import CONNECT_TIMEOUT_S, make_engine, server_connect_args
 from app.settings import Settings, get_settings, is_loopback
-from tests.conftest import ADMIN_TOKEN, REPO, TOMSTUDY, free_port, local_client, patience
+from tests.conftest import (
+    ADMIN_TOKEN,
+    REPO,
+    TOMSTUDY,
+    free_port,
+    local_client,
+    patience,
+    researcher_get,
+)
 from tests.server.flow import ADMIN, Participant
+from tests.server.serve_preflight import run_serve
 
 STRONG_TOKEN = "x" * 40
 OLD_DEFAULT_TOKEN = "change-me-researcher-token"  # the default before issue 22 removed it
@@ -39,14 +48,6 @@ PRODUCTION = {"production": True, "admin_token": STRONG_TOKEN, **LIMITS_ON}
 def study_settings(small_study, tmp_path, **overrides) -> Settings:
     """Settings of the small study on a fresh SQLite file."""
     return small_study.settings(f"sqlite:///{tmp_path / 'study.db'}", **overrides)
-
-
-def run_serve(small_study, tmp_path, *args: str, **env: str) -> subprocess.CompletedProcess:
-    """`tomstudy serve ARGS` on a fresh database; a refusal must come before it serves."""
-    environment = small_study.env(f"sqlite:///{tmp_path / 'serve.db'}", **env)
-    return subprocess.run([TOMSTUDY, "serve", "--port", str(free_port()), "--study",
-                           small_study.study_id, *args], env=environment, cwd=REPO,
-                          capture_output=True, text=True, timeout=patience(60))
 
 
 # ---------------------------------------------------------------- researcher token
@@ -356,11 +357,9 @@ def test_a_loopback_server_without_a_token_makes_one_and_the_old_default_opens_n
         printed = re.findall(r"researcher token for this run .*: (\S+)", out.read_text())
         assert len(printed) == 1 and len(printed[0]) >= 40  # printed once, 32 random bytes
         sheet = f"{base}/api/researcher/export/participants.csv?study_id={small_study.study_id}"
-        old = httpx.get(sheet, headers={"Authorization": f"Bearer {OLD_DEFAULT_TOKEN}"},
-                        timeout=patience(30))
+        old = researcher_get(sheet, token=OLD_DEFAULT_TOKEN)
         assert old.status_code == 403
-        made = httpx.get(sheet, headers={"Authorization": f"Bearer {printed[0]}"},
-                         timeout=patience(30))
+        made = researcher_get(sheet, token=printed[0])
         assert made.status_code == 200 and made.text.startswith("export_version,study_id,")
     finally:
         proc.terminate()

@@ -16,8 +16,7 @@ from app.server.storage import crud
 from app.server.storage.tables import Participant
 from app.study.errors import Refused
 from tests.server.flow import Participant as Person
-from tests.server.flow import prolific
-from tests.server.test_traffic import with_cap
+from tests.server.flow import prolific, with_cap
 
 AT_ONCE = 8
 CAP = 3

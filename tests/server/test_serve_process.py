@@ -13,16 +13,22 @@ import pandas as pd
 import pytest
 
 from app.server.flow.plan import PART_PHASES, TRIAL_PHASES
-from tests.conftest import free_port, fresh_database, patience, start_server, wait_for_log
-from tests.server.flow import ADMIN, Participant, new_id, prediction_body, prolific
+from tests.conftest import (
+    free_port,
+    fresh_database,
+    patience,
+    researcher_get,
+    start_server,
+    wait_for_log,
+)
+from tests.server.flow import Participant, new_id, prediction_body, prolific
 
 pytestmark = pytest.mark.slow
 
 
 def export(base_url: str, study_id: str, what: str = "predictions") -> pd.DataFrame:
     """One researcher export as a DataFrame."""
-    r = httpx.get(f"{base_url}/api/researcher/export/{what}.csv?study_id={study_id}",
-                  headers=ADMIN, timeout=patience(30))
+    r = researcher_get(f"{base_url}/api/researcher/export/{what}.csv?study_id={study_id}")
     assert r.status_code == 200, r.text
     return pd.read_csv(io.StringIO(r.text), dtype={"participant_id": str, "external_id": str})
 

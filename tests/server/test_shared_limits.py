@@ -16,8 +16,8 @@ from tests.conftest import (
     stop_server,
     wait_for_log,
 )
+from tests.server.serve_preflight import run_serve
 from tests.server.starts import researcher_status, send_starts, start_once
-from tests.server.test_hosting import run_serve
 
 STARTS_PER_MINUTE = 20
 SENT = 45

@@ -2,7 +2,6 @@
 and stale sessions released in bounded set-based batches off the request path."""
 
 import asyncio
-import dataclasses
 import secrets
 import time
 from datetime import timedelta
@@ -19,7 +18,7 @@ from app.server.flow.recruitment import preview_key
 from app.server.flow.sessions import SESSION_HEADER
 from app.server.storage.tables import Participant, utcnow
 from tests.conftest import free_port, local_client, patience, start_server
-from tests.server.flow import TOKEN, new_id, prolific
+from tests.server.flow import TOKEN, new_id, prolific, with_cap
 from tests.server.flow import Participant as Client
 
 
@@ -119,14 +118,6 @@ def test_production_refuses_to_run_without_rate_limits(small_study, tmp_path):
 
 
 # ---------------------------------------------------------------- live sessions cap
-
-def with_cap(client, study_id: str, per_target: float, target: int) -> None:
-    """Serve `study_id` with max_live_sessions_per_target x target_sample_size changed."""
-    ctx = client.app.state.studies[study_id]
-    config = ctx.config.model_copy(update={"max_live_sessions_per_target": per_target,
-                                           "target_sample_size": target})
-    client.app.state.studies[study_id] = dataclasses.replace(ctx, config=config)
-
 
 def age(client, token: str, days: float = 1) -> None:
     """Make a session look abandoned `days` ago."""
