@@ -99,7 +99,7 @@ screens-recorded: $(STAMP)
 # Schemathesis with every check on the study API: at least 5,000 cases, 0 failures (issue 10)
 fuzz: $(STAMP)
 	SCHEMATHESIS_MAX_EXAMPLES=600 SCHEMATHESIS_MIN_CASES=5000 \
-	  $(BIN)/pytest tests/server/test_schemathesis.py -q -s -p no:cacheprovider
+	  $(BIN)/pytest tests/http/test_schemathesis.py -q -s -p no:cacheprovider
 
 bench: $(STAMP)
 	for f in benchmarks/[!_]*.py; do $(BIN)/python $$f || exit 1; done

@@ -26,7 +26,7 @@ PG_BIN = Path("/usr/lib/postgresql/15/bin")
 REDIS_SERVER = Path("/usr/bin/redis-server")  # Debian's redis-server (the shared rate-limit store)
 ADMIN_TOKEN = "test-token"  # the researcher token of every test server and app
 # test clients send many requests from one address (TestClient's peer is "testclient"):
-# rate limits are off unless a test turns them on (tests/server/test_traffic.py)
+# rate limits are off unless a test turns them on (tests/http/test_traffic.py)
 NO_RATE_LIMITS = {"rate_limit_starts": "", "rate_limit_requests": ""}
 TOMSTUDY = str(Path(sys.executable).parent / "tomstudy")  # the installed CLI, for subprocesses
 

@@ -3,7 +3,7 @@
 Valid cases sometimes carry a real session token (the X-Session-Token header, at each
 phase), the study id, Prolific parameters, the preview key and the researcher's token
 instead of drawn ones, so requests also get past 404, 403 and 401. Rate limits are off
-here (tests/server/test_traffic.py tests them); a replaced session's 410 is declared. The
+here (tests/http/test_traffic.py tests them); a replaced session's 410 is declared. The
 in-suite run is small; the issue's must-show run is the same test with more examples per
 operation and a floor on the total: `make fuzz` (SCHEMATHESIS_MAX_EXAMPLES=600,
 SCHEMATHESIS_MIN_CASES=5000).
