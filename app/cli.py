@@ -612,7 +612,8 @@ def serve(
         uvicorn.run("app.main:app_from_env", factory=True, host=host, port=port,
                     workers=workers, log_level="info", access_log=False,
                     proxy_headers=True, forwarded_allow_ips=proxies,
-                    timeout_worker_healthcheck=WORKER_HEALTHCHECK_S)
+                    timeout_worker_healthcheck=WORKER_HEALTHCHECK_S,
+                    timeout_keep_alive=settings.keep_alive_s)
 
 
 def archived_study(archive: Path, archive_dir: Path | None, study: str | None, prepare: bool,

@@ -58,6 +58,11 @@ class Settings(BaseSettings):
     # wrong researcher tokens per client address (and worker, with memory://) before a
     # lockout (429)
     researcher_lockout: str = "10 per 10 minutes"
+    # seconds (>= 1) an idle keep-alive connection stays open: longer than a reverse proxy keeps
+    # its idle connections to the server (Caddy 2 min, nginx 60 s), so the proxy always closes
+    # first; uvicorn's 5 s raced the proxy reusing a connection the server was closing (a 502,
+    # or a reset for a direct client)
+    keep_alive_s: int = Field(130, ge=1)
     # how often each worker releases stale sessions' balance counts (balance.sweep_stale)
     stale_sweep_s: float = Field(default=30.0, gt=0)
     # production: researcher token must be strong, API docs off (app/main.py); implied by a

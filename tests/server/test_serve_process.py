@@ -1,12 +1,14 @@
 """Real `tomstudy serve` processes: SIGKILL mid-session, and several workers on PostgreSQL."""
 
 import asyncio
+import http.client
 import io
 import os
 import signal
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
+from urllib.parse import urlsplit
 
 import httpx
 import pandas as pd
@@ -178,6 +180,23 @@ def test_worker_starts_and_replacements_are_logged(small_study, postgres_url, tm
         proc.terminate()
         proc.wait(timeout=patience(15))
     assert "GET /s/" not in log.read_text()  # no access log: client addresses stay out
+
+
+def test_an_idle_connection_outlives_uvicorns_default_keep_alive(live_server):
+    """One connection, idle past uvicorn's 5 s default, still answers: the server keeps idle
+    connections longer than a reverse proxy keeps its own (settings.keep_alive_s), so the proxy
+    never sends a request into a connection the server is closing (a 502 for a participant)."""
+    connection = http.client.HTTPConnection(urlsplit(live_server).netloc, timeout=patience(20))
+    try:
+        connection.request("GET", "/healthz")
+        assert connection.getresponse().read() and connection.sock is not None
+        first_socket = connection.sock
+        time.sleep(6)
+        connection.request("GET", "/healthz")  # RemoteDisconnected if the server closed it
+        assert connection.getresponse().status == 200
+        assert connection.sock is first_socket
+    finally:
+        connection.close()
 
 
 def test_many_concurrent_participants_on_one_sqlite_worker(small_study, live_server):
