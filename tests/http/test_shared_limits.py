@@ -19,9 +19,12 @@ from tests.conftest import (
 from tests.server.serve_preflight import run_serve
 from tests.server.starts import researcher_status, send_starts, start_once
 
-STARTS_PER_MINUTE = 20
+# a day, not a minute: the starts limit is a sliding-window counter, which lets a start or two
+# more through once a window edge passes mid-test (42 of 45 accepted where 40 were due, seen
+# in make test); a day's edge falls inside a test's half minute almost never
+STARTS_PER_DAY = 20
 SENT = 45
-LIMITS = {"TOMSTUDY_RATE_LIMIT_STARTS": f"{STARTS_PER_MINUTE}/minute",
+LIMITS = {"TOMSTUDY_RATE_LIMIT_STARTS": f"{STARTS_PER_DAY}/day",
           "TOMSTUDY_RESEARCHER_LOCKOUT": "4 per 10 minutes"}
 
 
@@ -52,8 +55,8 @@ def test_two_workers_sharing_redis_accept_one_limit_of_starts(serving, redis_ser
     # both serving (start_server returns once one answers), so either may take a start
     assert len(wait_for_log(serving.log_of(port), "Application startup complete", 2)) == 2
     statuses = send_starts([port], small_study.study_id, "127.1.0.1", SENT)
-    assert statuses.count(201) == STARTS_PER_MINUTE
-    assert statuses.count(429) == SENT - STARTS_PER_MINUTE
+    assert statuses.count(201) == STARTS_PER_DAY
+    assert statuses.count(429) == SENT - STARTS_PER_DAY
     # another address has its own budget
     assert start_once(port, small_study.study_id, "127.1.0.2", "other") == 201
 
