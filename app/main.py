@@ -1,5 +1,5 @@
-"""The study server: `create_app(settings)` mounts the participant server and the researcher
-side, with a lifespan that loads studies, banks and models.
+"""The study server: `create_app(settings)` mounts every route of app/http (participant and
+researcher), with a lifespan that loads studies, banks and models.
 
 Per process state is read-only (configs, trial banks, model answers); everything that
 changes lives in the database, so several uvicorn workers can serve one study.
