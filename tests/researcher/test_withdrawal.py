@@ -62,7 +62,7 @@ def post_events(p: Driver, n: int) -> None:
 
 
 @pytest.fixture
-def study(client, small_study, bank):
+def leaver_and_stayer(client, small_study, bank):
     """The leaver: a stale first attempt (replaced) and a completed second one; the
     stayer: a session in progress. Returns the study context."""
     sid = small_study.study_id
@@ -91,13 +91,14 @@ def balance_is_exact(client, ctx) -> dict[str, int]:
     return stored
 
 
-def test_withdrawal_deletes_every_row_of_the_participant_only(client, small_study, study):
+def test_withdrawal_deletes_every_row_of_the_participant_only(client, small_study,
+                                                              leaver_and_stayer):
     sid = small_study.study_id
     ext = LEAVER["PROLIFIC_PID"]
     before, mine = counts(client), counts(client, ext)
     stayer = counts(client, STAYER["PROLIFIC_PID"])
     assert mine["participant"] == 2 and all(mine.values())  # both attempts, every table
-    held = balance_is_exact(client, study)
+    held = balance_is_exact(client, leaver_and_stayer)
     r = client.post("/api/researcher/withdrawals", json={"study_id": sid, "external_id": ext},
                     headers=ADMIN)
     assert r.status_code == 201, r.text
@@ -109,7 +110,7 @@ def test_withdrawal_deletes_every_row_of_the_participant_only(client, small_stud
     assert ext not in json.dumps(line) and line["via"] == "api"
     assert line["id_sha256"] == id_hash(line["salt"], ext) and len(line["salt"]) == 32
     assert ext not in r.text
-    released = balance_is_exact(client, study)
+    released = balance_is_exact(client, leaver_and_stayer)
     assert sum(released.values()) < sum(held.values())  # the completed attempt was counted
     listed = client.get(f"/api/researcher/withdrawals/audit?study_id={sid}", headers=ADMIN)
     backend = client.app.state.engine.dialect.name
@@ -122,7 +123,7 @@ def test_withdrawal_deletes_every_row_of_the_participant_only(client, small_stud
         assert ext not in json.dumps(stored.model_dump(mode="json"))
 
 
-def test_an_unknown_id_is_a_404_naming_the_field(client, small_study, study):
+def test_an_unknown_id_is_a_404_naming_the_field(client, small_study, leaver_and_stayer):
     before = counts(client)
     r = client.post("/api/researcher/withdrawals", headers=ADMIN,
                     json={"study_id": small_study.study_id, "external_id": "nobody"})
@@ -135,7 +136,8 @@ def test_an_unknown_id_is_a_404_naming_the_field(client, small_study, study):
         assert db.execute(select(func.count()).select_from(WithdrawalAudit)).scalar_one() == 0
 
 
-def test_a_withdrawn_id_may_start_again_as_a_new_person(client, small_study, study, bank):
+def test_a_withdrawn_id_may_start_again_as_a_new_person(client, small_study, leaver_and_stayer,
+                                                        bank):
     sid = small_study.study_id
     ext = LEAVER["PROLIFIC_PID"]
     client.post("/api/researcher/withdrawals", json={"study_id": sid, "external_id": ext},
@@ -146,10 +148,10 @@ def test_a_withdrawn_id_may_start_again_as_a_new_person(client, small_study, stu
     assert again.state()["phase"] == Phase.CONSENT
     assert counts(client, ext) == {"participant": 1, "submission": 0, "trialresponse": 0,
                                    "predictionrow": 0, "event": 0, "trialdraft": 0}
-    balance_is_exact(client, study)
+    balance_is_exact(client, leaver_and_stayer)
 
 
-def test_tomstudy_withdraw(client, small_study, study, db_url, monkeypatch):
+def test_tomstudy_withdraw(client, small_study, leaver_and_stayer, db_url, monkeypatch):
     for key, value in small_study.env(db_url).items():
         monkeypatch.setenv(key, value)
     get_settings.cache_clear()
@@ -167,7 +169,7 @@ def test_tomstudy_withdraw(client, small_study, study, db_url, monkeypatch):
     assert line["row_counts"] == {"predictionrow": 15, "trialresponse": 1, "event": 1,
                                   "submission": 4, "trialdraft": 0, "participant": 1}
     assert counts(client, ext)["participant"] == 0
-    balance_is_exact(client, study)
+    balance_is_exact(client, leaver_and_stayer)
 
 
 def test_the_schema_declares_what_the_new_routes_answer():
@@ -182,7 +184,8 @@ def test_the_schema_declares_what_the_new_routes_answer():
         200, 401, 403, 404, 422, 429, 503]
 
 
-def test_open_and_pilot_sessions_are_withdrawn_by_their_public_id(client, small_study, study):
+def test_open_and_pilot_sessions_are_withdrawn_by_their_public_id(client, small_study,
+                                                                  leaver_and_stayer):
     sid = small_study.study_id
     lab = Driver(client, sid)
     lab.start(preview=preview_key(TOKEN, sid))
@@ -207,7 +210,8 @@ def test_open_and_pilot_sessions_are_withdrawn_by_their_public_id(client, small_
     assert both.status_code == 422 and "participant_id" in both.json()["message"]
 
 
-def test_any_spelling_of_a_platform_id_withdraws_the_person(client, small_study, study):
+def test_any_spelling_of_a_platform_id_withdraws_the_person(client, small_study,
+                                                            leaver_and_stayer):
     sid, ext = small_study.study_id, LEAVER["PROLIFIC_PID"]
     r = client.post("/api/researcher/withdrawals", headers=ADMIN,
                     json={"study_id": sid, "external_id": ext.upper()})

@@ -5,13 +5,14 @@ import uuid
 
 import httpx
 
+from tests.conftest import patience
 from tests.server.flow import prolific
 
 
 def start_once(port: int, study_id: str, source: str, name: str) -> int:
     """One session start from `source` to the server on `port`; its status."""
     transport = httpx.HTTPTransport(local_address=source)
-    with httpx.Client(transport=transport, timeout=20) as client:
+    with httpx.Client(transport=transport, timeout=patience(20)) as client:
         return client.post(f"http://127.0.0.1:{port}/api/sessions", json={
             "study_id": study_id, "recruitment": prolific(name)}).status_code
 
@@ -29,9 +30,9 @@ def send_starts(ports: list[int], study_id: str, source: str, count: int) -> lis
 
 def researcher_status(port: int, study_id: str, source: str, token: str) -> int:
     """GET the researcher summary of `study_id` from `source` with bearer `token`; its
-    status."""
+    status (not researcher_get: the request must leave from `source`, which needs a client)."""
     transport = httpx.HTTPTransport(local_address=source)
-    with httpx.Client(transport=transport, timeout=20) as client:
+    with httpx.Client(transport=transport, timeout=patience(20)) as client:
         return client.get(f"http://127.0.0.1:{port}/api/researcher/summary",
                           params={"study_id": study_id},
                           headers={"Authorization": f"Bearer {token}"}).status_code
