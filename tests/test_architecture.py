@@ -2,13 +2,11 @@
 one form of the data directory."""
 
 import ast
-from pathlib import Path
 
 from tools.import_graph import (
     ROOT,
     file_graph,
     imported_names,
-    module_name,
     project_modules,
     report,
 )
@@ -146,19 +144,13 @@ def test_every_route_is_declared_in_the_routes_package():
     assert routers and [name for name in routers if not within(name, "app.http.routes")] == []
 
 
-# the trees whose modules may import test helpers (tests/e2e/node_modules holds no project code)
+# the trees whose modules may import test helpers
 TEST_TREES = ("tests", "benchmarks", "tools")
-
-
-def modules_of_test_trees() -> dict[str, Path]:
-    """Every module under TEST_TREES, by dotted name."""
-    return {module_name(p): p for tree in TEST_TREES for p in sorted((ROOT / tree).rglob("*.py"))
-            if "node_modules" not in p.parts}
 
 
 def imports_of_test_modules() -> dict[str, list[str]]:
     """Each module under TEST_TREES that imports a test_*.py module, and those it imports."""
-    modules = modules_of_test_trees()
+    modules = project_modules(TEST_TREES)
     tests = {name for name, path in modules.items() if path.name.startswith("test_")}
     found = {str(path.relative_to(ROOT)): sorted(imported_names(path, name) & tests - {name})
              for name, path in modules.items()}
@@ -174,7 +166,7 @@ def test_no_module_imports_a_test_module():
 def direct_researcher_gets() -> list[str]:
     """file:line of each `httpx.get` of a literal /api/researcher/ URL under TEST_TREES."""
     found = []
-    for path in modules_of_test_trees().values():
+    for path in project_modules(TEST_TREES).values():
         for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
             if (isinstance(node, ast.Call) and ast.unparse(node.func) == "httpx.get"
                     and node.args and "/api/researcher/" in ast.unparse(node.args[0])):

@@ -23,9 +23,11 @@ def module_name(path: Path) -> str:
     return ".".join(parts)
 
 
-def project_modules() -> dict[str, Path]:
-    """Every module of the project's packages, by dotted name."""
-    return {module_name(p): p for pkg in PACKAGES for p in sorted((ROOT / pkg).rglob("*.py"))}
+def project_modules(packages: tuple[str, ...] = PACKAGES) -> dict[str, Path]:
+    """Every module of these top-level folders (the project's packages unless told), by dotted
+    name; an npm folder's JavaScript tooling (node_modules) holds no project module."""
+    return {module_name(p): p for pkg in packages for p in sorted((ROOT / pkg).rglob("*.py"))
+            if "node_modules" not in p.parts}
 
 
 def imported_names(path: Path, this: str) -> set[str]:

@@ -36,8 +36,8 @@ from tests.conftest import (
     patience,
     researcher_get,
 )
+from tests.http.serve_preflight import run_serve
 from tests.server.flow import ADMIN, Participant
-from tests.server.serve_preflight import run_serve
 
 STRONG_TOKEN = "x" * 40
 OLD_DEFAULT_TOKEN = "change-me-researcher-token"  # the default before issue 22 removed it

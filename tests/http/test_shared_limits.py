@@ -16,7 +16,7 @@ from tests.conftest import (
     stop_server,
     wait_for_log,
 )
-from tests.server.serve_preflight import run_serve
+from tests.http.serve_preflight import run_serve
 from tests.server.starts import researcher_status, send_starts, start_once
 
 # a day, not a minute: the starts limit is a sliding-window counter, which lets a start or two

@@ -33,9 +33,7 @@ def test_obstacle_names_its_two_policies():
 def test_a_registered_world_decides_its_own_policies(monkeypatch):
     """A world with a policy no other world has is built from its builder alone (the guide's
     promise); there is no second, global list of policies to extend."""
-    built = {}
-    monkeypatch.setitem(SIMULATED_WORLDS, "corridor",
-                        lambda path, policy: built.setdefault("policy", policy))
+    monkeypatch.setitem(SIMULATED_WORLDS, "corridor", lambda path, policy: policy)
     assert build_world("corridor", policy="rule") == "rule"
 
 
